@@ -1,0 +1,1 @@
+"""Embedded scenario configurations (installed as ``fuzzyslam.configs``)."""

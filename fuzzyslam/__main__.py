@@ -1,0 +1,3 @@
+from fuzzyslam.cli import main
+
+main()

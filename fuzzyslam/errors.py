@@ -1,0 +1,36 @@
+"""Errors and the exit-code scheme shared by every command.
+
+Exit codes:
+    0   success
+    1   internal failure (a bug): one line, ``--debug`` shows the traceback
+    2   usage error (bad option or argument, from click)
+    3   bad input: a file or config that is missing, malformed or inconsistent
+    130 interrupted (Ctrl-C); no partial outputs are left behind
+"""
+
+from __future__ import annotations
+
+EXIT_OK = 0
+EXIT_INTERNAL = 1
+EXIT_USAGE = 2
+EXIT_INPUT = 3
+EXIT_INTERRUPTED = 130
+
+
+class FuzzyslamError(Exception):
+    """Base class of errors that are reported as one clear line."""
+
+    exit_code = EXIT_INPUT
+
+
+class InputError(FuzzyslamError):
+    """A file given to a command is missing, unreadable or inconsistent."""
+
+    def __init__(self, path: object, problem: str) -> None:
+        self.path = str(path)
+        self.problem = problem
+        super().__init__(f"{self.path}: {problem}")
+
+
+class ConfigError(InputError):
+    """A configuration file has an unknown key, a wrong type or an out-of-range value."""

@@ -1,0 +1,116 @@
+"""Safe output writing: temporary names renamed into place only when complete.
+
+Every command writes through these helpers, so an error or Ctrl-C leaves no
+partial file behind and an input is never overwritten.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import shutil
+import tempfile
+from collections.abc import Iterable, Iterator
+from pathlib import Path
+
+from fuzzyslam.errors import InputError
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    try:
+        return a.resolve() == b.resolve() or (a.exists() and b.exists() and a.samefile(b))
+    except OSError:
+        return False
+
+
+def check_outputs(
+    inputs: Iterable[str | os.PathLike], outputs: Iterable[str | os.PathLike]
+) -> None:
+    """Raise InputError if an output path is one of the inputs or lies in a missing directory."""
+    ins = [Path(p) for p in inputs if p is not None]
+    for out in outputs:
+        out = Path(out)
+        for inp in ins:
+            if _same_file(out, inp):
+                raise InputError(
+                    out, "output path is the same as an input; refusing to overwrite it"
+                )
+        parent = out.resolve().parent
+        if not parent.is_dir():
+            raise InputError(out, f"output directory {parent} does not exist")
+
+
+def check_input_file(path: str | os.PathLike, what: str = "input") -> Path:
+    """Return Path(path) if it is a readable file, else raise InputError naming it."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(p, f"{what} does not exist")
+    if not p.is_file():
+        raise InputError(p, f"{what} is not a regular file")
+    if not os.access(p, os.R_OK):
+        raise InputError(p, f"{what} is not readable")
+    return p
+
+
+@contextlib.contextmanager
+def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
+    """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
+
+    On any exception (including KeyboardInterrupt) the temporary file is removed
+    and ``path`` is left as it was.
+    """
+    path = Path(path)
+    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
+    os.close(fd)
+    tmp_path = Path(tmp)
+    try:
+        yield tmp_path
+        os.replace(tmp_path, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            tmp_path.unlink()
+        raise
+
+
+class OutputDir:
+    """Stage outputs in a hidden temporary directory; move them into place on success.
+
+    Usage::
+
+        with OutputDir(outdir) as tmp:
+            write(tmp / "trajectory.tum")
+        # now outdir/trajectory.tum exists; nothing was written if the block failed
+
+    Files already in ``outdir`` that the stage does not write are kept. Each file
+    is moved with ``os.replace`` (atomic on one file system).
+    """
+
+    def __init__(self, path: str | os.PathLike) -> None:
+        self.path = Path(path)
+        self.tmp: Path | None = None
+        self._created = False
+
+    def __enter__(self) -> Path:
+        if self.path.exists() and not self.path.is_dir():
+            raise InputError(self.path, "output directory path exists and is not a directory")
+        parent = self.path.resolve().parent
+        if not parent.is_dir():
+            raise InputError(self.path, f"parent directory {parent} does not exist")
+        self.tmp = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", suffix=".part", dir=parent))
+        return self.tmp
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        assert self.tmp is not None
+        try:
+            if exc_type is None:
+                self.path.mkdir(exist_ok=True)
+                for item in sorted(self.tmp.rglob("*")):
+                    rel = item.relative_to(self.tmp)
+                    dest = self.path / rel
+                    if item.is_dir():
+                        dest.mkdir(parents=True, exist_ok=True)
+                    else:
+                        dest.parent.mkdir(parents=True, exist_ok=True)
+                        os.replace(item, dest)
+        finally:
+            shutil.rmtree(self.tmp, ignore_errors=True)

@@ -1,0 +1,121 @@
+"""SE(2) toolkit: the one place for planar pose maths and angle wrapping.
+
+A pose is ``(x, y, theta)``: the transform from a child frame to its parent,
+``p_parent = R(theta) p_child + t``. Every function accepts a single pose of
+shape ``(3,)`` or a stack of shape ``(N, 3)``.
+
+References: J.-L. Blanco, "A tutorial on SE(3) transformation parameterizations
+and on-manifold optimization", 2010, sec. 2 (the planar case).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+from numpy.typing import ArrayLike, NDArray
+
+Array = NDArray[np.float64]
+
+
+def wrap_angle(a: ArrayLike) -> Array | float:
+    """Wrap angles to the half-open interval (-pi, pi]."""
+    arr = np.asarray(a, dtype=float)
+    w = np.pi - np.mod(np.pi - arr, 2.0 * np.pi)
+    if w.ndim == 0:
+        return float(w)
+    return w
+
+
+def wrap_angle_period(a: ArrayLike, period: float) -> Array | float:
+    """Wrap angles to (-period/2, period/2]; period pi for undirected lines."""
+    arr = np.asarray(a, dtype=float)
+    half = period / 2.0
+    w = half - np.mod(half - arr, period)
+    if w.ndim == 0:
+        return float(w)
+    return w
+
+
+def rot(theta: float) -> Array:
+    """2x2 rotation matrix R(theta)."""
+    c, s = np.cos(theta), np.sin(theta)
+    return np.array([[c, -s], [s, c]])
+
+
+def compose(a: ArrayLike, b: ArrayLike) -> Array:
+    """Pose composition a (+) b: b expressed in a's parent frame."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
+    y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
+    th = wrap_angle(a[..., 2] + b[..., 2])
+    return np.stack([x, y, np.asarray(th)], axis=-1)
+
+
+def inverse(a: ArrayLike) -> Array:
+    """Pose inverse (-)a, so that compose(a, inverse(a)) is the identity."""
+    a = np.asarray(a, dtype=float)
+    c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
+    x = -c * a[..., 0] - s * a[..., 1]
+    y = s * a[..., 0] - c * a[..., 1]
+    return np.stack([x, y, np.asarray(wrap_angle(-a[..., 2]))], axis=-1)
+
+
+def between(a: ArrayLike, b: ArrayLike) -> Array:
+    """Relative pose (-)a (+) b: b expressed in a's frame."""
+    return compose(inverse(a), b)
+
+
+def transform_points(pose: ArrayLike, pts: ArrayLike) -> Array:
+    """Map points (N, 2) from the pose's child frame into its parent frame."""
+    pose = np.asarray(pose, dtype=float)
+    pts = np.asarray(pts, dtype=float)
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    out = np.empty_like(pts)
+    out[..., 0] = pose[0] + c * pts[..., 0] - s * pts[..., 1]
+    out[..., 1] = pose[1] + s * pts[..., 0] + c * pts[..., 1]
+    return out
+
+
+def inverse_transform_points(pose: ArrayLike, pts: ArrayLike) -> Array:
+    """Map points (N, 2) from the parent frame into the pose's child frame: R^T (p - t)."""
+    pose = np.asarray(pose, dtype=float)
+    pts = np.asarray(pts, dtype=float)
+    c, s = np.cos(pose[2]), np.sin(pose[2])
+    dx = pts[..., 0] - pose[0]
+    dy = pts[..., 1] - pose[1]
+    out = np.empty_like(pts)
+    out[..., 0] = c * dx + s * dy
+    out[..., 1] = -s * dx + c * dy
+    return out
+
+
+def jacobians_compose(a: ArrayLike, b: ArrayLike) -> tuple[Array, Array]:
+    """Jacobians of compose(a, b) with respect to a and to b (each 3x3)."""
+    a = np.asarray(a, dtype=float)
+    b = np.asarray(b, dtype=float)
+    c, s = np.cos(a[2]), np.sin(a[2])
+    ja = np.array(
+        [
+            [1.0, 0.0, -s * b[0] - c * b[1]],
+            [0.0, 1.0, c * b[0] - s * b[1]],
+            [0.0, 0.0, 1.0],
+        ]
+    )
+    jb = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
+    return ja, jb
+
+
+def yaw_to_quaternion(theta: ArrayLike) -> Array:
+    """Yaw-only quaternion (qx, qy, qz, qw) for heading theta."""
+    th = np.asarray(theta, dtype=float)
+    z = np.zeros_like(th)
+    return np.stack([z, z, np.sin(th / 2.0), np.cos(th / 2.0)], axis=-1)
+
+
+def quaternion_to_yaw(q: ArrayLike) -> Array | float:
+    """Yaw (rotation about z) of quaternion(s) (qx, qy, qz, qw)."""
+    q = np.asarray(q, dtype=float)
+    x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
+    yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
+    return wrap_angle(yaw)

@@ -1,0 +1,94 @@
+"""Parameters of the simulated world, robot, sensors and scenario (owned by the simulator)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+
+@dataclass
+class WorldParams:
+    """The office floor: a loop of corridors around a centre line, and its ceiling lamps."""
+
+    centerline: list[list[float]] = field(
+        default_factory=lambda: [[0.0, 0.0], [10.0, 0.0], [12.5, 7.0], [0.0, 7.0]]
+    )
+    corridor_width: float = field(default=2.0, metadata={"min": 1.0, "max": 10.0})
+    lamps: list[list[float]] = field(default_factory=list)
+    lamp_count: int = field(default=15, metadata={"min": 0, "max": 10000})
+    lamp_radius: float = field(default=0.12, metadata={"min": 0.01, "max": 1.0})
+
+
+@dataclass
+class RobotParams:
+    """Nomad 200-like base with wheel encoders (nominal values are what the filter knows)."""
+
+    radius: float = field(default=0.225, metadata={"min": 0.05, "max": 2.0})
+    wheel_radius: float = field(default=0.05, metadata={"min": 0.005, "max": 1.0})
+    wheel_base: float = field(default=0.40, metadata={"min": 0.05, "max": 5.0})
+    max_speed: float = field(default=0.5, metadata={"min": 0.01, "max": 5.0})
+    cruise_speed: float = field(default=0.3, metadata={"min": 0.01, "max": 5.0})
+    rate_hz: float = field(default=20.0, metadata={"min": 1.0, "max": 1000.0})
+    # systematic encoder errors: true wheel radius = nominal * scale
+    left_scale: float = field(default=1.004, metadata={"min": 0.5, "max": 1.5})
+    right_scale: float = field(default=0.996, metadata={"min": 0.5, "max": 1.5})
+    base_scale: float = field(default=1.01, metadata={"min": 0.5, "max": 1.5})
+    # random encoder error: std of a wheel's angle increment per sqrt(rad) turned
+    wheel_noise: float = field(default=0.01, metadata={"min": 0.0, "max": 1.0})
+    ticks_per_rev: int = field(default=4096, metadata={"min": 1})
+
+
+@dataclass
+class SonarParams:
+    """Ring of Polaroid-like sonars (models.md sec. 11)."""
+
+    count: int = field(default=16, metadata={"min": 1, "max": 64})
+    rate_hz: float = field(default=4.0, metadata={"min": 0.1, "max": 100.0})
+    fov_deg: float = field(default=25.0, metadata={"min": 1.0, "max": 90.0})
+    min_range: float = field(default=0.15, metadata={"min": 0.0, "max": 10.0})
+    max_range: float = field(default=6.5, metadata={"min": 0.5, "max": 50.0})
+    noise_frac: float = field(default=0.01, metadata={"min": 0.0, "max": 0.5})
+    quantization: float = field(default=0.0254, metadata={"min": 0.0, "max": 1.0})
+    critical_angle_deg: float = field(default=17.0, metadata={"min": 1.0, "max": 90.0})
+    rays_per_cone: int = field(default=9, metadata={"min": 1, "max": 101})
+    max_bounces: int = field(default=2, metadata={"min": 0, "max": 5})
+    crosstalk_prob: float = field(default=0.01, metadata={"min": 0.0, "max": 1.0})
+
+
+@dataclass
+class CameraParams:
+    """Upward ceiling camera (shared by the simulator and the lamp detector)."""
+
+    width: int = field(default=160, metadata={"min": 16, "max": 4096})
+    height: int = field(default=120, metadata={"min": 16, "max": 4096})
+    rate_hz: float = field(default=5.0, metadata={"min": 0.1, "max": 100.0})
+    hfov_deg: float = field(default=95.0, metadata={"min": 10.0, "max": 170.0})
+    ceiling_height: float = field(default=2.5, metadata={"min": 0.2, "max": 20.0})
+    offset: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    noise_sigma: float = field(default=3.0, metadata={"min": 0.0, "max": 100.0})
+    background: float = field(default=40.0, metadata={"min": 0.0, "max": 255.0})
+
+
+@dataclass
+class LampFailure:
+    """Lamps (by index) that go dark from the start of a run."""
+
+    run: int = field(default=5, metadata={"min": 1})
+    lamps: list[int] = field(default_factory=list)
+
+
+@dataclass
+class Bump:
+    """The true pose turns by ``angle_deg`` in one step, unseen by odometry."""
+
+    run: int = field(default=1, metadata={"min": 1})
+    fraction: float = field(default=0.5, metadata={"min": 0.0, "max": 1.0})
+    angle_deg: float = field(default=10.0, metadata={"min": -180.0, "max": 180.0})
+
+
+@dataclass
+class ScenarioParams:
+    """Runs (laps, alternating direction) and scheduled events."""
+
+    runs: int = field(default=6, metadata={"min": 1, "max": 1000})
+    lamp_failures: list[LampFailure] = field(default_factory=list)
+    bumps: list[Bump] = field(default_factory=list)

@@ -1,0 +1,299 @@
+"""Build and read the ROS 2 messages fuzzyslam uses (the one place for message layout).
+
+Builders take plain numbers and numpy arrays and return rosbags message objects;
+readers take message objects and return plain numbers and arrays.
+"""
+
+from __future__ import annotations
+
+import json
+from typing import Any
+
+import numpy as np
+
+from fuzzyslam.se2 import quaternion_to_yaw, yaw_to_quaternion
+from fuzzyslam.streams.typestore import msgtype
+
+RANGE = "sensor_msgs/msg/Range"
+IMAGE = "sensor_msgs/msg/Image"
+CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
+JOINT_STATE = "sensor_msgs/msg/JointState"
+ODOMETRY = "nav_msgs/msg/Odometry"
+OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
+POSE_COV_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
+POSE_ARRAY = "geometry_msgs/msg/PoseArray"
+MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
+TF_MESSAGE = "tf2_msgs/msg/TFMessage"
+STRING = "std_msgs/msg/String"
+
+
+def stamp(t: float) -> Any:
+    """builtin_interfaces/Time from seconds."""
+    ns = round(t * 1e9)
+    return msgtype("builtin_interfaces/msg/Time")(
+        sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000
+    )
+
+
+def stamp_to_sec(s: Any) -> float:
+    return s.sec + s.nanosec * 1e-9
+
+
+def header(t: float, frame_id: str) -> Any:
+    return msgtype("std_msgs/msg/Header")(stamp=stamp(t), frame_id=frame_id)
+
+
+def _pose_msg(x: float, y: float, theta: float, z: float = 0.0) -> Any:
+    q = yaw_to_quaternion(theta)
+    point = msgtype("geometry_msgs/msg/Point")(x=float(x), y=float(y), z=float(z))
+    quat = msgtype("geometry_msgs/msg/Quaternion")(
+        x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])
+    )
+    return msgtype("geometry_msgs/msg/Pose")(position=point, orientation=quat)
+
+
+def pose_of(pose_msg: Any) -> np.ndarray:
+    """(x, y, theta) of a geometry_msgs/Pose."""
+    o = pose_msg.orientation
+    yaw = quaternion_to_yaw([o.x, o.y, o.z, o.w])
+    return np.array([pose_msg.position.x, pose_msg.position.y, yaw])
+
+
+def cov3_to_cov6(cov3: np.ndarray | None) -> np.ndarray:
+    """Embed a 3x3 (x, y, theta) covariance in ROS's row-major 6x6 (x y z roll pitch yaw)."""
+    c6 = np.zeros((6, 6))
+    if cov3 is not None:
+        idx = [0, 1, 5]
+        c6[np.ix_(idx, idx)] = np.asarray(cov3, dtype=float)
+    return c6.reshape(36)
+
+
+def cov6_to_cov3(cov36: Any) -> np.ndarray:
+    c6 = np.asarray(cov36, dtype=float).reshape(6, 6)
+    idx = [0, 1, 5]
+    return c6[np.ix_(idx, idx)].copy()
+
+
+def range_msg(t: float, frame_id: str, r: float, fov: float, rmin: float, rmax: float) -> Any:
+    """sensor_msgs/Range, radiation ULTRASOUND."""
+    return msgtype(RANGE)(
+        header=header(t, frame_id),
+        radiation_type=0,
+        field_of_view=float(fov),
+        min_range=float(rmin),
+        max_range=float(rmax),
+        range=float(r),
+    )
+
+
+def image_mono8(t: float, frame_id: str, img: np.ndarray) -> Any:
+    """sensor_msgs/Image, encoding mono8, from a (H, W) uint8 array."""
+    img = np.ascontiguousarray(img, dtype=np.uint8)
+    h, w = img.shape
+    return msgtype(IMAGE)(
+        header=header(t, frame_id),
+        height=h,
+        width=w,
+        encoding="mono8",
+        is_bigendian=0,
+        step=w,
+        data=img.reshape(-1),
+    )
+
+
+def image_to_array(msg: Any) -> np.ndarray:
+    """(H, W) uint8 array of a mono8 Image; ValueError on another encoding or a bad size."""
+    if msg.encoding not in ("mono8", "8UC1"):
+        raise ValueError(f"unsupported image encoding '{msg.encoding}' (expected mono8)")
+    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+    data = np.asarray(msg.data, dtype=np.uint8)
+    if h <= 0 or w <= 0 or step < w or data.size < h * step:
+        raise ValueError(f"image of {data.size} bytes does not match {w}x{h} (step {step})")
+    return data[: h * step].reshape(h, step)[:, :w]
+
+
+def camera_info(
+    t: float, frame_id: str, width: int, height: int, f: float, cx: float, cy: float
+) -> Any:
+    """sensor_msgs/CameraInfo of a distortion-free pinhole camera."""
+    k = np.array([f, 0.0, cx, 0.0, f, cy, 0.0, 0.0, 1.0])
+    p = np.array([f, 0.0, cx, 0.0, 0.0, f, cy, 0.0, 0.0, 0.0, 1.0, 0.0])
+    roi = msgtype("sensor_msgs/msg/RegionOfInterest")(
+        x_offset=0, y_offset=0, height=0, width=0, do_rectify=False
+    )
+    return msgtype(CAMERA_INFO)(
+        header=header(t, frame_id),
+        height=int(height),
+        width=int(width),
+        distortion_model="plumb_bob",
+        d=np.zeros(5),
+        k=k,
+        r=np.eye(3).reshape(9),
+        p=p,
+        binning_x=0,
+        binning_y=0,
+        roi=roi,
+    )
+
+
+def joint_state(t: float, names: list[str], positions: np.ndarray) -> Any:
+    return msgtype(JOINT_STATE)(
+        header=header(t, ""),
+        name=list(names),
+        position=np.asarray(positions, dtype=float),
+        velocity=np.zeros(0),
+        effort=np.zeros(0),
+    )
+
+
+def odometry(
+    t: float,
+    frame_id: str,
+    child_frame_id: str,
+    pose: np.ndarray,
+    cov3: np.ndarray | None = None,
+    v: float = 0.0,
+    w: float = 0.0,
+) -> Any:
+    """nav_msgs/Odometry with a planar pose and twist."""
+    pwc = msgtype("geometry_msgs/msg/PoseWithCovariance")(
+        pose=_pose_msg(*pose), covariance=cov3_to_cov6(cov3)
+    )
+    vec = msgtype("geometry_msgs/msg/Vector3")
+    twist = msgtype("geometry_msgs/msg/Twist")(
+        linear=vec(x=float(v), y=0.0, z=0.0), angular=vec(x=0.0, y=0.0, z=float(w))
+    )
+    twc = msgtype("geometry_msgs/msg/TwistWithCovariance")(twist=twist, covariance=np.zeros(36))
+    return msgtype(ODOMETRY)(
+        header=header(t, frame_id), child_frame_id=child_frame_id, pose=pwc, twist=twc
+    )
+
+
+def pose_with_covariance(t: float, frame_id: str, pose: np.ndarray, cov3: np.ndarray) -> Any:
+    pwc = msgtype("geometry_msgs/msg/PoseWithCovariance")(
+        pose=_pose_msg(*pose), covariance=cov3_to_cov6(cov3)
+    )
+    return msgtype(POSE_COV_STAMPED)(header=header(t, frame_id), pose=pwc)
+
+
+def pose_array(t: float, frame_id: str, points: np.ndarray) -> Any:
+    """geometry_msgs/PoseArray, one pose per (x, y) point (heading 0)."""
+    poses = [
+        _pose_msg(float(x), float(y), 0.0)
+        for x, y in np.asarray(points, dtype=float).reshape(-1, 2)
+    ]
+    return msgtype(POSE_ARRAY)(header=header(t, frame_id), poses=poses)
+
+
+def points_of_pose_array(msg: Any) -> np.ndarray:
+    """(N, 2) positions of a PoseArray."""
+    if not msg.poses:
+        return np.zeros((0, 2))
+    return np.array([[p.position.x, p.position.y] for p in msg.poses], dtype=float)
+
+
+def transform_stamped(
+    t: float, parent: str, child: str, x: float, y: float, z: float, yaw: float
+) -> Any:
+    q = yaw_to_quaternion(yaw)
+    tr = msgtype("geometry_msgs/msg/Vector3")(x=float(x), y=float(y), z=float(z))
+    rot = msgtype("geometry_msgs/msg/Quaternion")(
+        x=float(q[0]), y=float(q[1]), z=float(q[2]), w=float(q[3])
+    )
+    tf = msgtype("geometry_msgs/msg/Transform")(translation=tr, rotation=rot)
+    return msgtype("geometry_msgs/msg/TransformStamped")(
+        header=header(t, parent), child_frame_id=child, transform=tf
+    )
+
+
+def tf_message(transforms: list[Any]) -> Any:
+    return msgtype(TF_MESSAGE)(transforms=transforms)
+
+
+def planar_transforms(msg: Any) -> dict[str, tuple[str, np.ndarray]]:
+    """child frame -> (parent frame, (x, y, yaw)) of a TFMessage."""
+    out = {}
+    for ts in msg.transforms:
+        tr, r = ts.transform.translation, ts.transform.rotation
+        yaw = quaternion_to_yaw([r.x, r.y, r.z, r.w])
+        out[ts.child_frame_id] = (ts.header.frame_id, np.array([tr.x, tr.y, yaw]))
+    return out
+
+
+def string_msg(text: str) -> Any:
+    return msgtype(STRING)(data=text)
+
+
+def json_msg(obj: Any) -> Any:
+    """std_msgs/String holding JSON (used for scenario events)."""
+    return string_msg(json.dumps(obj, sort_keys=True))
+
+
+def color(r: float, g: float, b: float, a: float = 1.0) -> Any:
+    return msgtype("std_msgs/msg/ColorRGBA")(r=float(r), g=float(g), b=float(b), a=float(a))
+
+
+def marker(
+    t: float,
+    frame_id: str,
+    ns: str,
+    mid: int,
+    mtype: int,
+    pose: tuple[float, float, float] = (0.0, 0.0, 0.0),
+    z: float = 0.0,
+    scale: tuple[float, float, float] = (0.1, 0.1, 0.1),
+    rgba: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0),
+    points: np.ndarray | None = None,
+    text: str = "",
+    action: int = 0,
+) -> Any:
+    """visualization_msgs/Marker. mtype: 2 SPHERE, 3 CYLINDER, 4 LINE_STRIP, 5 LINE_LIST, 9 TEXT."""
+    pt = msgtype("geometry_msgs/msg/Point")
+    pts = [] if points is None else [pt(x=float(p[0]), y=float(p[1]), z=float(z)) for p in points]
+    dur = msgtype("builtin_interfaces/msg/Duration")(sec=0, nanosec=0)
+    vec = msgtype("geometry_msgs/msg/Vector3")
+    return msgtype("visualization_msgs/msg/Marker")(
+        header=header(t, frame_id),
+        ns=ns,
+        id=int(mid),
+        type=int(mtype),
+        action=int(action),
+        pose=_pose_msg(pose[0], pose[1], pose[2], z),
+        scale=vec(x=float(scale[0]), y=float(scale[1]), z=float(scale[2])),
+        color=color(*rgba),
+        lifetime=dur,
+        frame_locked=False,
+        points=pts,
+        colors=[],
+        texture_resource="",
+        texture=msgtype("sensor_msgs/msg/CompressedImage")(
+            header=header(t, ""), format="", data=np.zeros(0, dtype=np.uint8)
+        ),
+        uv_coordinates=[],
+        text=text,
+        mesh_resource="",
+        mesh_file=msgtype("visualization_msgs/msg/MeshFile")(
+            filename="", data=np.zeros(0, dtype=np.uint8)
+        ),
+        mesh_use_embedded_materials=False,
+    )
+
+
+def marker_array(markers: list[Any]) -> Any:
+    return msgtype(MARKER_ARRAY)(markers=markers)
+
+
+def occupancy_grid(
+    t: float, frame_id: str, data: np.ndarray, resolution: float, origin: tuple[float, float]
+) -> Any:
+    """nav_msgs/OccupancyGrid from an (H, W) int8 array (row 0 at the origin's y)."""
+    data = np.asarray(data, dtype=np.int8)
+    h, w = data.shape
+    info = msgtype("nav_msgs/msg/MapMetaData")(
+        map_load_time=stamp(t),
+        resolution=float(resolution),
+        width=w,
+        height=h,
+        origin=_pose_msg(origin[0], origin[1], 0.0),
+    )
+    return msgtype(OCCUPANCY_GRID)(header=header(t, frame_id), info=info, data=data.reshape(-1))

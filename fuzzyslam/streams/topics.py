@@ -1,0 +1,29 @@
+"""Topic names of a log (the one place for them). Configurable for real robot logs."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass
+class Topics:
+    """Topic names read and written by every stage (config section ``topics``)."""
+
+    joint_states: str = "/joint_states"
+    odom: str = "/odom"
+    sonar_prefix: str = "/sonar/s"
+    tf_static: str = "/tf_static"
+    image: str = "/ceiling_camera/image_raw"
+    camera_info: str = "/ceiling_camera/camera_info"
+    detections: str = "/ceiling_camera/detections"
+    ground_truth: str = "/ground_truth/odom"
+    events: str = "/sim/events"
+    world_markers: str = "/sim/world"
+    slam_pose: str = "/slam/pose"
+    slam_landmarks: str = "/slam/landmarks"
+    slam_changes: str = "/slam/changes"
+    map: str = "/map"
+
+    def sonar(self, i: int) -> str:
+        """Topic of sonar ``i`` (``/sonar/s00`` .. ``/sonar/s15``)."""
+        return f"{self.sonar_prefix}{i:02d}"

@@ -1,0 +1,63 @@
+"""TUM trajectory files: ``timestamp x y z qx qy qz qw`` (what evo reads)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+
+from fuzzyslam.errors import InputError
+from fuzzyslam.fileio import atomic_path, check_input_file
+from fuzzyslam.se2 import quaternion_to_yaw, yaw_to_quaternion
+
+
+def format_tum(t: np.ndarray, poses: np.ndarray) -> str:
+    """TUM text of times (N,) and planar poses (N, 3), z = 0, yaw-only quaternion."""
+    t = np.asarray(t, dtype=float)
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    q = yaw_to_quaternion(poses[:, 2]).reshape(-1, 4)
+    rows = np.column_stack([t, poses[:, 0], poses[:, 1], np.zeros(len(t)), q])
+    lines = [
+        "%.9f %.6f %.6f %.6f %.9f %.9f %.9f %.9f" % tuple(r)  # noqa: UP031 - fixed layout
+        for r in rows
+    ]
+    return "\n".join(["# timestamp x y z qx qy qz qw", *lines]) + "\n"
+
+
+def write_tum(path: str | os.PathLike, t: np.ndarray, poses: np.ndarray) -> None:
+    """Write a TUM file atomically."""
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(format_tum(t, poses), encoding="utf-8")
+
+
+def read_tum(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
+    """Read a TUM file: times (N,) and planar poses (N, 3) (yaw from the quaternion)."""
+    p = check_input_file(path, "trajectory")
+    rows = []
+    try:
+        text = p.read_text(encoding="utf-8")
+    except UnicodeDecodeError:
+        raise InputError(p, "not a TUM trajectory (not text)") from None
+    for lineno, line in enumerate(text.splitlines(), 1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        parts = s.replace(",", " ").split()
+        if len(parts) != 8:
+            raise InputError(p, f"line {lineno}: expected 8 columns (TUM), got {len(parts)}")
+        try:
+            vals = [float(v) for v in parts]
+        except ValueError:
+            raise InputError(p, f"line {lineno}: non-numeric value") from None
+        if not np.all(np.isfinite(vals)):
+            raise InputError(p, f"line {lineno}: NaN or infinite value")
+        rows.append(vals)
+    if not rows:
+        raise InputError(p, "trajectory holds no poses")
+    a = np.array(rows)
+    t = a[:, 0]
+    if np.any(np.diff(t) < 0):
+        raise InputError(p, "timestamps are not in increasing order")
+    yaw = np.asarray(quaternion_to_yaw(a[:, 4:8])).reshape(-1)
+    return t, np.column_stack([a[:, 1], a[:, 2], yaw])

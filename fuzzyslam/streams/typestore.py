@@ -1,0 +1,45 @@
+"""The ROS 2 message typestore (rosbags) used for every message read or written."""
+
+from __future__ import annotations
+
+from functools import cache, lru_cache
+from typing import Any
+
+from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys.store import Typestore
+
+
+@lru_cache(maxsize=1)
+def typestore() -> Typestore:
+    """The ROS 2 Humble typestore (standard message types)."""
+    return get_typestore(Stores.ROS2_HUMBLE)
+
+
+def normalise_typename(name: str) -> str:
+    """'sensor_msgs/Range' or 'sensor_msgs/msg/Range' -> 'sensor_msgs/msg/Range'."""
+    parts = name.split("/")
+    if len(parts) == 2:
+        return f"{parts[0]}/msg/{parts[1]}"
+    return name
+
+
+def msgtype(name: str) -> Any:
+    """The message class of a type name, e.g. msgtype('sensor_msgs/msg/Range')."""
+    return typestore().types[normalise_typename(name)]
+
+
+@cache
+def msgdef(name: str) -> str:
+    """The ros2msg definition text of a type, with dependencies as 'MSG: pkg/Type' blocks."""
+    text, _ = typestore().generate_msgdef(normalise_typename(name), ros_version=2)
+    return text
+
+
+def serialize(msg: Any, name: str) -> bytes:
+    """CDR bytes of a message."""
+    return bytes(typestore().serialize_cdr(msg, normalise_typename(name)))
+
+
+def deserialize(data: bytes | memoryview, name: str) -> Any:
+    """Message object from CDR bytes."""
+    return typestore().deserialize_cdr(data, normalise_typename(name))
