@@ -1,0 +1,99 @@
+"""Grid geometry and per-cell belief masses: the data contract of every fuzzy map.
+
+A :class:`Grid` maps world (or robot-frame) coordinates to cells: cell (iy, ix)
+covers x in [ox + ix*res, ox + (ix+1)*res) and y in [oy + iy*res, oy + (iy+1)*res),
+so row 0 is at the origin's y (as in nav2's OccupancyGrid; flip rows for a picture).
+
+A :class:`BeliefMap` holds, per cell, the masses of Smets' transferable belief
+model on the frame {E (empty), O (occupied)}: m(E), m(O), m(Theta) (don't know)
+and m(emptyset) (conflict), which always sum to 1 (models.md sec. 6).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class Grid:
+    """Regular grid: origin (lower-left corner of cell (0, 0)), cell size, (ny, nx)."""
+
+    origin: tuple[float, float]
+    resolution: float
+    shape: tuple[int, int]
+
+    @classmethod
+    def centred(cls, cells: int, resolution: float) -> Grid:
+        """Square grid of ``cells`` x ``cells`` centred on (0, 0) (the FLM's frame)."""
+        half = cells * resolution / 2.0
+        return cls((-half, -half), float(resolution), (int(cells), int(cells)))
+
+    @classmethod
+    def covering(
+        cls, xmin: float, ymin: float, xmax: float, ymax: float, resolution: float
+    ) -> Grid:
+        """Smallest grid with cells aligned to multiples of ``resolution`` covering a box."""
+        ox = np.floor(xmin / resolution) * resolution
+        oy = np.floor(ymin / resolution) * resolution
+        nx = int(np.ceil((xmax - ox) / resolution))
+        ny = int(np.ceil((ymax - oy) / resolution))
+        return cls((float(ox), float(oy)), float(resolution), (max(ny, 1), max(nx, 1)))
+
+    def cell_of(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(iy, ix) integer indices of points (N, 2); may be out of range."""
+        p = np.asarray(pts, dtype=float).reshape(-1, 2)
+        ix = np.floor((p[:, 0] - self.origin[0]) / self.resolution).astype(np.int64)
+        iy = np.floor((p[:, 1] - self.origin[1]) / self.resolution).astype(np.int64)
+        return iy, ix
+
+    def inside(self, iy: np.ndarray, ix: np.ndarray) -> np.ndarray:
+        return (iy >= 0) & (iy < self.shape[0]) & (ix >= 0) & (ix < self.shape[1])
+
+    def centres(self) -> tuple[np.ndarray, np.ndarray]:
+        """(ny, nx) arrays X, Y of cell-centre coordinates."""
+        xs = self.origin[0] + (np.arange(self.shape[1]) + 0.5) * self.resolution
+        ys = self.origin[1] + (np.arange(self.shape[0]) + 0.5) * self.resolution
+        return np.meshgrid(xs, ys)
+
+    @property
+    def extent(self) -> tuple[float, float, float, float]:
+        """(xmin, xmax, ymin, ymax), for matplotlib's imshow(origin='lower')."""
+        ox, oy = self.origin
+        return (ox, ox + self.shape[1] * self.resolution, oy, oy + self.shape[0] * self.resolution)
+
+
+@dataclass
+class BeliefMap:
+    """Per-cell masses m(E), m(O), m(Theta), m(conflict) (float32, each ``grid.shape``)."""
+
+    grid: Grid
+    m_e: np.ndarray
+    m_o: np.ndarray
+    m_t: np.ndarray
+    m_c: np.ndarray
+
+    @classmethod
+    def vacuous(cls, grid: Grid) -> BeliefMap:
+        """Total ignorance: m(Theta) = 1 everywhere."""
+        z = np.zeros(grid.shape, dtype=np.float32)
+        return cls(grid, z.copy(), z.copy(), np.ones(grid.shape, dtype=np.float32), z.copy())
+
+    def copy(self) -> BeliefMap:
+        return BeliefMap(
+            self.grid, self.m_e.copy(), self.m_o.copy(), self.m_t.copy(), self.m_c.copy()
+        )
+
+    def belief_occupied(self) -> np.ndarray:
+        """bel(O) = m(O)."""
+        return self.m_o
+
+    def plausibility_occupied(self) -> np.ndarray:
+        """pl(O) = m(O) + m(Theta)."""
+        return self.m_o + self.m_t
+
+    def pignistic_occupied(self) -> np.ndarray:
+        """BetP(O) = (m(O) + m(Theta)/2) / (1 - m(emptyset)) (Smets & Kennes 1994)."""
+        denom = np.maximum(1.0 - self.m_c, 1e-6)
+        return (self.m_o + 0.5 * self.m_t) / denom
