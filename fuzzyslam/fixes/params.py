@@ -7,8 +7,70 @@ from dataclasses import dataclass, field
 
 @dataclass
 class FixParams:
-    """Heading fixes (the paper) and full-pose fixes (beyond it)."""
+    """Heading fixes (the paper), full-pose fixes and change detection (beyond it)."""
 
     mode: str = field(default="heading", metadata={"choices": ["none", "heading", "pose"]})
+
+    # --- heading fixes (models.md sec. 9) ---
+    # R = sigma^2 of one heading measurement (the measured scatter of FLM-vs-FGM headings)
     sigma_heading_deg: float = field(default=1.0, metadata={"min": 0.01, "max": 90.0})
+    # chi-square gate on the heading innovation, 1 dof (99 %: 6.63)
     gate_chi2: float = field(default=6.63, metadata={"min": 0.1})
+    # Hough peak strength below which a FLM gives no usable wall direction
+    min_strength: float = field(default=0.0, metadata={"min": 0.0})
+    # reduce theta mod pi/2 instead of mod pi (only where every wall meets the others at
+    # right angles; the paper world has a 70-degree corridor, so off by default)
+    right_angles: bool = False
+    # refuse when the two candidate headings nearest the prediction are both within this
+    # many standard deviations sqrt(P_tt + R) of it
+    ambiguity_sigmas: float = field(default=3.0, metadata={"min": 0.5, "max": 20.0})
+    # recovery from an unseen heading jump (a bump): after this many consecutive gated
+    # fixes whose measurements agree within recover_spread_deg, the heading variance is
+    # inflated by the squared innovation (ekf.inflate_robot) and the fix applied; 0: never
+    recover_after: int = field(default=3, metadata={"min": 0})
+    recover_spread_deg: float = field(default=3.0, metadata={"min": 0.0, "max": 90.0})
+
+    # --- full-pose fixes (models.md sec. 10) ---
+    pose_gate_chi2: float = field(default=11.34, metadata={"min": 0.1})  # 3 dof, 99 %
+    # Olson's blur of the FGM's occupied mass (m): the width of the score's basin
+    pose_blur: float = field(default=0.10, metadata={"min": 0.0, "max": 1.0})
+    # weight of the conflict m_E(FLM) m_O(FGM) (an empty cone through a wall)
+    pose_conflict_weight: float = field(default=1.0, metadata={"min": 0.0, "max": 10.0})
+    # weight of the conflict m_O(FLM) m_E(FGM) (an echo arc in free space: mostly the
+    # arc's own angular spread, so weak evidence against a pose)
+    pose_arc_conflict_weight: float = field(default=0.0, metadata={"min": 0.0, "max": 10.0})
+    # weight of the empty-with-empty agreement (near constant, flattens the surface)
+    pose_empty_weight: float = field(default=0.0, metadata={"min": 0.0, "max": 10.0})
+    # search half-window: 3 sigma of the prediction, clipped to [min, max]
+    pose_window_min: float = field(default=0.2, metadata={"min": 0.0, "max": 5.0})
+    pose_window_max: float = field(default=0.5, metadata={"min": 0.0, "max": 5.0})
+    pose_window_min_deg: float = field(default=2.0, metadata={"min": 0.0, "max": 45.0})
+    pose_window_max_deg: float = field(default=6.0, metadata={"min": 0.0, "max": 45.0})
+    # rotation step of the coarse search and of the fine one around the coarse peak
+    pose_coarse_deg: float = field(default=1.0, metadata={"min": 0.01, "max": 10.0})
+    pose_fine_deg: float = field(default=0.25, metadata={"min": 0.01, "max": 10.0})
+    # likelihood exp((s - s_max) / temperature), s the explained fraction of the FLM's walls
+    pose_temperature: float = field(default=0.01, metadata={"min": 1e-4, "max": 1.0})
+    # floor of the measurement's standard deviations (the grid's own quantisation)
+    pose_min_sigma: float = field(default=0.02, metadata={"min": 1e-4, "max": 1.0})
+    pose_min_sigma_deg: float = field(default=0.25, metadata={"min": 1e-3, "max": 10.0})
+    # an eigen-direction whose variance exceeds this fraction of the window's uniform
+    # variance is unconstrained (e.g. along a corridor) and is given no information
+    pose_degenerate_fraction: float = field(default=0.5, metadata={"min": 0.05, "max": 1.0})
+    # a second separate mode holding more than this fraction of the likelihood: reject
+    pose_max_second_mode: float = field(default=0.1, metadata={"min": 0.0, "max": 1.0})
+    # FLM evidence: cells with m(O) or m(E) above this take part; fewer O cells: reject
+    pose_min_mass: float = field(default=0.05, metadata={"min": 0.0, "max": 1.0})
+    pose_min_occupied_cells: int = field(default=8, metadata={"min": 1})
+    # match every n-th ring (amortises the cost)
+    pose_every: int = field(default=1, metadata={"min": 1})
+
+    # --- change detection (models.md sec. 10) ---
+    detect_changes: bool = True
+    # conflict m_O(FLM) * m_E(FGM) above which a cell contradicts the map
+    change_min_conflict: float = field(default=0.25, metadata={"min": 0.0, "max": 1.0})
+    change_min_cells: int = field(default=3, metadata={"min": 1})
+    # FGM free space is eroded by this many cells so that pose error does not fire at walls
+    change_erode_cells: int = field(default=1, metadata={"min": 0, "max": 10})
+    # no detection while the position is this uncertain (1-sigma, m)
+    change_max_sigma: float = field(default=0.15, metadata={"min": 0.0})

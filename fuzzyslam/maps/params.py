@@ -1,4 +1,23 @@
-"""Parameters of the fuzzy global and local maps (models.md sec. 5-8)."""
+"""Parameters of the fuzzy global and local maps (models.md sec. 5-8).
+
+Sonar evidence constants (models.md sec. 5, Oriolo, Ulivi & Vendittelli 1997) and why:
+
+- ``k_occupied`` = 0.6, ``k_empty`` = 0.4: one reading is weak evidence (k < 1), so a
+  cell needs several agreeing readings to become certain; k_O + k_E <= 1 keeps the
+  reading's mass function valid where the occupied arc and the empty ramp overlap.
+  Occupied evidence is stronger than empty because a short echo is rarely wrong while a
+  long one is often specular (a missed wall: Moravec 1990).
+- ``range_tolerance`` dr = 0.10 m: half-width of the occupied arc; about 4 sigma of the
+  Polaroid's 1 % range error at 1-2 m plus its 1-inch quantisation, and one cell.
+- ``reliability_range`` rho_h = 3 m: distance reliability d(rho) = 1 / (1 + (rho/rho_h)^2).
+  The beam's footprint grows with rho (the echo's source is less certain), and long
+  readings are more often multipath; d is 0.9 at 1 m, 0.5 at 3 m, 0.18 at 6.5 m.
+- ``no_echo_empty`` = 0.05 and ``no_echo_reach`` = 0.6 m: a max-range reading (no echo)
+  says little in a specular corridor (a wall at more than the critical incidence does not
+  echo: in a 2 m corridor the 45-degree sonars miss walls 1.1 m away), so it gives only
+  very weak empty evidence, and only nearer than the closest wall of a corridor.
+- ``forgetting_gamma``: alpha = 1 - gamma * m(conflict) (models.md sec. 6).
+"""
 
 from __future__ import annotations
 
@@ -7,13 +26,44 @@ from dataclasses import dataclass, field
 
 @dataclass
 class MapParams:
-    """Fuzzy grid maps from sonar evidence, Smets' calculus and forgetting."""
+    """Fuzzy grid maps from sonar evidence, Smets' calculus, forgetting, Hough references."""
 
     resolution: float = field(default=0.10, metadata={"min": 0.01, "max": 1.0})
-    margin: float = field(default=1.0, metadata={"min": 0.0, "max": 20.0})
+    margin: float = field(default=2.0, metadata={"min": 0.0, "max": 20.0})
     flm_cells: int = field(default=41, metadata={"min": 5, "max": 1001})
     freeze_run: int = field(default=4, metadata={"min": 1})
+    # --- per-reading evidence (models.md sec. 5) ---
     k_occupied: float = field(default=0.6, metadata={"min": 0.0, "max": 1.0})
     k_empty: float = field(default=0.4, metadata={"min": 0.0, "max": 1.0})
     range_tolerance: float = field(default=0.10, metadata={"min": 0.01, "max": 2.0})
+    angular_exponent: float = field(default=2.0, metadata={"min": 0.5, "max": 50.0})
+    reliability_range: float = field(default=1.5, metadata={"min": 0.1, "max": 100.0})
+    empty_reliability_range: float = field(default=3.0, metadata={"min": 0.1, "max": 100.0})
+    empty_reach: float = field(default=1.2, metadata={"min": 0.0, "max": 1000.0})
+    no_echo_empty: float = field(default=0.05, metadata={"min": 0.0, "max": 1.0})
+    no_echo_reach: float = field(default=0.6, metadata={"min": 0.0, "max": 50.0})
+    # --- combination (models.md sec. 6) ---
     forgetting_gamma: float = field(default=1.0, metadata={"min": 0.0, "max": 1.0})
+    # --- trajectory interpolation ---
+    max_pose_gap: float = field(default=1.0, metadata={"min": 0.01, "max": 100.0})
+    # --- Hough and references (models.md sec. 8-9) ---
+    wall_threshold: float = field(default=0.3, metadata={"min": 0.0, "max": 1.0})
+    flm_wall_threshold: float = field(default=0.05, metadata={"min": 0.0, "max": 1.0})
+    hough_theta_step_deg: float = field(default=0.5, metadata={"min": 0.05, "max": 5.0})
+    ambiguity_ratio: float = field(default=0.85, metadata={"min": 0.0, "max": 1.0})
+    ambiguity_separation_deg: float = field(default=20.0, metadata={"min": 1.0, "max": 89.0})
+    segment_min_length: float = field(default=2.0, metadata={"min": 0.1, "max": 100.0})
+    segment_turn_deg: float = field(default=10.0, metadata={"min": 0.5, "max": 90.0})
+    segment_band: float = field(default=1.6, metadata={"min": 0.1, "max": 20.0})
+    segment_merge_distance: float = field(default=0.8, metadata={"min": 0.0, "max": 20.0})
+
+    def __post_init__(self) -> None:
+        if self.k_occupied + self.k_empty > 1.0 + 1e-9:
+            raise ValueError(
+                f"k_occupied + k_empty must be <= 1 (got {self.k_occupied + self.k_empty:g}): "
+                "a reading's masses m(E) + m(O) may not exceed 1"
+            )
+        if self.flm_cells % 2 == 0:
+            raise ValueError(
+                f"flm_cells must be odd (robot on the centre cell), got {self.flm_cells}"
+            )

@@ -7,7 +7,12 @@ from dataclasses import dataclass, field
 
 @dataclass
 class WorldParams:
-    """The office floor: a loop of corridors around a centre line, and its ceiling lamps."""
+    """The office floor: a loop of corridors around a centre line, and its ceiling lamps.
+
+    Walls are the centre-line loop offset by +-corridor_width/2 (mitred corners). Lamps
+    are placed evenly along the centre line (``lamp_count``, the first half a spacing
+    from the first vertex) unless ``lamps`` lists them explicitly as [x, y].
+    """
 
     centerline: list[list[float]] = field(
         default_factory=lambda: [[0.0, 0.0], [10.0, 0.0], [12.5, 7.0], [0.0, 7.0]]
@@ -27,12 +32,18 @@ class RobotParams:
     wheel_base: float = field(default=0.40, metadata={"min": 0.05, "max": 5.0})
     max_speed: float = field(default=0.5, metadata={"min": 0.01, "max": 5.0})
     cruise_speed: float = field(default=0.3, metadata={"min": 0.01, "max": 5.0})
+    max_turn_rate: float = field(default=0.8, metadata={"min": 0.01, "max": 10.0})
+    lookahead: float = field(default=0.8, metadata={"min": 0.05, "max": 10.0})
+    # the driver's aim wanders sideways off the centre line (Ornstein-Uhlenbeck: std, time
+    # constant), so the true path differs from seed to seed
+    path_wander: float = field(default=0.1, metadata={"min": 0.0, "max": 1.0})
+    wander_time: float = field(default=8.0, metadata={"min": 0.1, "max": 1000.0})
     rate_hz: float = field(default=20.0, metadata={"min": 1.0, "max": 1000.0})
-    # systematic encoder errors: true wheel radius = nominal * scale
-    left_scale: float = field(default=1.004, metadata={"min": 0.5, "max": 1.5})
-    right_scale: float = field(default=0.996, metadata={"min": 0.5, "max": 1.5})
+    # systematic encoder errors: true wheel radius = nominal * scale, true base = nominal * scale
+    left_scale: float = field(default=1.0006, metadata={"min": 0.5, "max": 1.5})
+    right_scale: float = field(default=0.9994, metadata={"min": 0.5, "max": 1.5})
     base_scale: float = field(default=1.01, metadata={"min": 0.5, "max": 1.5})
-    # random encoder error: std of a wheel's angle increment per sqrt(rad) turned
+    # random encoder error: std (rad) of a wheel's angle increment per sqrt(rad) turned
     wheel_noise: float = field(default=0.01, metadata={"min": 0.0, "max": 1.0})
     ticks_per_rev: int = field(default=4096, metadata={"min": 1})
 
@@ -49,9 +60,12 @@ class SonarParams:
     noise_frac: float = field(default=0.01, metadata={"min": 0.0, "max": 0.5})
     quantization: float = field(default=0.0254, metadata={"min": 0.0, "max": 1.0})
     critical_angle_deg: float = field(default=17.0, metadata={"min": 1.0, "max": 90.0})
+    # a reflected ray heading back within this angle of the sensor returns (corner reflector)
+    return_angle_deg: float = field(default=12.5, metadata={"min": 0.0, "max": 90.0})
     rays_per_cone: int = field(default=9, metadata={"min": 1, "max": 101})
     max_bounces: int = field(default=2, metadata={"min": 0, "max": 5})
     crosstalk_prob: float = field(default=0.01, metadata={"min": 0.0, "max": 1.0})
+    mount_height: float = field(default=0.5, metadata={"min": 0.0, "max": 5.0})
 
 
 @dataclass
@@ -64,8 +78,13 @@ class CameraParams:
     hfov_deg: float = field(default=95.0, metadata={"min": 10.0, "max": 170.0})
     ceiling_height: float = field(default=2.5, metadata={"min": 0.2, "max": 20.0})
     offset: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    mount_height: float = field(default=0.8, metadata={"min": 0.0, "max": 5.0})
     noise_sigma: float = field(default=3.0, metadata={"min": 0.0, "max": 100.0})
     background: float = field(default=40.0, metadata={"min": 0.0, "max": 255.0})
+    # background shading: brightness falls by this much (grey levels) toward the corners
+    vignetting: float = field(default=12.0, metadata={"min": 0.0, "max": 255.0})
+    lamp_level: float = field(default=255.0, metadata={"min": 0.0, "max": 255.0})
+    supersample: int = field(default=4, metadata={"min": 1, "max": 16})
 
 
 @dataclass
@@ -78,7 +97,10 @@ class LampFailure:
 
 @dataclass
 class Bump:
-    """The true pose turns by ``angle_deg`` in one step, unseen by odometry."""
+    """The true pose turns by ``angle_deg`` in one step, unseen by odometry.
+
+    ``fraction`` is the part of the run's lap already driven when it happens.
+    """
 
     run: int = field(default=1, metadata={"min": 1})
     fraction: float = field(default=0.5, metadata={"min": 0.0, "max": 1.0})
@@ -87,8 +109,16 @@ class Bump:
 
 @dataclass
 class ScenarioParams:
-    """Runs (laps, alternating direction) and scheduled events."""
+    """Runs (laps, alternating direction) and scheduled events.
+
+    The robot starts on the centre line ``start_offset`` metres along it from its first
+    vertex, facing along it; odd runs drive the loop forward, even runs backward, and
+    between runs it turns around in place. ``lap_fraction`` < 1 shortens every run to
+    part of a lap (for tests).
+    """
 
     runs: int = field(default=6, metadata={"min": 1, "max": 1000})
+    start_offset: float = field(default=5.0, metadata={"min": 0.0})
+    lap_fraction: float = field(default=1.0, metadata={"min": 0.01, "max": 1.0})
     lamp_failures: list[LampFailure] = field(default_factory=list)
     bumps: list[Bump] = field(default_factory=list)

@@ -1,0 +1,316 @@
+"""Edge of the evaluation: read TRUTH and ESTIMATE files, run the core, write REPORTDIR.
+
+TRUTH is a simulated MCAP log (ground truth, world and scenario inside) or a TUM file;
+ESTIMATE is a ``fuzzyslam run`` output directory or a TUM file. Kinds are detected by content.
+"""
+
+from __future__ import annotations
+
+import csv
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from fuzzyslam.errors import InputError
+from fuzzyslam.evaluation.core import (
+    Estimate,
+    Evaluation,
+    HeadingFixes,
+    SpanError,
+    Truth,
+    Updates,
+    evaluate,
+)
+from fuzzyslam.evaluation.params import EvalParams
+from fuzzyslam.fileio import OutputDir, check_input_file, check_outputs
+from fuzzyslam.maps.grid import BeliefMap, Grid
+from fuzzyslam.progress import Progress
+from fuzzyslam.streams.logmeta import read_scenario, read_world
+from fuzzyslam.streams.messages import pose_of
+from fuzzyslam.streams.reader import MCAP_MAGIC, LogReader
+from fuzzyslam.streams.topics import Topics
+from fuzzyslam.streams.tum import read_tum
+
+KIND_MCAP = "mcap"
+KIND_TUM = "tum"
+KIND_RUNDIR = "rundir"
+
+
+def detect_kind(path: str | os.PathLike) -> str:
+    """``mcap`` (magic bytes), ``rundir`` (a directory) or ``tum`` (text whose first data line
+    has 8 numeric columns); anything else is an InputError."""
+    p = Path(path)
+    if not p.exists():
+        raise InputError(p, "does not exist")
+    if p.is_dir():
+        return KIND_RUNDIR
+    check_input_file(p)
+    with open(p, "rb") as f:
+        head = f.read(4096)
+    if head.startswith(MCAP_MAGIC):
+        return KIND_MCAP
+    try:
+        text = head.decode("utf-8")
+    except UnicodeDecodeError:
+        text = ""
+    for line in text.splitlines():
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        parts = s.replace(",", " ").split()
+        try:
+            [float(v) for v in parts]
+        except ValueError:
+            break
+        if len(parts) == 8:
+            return KIND_TUM
+        break
+    raise InputError(
+        p, "unknown file kind (expected an MCAP log, a TUM trajectory or a run output directory)"
+    )
+
+
+# --- truth --------------------------------------------------------------------------------
+
+
+def read_truth(path: str | os.PathLike) -> Truth:
+    """Ground truth from a simulated log (with world, scenario, freeze run) or a TUM file."""
+    kind = detect_kind(path)
+    if kind == KIND_TUM:
+        t, poses = read_tum(path)
+        return Truth(t, poses, source=str(path))
+    if kind != KIND_MCAP:
+        raise InputError(path, "TRUTH must be a simulated MCAP log or a TUM file, not a directory")
+    reader = LogReader(path)
+    world = read_world(reader)
+    scenario = read_scenario(reader)
+    topic = Topics().ground_truth
+    if scenario is not None:
+        topic = scenario.config.get("topics", {}).get("ground_truth", topic)
+    if topic not in reader.topics:
+        raise InputError(path, f"log has no ground truth (no topic {topic}); give a simulated log")
+    ts, ps = [], []
+    with Progress(reader.end - reader.start, "evaluate: reading ground truth") as bar:
+        for lm in reader.messages([topic]):
+            ts.append(lm.t)
+            ps.append(pose_of(lm.msg.pose.pose))
+            bar.update_to(lm.t - reader.start)
+    if len(ts) < 2:
+        raise InputError(path, f"ground truth topic {topic} holds fewer than two poses")
+    t = np.asarray(ts)
+    order = np.argsort(t, kind="stable")
+    freeze = None
+    if scenario is not None:
+        fr = scenario.config.get("fgm", {}).get("freeze_run")
+        freeze = int(fr) if fr is not None else None
+    return Truth(t[order], np.asarray(ps)[order], world, scenario, freeze, str(path))
+
+
+# --- estimate -----------------------------------------------------------------------------
+
+
+def _read_csv(path: Path, required: list[str]) -> dict[str, list[str]]:
+    try:
+        with open(path, newline="", encoding="utf-8") as f:
+            rows = list(csv.reader(f))
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(path, f"cannot read CSV: {exc}") from None
+    if not rows:
+        raise InputError(path, "empty CSV (no header)")
+    header = [h.strip() for h in rows[0]]
+    missing = [c for c in required if c not in header]
+    if missing:
+        raise InputError(path, f"CSV lacks column(s) {', '.join(missing)}")
+    cols: dict[str, list[str]] = {h: [] for h in header}
+    for lineno, r in enumerate(rows[1:], 2):
+        if not r:
+            continue
+        if len(r) != len(header):
+            raise InputError(path, f"line {lineno}: {len(r)} fields, header has {len(header)}")
+        for h, v in zip(header, r, strict=True):
+            cols[h].append(v.strip())
+    return cols
+
+
+def _floats(path: Path, name: str, vals: list[str]) -> np.ndarray:
+    try:
+        return np.array([float(v) if v != "" else np.nan for v in vals], dtype=float)
+    except ValueError:
+        raise InputError(path, f"column {name} holds a non-numeric value") from None
+
+
+def read_covariance(path: Path, n: int) -> np.ndarray:
+    """covariance.csv -> (n, 3, 3); rows must match trajectory.tum one to one."""
+    names = ["t", "pxx", "pxy", "pxt", "pyy", "pyt", "ptt"]
+    c = _read_csv(path, names)
+    v = {k: _floats(path, k, c[k]) for k in names}
+    if v["t"].size != n:
+        raise InputError(path, f"{v['t'].size} rows, but trajectory.tum has {n} poses")
+    cov = np.empty((n, 3, 3))
+    cov[:, 0, 0], cov[:, 1, 1], cov[:, 2, 2] = v["pxx"], v["pyy"], v["ptt"]
+    cov[:, 0, 1] = cov[:, 1, 0] = v["pxy"]
+    cov[:, 0, 2] = cov[:, 2, 0] = v["pxt"]
+    cov[:, 1, 2] = cov[:, 2, 1] = v["pyt"]
+    return cov
+
+
+def read_updates(path: Path) -> Updates:
+    names = ["t", "kind", "id", "dof", "nis", "accepted"]
+    c = _read_csv(path, names)
+    return Updates(
+        t=_floats(path, "t", c["t"]),
+        kind=np.array(c["kind"], dtype=str),
+        id=np.nan_to_num(_floats(path, "id", c["id"]), nan=-1).astype(np.int64),
+        dof=np.nan_to_num(_floats(path, "dof", c["dof"]), nan=0).astype(np.int64),
+        nis=_floats(path, "nis", c["nis"]),
+        accepted=np.nan_to_num(_floats(path, "accepted", c["accepted"])) > 0.5,
+    )
+
+
+def read_heading_fixes(path: Path) -> HeadingFixes:
+    c = _read_csv(path, ["t", "measured", "accepted", "reason"])
+    return HeadingFixes(
+        t=_floats(path, "t", c["t"]),
+        measured=_floats(path, "measured", c["measured"]),
+        accepted=np.nan_to_num(_floats(path, "accepted", c["accepted"])) > 0.5,
+        reason=np.array(c["reason"], dtype=str),
+    )
+
+
+def read_landmarks(path: Path) -> tuple[np.ndarray, list[int]]:
+    """landmarks.yaml -> positions (M, 2) and ids."""
+    try:
+        data = yaml.safe_load(path.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise InputError(path, f"cannot read landmarks YAML: {str(exc).splitlines()[0]}") from None
+    lms = (data or {}).get("landmarks") if isinstance(data, dict) else None
+    if lms is None:
+        lms = []
+    if not isinstance(lms, list):
+        raise InputError(path, "'landmarks' must be a list")
+    try:
+        xy = np.array([[float(d["x"]), float(d["y"])] for d in lms], dtype=float).reshape(-1, 2)
+        ids = [int(d.get("id", i)) for i, d in enumerate(lms)]
+    except (KeyError, TypeError, ValueError) as exc:
+        raise InputError(path, f"malformed landmark entry: {exc}") from None
+    return xy, ids
+
+
+def read_landmark_history(path: Path, topic: str) -> list[tuple[float, np.ndarray]]:
+    """Snapshots (t, lamps (M, 2)) of the /slam/landmarks MarkerArrays in estimates.mcap.
+
+    Each message holds the whole map; lamps are the ADD markers of namespace ``lamps`` (or,
+    if there is none, every non-text marker).
+    """
+    reader = LogReader(path)
+    if topic not in reader.topics:
+        return []
+    out = []
+    for lm in reader.messages([topic]):
+        mk = [m for m in lm.msg.markers if m.action == 0]
+        lamps = [m for m in mk if m.ns == "lamps"] or [m for m in mk if m.type != 9]
+        xy = np.array([[m.pose.position.x, m.pose.position.y] for m in lamps], dtype=float)
+        out.append((lm.t, xy.reshape(-1, 2)))
+    return out
+
+
+def read_estimate(path: str | os.PathLike, label: str | None = None) -> Estimate:
+    """An estimate from a run OUTDIR (every file it holds) or a TUM file (poses only)."""
+    kind = detect_kind(path)
+    p = Path(path)
+    if kind == KIND_TUM:
+        t, poses = read_tum(p)
+        return Estimate(t, poses, label=label or p.stem, source=str(p))
+    if kind != KIND_RUNDIR:
+        raise InputError(p, "ESTIMATE must be a run output directory or a TUM file, not a log")
+    traj = p / "trajectory.tum"
+    if not traj.is_file():
+        raise InputError(p, "not a run output directory (no trajectory.tum)")
+    t, poses = read_tum(traj)
+    est = Estimate(t, poses, label=label or p.name, source=str(p))
+    if (p / "covariance.csv").is_file():
+        est.cov = read_covariance(p / "covariance.csv", t.size)
+    if (p / "odometry.tum").is_file():
+        est.odometry = read_tum(p / "odometry.tum")
+    if (p / "landmarks.yaml").is_file():
+        est.landmarks, est.landmark_ids = read_landmarks(p / "landmarks.yaml")
+    if (p / "updates.csv").is_file():
+        est.updates = read_updates(p / "updates.csv")
+    if (p / "heading_fixes.csv").is_file():
+        est.heading_fixes = read_heading_fixes(p / "heading_fixes.csv")
+    if (p / "estimates.mcap").is_file():
+        est.landmark_history = read_landmark_history(p / "estimates.mcap", Topics().slam_landmarks)
+    return est
+
+
+def read_fgm(mapdir: str | os.PathLike) -> BeliefMap:
+    """The FGM of a ``fuzzyslam map`` output directory (fgm.npz), for drawing under Fig. 1."""
+    p = Path(mapdir)
+    f = p / "fgm.npz" if p.is_dir() else p
+    check_input_file(f, "map")
+    try:
+        with np.load(f) as z:
+            grid = Grid(
+                origin=(float(z["origin"][0]), float(z["origin"][1])),
+                resolution=float(z["resolution"]),
+                shape=(int(z["shape"][0]), int(z["shape"][1])),
+            )
+            return BeliefMap(grid, z["m_e"], z["m_o"], z["m_t"], z["m_c"])
+    except (OSError, KeyError, ValueError) as exc:
+        raise InputError(f, f"not a fuzzyslam FGM (fgm.npz): {exc}") from None
+
+
+# --- the whole stage ----------------------------------------------------------------------
+
+
+@dataclass
+class EvaluateResult:
+    evaluation: Evaluation
+    outdir: Path
+    files: list[str]
+
+
+def run_evaluate(
+    truth_path: str | os.PathLike,
+    estimate_path: str | os.PathLike,
+    outdir: str | os.PathLike,
+    params: EvalParams | None = None,
+    map_dir: str | os.PathLike | None = None,
+    label: str | None = None,
+) -> EvaluateResult:
+    """Read, evaluate, and write metrics.json, the figures and report.md into ``outdir``.
+
+    Every input is read and checked before anything is written; the outputs appear together
+    (fileio.OutputDir), so a failure leaves ``outdir`` as it was.
+    """
+    from fuzzyslam.evaluation import figures, report
+
+    params = params or EvalParams()
+    check_outputs([truth_path, estimate_path], [outdir])
+    truth = read_truth(truth_path)
+    est = read_estimate(estimate_path, label)
+    fgm = read_fgm(map_dir) if map_dir is not None else None
+    try:
+        ev = evaluate(truth, est, params)
+    except SpanError as exc:
+        raise InputError(estimate_path, str(exc)) from None
+    with OutputDir(outdir) as tmp:
+        figs = figures.draw_all(tmp, truth, est, ev, fgm)
+        report.write_metrics(tmp / "metrics.json", ev.metrics)
+        report.write_report(tmp / "report.md", ev.metrics, figs)
+        files = sorted(x.name for x in tmp.iterdir())
+    return EvaluateResult(ev, Path(outdir), files)
+
+
+def summary(res: EvaluateResult) -> dict[str, Any]:
+    """The JSON printed on stdout: where the report is and the headline metrics."""
+    return {
+        "report": str(res.outdir / "report.md"),
+        "metrics": str(res.outdir / "metrics.json"),
+        "files": res.files,
+        **res.evaluation.metrics["headline"],
+    }

@@ -1,0 +1,358 @@
+"""The paper's figures (1, 3, 4) and a consistency plot, drawn with matplotlib (Agg) into PNGs.
+
+Each ``fig_*`` function takes arrays/dataclasses and a path and writes one PNG.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+from numpy.typing import NDArray
+
+from fuzzyslam.evaluation.core import Estimate, Evaluation, Truth
+from fuzzyslam.evaluation.metrics import LampMatch
+from fuzzyslam.maps.grid import BeliefMap
+from fuzzyslam.streams.logmeta import World
+
+Array = NDArray[np.float64]
+DPI = 120
+C_TRUTH, C_EST, C_ODOM = "black", "tab:blue", "tab:red"
+
+
+def _save(fig: plt.Figure, path: Path) -> None:
+    fig.savefig(path, dpi=DPI, bbox_inches="tight", format="png")
+    plt.close(fig)
+
+
+def fig1_paths(
+    path: Path,
+    truth: Truth,
+    est: Estimate,
+    fgm: BeliefMap | None = None,
+    lamp_match: LampMatch | None = None,
+    title: str = "",
+) -> None:
+    """Fig. 1: true, estimated and odometry-only paths; true and estimated lamps (duplicated and
+    missed ones marked when lamp_match is given); walls; the FGM underneath when given."""
+    fig, ax = plt.subplots(figsize=(9, 6.5))
+    if fgm is not None:
+        im = ax.imshow(
+            fgm.pignistic_occupied(),
+            origin="lower",
+            extent=fgm.grid.extent,
+            cmap="Greys",
+            vmin=0.0,
+            vmax=1.0,
+            interpolation="nearest",
+        )
+        fig.colorbar(im, ax=ax, shrink=0.7, label="FGM BetP(occupied)")
+    world: World | None = truth.world
+    if world is not None:
+        for i, w in enumerate(world.wall_array):
+            ax.plot(w[[0, 2]], w[[1, 3]], color="0.45", lw=1.2, label="walls" if i == 0 else None)
+    ax.plot(truth.poses[:, 0], truth.poses[:, 1], color=C_TRUTH, lw=1.0, label="true path")
+    if est.odometry is not None:
+        op = est.odometry[1]
+        ax.plot(op[:, 0], op[:, 1], color=C_ODOM, lw=0.8, ls="--", label="odometry only")
+    ax.plot(est.poses[:, 0], est.poses[:, 1], color=C_EST, lw=0.9, label=f"estimate ({est.label})")
+    if world is not None and world.lamp_array.size:
+        la = world.lamp_array
+        ax.scatter(
+            la[:, 0],
+            la[:, 1],
+            s=70,
+            marker="o",
+            facecolors="none",
+            edgecolors="darkorange",
+            linewidths=1.5,
+            label="true lamps",
+            zorder=5,
+        )
+        for i, (x, y) in enumerate(la):
+            ax.annotate(str(i), (x, y), xytext=(4, 4), textcoords="offset points", fontsize=7)
+    if est.landmarks is not None and est.landmarks.size:
+        ax.scatter(
+            est.landmarks[:, 0],
+            est.landmarks[:, 1],
+            s=40,
+            marker="x",
+            color="green",
+            linewidths=1.5,
+            label="estimated lamps",
+            zorder=6,
+        )
+        if lamp_match is not None and lamp_match.duplicates:
+            d = est.landmarks[lamp_match.duplicates]
+            ax.scatter(
+                d[:, 0],
+                d[:, 1],
+                s=90,
+                marker="x",
+                color="red",
+                linewidths=2.0,
+                label=f"duplicated lamps ({len(d)})",
+                zorder=7,
+            )
+        if lamp_match is not None and lamp_match.missed and world is not None:
+            m = world.lamp_array[lamp_match.missed]
+            ax.scatter(
+                m[:, 0],
+                m[:, 1],
+                s=110,
+                marker="s",
+                facecolors="none",
+                edgecolors="red",
+                linewidths=1.5,
+                label=f"missed lamps ({len(m)})",
+                zorder=7,
+            )
+    ax.scatter(*truth.poses[0, :2], s=60, marker="*", color="k", zorder=7, label="start")
+    pts = [truth.poses[:, :2], est.poses[:, :2]]
+    if world is not None:
+        pts.append(world.wall_array.reshape(-1, 2))
+    if est.odometry is not None:
+        pts.append(est.odometry[1][:, :2])
+    if fgm is not None:
+        e = fgm.grid.extent
+        pts.append(np.array([[e[0], e[2]], [e[1], e[3]]]))
+    allp = np.vstack(pts)
+    lo, hi = allp.min(axis=0), allp.max(axis=0)
+    pad = 0.04 * float(np.max(hi - lo)) + 0.1
+    ax.set_xlim(lo[0] - pad, hi[0] + pad)
+    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title or "Fig. 1: paths and lamps (map frame)")
+    ax.grid(alpha=0.3)
+    ax.legend(loc="best", fontsize=8, framealpha=0.85)
+    _save(fig, path)
+
+
+def _mark_events(axes: list[plt.Axes], truth: Truth) -> None:
+    if truth.scenario is None:
+        return
+    for r, t0, _t1 in truth.scenario.run_intervals():
+        for ax in axes:
+            ax.axvline(t0, color="0.6", lw=0.8, ls=":")
+        axes[0].annotate(
+            f"run {r}",
+            (t0, 1.0),
+            xycoords=("data", "axes fraction"),
+            xytext=(2, -10),
+            textcoords="offset points",
+            fontsize=7,
+        )
+    for e in truth.scenario.events:
+        if e.kind == "lamp_failure":
+            for ax in axes:
+                ax.axvline(e.t, color="tab:red", lw=1.2, ls="--")
+            axes[-1].annotate(
+                f"{len(e.lamps)} lamps fail",
+                (e.t, 0.0),
+                xycoords=("data", "axes fraction"),
+                xytext=(3, 4),
+                textcoords="offset points",
+                fontsize=7,
+                color="tab:red",
+            )
+        elif e.kind == "bump":
+            for ax in axes:
+                ax.axvline(e.t, color="tab:purple", lw=1.0, ls="-.")
+    if truth.freeze_run is not None:
+        t_freeze = truth.scenario.run_end_time(truth.freeze_run)
+        if t_freeze is not None:
+            for ax in axes:
+                ax.axvline(t_freeze, color="tab:green", lw=1.2)
+            axes[0].annotate(
+                "FGM frozen",
+                (t_freeze, 0.0),
+                xycoords=("data", "axes fraction"),
+                xytext=(3, 4),
+                textcoords="offset points",
+                fontsize=7,
+                color="tab:green",
+            )
+
+
+def fig3_errors(path: Path, truth: Truth, ev: Evaluation, title: str = "") -> None:
+    """Fig. 3: x, y (cm) and heading (deg) errors against time, +-2 sigma from the covariance,
+    run boundaries, the FGM freeze, lamp failures and bumps marked."""
+    t = ev.assoc.t
+    fig, axes = plt.subplots(3, 1, figsize=(10, 7.5), sharex=True)
+    scale = [100.0, 100.0, 180.0 / np.pi]
+    names = ["x error (cm)", "y error (cm)", "heading error (deg)"]
+    for k, ax in enumerate(axes):
+        e = ev.errors[:, k] * scale[k]
+        if ev.sigma is not None:
+            s2 = 2.0 * ev.sigma[:, k] * scale[k]
+            ax.fill_between(t, -s2, s2, color=C_EST, alpha=0.18, lw=0, label="+-2 sigma (filter)")
+        ax.plot(t, e, color=C_EST, lw=0.8, label="estimate - truth")
+        ax.axhline(0.0, color="k", lw=0.6)
+        ax.set_ylabel(names[k])
+        ax.grid(alpha=0.3)
+        lim = np.nanpercentile(np.abs(e), 99.5) if e.size else 1.0
+        if ev.sigma is not None:
+            lim = max(lim, float(np.nanpercentile(2.0 * ev.sigma[:, k] * scale[k], 99.5)))
+        lim = lim * 1.25 if np.isfinite(lim) and lim > 0 else 1.0
+        ax.set_ylim(-lim, lim)
+    _mark_events(list(axes), truth)
+    axes[0].legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time (s)")
+    axes[0].set_title(title or "Fig. 3: pose errors against time")
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def fig4_lamp_errors(
+    path: Path, per_lamp: Mapping[str, Array], title: str = "", max_dist: float | None = None
+) -> None:
+    """Fig. 4: position error of each true lamp (cm), one bar group per lamp, one bar per
+    labelled estimate (e.g. end of run 4, end of run 6, with bumps). Missed lamps: a cross."""
+    fig, ax = plt.subplots(figsize=(10, 4))
+    labels = list(per_lamp)
+    n = max((len(v) for v in per_lamp.values()), default=0)
+    width = 0.8 / max(len(labels), 1)
+    x = np.arange(n)
+    for j, lab in enumerate(labels):
+        v = np.asarray(per_lamp[lab], dtype=float) * 100.0
+        pos = x[: v.size] - 0.4 + width * (j + 0.5)
+        mean = np.nanmean(v) if np.isfinite(v).any() else np.nan
+        bars = ax.bar(
+            pos, np.nan_to_num(v), width=width * 0.95, label=f"{lab} (mean {mean:.1f} cm)"
+        )
+        miss = ~np.isfinite(v)
+        if miss.any():
+            ax.scatter(
+                pos[miss],
+                np.zeros(miss.sum()),
+                marker="x",
+                color=bars.patches[0].get_facecolor(),
+                s=40,
+                zorder=5,
+            )
+    ax.set_xticks(x)
+    ax.set_xticklabels([str(i) for i in x])
+    ax.set_xlabel(
+        f"true lamp index (x on the axis: lamp not matched within {max_dist * 100:.0f} cm)"
+        if max_dist
+        else "true lamp index"
+    )
+    ax.set_ylabel("lamp position error (cm)")
+    ax.set_title(title or "Fig. 4: per-lamp position error")
+    ax.grid(axis="y", alpha=0.3)
+    ax.legend(fontsize=8)
+    _save(fig, path)
+
+
+def running_mean(v: Array, frac: float = 0.02) -> Array:
+    """Centred moving average over max(5, frac * n) samples (NaNs ignored)."""
+    v = np.asarray(v, dtype=float)
+    w = max(5, int(frac * v.size))
+    ok = np.isfinite(v)
+    k = np.ones(w)
+    num = np.convolve(np.where(ok, v, 0.0), k, mode="same")
+    den = np.convolve(ok.astype(float), k, mode="same")
+    return np.where(den > 0, num / np.maximum(den, 1.0), np.nan)
+
+
+def fig_consistency(path: Path, truth: Truth, est: Estimate, ev: Evaluation) -> bool:
+    """NEES (3 dof) against time with its per-sample 95 % band, and NIS of accepted updates
+    per kind, normalised by dof. Returns False (nothing drawn) without covariance or updates."""
+    from scipy.stats import chi2
+
+    has_nis = est.updates is not None and est.updates.t.size > 0
+    if ev.nees is None and not has_nis:
+        return False
+    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    ax = axes[0]
+    if ev.nees is not None:
+        lo, hi = chi2.ppf([0.025, 0.975], 3)
+        ax.semilogy(
+            ev.assoc.t,
+            np.maximum(ev.nees, 1e-2),
+            color=C_EST,
+            lw=0.5,
+            alpha=0.6,
+            label=f"NEES (mean {np.nanmean(ev.nees):.2f})",
+        )
+        ax.semilogy(
+            ev.assoc.t,
+            running_mean(ev.nees),
+            color="navy",
+            lw=1.4,
+            label="running mean (2 % of samples)",
+        )
+        ax.axhspan(lo, hi, color="tab:green", alpha=0.15, label="95 % band, one sample (3 dof)")
+        ax.axhline(3.0, color="tab:green", lw=0.8)
+        ax.legend(fontsize=8, loc="lower left", framealpha=0.9)
+    ax.set_ylabel("NEES (pose, 3 dof)")
+    ax.set_ylim(bottom=1e-2)
+    ax.grid(alpha=0.3, which="both")
+    ax = axes[1]
+    if has_nis:
+        u = est.updates
+        assert u is not None
+        for kind in sorted(set(u.kind.tolist())):
+            m = (u.kind == kind) & u.accepted & (u.dof > 0) & np.isfinite(u.nis)
+            if m.any():
+                v = u.nis[m] / u.dof[m]
+                pts = ax.semilogy(
+                    u.t[m],
+                    np.maximum(v, 1e-3),
+                    ".",
+                    ms=2,
+                    alpha=0.5,
+                    label=f"{kind} ({m.sum()} accepted, mean {v.mean():.2f})",
+                )
+                ax.semilogy(u.t[m], running_mean(v), color=pts[0].get_color(), lw=1.4)
+        ax.axhline(1.0, color="tab:green", lw=0.8, label="expected NIS / dof = 1")
+        ax.legend(fontsize=8, loc="upper left", markerscale=4)
+    ax.set_ylabel("NIS / dof")
+    ax.set_ylim(bottom=1e-3)
+    ax.set_xlabel("time (s)")
+    ax.grid(alpha=0.3, which="both")
+    _mark_events(list(axes), truth)
+    axes[0].set_title("Filter consistency against truth (NEES) and innovations (NIS)")
+    fig.tight_layout()
+    _save(fig, path)
+    return True
+
+
+def fig4_sets(truth: Truth, est: Estimate, ev: Evaluation) -> dict[str, Array]:
+    """Per-lamp errors to draw in Fig. 4: the map at the end of the FGM-freeze run and of the
+    last run (the paper's 'run 4' and 'run 6') when snapshots exist, else the final map."""
+    by_run = ev.lamp_match_by_run
+    if by_run:
+        last = max(by_run)
+        runs = sorted({r for r in (truth.freeze_run, last) if r is not None and r in by_run})
+        return {f"{est.label}, end of run {r}": by_run[r].per_true for r in runs}
+    if ev.lamp_match is not None:
+        return {f"{est.label}, final map": ev.lamp_match.per_true}
+    return {}
+
+
+def draw_all(
+    outdir: Path, truth: Truth, est: Estimate, ev: Evaluation, fgm: BeliefMap | None
+) -> dict[str, str]:
+    """Draw every figure the inputs allow into outdir; return {figure key: file name}."""
+    out: dict[str, str] = {}
+    fig1_paths(outdir / "fig1_paths.png", truth, est, fgm, ev.lamp_match)
+    out["fig1"] = "fig1_paths.png"
+    fig3_errors(outdir / "fig3_errors.png", truth, ev)
+    out["fig3"] = "fig3_errors.png"
+    sets = fig4_sets(truth, est, ev)
+    if sets:
+        fig4_lamp_errors(
+            outdir / "fig4_lamps.png", sets, max_dist=ev.metrics["params"]["lamp_max_dist_m"]
+        )
+        out["fig4"] = "fig4_lamps.png"
+    if fig_consistency(outdir / "consistency.png", truth, est, ev):
+        out["consistency"] = "consistency.png"
+    return out

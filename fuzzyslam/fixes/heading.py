@@ -1,0 +1,242 @@
+"""Heading fixes from the frozen FGM: the paper's contribution (models.md sec. 9; paper sec. 4).
+
+A wall of world direction ``t_ref`` (the reference angle of the corridor the robot is
+in, from the FGM) is seen in the robot frame at ``t_local = t_ref - theta`` (the Hough
+peak of the FLM). Both are lines, so defined mod pi, hence the measurement
+
+    theta = t_ref - t_local   (mod pi; mod pi/2 where walls meet at right angles)
+
+is one of a comb of candidates theta_0 + k * period; the one nearest the predicted
+heading is taken. It is refused when the second nearest is also plausible
+(|d2| < n sigma, sigma^2 = P_tt + R), then gated on its normalised innovation squared
+NIS = (theta - theta_pred)^2 / (P_tt + R) against chi-square with 1 dof, and applied
+as the direct measurement h(x) = theta, H = [0 0 1 0 ...] (Probabilistic Robotics
+sec. 3.3; the EKF's ``update_robot``).
+
+Reasons recorded per ring (``heading_fixes.csv``): ``ok``, ``no_wall`` (no Hough
+peak), ``weak_peak``, ``ambiguous_wall`` (the FLM's peaks disagree: junction, open
+space), ``no_corridor``, ``ambiguous_corridor`` (two regions with different
+reference angles), ``ambiguous_heading`` (two candidates both plausible), ``gated``.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections import Counter
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, replace
+from pathlib import Path
+from typing import Any, Protocol
+
+import numpy as np
+
+from fuzzyslam.fileio import atomic_path
+from fuzzyslam.fixes.params import FixParams
+from fuzzyslam.fixes.references import Reference, corridors_at
+from fuzzyslam.maps.grid import BeliefMap
+from fuzzyslam.se2 import wrap_angle, wrap_angle_period
+
+HEADING_FIELDS = ("t", "corridor", "measured", "predicted", "accepted", "reason", "strength")
+
+
+class WallLike(Protocol):
+    """What the FLM's Hough gives (``maps.hough.WallDirection``)."""
+
+    angle: float
+    strength: float
+    ambiguous: bool
+
+
+@dataclass(frozen=True)
+class HeadingDecision:
+    """One ring's heading fix: measured theta (nan when not formed), why (not) applied."""
+
+    t: float
+    corridor: int
+    measured: float
+    predicted: float
+    accepted: bool
+    reason: str
+    strength: float
+    nis: float = math.nan
+
+    def row(self) -> list[str]:
+        def num(v: float) -> str:
+            return "" if not np.isfinite(v) else f"{v:.9g}"
+
+        return [
+            f"{self.t:.6f}",
+            str(self.corridor),
+            num(self.measured),
+            num(self.predicted),
+            str(int(self.accepted)),
+            self.reason,
+            num(self.strength),
+        ]
+
+
+def nearest_candidate(theta0: float, predicted: float, period: float) -> tuple[float, float, float]:
+    """Among theta0 + k * period, the candidate nearest ``predicted``.
+
+    Returns (theta, d1, d2): the candidate wrapped to (-pi, pi], its distance to the
+    prediction (|d1| <= period / 2) and the distance of the second nearest (period - |d1|).
+    """
+    d = float(wrap_angle_period(theta0 - predicted, period))
+    theta = float(wrap_angle(predicted + d))
+    return theta, abs(d), period - abs(d)
+
+
+def select_corridor(xy: Sequence[float], refs: Sequence[Reference], period: float) -> tuple:
+    """The corridor containing ``xy``: (reference or None, reason or "").
+
+    Overlapping regions (junctions) are accepted only when their reference angles agree
+    mod ``period`` within 1 degree (then the strongest is used), else ``ambiguous_corridor``.
+    """
+    inside = corridors_at(xy, refs)
+    if not inside:
+        return None, "no_corridor"
+    if len(inside) > 1:
+        a0 = inside[0].angle
+        spread = [abs(float(wrap_angle_period(r.angle - a0, period))) for r in inside]
+        if max(spread) > math.radians(1.0):
+            return None, "ambiguous_corridor"
+    return max(inside, key=lambda r: r.strength), ""
+
+
+def decide_heading_fix(
+    t: float,
+    wall: WallLike | None,
+    refs: Sequence[Reference],
+    pose: np.ndarray,
+    pose_cov: np.ndarray,
+    params: FixParams,
+) -> HeadingDecision:
+    """Form, check and gate the heading measurement of one ring (module docstring)."""
+    predicted = float(pose[2])
+    if wall is None or not np.isfinite(wall.angle):
+        return HeadingDecision(t, -1, math.nan, predicted, False, "no_wall", math.nan)
+    strength = float(wall.strength)
+    if strength < params.min_strength:
+        return HeadingDecision(t, -1, math.nan, predicted, False, "weak_peak", strength)
+    if wall.ambiguous:
+        return HeadingDecision(t, -1, math.nan, predicted, False, "ambiguous_wall", strength)
+    period = math.pi / 2 if params.right_angles else math.pi
+    ref, why = select_corridor(pose[:2], refs, period)
+    if ref is None:
+        return HeadingDecision(t, -1, math.nan, predicted, False, why, strength)
+    theta, d1, d2 = nearest_candidate(ref.angle - float(wall.angle), predicted, period)
+    var = float(pose_cov[2, 2]) + math.radians(params.sigma_heading_deg) ** 2
+    nis = d1 * d1 / var
+    if d2 < params.ambiguity_sigmas * math.sqrt(var):
+        return HeadingDecision(
+            t, ref.id, theta, predicted, False, "ambiguous_heading", strength, nis
+        )
+    if nis > params.gate_chi2:
+        return HeadingDecision(t, ref.id, theta, predicted, False, "gated", strength, nis)
+    return HeadingDecision(t, ref.id, theta, predicted, True, "ok", strength, nis)
+
+
+class FlmSource:
+    """Builds the FLM of a ring once, shared by every aid that needs it on that ring."""
+
+    def __init__(self, build: Callable[[Any, np.ndarray], BeliefMap]) -> None:
+        self._build = build
+        self._key: tuple[int, float] | None = None
+        self._flm: BeliefMap | None = None
+
+    def __call__(self, ring: Any, mounts: np.ndarray) -> BeliefMap:
+        key = (id(ring), float(ring.t))
+        if key != self._key or self._flm is None:
+            self._flm = self._build(ring, mounts)
+            self._key = key
+        return self._flm
+
+
+class HeadingFixAid:
+    """Plug-in of ``fuzzyslam run``: a heading fix per sonar ring from ``start_time`` on.
+
+    ``flm_source(ring, mounts) -> BeliefMap`` (robot frame) and ``wall_direction(flm) ->
+    WallLike`` are the maps stage's FLM builder and Hough (injected, so that tests can
+    use synthetic ones).
+    """
+
+    kind = "heading"
+
+    def __init__(
+        self,
+        refs: Sequence[Reference],
+        params: FixParams,
+        flm_source: Callable[[Any, np.ndarray], BeliefMap],
+        wall_direction: Callable[[BeliefMap], WallLike | None],
+        start_time: float = 0.0,
+    ) -> None:
+        self.refs = list(refs)
+        self.params = params
+        self.flm_source = flm_source
+        self.wall_direction = wall_direction
+        self.start_time = float(start_time)
+        self.decisions: list[HeadingDecision] = []
+        self.before_start = 0
+        self.recoveries = 0
+
+    def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: Any) -> None:
+        if t < self.start_time:
+            self.before_start += 1
+            return
+        wall = self.wall_direction(self.flm_source(ring, mounts))
+        d = decide_heading_fix(t, wall, self.refs, ekf.pose, ekf.pose_cov, self.params)
+        if d.reason == "gated" and hasattr(ekf, "inflate_robot") and self._recovery_due(d):
+            # consistent gated fixes: the filter, not the map, is wrong (an unseen bump).
+            # Covariance inflation P_tt += v^2 (fading memory, Simon, "Optimal state
+            # estimation", sec. 7.4) makes the prediction admit the innovation v.
+            v = float(wrap_angle(d.measured - d.predicted))
+            ekf.inflate_robot(np.diag([0.0, 0.0, v * v]))
+            d = replace(d, accepted=True, reason="recovered")
+            self.recoveries += 1
+        if d.accepted:
+            sigma = math.radians(self.params.sigma_heading_deg)
+            res = ekf.update_robot(
+                [d.measured], [[sigma * sigma]], [2], gate_chi2=self.params.gate_chi2
+            )
+            d = replace(d, nis=float(res.nis))
+            if not res.accepted:
+                d = replace(d, accepted=False, reason="gated")
+        self.decisions.append(d)
+
+    def _recovery_due(self, d: HeadingDecision) -> bool:
+        """True when this and the previous recover_after - 1 decisions were all gated and
+        their innovations (measured - predicted) agree within recover_spread_deg."""
+        k = self.params.recover_after
+        if k <= 0:
+            return False
+        last = [*self.decisions[len(self.decisions) - (k - 1) :], d] if k > 1 else [d]
+        if len(last) < k or any(x.reason != "gated" for x in last):
+            return False
+        v = np.array([float(wrap_angle(x.measured - x.predicted)) for x in last])
+        spread = float(wrap_angle(v.max() - v.min()))
+        return abs(spread) <= math.radians(self.params.recover_spread_deg)
+
+    def summary(self) -> dict[str, Any]:
+        reasons = Counter(d.reason for d in self.decisions)
+        accepted = [d for d in self.decisions if d.accepted]
+        nis = np.array([d.nis for d in accepted]) if accepted else np.zeros(0)
+        return {
+            "rings": len(self.decisions),
+            "before_start": self.before_start,
+            "accepted": len(accepted),
+            "recoveries": self.recoveries,
+            "reasons": dict(sorted(reasons.items())),
+            "mean_nis": float(nis.mean()) if nis.size else None,
+        }
+
+    def write(self, outdir: Path) -> None:
+        write_heading_fixes(Path(outdir) / "heading_fixes.csv", self.decisions)
+
+
+def write_heading_fixes(path: Path, decisions: Sequence[HeadingDecision]) -> None:
+    """heading_fixes.csv: ``t,corridor,measured,predicted,accepted,reason,strength``."""
+    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(HEADING_FIELDS)
+        w.writerows(d.row() for d in decisions)

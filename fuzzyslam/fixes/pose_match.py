@@ -1,0 +1,363 @@
+"""Full-pose fixes: correlative matching of the FLM against the frozen FGM (models.md sec. 10).
+
+Beyond the paper (its "future work"). Following E. Olson, "Real-time correlative scan
+matching", ICRA 2009, and K. Konolige, K. Chou, "Markov localization using
+correlation", IJCAI 1999: the pose likelihood is evaluated exhaustively on a lattice
+(dx, dy, dtheta) around the prediction, and its mean and covariance are the moments
+of that surface (Olson sec. IV-C):
+
+    mu = sum_i L_i x_i / sum_i L_i,   Sigma = sum_i L_i (x_i - mu)(x_i - mu)^T / sum_i L_i.
+
+Score [ours]. Each evidence cell of the FLM carries masses (o, e) = (m(O), m(E)); placed
+at a candidate pose it meets the FGM's masses (O, E). The unnormalised conjunctive
+combination of the two (Smets 1990) puts o O + e E on the agreeing focal sets and
+K = o E + e O on the empty set (the conflict). The score is agreement minus conflict:
+
+    s(pose) = sum_cells [ o * Ob + mu * e * E ] - lambda * [ o * E + e * O ]  /  sum_cells o
+
+where Ob is Olson's blurred occupancy Ob(x) = max_c O(c) exp(-|x - c|^2 / 2 sigma_b^2)
+(a grey dilation in the log domain): it widens the basin by the sonar's range/bearing
+scatter so that a wall seen 5 cm off still scores, without thickening the conflict.
+
+Vectorisation: for one rotation the score at every integer-cell translation is a
+cross-correlation of the rotated FLM (splatted bilinearly onto a template, so each
+translation's score is exactly the bilinear interpolation of the maps at the points)
+with a patch of the 2-channel map (O-channel Ob - lambda E, E-channel E - lambda O):
+one ``cv2.matchTemplate`` per rotation. Rotations: coarse steps over the window, then
+fine steps within one coarse step of the coarse peak; the moments integrate the
+resulting non-uniform lattice with per-sample rotation weights (trapezoid rule).
+
+The agreement of empty with empty (mu, small by default) hardly depends on the pose
+(most of an FLM's free cone lies in the FGM's free space wherever it is put) and would
+only flatten the surface; the conflicts carry the information of the empty evidence.
+Dividing by the FLM's occupied mass makes s the fraction of the ring's wall evidence
+that the map explains, comparable from ring to ring.
+
+Likelihood [ours]: L = exp((s - s_max) / tau); tau, the loss of explained fraction per
+e-fold of likelihood, is calibrated on synthetic scans (benchmarks/bench_fixes.py).
+Eigen-directions of Sigma whose variance nears that of a uniform distribution over the
+window are unconstrained by the scan (a straight corridor along its axis): they are
+given a huge variance, so the EKF takes no information from them. A flat surface (all
+directions unconstrained), a peak on the window's edge, or a second separate mode
+(connected components of the L > e^-3 L_max region) are rejected.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import cv2
+import numpy as np
+from scipy import ndimage
+
+from fuzzyslam.fileio import atomic_path
+from fuzzyslam.fixes.params import FixParams
+from fuzzyslam.maps.grid import BeliefMap
+from fuzzyslam.se2 import wrap_angle
+
+UNCONSTRAINED_VAR = 1.0e4  # variance given to a direction the scan does not constrain
+
+
+@dataclass(frozen=True)
+class PoseMatch:
+    """Result of one match: ``ok`` or why not, the measured pose and its covariance."""
+
+    ok: bool
+    reason: str
+    pose: np.ndarray  # (3,)
+    cov: np.ndarray  # (3, 3)
+    score: float = math.nan
+    degenerate: int = 0  # number of unconstrained eigen-directions
+    candidates: int = 0
+
+
+def olson_blur(m_o: np.ndarray, sigma_cells: float) -> np.ndarray:
+    """Ob(x) = max_c m_o(c) exp(-|x - c|^2 / (2 sigma^2)) (Olson 2009, rasterised cost table).
+
+    Computed as exp of a grey dilation of log m_o with the non-flat structuring element
+    -d^2 / (2 sigma^2) (scipy.ndimage.grey_dilation: max over the footprint of input + s).
+    """
+    m = np.asarray(m_o, dtype=np.float64)
+    if sigma_cells <= 0:
+        return m.astype(np.float32)
+    r = max(1, math.ceil(2.5 * sigma_cells))
+    d = np.arange(-r, r + 1, dtype=np.float64)
+    struct = -(d[:, None] ** 2 + d[None, :] ** 2) / (2.0 * sigma_cells**2)
+    logm = np.log(np.maximum(m, 1e-9))
+    return np.exp(
+        ndimage.grey_dilation(logm, structure=struct, mode="constant", cval=-30.0)
+    ).astype(np.float32)
+
+
+def flm_evidence(flm: BeliefMap, min_mass: float) -> tuple[np.ndarray, np.ndarray]:
+    """Robot-frame centres (N, 2) and masses (N, 2) = (m(O), m(E)) of the FLM's evidence cells."""
+    xs, ys = flm.grid.centres()
+    mask = (flm.m_o > min_mass) | (flm.m_e > min_mass)
+    pts = np.stack([xs[mask], ys[mask]], axis=1)
+    masses = np.stack([flm.m_o[mask], flm.m_e[mask]], axis=1).astype(np.float64)
+    return pts, masses
+
+
+class PoseMatcher:
+    """Correlative FLM-to-FGM matcher; the FGM's lookup maps are built once (it is frozen)."""
+
+    def __init__(self, fgm: BeliefMap, params: FixParams) -> None:
+        self.grid = fgm.grid
+        self.params = params
+        res = fgm.grid.resolution
+        lam = params.pose_conflict_weight
+        lam_o = params.pose_arc_conflict_weight
+        occ = olson_blur(fgm.m_o, params.pose_blur / res)
+        m_e = fgm.m_e.astype(np.float32)
+        m_o = fgm.m_o.astype(np.float32)
+        # channel 0 meets the FLM's m(O), channel 1 its m(E)
+        mu = params.pose_empty_weight
+        self.lookup = np.ascontiguousarray(
+            np.stack([occ - lam_o * m_e, mu * m_e - lam * m_o], axis=-1)
+        )
+
+    # -- lattice scores ---------------------------------------------------------------------
+
+    def _patch(self, row0: int, col0: int, size: int) -> np.ndarray:
+        """lookup[row0 : row0 + size, col0 : col0 + size] with zeros outside the map."""
+        ny, nx = self.grid.shape
+        out = np.zeros((size, size, 2), dtype=np.float32)
+        r0, r1 = max(row0, 0), min(row0 + size, ny)
+        c0, c1 = max(col0, 0), min(col0 + size, nx)
+        if r1 > r0 and c1 > c0:
+            out[r0 - row0 : r1 - row0, c0 - col0 : c1 - col0] = self.lookup[r0:r1, c0:c1]
+        return out
+
+    def scores(
+        self, pts: np.ndarray, masses: np.ndarray, pose0: np.ndarray, thetas: np.ndarray, w: int
+    ) -> np.ndarray:
+        """Scores (n_theta, 2w+1, 2w+1): [k, ty+w, tx+w] is s(x0 + tx res, y0 + ty res, theta_k)."""
+        res = self.grid.resolution
+        c = (np.asarray(pose0[:2], float) - np.asarray(self.grid.origin)) / res - 0.5
+        base = np.floor(c).astype(int)
+        frac = c - base
+        half = math.ceil(np.max(np.abs(pts)) / res * math.sqrt(2.0)) + 2 if len(pts) else 2
+        size = 2 * half + 1
+        cs, sn = np.cos(thetas)[:, None], np.sin(thetas)[:, None]
+        px, py = pts[None, :, 0] / res, pts[None, :, 1] / res
+        u = cs * px - sn * py + frac[0] + half  # template column (continuous)
+        v = sn * px + cs * py + frac[1] + half  # template row
+        iu, iv = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
+        au, av = u - iu, v - iv
+        n = len(thetas)
+        k = np.arange(n)[:, None]
+        idx, wts = [], []
+        for dv, du, wb in (
+            (0, 0, (1 - av) * (1 - au)),
+            (0, 1, (1 - av) * au),
+            (1, 0, av * (1 - au)),
+            (1, 1, av * au),
+        ):
+            flat = ((k * size + iv + dv) * size + iu + du) * 2
+            idx += [flat, flat + 1]
+            wts += [wb * masses[None, :, 0], wb * masses[None, :, 1]]
+        tmpl = np.bincount(
+            np.concatenate([i.ravel() for i in idx]),
+            weights=np.concatenate([x.ravel() for x in wts]),
+            minlength=n * size * size * 2,
+        ).astype(np.float32)
+        tmpl = tmpl.reshape(n, size, size, 2)
+        patch = self._patch(base[1] - half - w, base[0] - half - w, size + 2 * w)
+        return np.stack([cv2.matchTemplate(patch, tmpl[i], cv2.TM_CCORR) for i in range(n)])
+
+    # -- the match ------------------------------------------------------------------------
+
+    def match(self, flm: BeliefMap, pose0: np.ndarray, cov0: np.ndarray) -> PoseMatch:
+        """Measure the pose of ``flm`` in the FGM around ``pose0`` (module docstring)."""
+        p = self.params
+        pose0 = np.asarray(pose0, dtype=float)
+        res = self.grid.resolution
+        nan3 = np.full(3, np.nan)
+        pts, masses = flm_evidence(flm, p.pose_min_mass)
+        if np.count_nonzero(masses[:, 0] > p.pose_min_mass) < p.pose_min_occupied_cells:
+            return PoseMatch(False, "no_evidence", nan3, np.full((3, 3), np.nan))
+        sig = np.sqrt(np.maximum(np.diag(np.asarray(cov0, float)), 0.0))
+        wxy = float(np.clip(3.0 * max(sig[0], sig[1]), p.pose_window_min, p.pose_window_max))
+        w = max(1, math.ceil(wxy / res - 1e-9))
+        wth = float(
+            np.clip(
+                3.0 * sig[2],
+                math.radians(p.pose_window_min_deg),
+                math.radians(p.pose_window_max_deg),
+            )
+        )
+        cstep, fstep = math.radians(p.pose_coarse_deg), math.radians(p.pose_fine_deg)
+        nc = max(1, math.ceil(wth / cstep - 1e-9))
+        coarse = np.arange(-nc, nc + 1) * cstep
+        s_coarse = self.scores(pts, masses, pose0, pose0[2] + coarse, w)
+        kc = int(np.argmax(s_coarse.max(axis=(1, 2))))
+        # fine rotations within one coarse step of the coarse peak, trapezoid weights
+        nf = max(1, round(cstep / fstep))
+        fine = coarse[kc] + np.arange(-nf, nf + 1) * (cstep / nf)
+        fine = fine[(fine >= coarse[0] - 1e-12) & (fine <= coarse[-1] + 1e-12)]
+        s_fine = self.scores(pts, masses, pose0, pose0[2] + fine, w)
+        keep = np.abs(coarse - coarse[kc]) > cstep * (1 + 1e-9)
+        dth = np.concatenate([coarse[keep], fine])
+        s = np.concatenate([s_coarse[keep], s_fine])
+        order = np.argsort(dth)
+        dth, s = dth[order], s[order]
+        edges = np.concatenate([[dth[0]], 0.5 * (dth[1:] + dth[:-1]), [dth[-1]]])
+        wth_k = np.diff(edges)  # the rotation extent each sample stands for
+        # normalised by the FLM's occupied mass: the score is the fraction of its wall
+        # evidence that the map explains (minus conflict), whatever the ring saw
+        s = s / float(masses[:, 0].sum())
+        return self._moments(pose0, dth, wth_k, s, w, res)
+
+    def _moments(
+        self,
+        pose0: np.ndarray,
+        dth: np.ndarray,
+        wrot: np.ndarray,
+        s: np.ndarray,
+        w: int,
+        res: float,
+    ) -> PoseMatch:
+        p = self.params
+        smax = float(s.max())
+        ncand = int(s.size)
+        nan3, nan33 = np.full(3, np.nan), np.full((3, 3), np.nan)
+        if not smax > 0:
+            return PoseMatch(False, "no_match", nan3, nan33, smax, 0, ncand)
+        ll = (s - smax) / p.pose_temperature
+        lik = np.exp(ll) * wrot[:, None, None]
+        total = lik.sum()
+        t = np.arange(-w, w + 1) * res
+        gth, gy, gx = np.meshgrid(dth, t, t, indexing="ij")
+        xs = np.stack([gx.ravel(), gy.ravel(), gth.ravel()], axis=1)
+        pw = lik.ravel() / total
+        mu = pw @ xs
+        d = xs - mu
+        cov = (d * pw[:, None]).T @ d
+        # modes: connected components of the high-likelihood region
+        labels, nlab = ndimage.label(ll > -3.0, structure=np.ones((3, 3, 3), bool))
+        if nlab > 1:
+            mass = ndimage.sum_labels(lik, labels, index=np.arange(1, nlab + 1)) / total
+            if np.sort(mass)[-2] > p.pose_max_second_mode:
+                return PoseMatch(False, "multimodal", nan3, nan33, smax, 0, ncand)
+        # unconstrained directions: variance near that of a uniform over the window
+        span = np.array([2 * w * res, 2 * w * res, dth[-1] - dth[0]])
+        uni = np.maximum(span**2 / 12.0, 1e-12)
+        scale = np.sqrt(uni)
+        cn = cov / np.outer(scale, scale)
+        evals, evecs = np.linalg.eigh(0.5 * (cn + cn.T))
+        degenerate = evals > p.pose_degenerate_fraction
+        ndeg = int(np.count_nonzero(degenerate))
+        if ndeg == 3:
+            return PoseMatch(False, "flat", nan3, nan33, smax, ndeg, ncand)
+        kb, iy, ix = np.unravel_index(int(np.argmax(s)), s.shape)
+        if ndeg == 0 and (kb in (0, len(dth) - 1) or iy in (0, 2 * w) or ix in (0, 2 * w)):
+            return PoseMatch(False, "edge", nan3, nan33, smax, ndeg, ncand)
+        evals = np.where(degenerate, UNCONSTRAINED_VAR / uni.min(), evals)
+        cov = np.outer(scale, scale) * (evecs @ np.diag(evals) @ evecs.T)
+        floor = np.array([p.pose_min_sigma, p.pose_min_sigma, math.radians(p.pose_min_sigma_deg)])
+        cov = 0.5 * (cov + cov.T) + np.diag(floor**2)
+        pose = pose0 + mu
+        pose[2] = wrap_angle(pose[2])
+        return PoseMatch(True, "ok", pose, cov, smax, ndeg, ncand)
+
+
+POSE_FIELDS = (
+    "t", "accepted", "reason", "x", "y", "theta", "sxx", "syy", "stt", "degenerate", "nis",
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class PoseDecision:
+    """One ring's pose fix: the match, and whether the EKF took it (NIS gate)."""
+
+    t: float
+    accepted: bool
+    reason: str
+    pose: np.ndarray
+    cov: np.ndarray
+    degenerate: int
+    nis: float
+
+    def row(self) -> list[str]:
+        def num(v: float) -> str:
+            return "" if not np.isfinite(v) else f"{v:.9g}"
+
+        d = np.diag(self.cov)
+        vals = [*self.pose, *d]
+        return [
+            f"{self.t:.6f}",
+            str(int(self.accepted)),
+            self.reason,
+            *[num(float(v)) for v in vals],
+            str(self.degenerate),
+            num(self.nis),
+        ]
+
+
+class PoseFixAid:
+    """Plug-in of ``fuzzyslam run``: full-pose fixes update_robot(z, R, idx=[0, 1, 2])."""
+
+    kind = "pose"
+
+    def __init__(
+        self,
+        fgm: BeliefMap,
+        params: FixParams,
+        flm_source: Callable[[Any, np.ndarray], BeliefMap],
+        start_time: float = 0.0,
+    ) -> None:
+        self.matcher = PoseMatcher(fgm, params)
+        self.params = params
+        self.flm_source = flm_source
+        self.start_time = float(start_time)
+        self.decisions: list[PoseDecision] = []
+        self.before_start = 0
+        self._count = 0
+
+    def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: Any) -> None:
+        if t < self.start_time:
+            self.before_start += 1
+            return
+        self._count += 1
+        if (self._count - 1) % self.params.pose_every:
+            return
+        m = self.matcher.match(self.flm_source(ring, mounts), ekf.pose, ekf.pose_cov)
+        if not m.ok:
+            self.decisions.append(
+                PoseDecision(t, False, m.reason, m.pose, m.cov, m.degenerate, math.nan)
+            )
+            return
+        res = ekf.update_robot(m.pose, m.cov, [0, 1, 2], gate_chi2=self.params.pose_gate_chi2)
+        reason = "ok" if res.accepted else "gated"
+        self.decisions.append(
+            PoseDecision(t, bool(res.accepted), reason, m.pose, m.cov, m.degenerate, float(res.nis))
+        )
+
+    def summary(self) -> dict[str, Any]:
+        reasons = Counter(d.reason for d in self.decisions)
+        acc = [d for d in self.decisions if d.accepted]
+        return {
+            "rings": len(self.decisions),
+            "before_start": self.before_start,
+            "accepted": len(acc),
+            "reasons": dict(sorted(reasons.items())),
+            "degenerate": int(sum(d.degenerate > 0 for d in acc)),
+            "mean_nis": float(np.mean([d.nis for d in acc])) if acc else None,
+        }
+
+    def write(self, outdir: Path) -> None:
+        write_pose_fixes(Path(outdir) / "pose_fixes.csv", self.decisions)
+
+
+def write_pose_fixes(path: Path, decisions: list[PoseDecision]) -> None:
+    """pose_fixes.csv: ``t,accepted,reason,x,y,theta,sxx,syy,stt,degenerate,nis``."""
+    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(POSE_FIELDS)
+        w.writerows(d.row() for d in decisions)

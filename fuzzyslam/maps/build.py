@@ -1,0 +1,272 @@
+"""The map stage's edge: log + trajectory in, FGMDIR out (contracts.md sec. 3).
+
+Reads the log's sonar rings and mounts, places each ring at the trajectory's pose at
+the ring's time (linear in x, y; heading interpolated on the circle), builds the FGM up
+to the freeze time, freezes it, extracts corridor references and writes fgm.npz,
+fgm.yaml + fgm.pgm, references.yaml, figures and summary.json through
+:class:`fuzzyslam.fileio.OutputDir` (nothing partial is left on failure).
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fuzzyslam.config import Config
+from fuzzyslam.errors import InputError
+from fuzzyslam.fileio import OutputDir, check_outputs
+from fuzzyslam.maps import mapio
+from fuzzyslam.maps.fgm import FgmBuilder
+from fuzzyslam.maps.params import MapParams
+from fuzzyslam.maps.quality import wall_quality
+from fuzzyslam.maps.references import Reference, extract_references
+from fuzzyslam.progress import Progress
+from fuzzyslam.robot import sonar_mounts
+from fuzzyslam.se2 import wrap_angle, wrap_angle_period
+from fuzzyslam.streams.logmeta import World, read_scenario, read_world
+from fuzzyslam.streams.reader import LogReader
+from fuzzyslam.streams.sonar import RingStats, group_rings, sonar_mounts_from_tf
+from fuzzyslam.streams.tum import read_tum
+
+
+@dataclass
+class MapOptions:
+    """Command-line choices of the map stage."""
+
+    until_run: int | None = None
+    until: float | None = None
+    skip_uncovered: bool = False
+    landmarks: Path | None = None
+    figures: bool = True
+    explicit_config: bool = False
+
+
+def interpolate_poses(tq: np.ndarray, t: np.ndarray, poses: np.ndarray) -> np.ndarray:
+    """Poses at times ``tq``: x, y linear; theta linear on the unwrapped heading (the
+    shorter way round the circle between samples), wrapped to (-pi, pi]."""
+    th = np.unwrap(poses[:, 2])
+    return np.column_stack(
+        [
+            np.interp(tq, t, poses[:, 0]),
+            np.interp(tq, t, poses[:, 1]),
+            wrap_angle(np.interp(tq, t, th)),
+        ]
+    )
+
+
+def covered(tq: np.ndarray, t: np.ndarray, max_gap: float) -> np.ndarray:
+    """Whether each query time lies within the trajectory, between samples at most
+    ``max_gap`` seconds apart (or within max_gap/2 of a sample)."""
+    tq = np.asarray(tq, dtype=float)
+    j = np.searchsorted(t, tq)
+    lo = t[np.clip(j - 1, 0, len(t) - 1)]
+    hi = t[np.clip(j, 0, len(t) - 1)]
+    exact = np.isclose(lo, tq, atol=1e-9) | np.isclose(hi, tq, atol=1e-9)
+    inside = (tq >= t[0]) & (tq <= t[-1]) & (hi - lo <= max_gap)
+    return exact | inside
+
+
+def _gaps(tq: np.ndarray, ok: np.ndarray) -> list[tuple[float, float]]:
+    """Time spans (first, last ring time) of runs of uncovered rings."""
+    bad = np.concatenate([[0], (~ok).astype(np.int8), [0]])
+    e = np.flatnonzero(np.diff(bad))
+    return [(float(tq[a]), float(tq[b - 1])) for a, b in zip(e[::2], e[1::2], strict=True)]
+
+
+def freeze_time(reader: LogReader, cfg: Config, opts: MapOptions) -> tuple[float, str]:
+    """The window's end and how it was chosen."""
+    if opts.until is not None:
+        return float(opts.until), "--until"
+    scenario = read_scenario(reader)
+    if opts.until_run is not None:
+        run, how = opts.until_run, "--until-run"
+    else:
+        run, how = cfg.fgm.freeze_run, "config fgm.freeze_run"
+        if not opts.explicit_config and scenario is not None:
+            fr = scenario.config.get("fgm", {}).get("freeze_run") if scenario.config else None
+            if isinstance(fr, int):
+                run, how = fr, "the log's fgm.freeze_run"
+    if scenario is None:
+        if opts.until_run is not None:
+            raise InputError(reader.path, "the log has no scenario (no run events); use --until")
+        return float(reader.end), "end of log (no scenario)"
+    t = scenario.run_end_time(run)
+    if t is None:
+        runs = [r for r, _a, _b in scenario.run_intervals()]
+        raise InputError(
+            reader.path,
+            f"the log has no run {run} (runs: {runs}); choose --until-run N or --until T",
+        )
+    return float(t), f"end of run {run} ({how})"
+
+
+def read_rings(reader: LogReader, cfg: Config, t_end: float):
+    """(times (N,), ranges (N, M), max ranges (N, M), fov, mounts (M, 3), stats)."""
+    count = cfg.sonar.count
+    topics = [cfg.topics.sonar(i) for i in range(count)]
+    reader.require(topics)
+    mounts = None
+    if reader.has(cfg.topics.tf_static):
+        tf = [m.msg for m in reader.messages([cfg.topics.tf_static])]
+        mounts = sonar_mounts_from_tf(tf, count)
+    if mounts is None:
+        mounts = sonar_mounts(count, cfg.robot.radius)
+    stats = RingStats()
+    index = {tp: i for i, tp in enumerate(topics)}
+    ts, rs, ms, fov = [], [], [], 0.0
+    for ring in group_rings(reader.messages(topics), index, count, stats=stats):
+        if ring.t > t_end + 1e-9:
+            break
+        ts.append(ring.t)
+        rs.append(ring.ranges)
+        ms.append(ring.max_range)
+        fov = ring.fov
+    if not ts:
+        raise InputError(reader.path, f"no sonar readings in the window [0, {t_end:.2f}] s")
+    return np.array(ts), np.array(rs), np.array(ms), fov, mounts, stats
+
+
+def reference_truth(refs: list[Reference], world: World | None) -> list[dict[str, Any]]:
+    """Each reference against the nearest true corridor axis (by centre-line distance)."""
+    if world is None or not world.corridors:
+        return []
+    out = []
+    for ref in refs:
+        c = ref.stretch.point if ref.stretch is not None else ref.region.mean(axis=0)
+        best, bd = None, np.inf
+        for cor in world.corridors:  # a handful of corridors
+            a, b = np.asarray(cor.a, float), np.asarray(cor.b, float)
+            u = np.clip(np.dot(c - a, b - a) / max(np.dot(b - a, b - a), 1e-12), 0.0, 1.0)
+            d = float(np.hypot(*(a + u * (b - a) - c)))
+            if d < bd:
+                best, bd = cor, d
+        err = float(wrap_angle_period(ref.angle - best.axis, np.pi))
+        out.append(
+            {
+                "id": ref.id,
+                "true_corridor": best.name,
+                "true_axis_deg": float(np.rad2deg(best.axis)),
+                "error_deg": float(np.rad2deg(err)),
+            }
+        )
+    return out
+
+
+def build_map(
+    log_path: str | Path, traj_path: str | Path, outdir: str | Path, cfg: Config, opts: MapOptions
+) -> dict[str, Any]:
+    """Run the map stage; returns the JSON summary (also written as summary.json)."""
+    wall0 = time.perf_counter()
+    params: MapParams = cfg.fgm
+    outdir = Path(outdir)
+    check_outputs([log_path, traj_path], [outdir])
+    reader = LogReader(log_path)
+    t_traj, p_traj = read_tum(traj_path)
+    t_end, how = freeze_time(reader, cfg, opts)
+    times, ranges, rmax, fov, mounts, stats = read_rings(reader, cfg, t_end)
+    ok = covered(times, t_traj, params.max_pose_gap)
+    skipped_readings = int(np.isfinite(ranges[~ok]).sum())
+    if not ok.all():
+        gaps = _gaps(times, ok)
+        desc = ", ".join(f"{a:.2f}-{b:.2f} s" for a, b in gaps[:3])
+        if not opts.skip_uncovered:
+            raise InputError(
+                traj_path,
+                f"trajectory ({t_traj[0]:.2f}-{t_traj[-1]:.2f} s) does not cover sonar rings "
+                f"at {desc}{' ...' if len(gaps) > 3 else ''} ({int((~ok).sum())} rings); "
+                "pass --skip-uncovered to skip them",
+            )
+        if ok.sum() == 0:
+            raise InputError(traj_path, f"trajectory covers none of the sonar rings ({desc})")
+    times, ranges, rmax = times[ok], ranges[ok], rmax[ok]
+    poses = interpolate_poses(times, t_traj, p_traj)
+    builder = FgmBuilder.for_path(poses[:, :2], params)
+    t_build = time.perf_counter()
+    with Progress(len(times), "map: fusing sonar rings") as bar:
+        for k in range(len(times)):  # one ring at a time: the combination is sequential
+            builder.add_ring(poses[k], ranges[k], rmax[k], fov, mounts)
+            if k % 50 == 0:
+                bar.update_to(k + 1)
+    build_s = time.perf_counter() - t_build
+    fgm = builder.freeze(t_end)
+    refs = extract_references(fgm, poses[:, :2], params)
+    world = read_world(reader)
+    world_dict = world.to_dict() if world is not None else None
+    log_id = mapio.log_identity(world_dict, Path(log_path).name)
+    truth = reference_truth(refs, world)
+    quality = None
+    if world is not None:
+        q = wall_quality(fgm, world.wall_array)
+        quality = {
+            "precision": q.precision,
+            "recall": q.recall,
+            "map_cells": q.map_cells,
+            "true_cells": q.true_cells,
+        }
+    summary: dict[str, Any] = {
+        "log": str(log_path),
+        "trajectory": str(traj_path),
+        "output": str(outdir),
+        "log_id": log_id,
+        "cells": int(np.prod(fgm.grid.shape)),
+        "shape": list(fgm.grid.shape),
+        "origin": list(fgm.grid.origin),
+        "resolution": fgm.grid.resolution,
+        "rings_used": builder.rings,
+        "readings_used": builder.readings,
+        "readings_skipped": skipped_readings,
+        "rings_skipped": int((~ok).sum()),
+        "sonar_stats": {
+            "invalid": stats.invalid,
+            "no_echo": stats.no_echo,
+            "missing": stats.missing,
+        },
+        "cell_updates": builder.cell_updates,
+        "cells_touched": int((fgm.m_t < 1.0).sum()),
+        "freeze_time": t_end,
+        "freeze_rule": how,
+        "references": [
+            {
+                "id": r.id,
+                "name": r.name,
+                "angle_deg": float(np.rad2deg(r.angle)),
+                "strength": r.strength,
+                "ambiguous": r.ambiguous,
+            }
+            for r in refs
+        ],
+        "reference_truth": truth,
+        "wall_quality": quality,
+        "build_seconds": build_s,
+    }
+    with OutputDir(outdir) as tmp:
+        mapio.save_fgm(tmp / "fgm.npz", fgm, True, t_end, log_id)
+        mapio.save_nav2(tmp / "fgm.yaml", tmp / "fgm.pgm", fgm)
+        mapio.save_references(tmp / "references.yaml", [r.to_dict() for r in refs])
+        if opts.figures:
+            from fuzzyslam.maps import figures
+
+            figures.write_all(
+                tmp,
+                fgm,
+                poses,
+                refs,
+                world,
+                opts.landmarks,
+                times,
+                ranges,
+                rmax,
+                fov,
+                mounts,
+                params,
+            )
+        summary["wall_seconds"] = time.perf_counter() - wall0
+        (tmp / "summary.json").write_text(
+            json.dumps(summary, indent=2, sort_keys=True) + "\n", encoding="utf-8"
+        )
+    return summary

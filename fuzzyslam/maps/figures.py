@@ -1,0 +1,188 @@
+"""Figures of the map stage (matplotlib, Agg): the paper's Fig. 1 (FGM with path and
+lamps), the conflict map, and Fig. 2 (corridor segments and an FLM beside their Hough
+planes with the peaks marked)."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import matplotlib
+
+matplotlib.use("Agg")
+import matplotlib.pyplot as plt
+import numpy as np
+import yaml
+
+from fuzzyslam.errors import InputError
+from fuzzyslam.fileio import atomic_path, check_input_file
+from fuzzyslam.maps.flm import build_flm
+from fuzzyslam.maps.grid import BeliefMap
+from fuzzyslam.maps.hough import WallDirection, flm_wall_direction, wall_weights
+from fuzzyslam.maps.params import MapParams
+from fuzzyslam.maps.references import Reference
+from fuzzyslam.streams.logmeta import World
+
+
+def read_landmarks(path: Path) -> np.ndarray:
+    """(N, 2) estimated lamps of a landmarks.yaml (contracts.md sec. 2)."""
+    p = check_input_file(path, "landmarks")
+    try:
+        data = yaml.safe_load(p.read_text(encoding="utf-8"))
+        return np.array([[float(d["x"]), float(d["y"])] for d in data["landmarks"]]).reshape(-1, 2)
+    except (yaml.YAMLError, KeyError, TypeError, ValueError, UnicodeDecodeError):
+        raise InputError(p, "not a landmarks.yaml ({landmarks: [{x, y, ...}]})") from None
+
+
+def _save(fig, path: Path) -> None:
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", dpi=110)
+    plt.close(fig)
+
+
+def fig_fgm(
+    path: Path,
+    fgm: BeliefMap,
+    poses: np.ndarray,
+    refs: list[Reference],
+    world: World | None,
+    landmarks: np.ndarray | None,
+) -> None:
+    """The paper's Fig. 1: BetP(O) of the FGM, the path, references, lamps."""
+    fig, ax = plt.subplots(figsize=(9, 6))
+    ax.imshow(
+        1.0 - fgm.pignistic_occupied(),
+        origin="lower",
+        extent=fgm.grid.extent,
+        cmap="gray",
+        vmin=0,
+        vmax=1,
+    )
+    ax.plot(poses[:, 0], poses[:, 1], "-", color="tab:blue", lw=0.8, label="path")
+    for r in refs:
+        poly = np.vstack([r.region, r.region[:1]])
+        ax.plot(poly[:, 0], poly[:, 1], "--", color="tab:orange", lw=0.8)
+        c = r.region.mean(axis=0)
+        ax.annotate(f"{r.id}: {np.rad2deg(r.angle):.2f} deg", c, color="tab:orange", fontsize=8)
+    if world is not None and len(world.lamps):
+        la = world.lamp_array
+        ax.plot(la[:, 0], la[:, 1], "o", mfc="none", color="gold", label="true lamps")
+    if landmarks is not None and len(landmarks):
+        ax.plot(landmarks[:, 0], landmarks[:, 1], "x", color="tab:red", label="estimated lamps")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_aspect("equal")
+    ax.set_title("Fuzzy global map: BetP(occupied) (dark = occupied)")
+    ax.legend(loc="upper right", fontsize=8)
+    _save(fig, path)
+
+
+def fig_conflict(path: Path, fgm: BeliefMap) -> None:
+    """Conflict mass m(emptyset) per cell."""
+    fig, ax = plt.subplots(figsize=(9, 6))
+    im = ax.imshow(fgm.m_c, origin="lower", extent=fgm.grid.extent, cmap="magma", vmin=0)
+    fig.colorbar(im, ax=ax, label="m(conflict)")
+    ax.set_aspect("equal")
+    ax.set_title("FGM contradiction (conflict mass)")
+    _save(fig, path)
+
+
+def _hough_panel(ax, wd: WallDirection, title: str) -> None:
+    if wd.plane is None:
+        ax.set_title(title + " (no evidence)")
+        return
+    pl = wd.plane
+    ax.imshow(
+        pl.acc,
+        origin="lower",
+        aspect="auto",
+        cmap="viridis",
+        extent=(0, 180, pl.rhos[0], pl.rhos[-1]),
+    )
+    for k, pk in enumerate(wd.peaks):
+        ax.plot(
+            np.rad2deg(pk.theta),
+            pk.rho,
+            "o",
+            color="red" if k < len(wd.peaks) - 1 or not wd.second_strength else "white",
+            mfc="none",
+            ms=8,
+        )
+    ax.set_xlabel("t (deg)")
+    ax.set_ylabel("r (m)")
+    ax.set_title(title, fontsize=9)
+
+
+def fig_hough(
+    path: Path,
+    fgm: BeliefMap,
+    refs: list[Reference],
+    flm: BeliefMap | None,
+    flm_wd: WallDirection | None,
+    params: MapParams,
+) -> None:
+    """The paper's Fig. 2: each corridor segment's wall evidence and an FLM (top) with
+    their Hough planes and peaks (bottom)."""
+    n = len(refs) + (1 if flm is not None else 0)
+    fig, axes = plt.subplots(2, max(n, 1), figsize=(3.6 * max(n, 1), 7), squeeze=False)
+    w = wall_weights(fgm, params.wall_threshold)
+    for k, r in enumerate(refs):
+        lo, hi = r.region.min(axis=0), r.region.max(axis=0)
+        ax = axes[0, k]
+        ax.imshow(w, origin="lower", extent=fgm.grid.extent, cmap="gray_r", vmin=0, vmax=1)
+        poly = np.vstack([r.region, r.region[:1]])
+        ax.plot(poly[:, 0], poly[:, 1], "--", color="tab:orange", lw=0.8)
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
+        ax.set_aspect("equal")
+        ax.set_title(f"{r.name}: {np.rad2deg(r.angle):.2f} deg", fontsize=9)
+        if r.wall is not None:
+            _hough_panel(axes[1, k], r.wall, f"Hough, strength {r.strength:.2f} m")
+    if flm is not None and flm_wd is not None:
+        ax = axes[0, n - 1]
+        ax.imshow(
+            wall_weights(flm, params.wall_threshold),
+            origin="lower",
+            extent=flm.grid.extent,
+            cmap="gray_r",
+            vmin=0,
+            vmax=1,
+        )
+        ax.plot(0, 0, "^", color="tab:blue")
+        ax.set_aspect("equal")
+        ax.set_title(f"FLM (robot frame): {np.rad2deg(flm_wd.angle):.2f} deg", fontsize=9)
+        _hough_panel(axes[1, n - 1], flm_wd, f"FLM Hough, strength {flm_wd.strength:.2f} m")
+    fig.tight_layout()
+    _save(fig, path)
+
+
+def pick_flm_ring(poses: np.ndarray, refs: list[Reference]) -> int:
+    """A ring in the middle of the longest corridor (for the Fig. 2 FLM)."""
+    if not refs:
+        return len(poses) // 2
+    best = max(refs, key=lambda r: r.stretch.length if r.stretch is not None else 0.0)
+    c = best.region.mean(axis=0)
+    return int(np.argmin(np.hypot(poses[:, 0] - c[0], poses[:, 1] - c[1])))
+
+
+def write_all(
+    outdir: Path,
+    fgm: BeliefMap,
+    poses: np.ndarray,
+    refs: list[Reference],
+    world: World | None,
+    landmarks_path: Path | None,
+    times: np.ndarray,
+    ranges: np.ndarray,
+    rmax: np.ndarray,
+    fov: float,
+    mounts: np.ndarray,
+    params: MapParams,
+) -> list[str]:
+    """Write fgm.png, conflict.png, hough.png into ``outdir``; returns their names."""
+    lm = read_landmarks(landmarks_path) if landmarks_path is not None else None
+    fig_fgm(outdir / "fgm.png", fgm, poses, refs, world, lm)
+    fig_conflict(outdir / "conflict.png", fgm)
+    k = pick_flm_ring(poses, refs)
+    flm = build_flm(ranges[k], rmax[k], fov, mounts, params)
+    fig_hough(outdir / "hough.png", fgm, refs, flm, flm_wall_direction(flm, params), params)
+    return ["fgm.png", "conflict.png", "hough.png"]

@@ -1,0 +1,39 @@
+"""The fuzzy local map (FLM): one sonar ring on a small grid in the robot frame.
+
+41 x 41 cells of 10 cm centred on the robot (base_link), from a single ring, with no
+odometry dependency (the paper's sec. 3, models.md sec. 7). The evidence and its
+combination are the FGM's own (:func:`fuzzyslam.maps.evidence.ring_evidence`): combining
+a ring into the vacuous map is the identity, so the FLM holds the ring's combined masses.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fuzzyslam.maps.evidence import ring_evidence
+from fuzzyslam.maps.grid import BeliefMap, Grid
+from fuzzyslam.maps.params import MapParams
+from fuzzyslam.maps.tbm import clip_masses
+
+
+def flm_grid(params: MapParams) -> Grid:
+    """The FLM's grid: ``Grid.centred(flm_cells, resolution)`` in base_link."""
+    return Grid.centred(params.flm_cells, params.resolution)
+
+
+def build_flm(
+    ranges: np.ndarray,
+    max_range: np.ndarray | float,
+    fov: float,
+    mounts: np.ndarray,
+    params: MapParams | None = None,
+) -> BeliefMap:
+    """FLM of one ring: ranges (16,) (NaN = missing), max ranges, cone fov (rad), sonar
+    mounts (16, 3) in base_link. Returns a BeliefMap on :func:`flm_grid` (robot frame)."""
+    params = params if params is not None else MapParams()
+    grid = flm_grid(params)
+    bm = BeliefMap.vacuous(grid)
+    ev = ring_evidence(grid, np.zeros(3), ranges, max_range, fov, mounts, params)
+    for arr, val in zip((bm.m_e, bm.m_o, bm.m_t, bm.m_c), clip_masses(ev.masses), strict=True):
+        arr.ravel()[ev.cells] = val
+    return bm

@@ -1,0 +1,229 @@
+"""Dominant wall directions by Hough transform on an image of wall evidence.
+
+Line model r = x cos t + y sin t (t the normal's angle in [0, pi)); a wall's DIRECTION
+is t - pi/2, reported mod pi in [0, pi) like ``Corridor.axis`` (models.md sec. 8-9).
+Parallel walls share t, so a corridor gives one direction with two rho peaks; a junction
+gives two directions.
+
+Why a weighted accumulator rather than ``cv2.HoughLines``: each cell votes with its
+evidence m(O) (a cell seen once weighs less than one seen a hundred times), the whole
+accumulator is needed for the paper's Fig. 2, and ``cv2.HoughLines`` takes a binary image
+and returns neither. The accumulator is a vectorised ``np.bincount`` with linear
+interpolation between rho bins; the tests check it against ``cv2.HoughLines`` on a binary
+image. Reference: R. O. Duda, P. E. Hart, "Use of the Hough transformation to detect
+lines and curves in pictures", CACM 15(1), 1972.
+
+Sub-bin refinement: the coarse peak's lines (every rho peak of the dominant t) select
+their supporting cells (within one cell of the line); a weighted total-least-squares fit
+with one direction shared by all the lines (the scatter matrices of each line's centred
+cells summed; the direction is the principal eigenvector) gives the angle, iterated
+twice. Reference: Golub & Van Loan, "Matrix computations", sec. 12.3 (TLS); K. Kanatani,
+"Statistical optimization for geometric computation", 1996, ch. 7 (weighted line fits).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fuzzyslam.maps.grid import BeliefMap
+from fuzzyslam.maps.params import MapParams
+from fuzzyslam.se2 import wrap_angle_period
+
+
+@dataclass
+class HoughPlane:
+    """Accumulator ``acc`` (n_rho, n_theta) over normal angles ``thetas`` and ``rhos``
+    (m, relative to ``centre``, the weighted centroid of the voting cells)."""
+
+    acc: np.ndarray
+    thetas: np.ndarray
+    rhos: np.ndarray
+    centre: np.ndarray
+
+
+@dataclass
+class HoughPeak:
+    """A line: normal angle theta (rad, [0, pi)), rho (m, about the plane's centre), strength."""
+
+    theta: float
+    rho: float
+    strength: float
+
+
+@dataclass
+class WallDirection:
+    """Dominant wall direction of an evidence image.
+
+    angle: direction of the walls, mod pi in [0, pi) (NaN if there is no evidence);
+    strength: the strongest line's votes in metres of wall at full belief (sum of m(O) on
+    the line x cell size); second_strength: the strongest line at least
+    ``ambiguity_separation_deg`` away in direction; ambiguous: second_strength >=
+    ambiguity_ratio * strength (junctions, corners); peaks: the lines found (dominant
+    direction first, then the second direction's peak); cells: voting cells.
+    """
+
+    angle: float
+    strength: float
+    ambiguous: bool
+    peaks: list[HoughPeak]
+    second_strength: float = 0.0
+    cells: int = 0
+    plane: HoughPlane | None = field(default=None, repr=False)
+
+
+def wall_weights(bm: BeliefMap, threshold: float) -> np.ndarray:
+    """Wall evidence per cell: bel(O) = m(O) where it reaches ``threshold``, else 0."""
+    m_o = np.asarray(bm.m_o, dtype=float)
+    return np.where(m_o >= threshold, m_o, 0.0)
+
+
+def hough_accumulator(
+    x: np.ndarray, y: np.ndarray, w: np.ndarray, theta_step: float, rho_step: float
+) -> HoughPlane:
+    """Weighted Hough accumulator A(rho, t) = sum_i w_i K(rho - x_i cos t - y_i sin t),
+    K the linear (tent) kernel of one rho bin; points centred on their weighted centroid."""
+    x, y, w = (np.asarray(a, dtype=float).ravel() for a in (x, y, w))
+    thetas = np.arange(0.0, np.pi, theta_step)
+    centre = (
+        np.array([np.average(x, weights=w), np.average(y, weights=w)])
+        if w.sum() > 0
+        else (np.zeros(2))
+    )
+    xc, yc = x - centre[0], y - centre[1]
+    rmax = float(np.max(np.hypot(xc, yc))) + 2 * rho_step if len(x) else rho_step
+    nr = int(np.ceil(2 * rmax / rho_step)) + 1
+    rhos = -rmax + np.arange(nr) * rho_step
+    r = xc[:, None] * np.cos(thetas)[None, :] + yc[:, None] * np.sin(thetas)[None, :] + rmax
+    u = r / rho_step
+    i0 = np.floor(u).astype(np.int64)
+    f = u - i0
+    nt = len(thetas)
+    cols = np.broadcast_to(np.arange(nt), i0.shape)
+    ww = np.broadcast_to(w[:, None], i0.shape)
+    i0c = np.clip(i0, 0, nr - 1)
+    i1c = np.clip(i0 + 1, 0, nr - 1)
+    acc = np.bincount((i0c * nt + cols).ravel(), weights=(ww * (1 - f)).ravel(), minlength=nr * nt)
+    acc += np.bincount((i1c * nt + cols).ravel(), weights=(ww * f).ravel(), minlength=nr * nt)
+    return HoughPlane(acc.reshape(nr, nt), thetas, rhos, centre)
+
+
+def _rho_peaks(col: np.ndarray, min_frac: float = 0.3, min_sep: int = 3) -> np.ndarray:
+    """Indices of local maxima of a 1-D profile above min_frac * max, greedy non-max
+    suppression over +-min_sep bins, strongest first (at most 4)."""
+    order = np.argsort(-col, kind="stable")
+    top = col[order[0]] if len(col) else 0.0
+    chosen: list[int] = []
+    for i in order[:64]:  # a handful of candidates; not a loop over cells
+        if col[i] < min_frac * top or len(chosen) >= 4:
+            break
+        if all(abs(int(i) - c) > min_sep for c in chosen):
+            chosen.append(int(i))
+    return np.array(chosen, dtype=np.int64)
+
+
+def _tls_direction(
+    xc: np.ndarray, yc: np.ndarray, w: np.ndarray, theta: float, rhos: np.ndarray, band: float
+) -> tuple[float, np.ndarray]:
+    """Weighted TLS refit of lines sharing the normal angle ``theta`` (see module doc).
+
+    Returns the refined normal angle in [0, pi) and the lines' refined rhos."""
+    n = np.array([np.cos(theta), np.sin(theta)])
+    d = xc * n[0] + yc * n[1]
+    scatter = np.zeros((2, 2))
+    cents = []
+    for rk in rhos:  # one term per line (2-4 lines)
+        sel = np.abs(d - rk) <= band
+        ws = w[sel]
+        if ws.sum() <= 0:
+            cents.append(None)
+            continue
+        p = np.column_stack([xc[sel], yc[sel]])
+        c = np.average(p, axis=0, weights=ws)
+        q = p - c
+        scatter += (q * ws[:, None]).T @ q
+        cents.append(c)
+    if not np.any(scatter):
+        return theta, rhos
+    _evals, evecs = np.linalg.eigh(scatter)
+    normal = evecs[:, 0]  # smallest eigenvalue: the common normal
+    t = float(np.mod(np.arctan2(normal[1], normal[0]), np.pi))
+    nn = np.array([np.cos(t), np.sin(t)])
+    new_rhos = np.array(
+        [float(c @ nn) if c is not None else rk for c, rk in zip(cents, rhos, strict=True)]
+    )
+    return t, new_rhos
+
+
+def _angdist_pi(a: np.ndarray, b: float) -> np.ndarray:
+    """|a - b| for undirected angles (mod pi)."""
+    return np.abs(wrap_angle_period(np.asarray(a) - b, np.pi))
+
+
+def dominant_direction(
+    x: np.ndarray, y: np.ndarray, w: np.ndarray, params: MapParams, rho_step: float | None = None
+) -> WallDirection:
+    """Dominant wall direction of weighted points (cell centres, wall evidence).
+
+    Coarse peak of the weighted accumulator, a second direction for the ambiguity test,
+    then the shared-direction TLS refinement (module docstring).
+    """
+    x, y, w = (np.asarray(a, dtype=float).ravel() for a in (x, y, w))
+    keep = w > 0
+    x, y, w = x[keep], y[keep], w[keep]
+    if len(w) < 3:
+        return WallDirection(float("nan"), 0.0, False, [], 0.0, len(w))
+    step = params.resolution if rho_step is None else rho_step
+    plane = hough_accumulator(x, y, w, np.deg2rad(params.hough_theta_step_deg), step)
+    acc = plane.acc
+    profile = acc.max(axis=0)
+    j = int(np.argmax(profile))
+    t0 = float(plane.thetas[j])
+    far = _angdist_pi(plane.thetas, t0) >= np.deg2rad(params.ambiguity_separation_deg)
+    j2 = int(np.argmax(np.where(far, profile, -1.0)))
+    s1 = float(profile[j]) * params.resolution
+    s2 = float(profile[j2]) * params.resolution if far.any() else 0.0
+    ri = _rho_peaks(acc[:, j])
+    rhos = plane.rhos[ri]
+    xc, yc = x - plane.centre[0], y - plane.centre[1]
+    t = t0
+    for _ in range(3):
+        t, rhos = _tls_direction(xc, yc, w, t, rhos, 1.0 * params.resolution)
+    peaks = [
+        HoughPeak(t, float(r), float(acc[i, j]) * params.resolution)
+        for r, i in zip(rhos, ri, strict=True)
+    ]
+    if s2 > 0:
+        i2 = int(np.argmax(acc[:, j2]))
+        peaks.append(HoughPeak(float(plane.thetas[j2]), float(plane.rhos[i2]), s2))
+    angle = float(np.mod(t - np.pi / 2, np.pi))
+    ambiguous = bool(s2 >= params.ambiguity_ratio * s1)
+    return WallDirection(angle, s1, ambiguous, peaks, s2, len(w), plane)
+
+
+def map_wall_direction(
+    bm: BeliefMap,
+    params: MapParams,
+    mask: np.ndarray | None = None,
+    threshold: float | None = None,
+) -> WallDirection:
+    """Dominant wall direction of a BeliefMap (optionally only the cells where ``mask``);
+    cells vote with bel(O) from ``threshold`` (default ``params.wall_threshold``)."""
+    w = wall_weights(bm, params.wall_threshold if threshold is None else threshold)
+    if mask is not None:
+        w = np.where(mask, w, 0.0)
+    X, Y = bm.grid.centres()
+    return dominant_direction(X, Y, w, params, rho_step=bm.grid.resolution)
+
+
+def flm_wall_direction(flm: BeliefMap, params: MapParams | None = None) -> WallDirection:
+    """Wall direction of an FLM in the robot frame (for heading fixes, models.md sec. 9).
+
+    With the corridor's reference angle t_ref, the heading measurement is
+    theta = t_ref - angle, reduced mod pi to the value nearest the prediction. Skip the
+    fix when ``ambiguous`` or when ``strength`` (m of wall) is small. One ring's arcs are
+    short and weak, so every cell from ``flm_wall_threshold`` votes (lower than the FGM's).
+    """
+    params = params if params is not None else MapParams()
+    return map_wall_direction(flm, params, threshold=params.flm_wall_threshold)

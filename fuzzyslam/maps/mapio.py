@@ -1,0 +1,163 @@
+"""Map files (contracts.md sec. 3): fgm.npz, nav2 map_server fgm.yaml + fgm.pgm,
+references.yaml. Every file is written to a temporary name and renamed when complete.
+
+nav2 map_server (``nav2_map_server``, map_io): with ``negate: 0`` a pixel p in 0..255
+has occupancy (255 - p) / 255; ``mode: trinary`` makes it occupied above
+``occupied_thresh``, free below ``free_thresh``, unknown between. The image's top row is
+the map's largest y; ``origin`` is the pose of the lower-left pixel [x, y, yaw].
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import os
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from fuzzyslam.errors import InputError
+from fuzzyslam.fileio import atomic_path, check_input_file
+from fuzzyslam.maps.grid import BeliefMap, Grid
+
+OCCUPIED_THRESH = 0.65
+FREE_THRESH = 0.196
+PGM_OCCUPIED, PGM_FREE, PGM_UNKNOWN = 0, 254, 205
+NPZ_KEYS = ("m_e", "m_o", "m_t", "m_c", "origin", "resolution", "shape", "frozen", "freeze_time")
+
+
+@dataclass
+class FgmFile:
+    """Contents of fgm.npz: the map, whether it is frozen, freeze time (s), log identity."""
+
+    map: BeliefMap
+    frozen: bool
+    freeze_time: float
+    log_id: str
+
+
+def log_identity(world: dict[str, Any] | None, fallback: str = "") -> str:
+    """Identity of the world a log was recorded in: ``world-`` + 16 hex digits of the
+    SHA-256 of its canonical JSON; for logs without a world record, ``log-`` + the hash
+    of ``fallback`` (e.g. the log's file name). ``run --map`` compares it with its log's."""
+    if world is not None:
+        text = json.dumps(world, sort_keys=True, separators=(",", ":"))
+        return "world-" + hashlib.sha256(text.encode()).hexdigest()[:16]
+    return "log-" + hashlib.sha256(fallback.encode()).hexdigest()[:16]
+
+
+def save_fgm(
+    path: str | os.PathLike, bm: BeliefMap, frozen: bool, freeze_time: float, log_id: str
+) -> None:
+    """Write fgm.npz (masses float32 (ny, nx), grid geometry, freeze state, log_id)."""
+    with atomic_path(path) as tmp, open(tmp, "wb") as f:
+        np.savez_compressed(
+            f,
+            m_e=bm.m_e.astype(np.float32),
+            m_o=bm.m_o.astype(np.float32),
+            m_t=bm.m_t.astype(np.float32),
+            m_c=bm.m_c.astype(np.float32),
+            origin=np.asarray(bm.grid.origin, dtype=float),
+            resolution=np.float64(bm.grid.resolution),
+            shape=np.asarray(bm.grid.shape, dtype=np.int64),
+            frozen=np.bool_(frozen),
+            freeze_time=np.float64(freeze_time),
+            log_id=np.str_(log_id),
+        )
+
+
+def load_fgm(path: str | os.PathLike) -> FgmFile:
+    """Read fgm.npz; a missing key or inconsistent shape is an InputError naming the file."""
+    p = check_input_file(path, "fuzzy map")
+    try:
+        with np.load(p, allow_pickle=False) as z:
+            missing = [k for k in NPZ_KEYS if k not in z.files]
+            if missing:
+                raise InputError(p, f"not an FGM file: missing {', '.join(missing)}")
+            shape = tuple(int(v) for v in z["shape"])
+            grid = Grid(tuple(float(v) for v in z["origin"]), float(z["resolution"]), shape)
+            arrs = [np.asarray(z[k], dtype=np.float32) for k in ("m_e", "m_o", "m_t", "m_c")]
+            frozen = bool(z["frozen"])
+            freeze_time = float(z["freeze_time"])
+            log_id = str(z["log_id"]) if "log_id" in z.files else ""
+    except InputError:
+        raise
+    except Exception as exc:  # zip/npy format errors
+        raise InputError(p, f"not a readable .npz map ({type(exc).__name__})") from None
+    if len(shape) != 2 or any(a.shape != shape for a in arrs):
+        raise InputError(p, f"mass arrays do not match the grid shape {shape}")
+    return FgmFile(BeliefMap(grid, *arrs), frozen, freeze_time, log_id)
+
+
+def occupancy_image(bm: BeliefMap, unknown_t: float = 0.9) -> np.ndarray:
+    """Trinary PGM pixels (ny, nx), top row = max y: occupied where BetP(O) > 0.65, free
+    where BetP(O) < 0.196, unknown where nothing is known (m(T) > ``unknown_t``) or between."""
+    betp = bm.pignistic_occupied()
+    img = np.full(bm.grid.shape, PGM_UNKNOWN, dtype=np.uint8)
+    known = bm.m_t <= unknown_t
+    img[known & (betp > OCCUPIED_THRESH)] = PGM_OCCUPIED
+    img[known & (betp < FREE_THRESH)] = PGM_FREE
+    return np.flipud(img)
+
+
+def save_nav2(yaml_path: str | os.PathLike, pgm_path: str | os.PathLike, bm: BeliefMap) -> None:
+    """Write the nav2 map_server pair (binary PGM P5 + YAML naming it)."""
+    img = occupancy_image(bm)
+    ny, nx = img.shape
+    with atomic_path(pgm_path) as tmp:
+        Path(tmp).write_bytes(f"P5\n{nx} {ny}\n255\n".encode() + img.tobytes())
+    meta = {
+        "image": Path(pgm_path).name,
+        "mode": "trinary",
+        "resolution": float(bm.grid.resolution),
+        "origin": [float(bm.grid.origin[0]), float(bm.grid.origin[1]), 0.0],
+        "negate": 0,
+        "occupied_thresh": OCCUPIED_THRESH,
+        "free_thresh": FREE_THRESH,
+    }
+    with atomic_path(yaml_path) as tmp:
+        Path(tmp).write_text(yaml.safe_dump(meta, sort_keys=False), encoding="utf-8")
+
+
+def read_pgm(path: str | os.PathLike) -> np.ndarray:
+    """Read a binary (P5, 8-bit) PGM written by :func:`save_nav2`."""
+    p = check_input_file(path, "PGM image")
+    data = p.read_bytes()
+    parts = data.split(maxsplit=4)
+    if len(parts) < 5 or parts[0] != b"P5" or parts[3] != b"255":
+        raise InputError(p, "not an 8-bit binary PGM (P5)")
+    nx, ny = int(parts[1]), int(parts[2])
+    body = parts[4]
+    if len(body) != nx * ny:
+        raise InputError(p, f"PGM holds {len(body)} bytes, expected {nx * ny}")
+    return np.frombuffer(body, dtype=np.uint8).reshape(ny, nx)
+
+
+def save_references(
+    path: str | os.PathLike, refs: list[dict[str, Any]], frame: str = "map"
+) -> None:
+    """Write references.yaml: ``{frame, references: [{id, name, angle, angle_deg, strength,
+    region}]}`` (angles in rad mod pi, [0, pi))."""
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(
+            yaml.safe_dump({"frame": frame, "references": refs}, sort_keys=False),
+            encoding="utf-8",
+        )
+
+
+def load_references(path: str | os.PathLike) -> list[dict[str, Any]]:
+    """Read references.yaml back (a list of dicts); InputError when malformed."""
+    p = check_input_file(path, "references")
+    try:
+        data = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except (yaml.YAMLError, UnicodeDecodeError):
+        raise InputError(p, "not valid YAML") from None
+    if not isinstance(data, dict) or not isinstance(data.get("references"), list):
+        raise InputError(p, "expected a mapping with a 'references' list")
+    for i, r in enumerate(data["references"]):
+        if not isinstance(r, dict) or not {"id", "angle", "region"} <= set(r):
+            raise InputError(p, f"reference {i} lacks id, angle or region")
+    return data["references"]

@@ -1,0 +1,178 @@
+"""Data association of lamp detections with unknown correspondences (models.md sec. 4).
+
+- Individual compatibility: squared Mahalanobis distance D2_ij of detection j to
+  lamp i against a chi-square gate with 2 dof (``EkfSlam.individual_compatibility``).
+- Joint compatibility branch and bound (JCBB; J. Neira, J. D. Tardos, "Data
+  association in stochastic mapping using the joint compatibility test", IEEE
+  T-RA 17(6), 2001): the hypothesis (detection -> lamp or none) with the most
+  pairings whose stacked innovation passes the chi-square test with 2k dof at the
+  same confidence as the individual gate; ties go to the smaller joint NIS. A lamp
+  takes at most one detection, so two lamps closer than the gate is wide each
+  keep their own detection when both are seen.
+- New lamps: a detection paired with no lamp becomes a tentative lamp; it is
+  promoted into the state after ``hits`` sightings within ``radius`` of each other
+  (the paper: "once those features become reliable, they are included into the
+  map"), but only if it is far, D2 > ``new_lamp_chi2``, from every lamp already
+  mapped: the guard against the paper's duplicate-lamp failure.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from functools import lru_cache
+
+import numpy as np
+from scipy.special import gammainc, gammaincinv
+
+from fuzzyslam.slam.ekf import EkfSlam
+
+
+@lru_cache(maxsize=256)
+def joint_threshold(gate_chi2: float, dof: int) -> float:
+    """Chi-square threshold with ``dof`` degrees of freedom at the confidence of a 2-dof gate.
+
+    chi2.cdf(x, k) = P(k/2, x/2) (regularised lower incomplete gamma), so
+    chi2.ppf(p, k) = 2 P^-1(k/2, p); scipy.special avoids importing scipy.stats (1.5 s).
+    """
+    p = float(gammainc(1.0, gate_chi2 / 2.0))
+    return float(2.0 * gammaincinv(dof / 2.0, p))
+
+
+def block_diag_cov(r: np.ndarray) -> np.ndarray:
+    """(2k, 2k) block-diagonal matrix of k (2, 2) covariances."""
+    r = np.asarray(r, dtype=float).reshape(-1, 2, 2)
+    k = len(r)
+    out = np.zeros((2 * k, 2 * k))
+    for a in range(k):
+        out[2 * a : 2 * a + 2, 2 * a : 2 * a + 2] = r[a]
+    return out
+
+
+def joint_nis(ekf: EkfSlam, pairs: list[tuple[int, int]], z: np.ndarray, r: np.ndarray) -> float:
+    """NIS of the stacked innovation of ``pairs`` (detection j, lamp i)."""
+    if not pairs:
+        return 0.0
+    det = [j for j, _ in pairs]
+    h, cols, hc = ekf.predict_lamps([i for _, i in pairs])
+    v = z[det].reshape(-1) - h
+    s = ekf.innovation_cov(cols, hc, block_diag_cov(r[det]))
+    return float(v @ np.linalg.solve(s, v))
+
+
+def candidates(d2: np.ndarray, gate_chi2: float) -> list[list[int]]:
+    """Per detection, the individually compatible lamps, nearest first."""
+    return [
+        sorted(np.nonzero(d2[j] <= gate_chi2)[0].tolist(), key=lambda i, j=j: d2[j, i])
+        for j in range(len(d2))
+    ]
+
+
+def unique_hypothesis(cands: list[list[int]]) -> list[tuple[int, int]] | None:
+    """The pairing of every detection with its candidate when no detection has two
+    candidates and no lamp two detections (then it is the only hypothesis with the most
+    pairings, and JCBB reduces to one joint test); else None."""
+    flat = [c[0] for c in cands if c]
+    if all(len(c) <= 1 for c in cands) and len(set(flat)) == len(flat):
+        return [(j, c[0]) for j, c in enumerate(cands) if c]
+    return None
+
+
+def jcbb(
+    ekf: EkfSlam, z: np.ndarray, r: np.ndarray, d2: np.ndarray, gate_chi2: float
+) -> list[tuple[int, int]]:
+    """Joint-compatibility branch and bound: the best list of (detection, lamp) pairs.
+
+    ``d2`` (m, n) are the individual squared Mahalanobis distances.
+    """
+    m = len(z)
+    cands = candidates(d2, gate_chi2)
+    pairs = unique_hypothesis(cands)
+    if pairs is not None and (
+        not pairs or joint_nis(ekf, pairs, z, r) <= joint_threshold(gate_chi2, 2 * len(pairs))
+    ):
+        return pairs
+    best: list[tuple[int, int]] = []
+    best_nis = np.inf
+
+    def recurse(j: int, pairs: list[tuple[int, int]], used: set[int], nis: float) -> None:
+        nonlocal best, best_nis
+        if j == m:
+            if len(pairs) > len(best) or (len(pairs) == len(best) and nis < best_nis):
+                best, best_nis = list(pairs), nis
+            return
+        # bound: even pairing every remaining detection cannot beat the best
+        remaining = sum(1 for jj in range(j, m) if cands[jj])
+        if len(pairs) + remaining < len(best):
+            return
+        for i in cands[j]:
+            if i in used:
+                continue
+            trial = [*pairs, (j, i)]
+            jn = joint_nis(ekf, trial, z, r)
+            if jn <= joint_threshold(gate_chi2, 2 * len(trial)):
+                used.add(i)
+                recurse(j + 1, trial, used, jn)
+                used.discard(i)
+        if len(pairs) + remaining - (1 if cands[j] else 0) >= len(best):
+            recurse(j + 1, pairs, used, nis)
+
+    recurse(0, [], set(), 0.0)
+    return best
+
+
+@dataclass
+class Tentative:
+    """A candidate lamp: mean world position of its sightings, count, first/last time."""
+
+    pos: np.ndarray
+    hits: int
+    first_t: float
+    last_t: float
+
+
+@dataclass
+class TentativeLamps:
+    """Candidate lamps awaiting ``hits`` consistent sightings (module docstring)."""
+
+    hits: int = 3
+    radius: float = 0.3
+    timeout: float = 2.0
+    items: list[Tentative] = field(default_factory=list)
+    expired: int = 0
+
+    def expire(self, t: float) -> None:
+        """Drop candidates not seen for longer than ``timeout``."""
+        keep = [c for c in self.items if t - c.last_t <= self.timeout]
+        self.expired += len(self.items) - len(keep)
+        self.items = keep
+
+    def observe(self, t: float, world: np.ndarray, taken: set[int]) -> bool:
+        """Add a sighting at world point ``world``; True when it promotes a candidate.
+
+        ``taken`` holds candidates already sighted in this frame (one sighting per frame).
+        """
+        world = np.asarray(world, dtype=float)
+        best, best_d = -1, self.radius
+        for a, c in enumerate(self.items):
+            d = float(np.hypot(*(c.pos - world)))
+            if a not in taken and d <= best_d:
+                best, best_d = a, d
+        if best < 0:
+            if self.hits <= 1:
+                return True
+            self.items.append(Tentative(world.copy(), 1, t, t))
+            taken.add(len(self.items) - 1)
+            return False
+        c = self.items[best]
+        c.pos = c.pos + (world - c.pos) / (c.hits + 1)
+        c.hits += 1
+        c.last_t = t
+        taken.add(best)
+        if c.hits >= self.hits:
+            del self.items[best]
+            # indices after ``best`` shift down by one
+            shifted = {a - 1 if a > best else a for a in taken if a != best}
+            taken.clear()
+            taken.update(shifted)
+            return True
+        return False

@@ -1,0 +1,96 @@
+"""Ceiling-lamp detection in an upward camera frame (OpenCV).
+
+Algorithm (models.md sec. 3; standard blob detection, as in Panzieri et al.'s
+ceiling-lamp localisation):
+
+1. threshold: lamps saturate the image, pixels >= ``threshold`` are lamp pixels;
+2. ``cv2.connectedComponentsWithStats`` (8-connected) on the binary mask;
+3. gate each component on area, fill ratio (area / bounding box: pi/4 for a disc),
+   aspect ratio of the box, and on touching the image border (a lamp cut by the
+   border has a biased centroid);
+4. sub-pixel centroid: the intensity-weighted centroid (first image moments, via
+   ``cv2.moments``) of ``max(I - background, 0)`` over the component dilated by
+   one pixel, so that the partly lit rim pixels pull the centroid toward the true
+   centre. The background is the mean of the pixels around the component (its box
+   grown by two pixels, minus the dilated component): local, so shading does not bias it.
+
+Pixel coordinates follow OpenCV: pixel centres at integers, u = column, v = row.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import cv2
+import numpy as np
+
+_KERNEL = np.ones((3, 3), np.uint8)
+
+
+@dataclass
+class Blobs:
+    """Detected lamps in one frame: centroids uv (m, 2) in pixels and areas (m,) in pixels."""
+
+    uv: np.ndarray
+    area: np.ndarray
+    rejected: int = 0
+
+    def __len__(self) -> int:
+        return len(self.uv)
+
+
+def detect_lamps(
+    img: np.ndarray,
+    threshold: int = 200,
+    min_area: int = 4,
+    max_area: int = 2000,
+    min_fill: float = 0.5,
+    max_aspect: float = 2.0,
+    border: int = 1,
+) -> Blobs:
+    """Lamp centroids in a mono8 frame (module docstring). ``rejected`` counts gated blobs."""
+    img = np.ascontiguousarray(img, dtype=np.uint8)
+    if img.ndim != 2:
+        raise ValueError(f"expected a (H, W) mono8 image, got shape {img.shape}")
+    hgt, wid = img.shape
+    _, full = cv2.threshold(img, int(threshold) - 1, 255, cv2.THRESH_BINARY)
+    # work on the bounding box of the lit pixels (plus a margin): most of a frame is dark
+    bx, by, bw, bh = cv2.boundingRect(full)
+    if bw == 0:
+        return Blobs(np.zeros((0, 2)), np.zeros(0))
+    ox, oy = max(bx - 3, 0), max(by - 3, 0)
+    ex, ey = min(bx + bw + 3, wid), min(by + bh + 3, hgt)
+    img = img[oy:ey, ox:ex]
+    mask = full[oy:ey, ox:ex]
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    stats[:, 0] += ox
+    stats[:, 1] += oy
+    st = stats[1:]
+    x, y, w, h, area = (st[:, i] for i in range(5))
+    fill = area / (w * h)
+    aspect = np.maximum(w, h) / np.minimum(w, h)
+    inside = (x >= border) & (y >= border) & (x + w <= wid - border) & (y + h <= hgt - border)
+    keep = (
+        (area >= min_area) & (area <= max_area) & (fill >= min_fill) & (aspect <= max_aspect)
+    ) & inside
+    ids = np.nonzero(keep)[0] + 1
+    rejected = int(n - 1 - len(ids))
+    if len(ids) == 0:
+        return Blobs(np.zeros((0, 2)), np.zeros(0), rejected)
+    uv = np.empty((len(ids), 2))
+    cw, chh = img.shape[1], img.shape[0]
+    for a, k in enumerate(ids):
+        # the component's box grown by two pixels, in crop coordinates
+        x0, y0 = max(st[k - 1, 0] - ox - 2, 0), max(st[k - 1, 1] - oy - 2, 0)
+        x1 = min(st[k - 1, 0] - ox + st[k - 1, 2] + 2, cw)
+        y1 = min(st[k - 1, 1] - oy + st[k - 1, 3] + 2, chh)
+        comp = (labels[y0:y1, x0:x1] == k).astype(np.uint8)
+        comp = cv2.dilate(comp, _KERNEL)
+        crop = img[y0:y1, x0:x1]
+        ring = (comp == 0) & (crop < threshold)
+        background = float(crop[ring].mean()) if ring.any() else 0.0
+        weights = np.where(comp > 0, np.maximum(crop - np.float32(background), 0.0), 0.0)
+        weights = weights.astype(np.float32)
+        mom = cv2.moments(weights, binaryImage=False)
+        uv[a] = (ox + x0 + mom["m10"] / mom["m00"], oy + y0 + mom["m01"] / mom["m00"])
+    return Blobs(uv, area[ids - 1].astype(float), rejected)

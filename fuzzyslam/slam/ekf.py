@@ -1,0 +1,394 @@
+"""Augmented-state EKF-SLAM with point landmarks (ceiling lamps) in the plane.
+
+State ``x = (x, y, theta, l1x, l1y, ..., lnx, lny)`` and covariance ``P``
+(models.md sec. 4; Thrun, Burgard, Fox, Probabilistic Robotics (2005), ch. 10;
+the paper sec. 2). Costs: ``predict`` O(n) (robot block and robot-map rows only),
+``update_*`` O(n^2) (one rank-2k correction of P), ``add_lamp`` O(n).
+
+Storage is preallocated and grows by doubling, so adding a lamp does not copy
+the whole matrix each time; ``x`` and ``P`` are views of the used part.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from fuzzyslam.robot import motion_step
+from fuzzyslam.se2 import compose, jacobians_compose, rot, wrap_angle
+
+
+@dataclass
+class UpdateResult:
+    """Outcome of one measurement update: accepted, NIS = v^T S^-1 v, innovation v."""
+
+    accepted: bool
+    nis: float
+    innovation: np.ndarray
+
+
+def motion_noise(d_trans: float, d_rot: float, alpha) -> np.ndarray:
+    """Covariance M of the odometry increment (d_trans, d_rot) (SlamParams docstring)."""
+    a1, a2, a3, a4, a5, a6 = alpha
+    dt2, dr2, adt = d_trans * d_trans, d_rot * d_rot, abs(d_trans)
+    return np.diag([a1 * dt2 + a2 * dr2 + a5 * adt, a3 * dr2 + a4 * dt2 + a6 * adt])
+
+
+def motion_jacobians(pose: np.ndarray, d_trans: float, d_rot: float) -> tuple[np.ndarray, ...]:
+    """Jacobians of ``robot.motion_step`` (midpoint rule) w.r.t. the pose (G_x) and (dt, dr) (G_u).
+
+    With m = theta + dr/2:  x' = x + dt cos m,  y' = y + dt sin m,  theta' = theta + dr.
+    G_x = [[1, 0, -dt sin m], [0, 1, dt cos m], [0, 0, 1]],
+    G_u = [[cos m, -dt sin m / 2], [sin m, dt cos m / 2], [0, 1]].
+    """
+    m = pose[2] + 0.5 * d_rot
+    c, s = np.cos(m), np.sin(m)
+    gx = np.array([[1.0, 0.0, -d_trans * s], [0.0, 1.0, d_trans * c], [0.0, 0.0, 1.0]])
+    gu = np.array([[c, -0.5 * d_trans * s], [s, 0.5 * d_trans * c], [0.0, 1.0]])
+    return gx, gu
+
+
+def lamp_measurement(pose: np.ndarray, lamp: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Predicted lamp position in the robot frame and its Jacobians (models.md sec. 3).
+
+    h = R(theta)^T (l - p);  dh/dp = -R^T;  dh/dl = R^T;  dh/dtheta = (h_y, -h_x).
+    Returns (h (2,), H_r (2, 3), H_l (2, 2)).
+    """
+    rt = rot(pose[2]).T
+    h = rt @ (np.asarray(lamp, dtype=float) - pose[:2])
+    hr = np.empty((2, 3))
+    hr[:, :2] = -rt
+    hr[:, 2] = (h[1], -h[0])
+    return h, hr, rt
+
+
+def lamp_init(pose: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, ...]:
+    """Inverse model: lamp l = p + R(theta) z, with Jacobians J_r (2, 3) and J_z (2, 2).
+
+    J_r = [[1, 0, -s zx - c zy], [0, 1, c zx - s zy]],  J_z = R(theta).
+    """
+    r = rot(pose[2])
+    d = r @ np.asarray(z, dtype=float)
+    jr = np.array([[1.0, 0.0, -d[1]], [0.0, 1.0, d[0]]])
+    return pose[:2] + d, jr, r
+
+
+class Preintegrator:
+    """Odometry increments composed into one relative motion and its covariance.
+
+    delta' = delta (+) m(u),  m(u) = (dt cos(dr/2), dt sin(dr/2), dr)  (the midpoint step);
+    Q' = A Q A^T + B G_u M G_u^T B^T,  A, B the composition Jacobians at (delta, m(u)),
+    G_u the motion Jacobian at the origin. Plain floats: it runs at the odometry rate.
+    """
+
+    def __init__(self, alpha) -> None:
+        self.alpha = tuple(float(a) for a in alpha)
+        self.reset()
+
+    def reset(self) -> None:
+        self.dx = self.dy = self.dth = 0.0
+        self._q = [0.0] * 6  # q00 q01 q02 q11 q12 q22
+        self.steps = 0
+
+    def add(self, d_trans: float, d_rot: float) -> None:
+        """Compose one increment (the matrix products written out on the 6 unique entries)."""
+        a1, a2, a3, a4, a5, a6 = self.alpha
+        dt2, dr2, adt = d_trans * d_trans, d_rot * d_rot, abs(d_trans)
+        mt = a1 * dt2 + a2 * dr2 + a5 * adt
+        mr = a3 * dr2 + a4 * dt2 + a6 * adt
+        h = 0.5 * d_rot
+        mx, my = d_trans * math.cos(h), d_trans * math.sin(h)
+        c, s = math.cos(self.dth), math.sin(self.dth)
+        # A = [[1, 0, a], [0, 1, b], [0, 0, 1]]: A Q A^T
+        a = -s * mx - c * my
+        b = c * mx - s * my
+        q00, q01, q02, q11, q12, q22 = self._q
+        q00, q01, q02, q11, q12 = (
+            q00 + 2 * a * q02 + a * a * q22,
+            q01 + a * q12 + b * q02 + a * b * q22,
+            q02 + a * q22,
+            q11 + 2 * b * q12 + b * b * q22,
+            q12 + b * q22,
+        )
+        # B G_u = [[ch, -k sh], [sh, k ch], [0, 1]], k = dt / 2: + B G_u diag(mt, mr) (B G_u)^T
+        ch, sh, k = math.cos(self.dth + h), math.sin(self.dth + h), 0.5 * d_trans
+        kk = k * k * mr
+        self._q = [
+            q00 + ch * ch * mt + kk * sh * sh,
+            q01 + ch * sh * (mt - kk),
+            q02 - k * sh * mr,
+            q11 + sh * sh * mt + kk * ch * ch,
+            q12 + k * ch * mr,
+            q22 + mr,
+        ]
+        self.dx += c * mx - s * my
+        self.dy += s * mx + c * my
+        self.dth += d_rot
+        self.steps += 1
+
+    @property
+    def q(self) -> np.ndarray:
+        """Covariance (3, 3) of the preintegrated motion."""
+        q00, q01, q02, q11, q12, q22 = self._q
+        return np.array([[q00, q01, q02], [q01, q11, q12], [q02, q12, q22]])
+
+    @property
+    def delta(self) -> np.ndarray:
+        return np.array([self.dx, self.dy, self.dth])
+
+
+class EkfSlam:
+    """EKF-SLAM state and covariance with O(n) prediction and Joseph-form updates."""
+
+    def __init__(self, pose, pose_cov, alpha, capacity: int = 16) -> None:
+        cap = 3 + 2 * max(int(capacity), 1)
+        self._x = np.zeros(cap)
+        self._p = np.zeros((cap, cap))
+        self._x[:3] = np.asarray(pose, dtype=float)
+        self._x[2] = wrap_angle(self._x[2])
+        self._p[:3, :3] = np.asarray(pose_cov, dtype=float)
+        self.alpha = tuple(float(a) for a in alpha)
+        if len(self.alpha) != 6:
+            raise ValueError("alpha must have 6 coefficients")
+        self.dim = 3
+
+    # -- views ------------------------------------------------------------------------
+
+    @property
+    def x(self) -> np.ndarray:
+        return self._x[: self.dim]
+
+    @property
+    def P(self) -> np.ndarray:
+        return self._p[: self.dim, : self.dim]
+
+    @property
+    def pose(self) -> np.ndarray:
+        """Robot pose (x, y, theta), a copy."""
+        return self._x[:3].copy()
+
+    @property
+    def pose_cov(self) -> np.ndarray:
+        """Robot pose covariance (3, 3), a copy."""
+        return self._p[:3, :3].copy()
+
+    @property
+    def n_lamps(self) -> int:
+        return (self.dim - 3) // 2
+
+    @property
+    def lamps(self) -> np.ndarray:
+        """(n, 2) lamp positions (a view)."""
+        return self._x[3 : self.dim].reshape(-1, 2)
+
+    def lamp_cov(self, i: int) -> np.ndarray:
+        j = 3 + 2 * i
+        return self._p[j : j + 2, j : j + 2].copy()
+
+    def lamp_covs(self) -> np.ndarray:
+        """(n, 2, 2) marginal covariances of all lamps (O(n), no loop in Python)."""
+        idx = 3 + 2 * np.arange(self.n_lamps)
+        rows = idx[:, None, None] + np.array([0, 1])[None, :, None]
+        cols = idx[:, None, None] + np.array([0, 1])[None, None, :]
+        return self._p[rows, cols]
+
+    # -- prediction ---------------------------------------------------------------------
+
+    def predict(self, d_trans: float, d_rot: float) -> None:
+        """Odometry prediction (Probabilistic Robotics, EKF-SLAM prediction, Table 10.1):
+
+        x_r' = g(x_r, u);   P_rr' = G_x P_rr G_x^T + G_u M G_u^T;   P_rm' = G_x P_rm.
+
+        Only the robot block and the robot-map cross rows change: O(n).
+        """
+        pose = self._x[:3]
+        gx, gu = motion_jacobians(pose, d_trans, d_rot)
+        m = motion_noise(d_trans, d_rot, self.alpha)
+        self._x[:3] = motion_step(pose, d_trans, d_rot)
+        n = self.dim
+        p = self._p
+        p[:3, :3] = gx @ p[:3, :3] @ gx.T + gu @ m @ gu.T
+        if n > 3:
+            cross = gx @ p[:3, 3:n]
+            p[:3, 3:n] = cross
+            p[3:n, :3] = cross.T
+
+    def predict_relative(self, delta: np.ndarray, q_delta: np.ndarray) -> None:
+        """Prediction with a preintegrated relative motion delta (robot frame) of covariance Q:
+
+        x_r' = x_r (+) delta;  P_rr' = J_a P_rr J_a^T + J_b Q J_b^T;  P_rm' = J_a P_rm,
+        with J_a, J_b the Jacobians of SE(2) composition (se2.jacobians_compose). Equal
+        to a sequence of ``predict`` calls (the midpoint step is the composition with
+        (dt cos(dr/2), dt sin(dr/2), dr), and these Jacobians compose), but O(n) once.
+        """
+        pose = self._x[:3].copy()
+        ja, jb = jacobians_compose(pose, delta)
+        self._x[:3] = compose(pose, delta)
+        n = self.dim
+        p = self._p
+        p[:3, :3] = ja @ p[:3, :3] @ ja.T + jb @ q_delta @ jb.T
+        if n > 3:
+            cross = ja @ p[:3, 3:n]
+            p[:3, 3:n] = cross
+            p[3:n, :3] = cross.T
+
+    # -- updates ------------------------------------------------------------------------
+
+    def _correct(self, cols: np.ndarray, hc: np.ndarray, v: np.ndarray, r: np.ndarray) -> None:
+        """Kalman correction with H nonzero only on columns ``cols`` (H[:, cols] = hc).
+
+        K = P H^T S^-1,  x' = x + K v,
+        P' = (I - K H) P (I - K H)^T + K R K^T      (Joseph form)
+           = P - K (P H^T)^T - (P H^T) K^T + K S K^T (expanded: O(n^2), symmetric)
+        """
+        n = self.dim
+        p = self._p[:n, :n]
+        pht = p[:, cols] @ hc.T
+        s = hc @ pht[cols] + r
+        s = 0.5 * (s + s.T)
+        k = np.linalg.solve(s, pht.T).T
+        self._x[:n] += k @ v
+        self._x[2] = wrap_angle(self._x[2])
+        kpht = k @ pht.T
+        p += k @ s @ k.T - kpht - kpht.T
+        p[...] = 0.5 * (p + p.T)
+
+    def innovation_cov(self, cols: np.ndarray, hc: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """S = H P H^T + R for H nonzero only on ``cols``."""
+        s = hc @ self._p[np.ix_(cols, cols)] @ hc.T + r
+        return 0.5 * (s + s.T)
+
+    def predict_lamps(self, ids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Stacked prediction of lamps ``ids``: h (2k,), columns, H restricted to columns.
+
+        Columns are [0, 1, 2, l_i...]; H is (2k, 3 + 2k).
+        """
+        ids = list(ids)
+        k = len(ids)
+        pose = self._x[:3]
+        h = np.empty(2 * k)
+        hc = np.zeros((2 * k, 3 + 2 * k))
+        cols = np.empty(3 + 2 * k, dtype=int)
+        cols[:3] = (0, 1, 2)
+        for a, i in enumerate(ids):
+            j = 3 + 2 * i
+            hi, hr, hl = lamp_measurement(pose, self._x[j : j + 2])
+            h[2 * a : 2 * a + 2] = hi
+            hc[2 * a : 2 * a + 2, :3] = hr
+            hc[2 * a : 2 * a + 2, 3 + 2 * a : 5 + 2 * a] = hl
+            cols[3 + 2 * a : 5 + 2 * a] = (j, j + 1)
+        return h, cols, hc
+
+    def update_lamps(
+        self, ids, z: np.ndarray, r: np.ndarray, gate_chi2: float | None = None
+    ) -> UpdateResult:
+        """Joint update with lamps ``ids`` observed at robot-frame points z (k, 2).
+
+        ``r`` is the (2k, 2k) measurement covariance (block-diagonal for independent
+        detections). v = z - h(x); S = H P H^T + R; rejected if NIS > gate_chi2.
+        """
+        h, cols, hc = self.predict_lamps(ids)
+        v = np.asarray(z, dtype=float).reshape(-1) - h
+        s = self.innovation_cov(cols, hc, r)
+        nis = float(v @ np.linalg.solve(s, v))
+        if gate_chi2 is not None and not nis <= gate_chi2:
+            return UpdateResult(False, nis, v)
+        self._correct(cols, hc, v, r)
+        return UpdateResult(True, nis, v)
+
+    def update_lamp(self, i: int, z, r, gate_chi2: float | None = None) -> UpdateResult:
+        """Update with one lamp ``i`` seen at robot-frame point z (2,), covariance r (2, 2)."""
+        return self.update_lamps([i], np.asarray(z).reshape(1, 2), np.asarray(r), gate_chi2)
+
+    def update_robot(self, z, r, idx, gate_chi2: float | None = None) -> UpdateResult:
+        """Direct measurement of robot state components ``idx`` (e.g. [2] heading, [0, 1, 2]).
+
+        h(x) = x[idx], H = rows of the identity; the heading component of the
+        innovation is wrapped to (-pi, pi]. Rejected (no change) if NIS > gate_chi2.
+        """
+        cols = np.asarray(idx, dtype=int).reshape(-1)
+        if np.any((cols < 0) | (cols > 2)):
+            raise ValueError("update_robot: idx must be robot components 0, 1, 2")
+        z = np.asarray(z, dtype=float).reshape(-1)
+        r = np.atleast_2d(np.asarray(r, dtype=float))
+        v = z - self._x[cols]
+        v[cols == 2] = wrap_angle(v[cols == 2])
+        hc = np.eye(len(cols))
+        s = self.innovation_cov(cols, hc, r)
+        nis = float(v @ np.linalg.solve(s, v))
+        if gate_chi2 is not None and not nis <= gate_chi2:
+            return UpdateResult(False, nis, v)
+        self._correct(cols, hc, v, r)
+        return UpdateResult(True, nis, v)
+
+    # -- augmentation -------------------------------------------------------------------
+
+    def _grow(self, need: int) -> None:
+        cap = self._x.size
+        if need <= cap:
+            return
+        new = max(need, 2 * cap)
+        x = np.zeros(new)
+        p = np.zeros((new, new))
+        x[:cap] = self._x
+        p[:cap, :cap] = self._p
+        self._x, self._p = x, p
+
+    def add_lamp(self, z, r) -> int:
+        """Append a lamp seen at robot-frame point z with covariance r; return its index.
+
+        l = p + R(theta) z;  P_ll = J_r P_rr J_r^T + J_z R J_z^T;  P_lx = J_r P_rx
+        (Probabilistic Robotics sec. 10.2; O(n)).
+        """
+        n = self.dim
+        self._grow(n + 2)
+        pose = self._x[:3]
+        lamp, jr, jz = lamp_init(pose, z)
+        p = self._p
+        plx = jr @ p[:3, :n]
+        p[n : n + 2, :n] = plx
+        p[:n, n : n + 2] = plx.T
+        pll = jr @ p[:3, :3] @ jr.T + jz @ np.asarray(r, dtype=float) @ jz.T
+        p[n : n + 2, n : n + 2] = 0.5 * (pll + pll.T)
+        self._x[n : n + 2] = lamp
+        self.dim = n + 2
+        return self.n_lamps - 1
+
+    def individual_compatibility(self, z: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """(m, n) squared Mahalanobis distances of detections z (m, 2) to every lamp.
+
+        D2_ij = v_ij^T S_ij^-1 v_ij, S_ij = H_i P H_i^T + R_j (vectorised over lamps, O(n m)).
+        """
+        z = np.asarray(z, dtype=float).reshape(-1, 2)
+        n = self.n_lamps
+        if n == 0 or len(z) == 0:
+            return np.full((len(z), n), np.inf)
+        pose = self._x[:3]
+        c, s = np.cos(pose[2]), np.sin(pose[2])
+        rt = np.array([[c, s], [-s, c]])
+        d = self.lamps - pose[:2]
+        h = d @ rt.T  # (n, 2)
+        # H_i = [ -R^T | (h_y, -h_x) | R^T ] on columns (x, y, theta, l_i)
+        hr = np.zeros((n, 2, 3))
+        hr[:, :, :2] = -rt
+        hr[:, 0, 2] = h[:, 1]
+        hr[:, 1, 2] = -h[:, 0]
+        prr = self._p[:3, :3]
+        idx = 3 + 2 * np.arange(n)
+        prl = np.stack([self._p[:3, idx], self._p[:3, idx + 1]], axis=-1)  # (3, n, 2)
+        prl = prl.transpose(1, 0, 2)  # (n, 3, 2)
+        pll = self.lamp_covs()
+        s_rr = np.einsum("nij,jk,nlk->nil", hr, prr, hr)
+        s_rl = np.einsum("nij,njk,lk->nil", hr, prl, rt)
+        s_ll = rt @ pll @ rt.T
+        s0 = s_rr + s_rl + s_rl.transpose(0, 2, 1) + s_ll  # (n, 2, 2)
+        r = np.asarray(r, dtype=float).reshape(-1, 2, 2)
+        if len(r) == 1:
+            r = np.repeat(r, len(z), axis=0)
+        stot = s0[None, :, :, :] + r[:, None, :, :]  # (m, n, 2, 2)
+        v = z[:, None, :] - h[None, :, :]  # (m, n, 2)
+        a, b, dd = stot[..., 0, 0], stot[..., 0, 1], stot[..., 1, 1]
+        det = a * dd - b * b
+        return (dd * v[..., 0] ** 2 - 2 * b * v[..., 0] * v[..., 1] + a * v[..., 1] ** 2) / det

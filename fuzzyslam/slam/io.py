@@ -1,0 +1,350 @@
+"""Edge of the SLAM stage: events from an MCAP log in, result files out.
+
+Input streams (topic names from the config's ``topics`` section):
+
+- odometry: ``topics.joint_states`` wheel angles (nominal ``robot.wheel_radius`` and
+  ``robot.wheel_base``), or ``topics.odom`` pose increments when the log has no
+  encoders or ``slam.use_encoders`` is false;
+- lamps: ``topics.image`` mono8 frames + ``topics.camera_info`` (ceiling height from
+  ``camera.ceiling_height``, lens offset from /tf_static ``ceiling_camera`` if present,
+  else ``camera.offset``), or ``topics.detections`` PoseArray (base_link points);
+- sonar rings ``topics.sonar_prefix``NN, only when aids are given (mounts from
+  /tf_static, else the nominal ring).
+
+Glitches are counted in ``warnings`` (never silently used): frames of another
+encoding, NaN odometry, header stamps out of order, joint states without the
+wheel joints. Event times are header stamps.
+"""
+
+from __future__ import annotations
+
+import csv
+import heapq
+import io
+import json
+import os
+from collections.abc import Iterator
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from fuzzyslam.camera import CeilingCamera
+from fuzzyslam.config import Config
+from fuzzyslam.errors import InputError
+from fuzzyslam.robot import WHEEL_NAMES, sonar_mounts, wheel_increments_to_odometry
+from fuzzyslam.se2 import between
+from fuzzyslam.slam.detect import detect_lamps
+from fuzzyslam.slam.runner import Event, Frame, Odom, RingEvent, SlamResult
+from fuzzyslam.streams import messages as M
+from fuzzyslam.streams.logmeta import read_scenario
+from fuzzyslam.streams.reader import LogReader
+from fuzzyslam.streams.sonar import RingStats, group_rings, sonar_mounts_from_tf
+from fuzzyslam.streams.tum import format_tum
+from fuzzyslam.streams.writer import LogWriter
+
+CAMERA_FRAME = "ceiling_camera"
+
+
+@dataclass
+class LogInputs:
+    """What the filter needs from one log, and the glitches met while reading it."""
+
+    reader: LogReader
+    cfg: Config
+    odom_topic: str
+    odom_source: str
+    lamp_topic: str
+    lamp_source: str
+    camera: CeilingCamera | None
+    mounts: np.ndarray
+    start_pose: np.ndarray
+    start: float
+    end: float
+    warnings: dict[str, int] = field(default_factory=dict)
+    ring_stats: RingStats = field(default_factory=RingStats)
+    first_problem: str = ""
+
+    def warn(self, key: str, problem: str = "") -> None:
+        self.warnings[key] = self.warnings.get(key, 0) + 1
+        if problem and not self.first_problem:
+            self.first_problem = problem
+
+    # -- streams --------------------------------------------------------------------------
+
+    def events(self, rings: bool = False) -> Iterator[Event]:
+        """All events in time order (rings merged in only when ``rings``)."""
+        main = self._main_events()
+        if not rings:
+            return main
+        return heapq.merge(main, self._ring_events(), key=lambda e: e.t)
+
+    def _main_events(self) -> Iterator[Event]:
+        odo = self._odometry if self.odom_source == "encoders" else self._odom_pose
+        lamp = self._frame if self.lamp_source == "frames" else self._pose_array
+        last_t = {self.odom_topic: -np.inf, self.lamp_topic: -np.inf}
+        prev = None
+        for m in self.reader.messages([self.odom_topic, self.lamp_topic]):
+            t = M.stamp_to_sec(m.msg.header.stamp)
+            if t < last_t[m.topic]:
+                self.warn("out_of_order", f"{m.topic}: header stamp {t:.3f} s goes back in time")
+                if m.topic == self.lamp_topic:
+                    continue
+                t = last_t[m.topic]  # an odometry increment is still motion: keep it
+            last_t[m.topic] = t
+            if m.topic == self.odom_topic:
+                ev, prev = odo(t, m.msg, prev)
+            else:
+                ev = lamp(t, m.msg)
+            if ev is not None:
+                yield ev
+
+    def _odometry(self, t: float, msg, prev):
+        names = list(msg.name)
+        try:
+            idx = [names.index(n) for n in WHEEL_NAMES]
+        except ValueError:
+            self.warn("joint_states_without_wheels", f"joint state lacks {WHEEL_NAMES}")
+            return None, prev
+        pos = np.asarray(msg.position, dtype=float)
+        if len(pos) <= max(idx) or not np.all(np.isfinite(pos[idx])):
+            self.warn("nan_odometry", f"NaN or missing wheel angle at t={t:.3f} s")
+            return None, prev
+        cur = pos[idx]
+        if prev is None:
+            return None, cur
+        dl, dr = cur - prev
+        rob = self.cfg.robot
+        d_trans, d_rot = wheel_increments_to_odometry(dl, dr, rob.wheel_radius, rob.wheel_base)
+        return Odom(t, float(d_trans), float(d_rot)), cur
+
+    def _odom_pose(self, t: float, msg, prev):
+        pose = M.pose_of(msg.pose.pose)
+        if not np.all(np.isfinite(pose)):
+            self.warn("nan_odometry", f"NaN odometry pose at t={t:.3f} s")
+            return None, prev
+        if prev is None:
+            return None, pose
+        rel = between(prev, pose)
+        d_trans = float(np.copysign(np.hypot(rel[0], rel[1]), rel[0]))
+        return Odom(t, d_trans, float(rel[2])), pose
+
+    def _measurement_cov(self, m: int, sigma: float) -> np.ndarray:
+        return np.repeat((np.eye(2) * sigma**2)[None], m, axis=0)
+
+    def _frame(self, t: float, msg) -> Frame | None:
+        try:
+            img = M.image_to_array(msg)
+        except ValueError as exc:
+            self.warn("bad_frames", f"{self.lamp_topic} at t={t:.3f} s: {exc}")
+            return None
+        p = self.cfg.slam
+        blobs = detect_lamps(
+            img, p.threshold, p.min_area, p.max_area, p.min_fill, p.max_aspect, p.border
+        )
+        if blobs.rejected:
+            self.warnings["blobs_rejected"] = (
+                self.warnings.get("blobs_rejected", 0) + blobs.rejected
+            )
+        assert self.camera is not None
+        z = self.camera.unproject(blobs.uv)
+        return Frame(t, z, self._measurement_cov(len(z), self.camera.metric_sigma(p.pixel_sigma)))
+
+    def _pose_array(self, t: float, msg) -> Frame | None:
+        z = M.points_of_pose_array(msg)
+        ok = np.all(np.isfinite(z), axis=1)
+        if not np.all(ok):
+            self.warn("nan_detections", f"NaN detection at t={t:.3f} s")
+            z = z[ok]
+        return Frame(t, z, self._measurement_cov(len(z), self.cfg.slam.detection_sigma))
+
+    def _ring_events(self) -> Iterator[Event]:
+        topics = {self.cfg.topics.sonar(i): i for i in range(self.cfg.sonar.count)}
+        msgs = self.reader.messages(list(topics))
+        for ring in group_rings(msgs, topics, self.cfg.sonar.count, stats=self.ring_stats):
+            yield RingEvent(ring.t, ring)
+
+
+def _first(reader: LogReader, topic: str):
+    for m in reader.messages([topic]):
+        return m.msg
+    return None
+
+
+def open_inputs(path: str | os.PathLike, cfg: Config, need_rings: bool = False) -> LogInputs:
+    """Open a log and decide its streams; InputError naming topics and config keys if missing."""
+    reader = LogReader(path)
+    tp = cfg.topics
+    if cfg.slam.use_encoders and reader.has(tp.joint_states):
+        odom_topic, odom_source = tp.joint_states, "encoders"
+    elif reader.has(tp.odom):
+        odom_topic, odom_source = tp.odom, "odom"
+    else:
+        looked = [tp.odom] if not cfg.slam.use_encoders else [tp.joint_states, tp.odom]
+        keys = "topics.odom" if not cfg.slam.use_encoders else "topics.joint_states / topics.odom"
+        reader.require(looked, f"the config's {keys}")
+        raise AssertionError("unreachable")
+    camera = None
+    if reader.has(tp.image):
+        lamp_topic, lamp_source = tp.image, "frames"
+        info = _first(reader, tp.camera_info) if reader.has(tp.camera_info) else None
+        if info is None:
+            reader.require([tp.camera_info], "the config's topics.camera_info")
+            raise InputError(reader.path, f"no message on {tp.camera_info}")
+        offset = tuple(cfg.camera.offset)
+        if reader.has(tp.tf_static):
+            for m in reader.messages([tp.tf_static]):
+                tf = M.planar_transforms(m.msg)
+                if CAMERA_FRAME in tf:
+                    offset = tuple(tf[CAMERA_FRAME][1][:2])
+        camera = CeilingCamera.from_camera_info(info, cfg.camera.ceiling_height, offset)
+        if not camera.f > 0:
+            raise InputError(reader.path, f"{tp.camera_info}: focal length must be > 0")
+    elif reader.has(tp.detections):
+        lamp_topic, lamp_source = tp.detections, "detections"
+    else:
+        reader.require(
+            [tp.image, tp.detections], "the config's topics.image (frames) or topics.detections"
+        )
+        raise AssertionError("unreachable")
+    mounts = None
+    if reader.has(tp.tf_static):
+        mounts = sonar_mounts_from_tf(
+            (m.msg for m in reader.messages([tp.tf_static])), cfg.sonar.count
+        )
+    if mounts is None:
+        mounts = sonar_mounts(cfg.sonar.count, cfg.robot.radius)
+    if need_rings:
+        reader.require([tp.sonar(0)], "the config's topics.sonar_prefix")
+    scen = read_scenario(reader)
+    start_pose = np.asarray(scen.start_pose if scen is not None else cfg.slam.start_pose, float)
+    if start_pose.shape != (3,) or not np.all(np.isfinite(start_pose)):
+        raise InputError(reader.path, "start pose must be three finite numbers (x, y, theta)")
+    return LogInputs(
+        reader,
+        cfg,
+        odom_topic,
+        odom_source,
+        lamp_topic,
+        lamp_source,
+        camera,
+        mounts,
+        start_pose,
+        reader.start,
+        reader.end,
+    )
+
+
+# -- outputs -------------------------------------------------------------------------------
+
+
+def _csv_text(header: list[str], rows) -> str:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(header)
+    w.writerows(rows)
+    return buf.getvalue()
+
+
+def _num(v: float) -> str:
+    return "" if not np.isfinite(v) else f"{v:.9g}"
+
+
+def landmarks_dict(res: SlamResult) -> dict:
+    return {
+        "frame": "map",
+        "landmarks": [
+            {
+                "id": int(lm.id),
+                "x": float(lm.x),
+                "y": float(lm.y),
+                "cov": [[float(v) for v in row] for row in lm.cov],
+                "first_seen": float(lm.first_seen),
+                "last_seen": float(lm.last_seen),
+                "observations": int(lm.observations),
+            }
+            for lm in res.lamps
+        ],
+    }
+
+
+def _lamp_markers(t: float, lamps: np.ndarray, covs: np.ndarray) -> object:
+    """One flat ellipse (3 sigma, at least 5 cm) and one text label per lamp."""
+    markers = []
+    for i, (xy, c) in enumerate(zip(lamps, covs, strict=True)):
+        w, v = np.linalg.eigh(c)
+        ang = float(np.arctan2(v[1, 1], v[0, 1]))
+        sx, sy = (max(6.0 * float(np.sqrt(max(e, 0.0))), 0.05) for e in (w[1], w[0]))
+        markers.append(
+            M.marker(
+                t,
+                "map",
+                "lamps",
+                i,
+                2,
+                (xy[0], xy[1], ang),
+                2.5,
+                (sx, sy, 0.02),
+                (1.0, 0.8, 0.1, 0.8),
+            )
+        )
+        markers.append(
+            M.marker(
+                t,
+                "map",
+                "lamp_ids",
+                i,
+                9,
+                (xy[0], xy[1], 0.0),
+                2.6,
+                (0.2, 0.2, 0.2),
+                (1.0, 1.0, 1.0, 1.0),
+                text=str(i),
+            )
+        )
+    return M.marker_array(markers)
+
+
+def write_summary(tmp: Path, summary: dict) -> None:
+    (tmp / "summary.json").write_text(
+        json.dumps(summary, indent=2, sort_keys=True, default=float) + "\n", encoding="utf-8"
+    )
+
+
+def write_outputs(tmp: Path, res: SlamResult, cfg: Config) -> None:
+    """The files of contracts.md sec. 2 but summary.json and the fix files, into ``tmp``."""
+    (tmp / "trajectory.tum").write_text(format_tum(res.t, res.poses), encoding="utf-8")
+    (tmp / "odometry.tum").write_text(format_tum(res.odo_t, res.odo_poses), encoding="utf-8")
+    cov_rows = ([_num(t), *(_num(v) for v in row)] for t, row in zip(res.t, res.cov, strict=True))
+    (tmp / "covariance.csv").write_text(
+        _csv_text(["t", "pxx", "pxy", "pxt", "pyy", "pyt", "ptt"], cov_rows), encoding="utf-8"
+    )
+    upd_rows = (
+        [
+            _num(u.t),
+            u.kind,
+            u.id,
+            u.dof,
+            _num(u.nis),
+            int(u.accepted),
+            *(_num(x) for x in (*u.v, np.nan, np.nan, np.nan)[:3]),
+        ]
+        for u in res.updates
+    )
+    (tmp / "updates.csv").write_text(
+        _csv_text(["t", "kind", "id", "dof", "nis", "accepted", "v0", "v1", "v2"], upd_rows),
+        encoding="utf-8",
+    )
+    (tmp / "landmarks.yaml").write_text(
+        yaml.safe_dump(landmarks_dict(res), sort_keys=False), encoding="utf-8"
+    )
+    tp = cfg.topics
+    with LogWriter(tmp / "estimates.mcap") as w:
+        for t, pose, c in zip(res.t, res.poses, res.cov, strict=True):
+            cov3 = np.array([[c[0], c[1], c[2]], [c[1], c[3], c[4]], [c[2], c[4], c[5]]])
+            w.write(
+                tp.slam_pose, M.POSE_COV_STAMPED, M.pose_with_covariance(t, "map", pose, cov3), t
+            )
+        for t, lamps, covs in res.snapshots:
+            w.write(tp.slam_landmarks, M.MARKER_ARRAY, _lamp_markers(t, lamps, covs), t)

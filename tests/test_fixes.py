@@ -1,0 +1,490 @@
+"""Heading fixes, full-pose matching and change detection on synthetic worlds (issues 5, 8).
+
+The worlds are wall segments; sonar rings are ray-cast (first echo in the cone, no
+specular loss), FLMs come from the maps stage's own ``build_flm`` and FGMs from its
+``FgmBuilder`` fed with rings at true poses, so the fixes see the evidence they will see
+in ``run``.
+"""
+
+from __future__ import annotations
+
+import csv
+import math
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+import yaml
+from matplotlib.path import Path as MplPath
+
+from fuzzyslam.config import load_config
+from fuzzyslam.errors import InputError
+from fuzzyslam.fixes.aids import load_frozen_map, make_aids
+from fuzzyslam.fixes.changes import ChangeDetector, detect_changes, free_space
+from fuzzyslam.fixes.heading import (
+    HeadingFixAid,
+    decide_heading_fix,
+    nearest_candidate,
+)
+from fuzzyslam.fixes.params import FixParams
+from fuzzyslam.fixes.pose_match import PoseFixAid, PoseMatcher
+from fuzzyslam.fixes.references import Reference, points_in_polygon, references_from_dicts
+from fuzzyslam.maps.fgm import FgmBuilder
+from fuzzyslam.maps.flm import build_flm
+from fuzzyslam.maps.grid import Grid
+from fuzzyslam.maps.hough import flm_wall_direction
+from fuzzyslam.maps.params import MapParams
+from fuzzyslam.robot import sonar_mounts
+from fuzzyslam.se2 import compose, rot, transform_points, wrap_angle, wrap_angle_period
+
+FOV = math.radians(25.0)
+MAXR = 6.5
+MOUNTS = sonar_mounts(16, 0.225)
+MP = MapParams()
+DEG = math.pi / 180.0
+
+
+# --- synthetic worlds ---------------------------------------------------------------------
+
+
+def raycast(pose, walls: np.ndarray, n_rays: int = 7) -> np.ndarray:
+    """Ranges (16,) of the ring at ``pose``: nearest wall hit over rays across each cone."""
+    sensors = compose(np.asarray(pose, float), MOUNTS)
+    ang = sensors[:, 2, None] + np.linspace(-FOV / 2, FOV / 2, n_rays)[None, :]
+    d = np.stack([np.cos(ang), np.sin(ang)], axis=-1)[:, :, None, :]  # (16, n, 1, 2)
+    a, b = walls[:, :2], walls[:, 2:]
+    e = (b - a)[None, None]
+    w = a[None, None] - sensors[:, None, None, :2]
+
+    def cross(p, q):
+        return p[..., 0] * q[..., 1] - p[..., 1] * q[..., 0]
+
+    den = cross(d, e)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t = cross(w, e) / den
+        u = cross(w, d) / den
+    hit = (np.abs(den) > 1e-12) & (t > 0) & (u >= 0) & (u <= 1)
+    r = np.where(hit, t, np.inf).min(axis=(1, 2))
+    return np.minimum(r, MAXR)
+
+
+def flm_at(pose, walls):
+    return build_flm(raycast(pose, walls), np.full(16, MAXR), FOV, MOUNTS, MP)
+
+
+def seg_distance(pts: np.ndarray, walls: np.ndarray) -> np.ndarray:
+    """Distance (N,) from points (N, 2) to the nearest wall segment."""
+    a, b = walls[None, :, :2], walls[None, :, 2:]
+    ab = b - a
+    t = np.clip(np.sum((pts[:, None] - a) * ab, -1) / np.sum(ab * ab, -1), 0.0, 1.0)
+    return np.linalg.norm(pts[:, None] - (a + t[..., None] * ab), axis=-1).min(axis=1)
+
+
+def ideal_flm(pose, walls, inside=None, reach: float = 2.0):
+    """A laser-like FLM: m(O) on the walls, m(E) in the free space within ``reach``."""
+    flm = build_flm(np.full(16, np.nan), np.full(16, MAXR), FOV, MOUNTS, MP)
+    xs, ys = flm.grid.centres()
+    local = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    world = transform_points(np.asarray(pose, float), local)
+    d = seg_distance(world, walls)
+    m_o = np.where(d < 0.1, 0.9 * np.exp(-0.5 * (d / 0.05) ** 2), 0.0)
+    free = (d > 0.15) & (np.hypot(*local.T) < reach)
+    if inside is not None:
+        free &= inside(world)
+    m_e = np.where(free, 0.8, 0.0)
+    shape = flm.grid.shape
+    flm.m_o[...] = m_o.reshape(shape)
+    flm.m_e[...] = m_e.reshape(shape)
+    flm.m_t[...] = 1.0 - flm.m_o - flm.m_e
+    flm.m_c[...] = 0.0
+    return flm
+
+
+def polygon_walls(poly) -> np.ndarray:
+    p = np.asarray(poly, float)
+    return np.concatenate([p, np.roll(p, -1, axis=0)], axis=1)
+
+
+def corridor_walls(angle: float, half_width: float = 1.0, half_length: float = 20.0):
+    r = rot(angle)
+    segs = []
+    for s in (-1.0, 1.0):
+        p0 = r @ [-half_length, s * half_width]
+        p1 = r @ [half_length, s * half_width]
+        segs.append([*p0, *p1])
+    return np.array(segs)
+
+
+def corridor_ref(angle: float, rid: int = 0, half_width: float = 1.0, half_length: float = 20.0):
+    r = rot(angle)
+    box = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [half_length, half_width]
+    return Reference(rid, f"c{rid}", float(wrap_angle_period(angle, math.pi)), 1.0, box @ r.T)
+
+
+L_ROOM = [[0, 0], [6, 0], [6, 2.5], [3, 2.5], [3, 5], [0, 5]]
+
+
+def build_fgm(walls: np.ndarray, poses: np.ndarray, grid: Grid):
+    fb = FgmBuilder(grid, MP)
+    for p in poses:
+        fb.add_ring(p, raycast(p, walls), np.full(16, MAXR), FOV, MOUNTS)
+    return fb.freeze(0.0)
+
+
+@pytest.fixture(scope="session")
+def room():
+    walls = polygon_walls(L_ROOM)
+    xs, ys = np.meshgrid(np.arange(0.5, 6.0, 0.5), np.arange(0.5, 5.0, 0.5))
+    pts = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    pts = pts[points_in_polygon(pts, np.array(L_ROOM, float))]
+    poses = np.concatenate([np.column_stack([pts, np.full(len(pts), h)]) for h in (0.0, 0.4)])
+    fgm = build_fgm(walls, poses, Grid.covering(-1, -1, 7, 6, 0.1))
+    return walls, fgm
+
+
+@pytest.fixture(scope="session")
+def corridor():
+    angle = 0.3
+    walls = corridor_walls(angle, half_length=12.0)
+    s = np.arange(-8.0, 8.01, 0.4)
+    poses = np.column_stack([s * math.cos(angle), s * math.sin(angle), np.full(len(s), angle)])
+    fgm = build_fgm(walls, poses, Grid.covering(-11, -5, 11, 5, 0.1))
+    return angle, walls, fgm
+
+
+# --- a 3-state EKF standing in for fuzzyslam.slam's ----------------------------------------
+
+
+class ToyEkf:
+    """x = (x, y, theta), Joseph-form direct measurements of components idx."""
+
+    def __init__(self, pose, cov):
+        self.x = np.asarray(pose, float).copy()
+        self.P = np.asarray(cov, float).copy()
+        self.updates = 0
+
+    @property
+    def pose(self):
+        return self.x.copy()
+
+    @property
+    def pose_cov(self):
+        return self.P.copy()
+
+    def update_robot(self, z, r, idx, gate_chi2=None):
+        idx = np.asarray(idx)
+        h = np.eye(3)[idx]
+        v = np.asarray(z, float) - self.x[idx]
+        v[idx == 2] = wrap_angle(v[idx == 2])
+        s = h @ self.P @ h.T + np.atleast_2d(r)
+        nis = float(v @ np.linalg.solve(s, v))
+        if gate_chi2 is not None and nis > gate_chi2:
+            return SimpleNamespace(accepted=False, nis=nis, innovation=v)
+        k = self.P @ h.T @ np.linalg.inv(s)
+        self.x = self.x + k @ v
+        self.x[2] = wrap_angle(self.x[2])
+        ikh = np.eye(3) - k @ h
+        self.P = ikh @ self.P @ ikh.T + k @ np.atleast_2d(r) @ k.T
+        self.updates += 1
+        return SimpleNamespace(accepted=True, nis=nis, innovation=v)
+
+    def inflate_robot(self, q):
+        self.P = self.P + q
+
+    def move(self, d_fwd: float, q: np.ndarray):
+        """Odometry step along the estimated heading, the true one moved by the caller."""
+        self.x = compose(self.x, [d_fwd, 0.0, 0.0])
+        self.P = self.P + q
+
+
+def ring(t):
+    return SimpleNamespace(t=t)
+
+
+# --- references and the heading measurement -----------------------------------------------
+
+
+def test_points_in_polygon_agrees_with_matplotlib():
+    rng = np.random.default_rng(1)
+    poly = np.array(L_ROOM, float)
+    pts = rng.uniform(-1, 7, size=(2000, 2))
+    ours = points_in_polygon(pts, poly)
+    ref = MplPath(poly).contains_points(pts)
+    assert ours.sum() > 200
+    assert np.array_equal(ours, ref)
+
+
+def test_references_parse_bbox_and_reject_bad():
+    refs = references_from_dicts(
+        [{"id": 3, "angle": 3.5, "region": [0, 0, 2, 1]}, {"angle": 0.1, "region": L_ROOM}], "r"
+    )
+    assert refs[0].contains([1.0, 0.5]) and not refs[0].contains([1.0, 1.5])
+    assert abs(refs[0].angle - wrap_angle_period(3.5, math.pi)) < 1e-12
+    with pytest.raises(InputError, match="region"):
+        references_from_dicts([{"angle": 0.0, "region": [[0, 0], [1, 1]]}], "r")
+    with pytest.raises(InputError, match="angle"):
+        references_from_dicts([{"region": [0, 0, 1, 1]}], "r")
+
+
+@pytest.mark.parametrize("period", [math.pi, math.pi / 2])
+def test_mod_pi_ambiguity_resolved_by_prediction(period):
+    """theta = t_ref - t_local is recovered exactly whichever way the robot faces."""
+    rng = np.random.default_rng(2)
+    p = FixParams(right_angles=period < 3, ambiguity_sigmas=3.0)
+    for _ in range(200):
+        t_ref = rng.uniform(0, math.pi)
+        theta = rng.uniform(-math.pi, math.pi)
+        t_local = float(wrap_angle_period(t_ref - theta, math.pi))  # what the Hough sees
+        pred = theta + rng.uniform(-0.4, 0.4) * period
+        m, d1, d2 = nearest_candidate(t_ref - t_local, pred, period)
+        assert abs(wrap_angle(m - theta)) < 1e-9
+        assert d1 <= period / 2 + 1e-12 and abs(d1 + d2 - period) < 1e-12
+        ref = Reference(0, "c", t_ref, 1.0, np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]))
+        wall = SimpleNamespace(angle=t_local, strength=2.0, ambiguous=False)
+        cov = np.diag([0.01, 0.01, (1 * DEG) ** 2])
+        d = decide_heading_fix(0.0, wall, [ref], np.array([0, 0, pred]), cov, p)
+        # accepted exactly when the innovation passes the 1-dof gate
+        var = cov[2, 2] + (p.sigma_heading_deg * DEG) ** 2
+        assert abs(wrap_angle(d.measured - theta)) < 1e-9
+        assert d.accepted == (wrap_angle(theta - pred) ** 2 / var <= p.gate_chi2)
+
+
+def test_heading_from_flm_in_straight_corridor_within_1p5_deg():
+    """Real FLM + Hough: heading error against the true heading, both directions of travel."""
+    rng = np.random.default_rng(3)
+    angle = 0.3
+    walls = corridor_walls(angle)
+    ref = corridor_ref(angle)
+    errs = []
+    for _ in range(40):
+        s, lat = rng.uniform(-10, 10), rng.uniform(-0.5, 0.5)
+        xy = rot(angle) @ [s, lat]
+        theta = float(wrap_angle(angle + rng.choice([0, math.pi]) + rng.uniform(-0.6, 0.6)))
+        wall = flm_wall_direction(flm_at([*xy, theta], walls), MP)
+        pred = theta + rng.normal(0, 2 * DEG)
+        cov = np.diag([0.01, 0.01, (3 * DEG) ** 2])
+        d = decide_heading_fix(0.0, wall, [ref], np.array([*xy, pred]), cov, FixParams())
+        assert d.reason == "ok", d
+        errs.append(wrap_angle(d.measured - theta))
+    errs = np.degrees(np.abs(errs))
+    assert errs.mean() < 1.5
+    assert errs.max() < 3.0
+
+
+def test_ambiguous_corridor_fix_is_skipped_not_applied():
+    """At the junction of two corridors with different axes the fix is refused."""
+    refs = [corridor_ref(0.0, 0), corridor_ref(math.radians(70), 1)]
+    wall = SimpleNamespace(angle=0.05, strength=3.0, ambiguous=False)
+    ekf = ToyEkf([0.0, 0.0, -0.05], np.diag([0.01, 0.01, (5 * DEG) ** 2]))
+    aid = HeadingFixAid(refs, FixParams(), lambda r, m: None, lambda flm: wall, 0.0)
+    aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
+    assert aid.decisions[-1].reason == "ambiguous_corridor"
+    assert ekf.updates == 0 and ekf.x[2] == -0.05
+    # a prediction too uncertain to pick among the mod-pi candidates is refused too
+    ekf = ToyEkf([0.0, 0.0, 0.2], np.diag([0.01, 0.01, (60 * DEG) ** 2]))
+    aid = HeadingFixAid(refs[:1], FixParams(), lambda r, m: None, lambda flm: wall, 0.0)
+    aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
+    assert aid.decisions[-1].reason == "ambiguous_heading" and ekf.updates == 0
+    # and so is a wall direction the Hough calls ambiguous, or a ring before start_time
+    amb = SimpleNamespace(angle=0.05, strength=3.0, ambiguous=True)
+    aid = HeadingFixAid(refs[:1], FixParams(), lambda r, m: None, lambda flm: amb, 2.0)
+    aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
+    aid.on_ring(3.0, ring(3.0), MOUNTS, ekf)
+    assert aid.before_start == 1 and [d.reason for d in aid.decisions] == ["ambiguous_wall"]
+    assert ekf.updates == 0
+
+
+def _drive_with_heading_fixes(theta_err: float, sigma_pred: float, rings: int):
+    angle = 0.3
+    walls = corridor_walls(angle)
+    ref = corridor_ref(angle)
+    true = np.array([*(rot(angle) @ [-6.0, 0.2]), angle + 0.05])
+    ekf = ToyEkf(true + [0.0, 0.0, theta_err], np.diag([1e-4, 1e-4, sigma_pred**2]))
+    src = {}
+
+    def flm_source(r, m):
+        return src["flm"]
+
+    aid = HeadingFixAid([ref], FixParams(), flm_source, lambda f: flm_wall_direction(f, MP), 0.0)
+    errs = []
+    for k in range(rings):
+        true = compose(true, [0.1, 0.0, 0.0])
+        ekf.move(0.1, np.diag([1e-6, 1e-6, (0.1 * DEG) ** 2]))
+        src["flm"] = flm_at(true, walls)
+        aid.on_ring(float(k), ring(float(k)), MOUNTS, ekf)
+        errs.append(abs(wrap_angle(ekf.x[2] - true[2])))
+    return np.degrees(errs), aid, ekf
+
+
+def test_ten_degree_heading_error_corrected_within_a_few_rings():
+    errs, aid, ekf = _drive_with_heading_fixes(10 * DEG, 8 * DEG, 6)
+    assert errs[2] < 1.0 and errs[-1] < 1.0
+    assert aid.summary()["accepted"] >= 3
+    assert np.all(np.linalg.eigvalsh(ekf.P) > 0)
+
+
+def test_unseen_bump_recovered_by_covariance_inflation():
+    """A 10 deg bump the filter is sure it did not take: gated, then recovered."""
+    errs, aid, _ = _drive_with_heading_fixes(10 * DEG, 0.5 * DEG, 8)
+    reasons = [d.reason for d in aid.decisions]
+    assert reasons[:2] == ["gated", "gated"] and "recovered" in reasons
+    assert errs[-1] < 1.0
+
+
+def test_heading_fixes_csv(tmp_path):
+    errs, aid, _ = _drive_with_heading_fixes(3 * DEG, 3 * DEG, 3)
+    aid.write(tmp_path)
+    rows = list(csv.DictReader(open(tmp_path / "heading_fixes.csv")))
+    assert list(rows[0]) == ["t", "corridor", "measured", "predicted", "accepted", "reason", "strength"]
+    assert len(rows) == 3 and all(r["reason"] == "ok" and r["accepted"] == "1" for r in rows)
+    assert abs(float(rows[0]["measured"]) - aid.decisions[0].measured) < 1e-6
+
+
+# --- full-pose matching ------------------------------------------------------------------------
+
+
+@pytest.mark.parametrize(
+    ("true", "offset"),
+    [
+        ([1.5, 1.2, 0.3], [0.17, -0.12, 2.0]),
+        ([1.2, 3.6, -1.2], [-0.21, 0.08, -3.0]),
+        ([4.6, 1.3, 2.5], [0.05, 0.22, 1.5]),
+    ],
+)
+def test_pose_match_recovers_known_offset(room, true, offset):
+    walls, fgm = room
+    true = np.array(true)
+    pred = true + [offset[0], offset[1], offset[2] * DEG]
+    cov = np.diag([0.1**2, 0.1**2, (2 * DEG) ** 2])
+    m = PoseMatcher(fgm, FixParams()).match(flm_at(true, walls), pred, cov)
+    assert m.ok, m.reason
+    assert np.hypot(*(m.pose[:2] - true[:2])) < 0.1
+    assert abs(wrap_angle(m.pose[2] - true[2])) < 0.5 * DEG
+    assert m.degenerate == 0
+    assert np.allclose(m.cov, m.cov.T) and np.all(np.linalg.eigvalsh(m.cov) > 0)
+
+
+def test_pose_match_covariance_elongated_along_corridor(corridor):
+    angle, walls, fgm = corridor
+    true = np.array([*(rot(angle) @ [1.0, 0.2]), angle + 0.1])
+    pred = true + [0.1, -0.1, 1.5 * DEG]
+    m = PoseMatcher(fgm, FixParams()).match(
+        flm_at(true, walls), pred, np.diag([0.1**2, 0.1**2, (2 * DEG) ** 2])
+    )
+    assert m.ok, m.reason
+    evals, evecs = np.linalg.eigh(m.cov[:2, :2])
+    axis = np.array([math.cos(angle), math.sin(angle)])
+    assert abs(evecs[:, -1] @ axis) > 0.95  # the big direction is the corridor's axis
+    assert evals[-1] > 100 * evals[0] and m.degenerate >= 1
+    # across the corridor and in heading the match is accurate
+    normal = np.array([-axis[1], axis[0]])
+    assert abs((m.pose[:2] - true[:2]) @ normal) < 0.05
+    assert abs(wrap_angle(m.pose[2] - true[2])) < 0.5 * DEG
+
+
+def test_pose_fixes_pull_toy_filter_to_truth(room, tmp_path):
+    walls, fgm = room
+    true = np.array([1.5, 1.5, 0.2])
+    ekf = ToyEkf(true + [0.15, -0.1, 2.5 * DEG], np.diag([0.1**2, 0.1**2, (2 * DEG) ** 2]))
+    src = {}
+    aid = PoseFixAid(fgm, FixParams(), lambda r, m: src["flm"], 0.0)
+    for k in range(4):
+        true = compose(true, [0.1, 0.0, 0.02])
+        ekf.move(0.1, np.diag([1e-5, 1e-5, (0.2 * DEG) ** 2]))
+        ekf.x[2] += 0.02
+        src["flm"] = flm_at(true, walls)
+        aid.on_ring(float(k), ring(float(k)), MOUNTS, ekf)
+    assert aid.summary()["accepted"] >= 3
+    assert np.hypot(*(ekf.x[:2] - true[:2])) < 0.05
+    assert abs(wrap_angle(ekf.x[2] - true[2])) < 0.5 * DEG
+    aid.write(tmp_path)
+    assert (tmp_path / "pose_fixes.csv").read_text().startswith("t,accepted,reason,x,y,theta")
+
+
+def test_pose_match_refuses_flat_surface(room):
+    """A FLM with no walls in reach (all no-echo) gives no fix."""
+    _, fgm = room
+    flm = build_flm(np.full(16, MAXR), np.full(16, MAXR), FOV, MOUNTS, MP)
+    m = PoseMatcher(fgm, FixParams()).match(flm, np.array([1.5, 1.5, 0.0]), np.eye(3) * 0.01)
+    assert not m.ok and m.reason in ("no_evidence", "flat")
+
+
+# --- change detection -------------------------------------------------------------------------
+
+
+def test_change_detection_finds_box_and_nothing_on_unchanged_map(room):
+    walls, fgm = room
+    free = free_space(fgm, FixParams().change_erode_cells)
+    pose = np.array([1.5, 1.2, 0.3])
+    p = FixParams()
+    same = detect_changes(0.0, flm_at(pose, walls), pose, fgm.grid, free, p.change_min_conflict, 3)
+    assert same == []
+    # small pose errors do not fire either
+    off = pose + [0.04, -0.04, 1.0 * DEG]
+    assert detect_changes(0.0, flm_at(pose, walls), off, fgm.grid, free, 0.25, 3) == []
+    box_c = np.array([2.6, 1.6])
+    box = polygon_walls(box_c + np.array([[-0.2, -0.2], [0.2, -0.2], [0.2, 0.2], [-0.2, 0.2]]))
+    found = detect_changes(
+        1.0, flm_at(pose, np.vstack([walls, box])), pose, fgm.grid, free, 0.25, 3
+    )
+    assert len(found) >= 1
+    near = min(found, key=lambda c: np.hypot(c.x - box_c[0], c.y - box_c[1]))
+    assert np.hypot(near.x - box_c[0], near.y - box_c[1]) < 0.35 and near.cells >= 3
+
+
+def test_change_detector_plugin_writes_csv(room, tmp_path):
+    walls, fgm = room
+    box = polygon_walls(np.array([[2.4, 1.4], [2.8, 1.4], [2.8, 1.8], [2.4, 1.8]]))
+    pose = np.array([1.5, 1.2, 0.3])
+    src = {"flm": flm_at(pose, np.vstack([walls, box]))}
+    det = ChangeDetector(fgm, FixParams(), lambda r, m: src["flm"], 0.0)
+    det.on_ring(1.0, ring(1.0), MOUNTS, ToyEkf(pose, np.eye(3) * 1e-4))
+    det.on_ring(2.0, ring(2.0), MOUNTS, ToyEkf(pose, np.eye(3) * 1.0))  # too uncertain
+    assert det.summary()["skipped_uncertain"] == 1 and det.summary()["detections"] >= 1
+    det.write(tmp_path)
+    rows = list(csv.DictReader(open(tmp_path / "changes.csv")))
+    assert list(rows[0]) == ["t", "x", "y", "size", "cells"] and len(rows) == len(det.changes)
+
+
+# --- the edge: map directory -> aids -------------------------------------------------------------
+
+
+def _write_map(d, fgm, frozen=True, refs=True):
+    d.mkdir()
+    g = fgm.grid
+    np.savez(
+        d / "fgm.npz",
+        m_e=fgm.m_e, m_o=fgm.m_o, m_t=fgm.m_t, m_c=fgm.m_c,
+        origin=np.array(g.origin), resolution=g.resolution, shape=np.array(g.shape),
+        frozen=frozen, freeze_time=123.5, log_id="world-x",
+    )  # fmt: skip
+    if refs:
+        data = {"references": [{"id": 0, "name": "a", "angle": 0.0, "angle_deg": 0.0,
+                                "strength": 4.0, "region": [0, 0, 6, 2.5]}]}  # fmt: skip
+        (d / "references.yaml").write_text(yaml.safe_dump(data))
+
+
+def test_make_aids_loads_and_checks_map_dir(room, tmp_path):
+    _, fgm = room
+    cfg = load_config("quick.yaml")
+    _write_map(tmp_path / "ok", fgm)
+    assert make_aids(tmp_path / "ok", "none", cfg) == []
+    (aid,) = make_aids(tmp_path / "ok", "heading", cfg)
+    assert isinstance(aid, HeadingFixAid) and aid.start_time == 123.5
+    aids = make_aids(tmp_path / "ok", "pose", cfg, start_time=5.0)
+    assert [type(a) for a in aids] == [PoseFixAid, ChangeDetector]
+    assert all(a.start_time == 5.0 for a in aids)
+    fm = load_frozen_map(tmp_path / "ok")
+    assert np.array_equal(fm.fgm.m_o, fgm.m_o) and fm.log_id == "world-x"
+    _write_map(tmp_path / "thawed", fgm, frozen=False)
+    with pytest.raises(InputError, match="never frozen"):
+        make_aids(tmp_path / "thawed", "heading", cfg)
+    _write_map(tmp_path / "norefs", fgm, refs=False)
+    with pytest.raises(InputError, match=r"references\.yaml"):
+        make_aids(tmp_path / "norefs", "heading", cfg)
+    (tmp_path / "bad").mkdir()
+    (tmp_path / "bad" / "fgm.npz").write_text("not a zip")
+    with pytest.raises(InputError, match="npz"):
+        make_aids(tmp_path / "bad", "pose", cfg)
+    with pytest.raises(InputError, match="does not exist"):
+        make_aids(tmp_path / "missing", "pose", cfg)
