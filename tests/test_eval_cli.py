@@ -2,17 +2,18 @@
 
 from __future__ import annotations
 
+import contextlib
+import io
 import itertools
 import json
-import os
-import subprocess
-import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
 
+from fuzzyslam.cli import main
 from fuzzyslam.evaluation.evaluate import detect_kind, read_estimate, read_truth
 from fuzzyslam.streams.logmeta import SCENARIO_KEY, WORLD_KEY
 from fuzzyslam.streams.messages import MARKER_ARRAY, ODOMETRY, marker, marker_array, odometry
@@ -155,14 +156,23 @@ def case(tmp_path_factory: pytest.TempPathFactory) -> dict[str, Path]:
     }
 
 
-def _cli(*args: str) -> subprocess.CompletedProcess:
-    env = dict(os.environ, FUZZYSLAM_NO_PROGRESS="1", MPLBACKEND="Agg")
-    return subprocess.run(
-        [sys.executable, "-m", "fuzzyslam", *map(str, args)],
-        capture_output=True,
-        text=True,
-        env=env,
-    )
+@dataclass
+class CliResult:
+    returncode: int
+    stdout: str
+    stderr: str
+
+
+def _cli(*args: object) -> CliResult:
+    """Run the CLI entry point in-process (as the console script does) and capture it."""
+    out, err = io.StringIO(), io.StringIO()
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            main([str(a) for a in args])
+            code = 0
+        except SystemExit as exc:
+            code = int(exc.code or 0)
+    return CliResult(code, out.getvalue(), err.getvalue())
 
 
 @pytest.fixture(scope="session")
@@ -216,6 +226,7 @@ def test_report_known_answers(case: dict, report: tuple) -> None:
     assert fx["n"] == fix_err.size
     assert fx["bias"] == pytest.approx(fix_err.mean(), abs=1e-3)
     assert fx["std"] == pytest.approx(fix_err.std(), abs=1e-3)
+    assert ov["heading_fix"]["reasons"] == {"ok": fix_err.size}
     assert m["odometry"]["position_m"]["max"] > 0.9
     assert summary["lamps_duplicated"] == 1
     assert summary["position_mean_m"] == pytest.approx(off, abs=1e-5)

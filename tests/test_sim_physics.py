@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+import itertools
 
 import cv2
 import numpy as np
@@ -280,3 +281,56 @@ def test_two_bumps_in_one_run(paper):
     got = [np.degrees(e.angle) for e in dr.events if e.kind == "bump"]
     assert got == pytest.approx([10.0, -5.0])
     assert np.degrees(dr.bump.sum()) == pytest.approx(5.0)
+
+
+def test_odometry_spread_matches_encoder_noise():
+    """Through the whole encoder pipeline: var(sum d_trans) = (r/2)^2 2 s^2 Phi and
+    var(sum d_rot) = (r/b)^2 2 s^2 Phi for a straight drive turning each wheel by Phi."""
+    robot = RobotParams(left_scale=1.0, right_scale=1.0, base_scale=1.0, wheel_noise=0.02)
+    n, step = 400, 0.015
+    rng = np.random.default_rng(5)
+    trans, rot = [], []
+    for _ in range(400):
+        enc = simulate_encoders(np.full(n, step), np.zeros(n), robot, np.zeros(3), rng)
+        trans.append(enc.d_trans.sum())
+        rot.append(enc.d_rot.sum())
+    phi = n * step / robot.wheel_radius
+    var_wheel = robot.wheel_noise**2 * phi
+    r, b = robot.wheel_radius, robot.wheel_base
+    assert np.mean(trans) == pytest.approx(n * step, abs=3 * np.sqrt(var_wheel) * r / 20)
+    assert np.var(trans) == pytest.approx((r / 2) ** 2 * 2 * var_wheel, rel=0.2)
+    assert np.var(rot) == pytest.approx((r / b) ** 2 * 2 * var_wheel, rel=0.2)
+
+
+def test_interpolate_pose_wraps_heading():
+    from fuzzyslam.sim.record import interpolate_pose, sensor_times
+
+    t = np.array([0.0, 1.0])
+    poses = np.array([[0.0, 0.0, np.pi - 0.1], [1.0, 2.0, -np.pi + 0.1]])
+    mid = interpolate_pose(t, poses, 0.5)
+    assert mid[:2] == pytest.approx([0.5, 1.0])
+    assert abs(wrap_angle(mid[2] - np.pi)) < 1e-12  # through pi, not through 0
+    ts = sensor_times(4.0, 1.0)
+    assert ts == pytest.approx([0.0, 0.25, 0.5, 0.75, 1.0])
+
+
+def test_laps_turn_once_around_and_headings_are_wrapped(paper):
+    """Loop topology: a forward lap turns +360 deg, a backward lap -360 deg, a turnaround
+    +-180 deg; stored headings stay in (-pi, pi]."""
+    centre = centreline_array(paper.world)
+    dr = drive(centre, paper.robot, ScenarioParams(runs=2), np.random.default_rng(0))
+    assert np.all(dr.pose[:, 2] > -np.pi) and np.all(dr.pose[:, 2] <= np.pi)
+    ks = [int(np.searchsorted(dr.t, e.t)) for e in dr.events]
+    turns = np.degrees([dr.d_rot[a:b].sum() for a, b in itertools.pairwise(ks)])
+    # events: start1, end1, start2, end2 -> lap 1, turnaround, lap 2
+    assert turns[0] == pytest.approx(360.0, abs=15.0)
+    assert abs(turns[1]) == pytest.approx(180.0, abs=15.0)
+    assert turns[2] == pytest.approx(-360.0, abs=15.0)
+
+
+def test_scalar_wrap_matches_se2():
+    from fuzzyslam.sim.path import _wrap
+
+    a = np.linspace(-25.0, 25.0, 20001)
+    assert np.array_equal([_wrap(float(x)) for x in a], wrap_angle(a))
+    assert _wrap(-np.pi) == pytest.approx(np.pi)

@@ -320,3 +320,35 @@ def test_preintegrated_prediction_equals_sequential_predictions():
         pre.add(*u)
     b.predict_relative(pre.delta, pre.q)
     assert np.allclose(a.x, b.x, atol=1e-12) and np.allclose(a.P, b.P, atol=1e-12)
+
+
+def test_runner_two_close_lamps_keep_their_own_detections():
+    """Lamps 15 cm apart, gate ~3 sigma = 30 cm wide: each detection updates its own lamp."""
+    runner = SlamRunner(SlamParams(tentative_hits=1), np.zeros(3))
+    r = np.eye(2) * 0.01**2
+    runner.frame(Frame(0.0, np.array([[1.0, 0.0], [1.0, 0.15]]), np.array([r, r])))
+    assert runner.ekf.n_lamps == 2
+    runner.ekf.P[:2, :2] += np.eye(2) * 0.1**2  # the robot gets lost by 10 cm (1 sigma)
+    z = np.array([[1.05, 0.21], [1.05, 0.06]])  # shifted by the pose error (5, 6 cm)
+    rr = np.array([r, r])
+    assert np.all(runner.ekf.individual_compatibility(z, rr) < 9.21)
+    runner.frame(Frame(0.1, z, rr))
+    last = runner.updates[-2:]
+    assert sorted((u.id, u.accepted) for u in last) == [(0, True), (1, True)]
+    assert runner._obs == [2, 2] and runner.counts["duplicates_guarded"] == 0
+    # the pose moved by the common shift, the lamps stayed 15 cm apart
+    assert np.allclose(runner.ekf.pose[:2], [-0.05, -0.06], atol=0.01)
+    assert np.hypot(*(runner.ekf.lamps[1] - runner.ekf.lamps[0])) == pytest.approx(0.15, abs=0.01)
+
+
+def test_predict_lamps_blocks_equal_single_lamp_model():
+    rng = np.random.default_rng(8)
+    ekf = make_filter(rng, 5)
+    h, cols, hc = ekf.predict_lamps([3, 1])
+    for a, i in enumerate([3, 1]):
+        hi, hr, hl = lamp_measurement(ekf.pose, ekf.lamps[i])
+        assert np.allclose(h[2 * a : 2 * a + 2], hi)
+        assert np.allclose(hc[2 * a : 2 * a + 2, :3], hr)
+        assert np.allclose(hc[2 * a : 2 * a + 2, 3 + 2 * a : 5 + 2 * a], hl)
+        assert list(cols[3 + 2 * a : 5 + 2 * a]) == [3 + 2 * i, 4 + 2 * i]
+    assert np.count_nonzero(hc[0:2, 5:7]) == 0 and np.count_nonzero(hc[2:4, 3:5]) == 0

@@ -25,7 +25,11 @@ from fuzzyslam.cli import cli, config_option, emit
     default=None,
     help="A 'fuzzyslam map' output directory: draw its FGM under Fig. 1.",
 )
-@click.option("--label", default=None, help="Name of the estimate in the report (default: its).")
+@click.option(
+    "--label",
+    default=None,
+    help="Name of the estimate in the report (default: its file or directory name).",
+)
 @config_option
 def evaluate_cmd(
     truth: str,

@@ -11,17 +11,20 @@ from fuzzyslam.config import load_config
 
 
 def _build_aids(map_dir: Path | None, fix: str | None, cfg, log: Path) -> list:
-    """Heading/pose-fix aids from a frozen map (``fuzzyslam.fixes.aids.build_aids``)."""
+    """Heading/pose-fix aids from a frozen map (``fuzzyslam.fixes.aids.make_aids``)."""
     mode = fix if fix is not None else ("none" if map_dir is None else cfg.fixes.mode)
     if mode == "none":
         return []
     if map_dir is None:
         raise click.UsageError(f"--fix {mode} needs --map FGMDIR (a frozen map from 'map')")
-    try:
-        from fuzzyslam.fixes.aids import build_aids
-    except ModuleNotFoundError:
-        raise click.UsageError("heading/pose fixes are not available in this build") from None
-    return build_aids(map_dir, cfg, mode, log)
+    from fuzzyslam.fixes.aids import make_aids
+    from fuzzyslam.maps.mapio import log_identity
+    from fuzzyslam.streams.logmeta import read_world
+    from fuzzyslam.streams.reader import LogReader
+
+    world = read_world(LogReader(log))  # the identity the map stage recorded (maps/build.py)
+    world_dict = world.to_dict() if world is not None else None
+    return make_aids(map_dir, mode, cfg, expect_log_id=log_identity(world_dict, Path(log).name))
 
 
 @cli.command("run")

@@ -100,6 +100,7 @@ def _phase_block(
     fix_ok: NDArray[np.bool_] | None,
     params: EvalParams,
 ) -> dict[str, Any]:
+    """Every metric over the samples of one phase (see :func:`evaluate`)."""
     m = ph.mask(assoc.t)
     out: dict[str, Any] = {
         "t0": ph.t0,
@@ -153,6 +154,11 @@ def _phase_block(
             "error_deg": M.stats(np.degrees(fix_err[ok])).to_dict(),
             "error_all_deg": M.stats(np.degrees(fix_err[fm & np.isfinite(fix_err)])).to_dict(),
         }
+        if est.heading_fixes is not None:
+            reasons, counts = np.unique(est.heading_fixes.reason[fm], return_counts=True)
+            out["heading_fix"]["reasons"] = {
+                str(k): int(n) for k, n in zip(reasons, counts, strict=True)
+            }
     return out
 
 
@@ -256,6 +262,8 @@ def headline(metrics: dict[str, Any]) -> dict[str, Any]:
         h["lamp_error_mean_m"] = lm["error_m"]["mean"]
         h["lamps_duplicated"] = lm["duplicates"]
         h["lamps_missed"] = lm["missed"]
+        h["lamps_spurious"] = lm["spurious"]
+        h["lamps_estimated"] = lm["estimated"]
     if "heading_fix" in ov:
         h["heading_fix_error_mean_deg"] = ov["heading_fix"]["error_deg"]["mean"]
         h["heading_fix_error_std_deg"] = ov["heading_fix"]["error_deg"]["std"]

@@ -291,9 +291,9 @@ def run_evaluate(
 
     params = params or EvalParams()
     check_outputs([truth_path, estimate_path], [outdir])
-    truth = read_truth(truth_path)
-    est = read_estimate(estimate_path, label)
     fgm = read_fgm(map_dir) if map_dir is not None else None
+    est = read_estimate(estimate_path, label)
+    truth = read_truth(truth_path)
     try:
         ev = evaluate(truth, est, params)
     except SpanError as exc:

@@ -51,11 +51,17 @@ def fig1_paths(
             vmax=1.0,
             interpolation="nearest",
         )
-        fig.colorbar(im, ax=ax, shrink=0.7, label="FGM BetP(occupied)")
+        fig.colorbar(im, ax=ax, shrink=0.5, location="bottom", pad=0.1, label="FGM BetP(occupied)")
     world: World | None = truth.world
     if world is not None:
         for i, w in enumerate(world.wall_array):
-            ax.plot(w[[0, 2]], w[[1, 3]], color="0.45", lw=1.2, label="walls" if i == 0 else None)
+            ax.plot(
+                w[[0, 2]],
+                w[[1, 3]],
+                color="0.45" if fgm is None else "tab:olive",
+                lw=1.2,
+                label=("true walls" if i == 0 else None),
+            )
     ax.plot(truth.poses[:, 0], truth.poses[:, 1], color=C_TRUTH, lw=1.0, label="true path")
     if est.odometry is not None:
         op = est.odometry[1]
@@ -87,6 +93,18 @@ def fig1_paths(
             label="estimated lamps",
             zorder=6,
         )
+        if lamp_match is not None and lamp_match.spurious:
+            d = est.landmarks[lamp_match.spurious]
+            ax.scatter(
+                d[:, 0],
+                d[:, 1],
+                s=40,
+                marker="x",
+                color="tab:purple",
+                linewidths=1.5,
+                label=f"spurious lamps ({len(d)}, > {lamp_match.max_dist:.2f} m from any)",
+                zorder=7,
+            )
         if lamp_match is not None and lamp_match.duplicates:
             d = est.landmarks[lamp_match.duplicates]
             ax.scatter(
@@ -129,18 +147,30 @@ def fig1_paths(
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(title or "Fig. 1: paths and lamps (map frame)")
+    ax.set_title(
+        title or f"Fig. 1: {'FGM, ' if fgm is not None else ''}paths and lamps (map frame)"
+    )
     ax.grid(alpha=0.3)
-    ax.legend(loc="best", fontsize=8, framealpha=0.85)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, framealpha=0.85)
     _save(fig, path)
 
 
 def _mark_events(axes: list[plt.Axes], truth: Truth) -> None:
+    """Vertical lines at run starts (labelled), the FGM freeze, lamp failures and bumps, with a
+    legend of the event kinds on the last axis."""
     if truth.scenario is None:
         return
+    from matplotlib.lines import Line2D
+
+    style = {
+        "run start": {"color": "0.6", "lw": 0.8, "ls": ":"},
+        "FGM frozen": {"color": "tab:green", "lw": 1.2, "ls": "-"},
+        "lamp failure": {"color": "tab:red", "lw": 1.2, "ls": "--"},
+        "bump": {"color": "tab:purple", "lw": 1.0, "ls": "-."},
+    }
+    times: dict[str, list[float]] = {k: [] for k in style}
     for r, t0, _t1 in truth.scenario.run_intervals():
-        for ax in axes:
-            ax.axvline(t0, color="0.6", lw=0.8, ls=":")
+        times["run start"].append(t0)
         axes[0].annotate(
             f"run {r}",
             (t0, 1.0),
@@ -151,34 +181,32 @@ def _mark_events(axes: list[plt.Axes], truth: Truth) -> None:
         )
     for e in truth.scenario.events:
         if e.kind == "lamp_failure":
-            for ax in axes:
-                ax.axvline(e.t, color="tab:red", lw=1.2, ls="--")
-            axes[-1].annotate(
-                f"{len(e.lamps)} lamps fail",
-                (e.t, 0.0),
-                xycoords=("data", "axes fraction"),
-                xytext=(3, 4),
-                textcoords="offset points",
-                fontsize=7,
-                color="tab:red",
-            )
+            times["lamp failure"].append(e.t)
         elif e.kind == "bump":
-            for ax in axes:
-                ax.axvline(e.t, color="tab:purple", lw=1.0, ls="-.")
+            times["bump"].append(e.t)
     if truth.freeze_run is not None:
         t_freeze = truth.scenario.run_end_time(truth.freeze_run)
         if t_freeze is not None:
+            times["FGM frozen"].append(t_freeze)
+    handles = []
+    for kind, ts in times.items():
+        for t in ts:
             for ax in axes:
-                ax.axvline(t_freeze, color="tab:green", lw=1.2)
-            axes[0].annotate(
-                "FGM frozen",
-                (t_freeze, 0.0),
-                xycoords=("data", "axes fraction"),
-                xytext=(3, 4),
-                textcoords="offset points",
-                fontsize=7,
-                color="tab:green",
-            )
+                ax.axvline(t, **style[kind])
+        if ts:
+            handles.append(Line2D([], [], label=f"{kind} ({len(ts)})", **style[kind]))
+    if handles:
+        leg = axes[-1].get_legend()
+        axes[-1].legend(
+            handles=handles,
+            loc="upper center",
+            bbox_to_anchor=(0.5, -0.28),
+            fontsize=8,
+            ncol=len(handles),
+            frameon=False,
+        )
+        if leg is not None:
+            axes[-1].add_artist(leg)
 
 
 def fig3_errors(path: Path, truth: Truth, ev: Evaluation, title: str = "") -> None:

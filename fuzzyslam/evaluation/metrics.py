@@ -422,11 +422,9 @@ def phases_from_runs(
     freeze_run: int | None,
     t_span: tuple[float, float],
 ) -> list[Phase]:
-    """Phases: ``overall`` (t_span), ``run<r>`` per run, ``A`` = runs 1..freeze_run and
-    ``after`` = runs after freeze_run (when there are such runs)."""
+    """Phases: ``overall`` (t_span), ``A`` = runs 1..freeze_run, ``after`` = runs after
+    freeze_run (when there are such runs), and ``run<r>`` per run."""
     out = [Phase("overall", t_span[0], t_span[1], tuple(r for r, _, _ in run_intervals))]
-    for r, t0, t1 in run_intervals:
-        out.append(Phase(f"run{r}", t0, t1, (r,)))
     if freeze_run is not None and run_intervals:
         a = [iv for iv in run_intervals if iv[0] <= freeze_run]
         b = [iv for iv in run_intervals if iv[0] > freeze_run]
@@ -434,4 +432,6 @@ def phases_from_runs(
             out.append(Phase("A", a[0][1], a[-1][2], tuple(iv[0] for iv in a)))
         if b:
             out.append(Phase("after", b[0][1], b[-1][2], tuple(iv[0] for iv in b)))
+    for r, t0, t1 in run_intervals:
+        out.append(Phase(f"run{r}", t0, t1, (r,)))
     return out

@@ -61,7 +61,7 @@ def phase_table(metrics: dict[str, Any]) -> str:
             f"| {_f(b['position_m']['max'], 100)} "
             f"| {_f(b['heading_deg']['mean'], nd=2)} / {_f(b['heading_deg']['max'], nd=2)} "
             f"| {_f(b['ape_m']['raw']['rmse'], 100)} / {_f(b['ape_m']['aligned']['rmse'], 100)} "
-            f"| {_f(b['rpe']['trans_m_per_m']['mean'], 100)} | {nees_s} |"
+            f"| {_f(b['rpe']['trans_m_per_m']['mean'], 100, 2)} | {nees_s} |"
         )
     return head + "\n".join(rows) + "\n"
 
@@ -81,7 +81,7 @@ def write_report(path: Path, metrics: dict[str, Any], figs: dict[str, str]) -> N
         "",
         "Phase `A` = runs 1..freeze run (map building), `after` = later runs; errors are "
         "estimate minus truth in the map frame. APE aligned = after a rigid Umeyama fit of the "
-        "positions (as `evo_ape --align`). RPE per metre of true travel.",
+        "positions (as `evo_ape --align`; fitted within each phase). RPE per metre of true travel.",
         "",
         phase_table(metrics),
     ]

@@ -10,8 +10,10 @@ Its first term is "the sonar sees an obstacle where the map is confidently free"
 new obstacle (a person, a box). The FGM's free mass is first eroded (grey erosion,
 the minimum over a (2k+1)^2 neighbourhood, OpenCV) so that a wall seen a cell off by
 pose error does not fire. Cells with conflict above a threshold are grouped with
-``cv2.connectedComponentsWithStats`` (8-connectivity); components of at least
-``change_min_cells`` cells are detections, at their conflict-weighted centroid.
+``cv2.connectedComponentsWithStats`` (8-connectivity, on the mask dilated by
+``change_link_cells`` so that the fragments of one object join); components of at least
+``change_min_cells`` conflicting cells are detections, at their conflict-weighted
+centroid; size is the component's larger bounding-box side (m).
 """
 
 from __future__ import annotations
@@ -83,30 +85,36 @@ def detect_changes(
     free: np.ndarray,
     min_conflict: float,
     min_cells: int,
+    link: int = 1,
 ) -> list[Change]:
     """Connected regions of strong conflict between the FLM at ``pose`` and the FGM."""
     k = conflict_image(flm, np.asarray(pose, float), fgm_grid, free)
     mask = (k > min_conflict).astype(np.uint8)
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    if n <= 1:
+    if not mask.any():
         return []
-    res = flm.grid.resolution
+    # fragments of one object (two faces of a box seen by two sonars) lie a cell or two
+    # apart: components are found on the mask dilated by ``link`` cells, then counted on
+    # the mask's own cells
+    grown = cv2.dilate(mask, np.ones((2 * link + 1, 2 * link + 1), np.uint8)) if link else mask
+    n, labels, stats, _ = cv2.connectedComponentsWithStats(grown, connectivity=8)
+    lab = np.where(mask.ravel() > 0, labels.ravel(), 0)
+    cells = np.bincount(lab, minlength=n)
     comp = np.arange(1, n)
-    comp = comp[stats[comp, cv2.CC_STAT_AREA] >= min_cells]
+    comp = comp[cells[comp] >= min_cells]
     if comp.size == 0:
         return []
     # conflict-weighted centroids of the kept components (robot frame)
     xs, ys = flm.grid.centres()
-    lab = labels.ravel()
-    wk = np.where(mask.ravel() > 0, k.ravel(), 0.0)
+    wk = np.where(lab > 0, k.ravel(), 0.0)
     wsum = np.bincount(lab, weights=wk, minlength=n)
     cx = np.bincount(lab, weights=wk * xs.ravel(), minlength=n) / np.maximum(wsum, 1e-12)
     cy = np.bincount(lab, weights=wk * ys.ravel(), minlength=n) / np.maximum(wsum, 1e-12)
     world = transform_points(pose, np.stack([cx[comp], cy[comp]], axis=1))
-    side = np.maximum(stats[comp, cv2.CC_STAT_WIDTH], stats[comp, cv2.CC_STAT_HEIGHT]) * res
+    extent = np.maximum(stats[comp, cv2.CC_STAT_WIDTH], stats[comp, cv2.CC_STAT_HEIGHT])
+    side = np.maximum(extent - 2 * link, 1) * flm.grid.resolution
     return [
-        Change(float(t), float(p[0]), float(p[1]), float(sz), int(a), float(wsum[c]))
-        for p, sz, a, c in zip(world, side, stats[comp, cv2.CC_STAT_AREA], comp, strict=True)
+        Change(float(t), float(p[0]), float(p[1]), float(sz), int(cells[c]), float(wsum[c]))
+        for p, sz, c in zip(world, side, comp, strict=True)
     ]
 
 
@@ -148,6 +156,7 @@ class ChangeDetector:
             self.free,
             self.params.change_min_conflict,
             self.params.change_min_cells,
+            self.params.change_link_cells,
         )
 
     def summary(self) -> dict[str, Any]:

@@ -16,7 +16,8 @@ sec. 3.3; the EKF's ``update_robot``).
 Reasons recorded per ring (``heading_fixes.csv``): ``ok``, ``no_wall`` (no Hough
 peak), ``weak_peak``, ``ambiguous_wall`` (the FLM's peaks disagree: junction, open
 space), ``no_corridor``, ``ambiguous_corridor`` (two regions with different
-reference angles), ``ambiguous_heading`` (two candidates both plausible), ``gated``.
+reference angles), ``ambiguous_reference`` (the map stage flagged the corridor's own
+reference angle), ``ambiguous_heading`` (two candidates both plausible), ``gated``.
 """
 
 from __future__ import annotations
@@ -101,7 +102,10 @@ def select_corridor(xy: Sequence[float], refs: Sequence[Reference], period: floa
         spread = [abs(float(wrap_angle_period(r.angle - a0, period))) for r in inside]
         if max(spread) > math.radians(1.0):
             return None, "ambiguous_corridor"
-    return max(inside, key=lambda r: r.strength), ""
+    best = max(inside, key=lambda r: r.strength)
+    if best.ambiguous:
+        return None, "ambiguous_reference"
+    return best, ""
 
 
 def decide_heading_fix(
@@ -184,8 +188,14 @@ class HeadingFixAid:
         if t < self.start_time:
             self.before_start += 1
             return
+        pose = ekf.pose
+        period = math.pi / 2 if self.params.right_angles else math.pi
+        ref, why = select_corridor(pose[:2], self.refs, period)
+        if ref is None:  # no FLM or Hough needed (junctions, open space)
+            self.decisions.append(HeadingDecision(t, -1, math.nan, pose[2], False, why, math.nan))
+            return
         wall = self.wall_direction(self.flm_source(ring, mounts))
-        d = decide_heading_fix(t, wall, self.refs, ekf.pose, ekf.pose_cov, self.params)
+        d = decide_heading_fix(t, wall, self.refs, pose, ekf.pose_cov, self.params)
         if d.reason == "gated" and hasattr(ekf, "inflate_robot") and self._recovery_due(d):
             # consistent gated fixes: the filter, not the map, is wrong (an unseen bump).
             # Covariance inflation P_tt += v^2 (fading memory, Simon, "Optimal state
@@ -203,6 +213,25 @@ class HeadingFixAid:
             if not res.accepted:
                 d = replace(d, accepted=False, reason="gated")
         self.decisions.append(d)
+
+    def update_rows(self) -> list[dict[str, Any]]:
+        """The EKF update attempts, as rows of run's updates.csv (contracts.md sec. 2):
+        fixes that reached the filter (accepted, recovered, or refused by its NIS gate)."""
+        return [
+            {
+                "t": d.t,
+                "kind": self.kind,
+                "id": d.corridor,
+                "dof": 1,
+                "nis": d.nis,
+                "accepted": int(d.accepted),
+                "v0": float(wrap_angle(d.measured - d.predicted)),
+                "v1": None,
+                "v2": None,
+            }
+            for d in self.decisions
+            if d.reason in ("ok", "recovered", "gated")
+        ]
 
     def _recovery_due(self, d: HeadingDecision) -> bool:
         """True when this and the previous recover_after - 1 decisions were all gated and

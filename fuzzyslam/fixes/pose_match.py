@@ -24,8 +24,9 @@ cross-correlation of the rotated FLM (splatted bilinearly onto a template, so ea
 translation's score is exactly the bilinear interpolation of the maps at the points)
 with a patch of the 2-channel map (O-channel Ob - lambda E, E-channel E - lambda O):
 one ``cv2.matchTemplate`` per rotation. Rotations: coarse steps over the window, then
-fine steps within one coarse step of the coarse peak; the moments integrate the
-resulting non-uniform lattice with per-sample rotation weights (trapezoid rule).
+fine steps within one coarse step of the coarse peak (skipped when the coarse surface
+already leaves the heading free); the moments integrate the resulting non-uniform
+lattice with per-sample rotation weights (trapezoid rule).
 
 The agreement of empty with empty (mu, small by default) hardly depends on the pose
 (most of an FLM's free cone lies in the FGM's free space wherever it is put) and would
@@ -33,11 +34,20 @@ only flatten the surface; the conflicts carry the information of the empty evide
 Dividing by the FLM's occupied mass makes s the fraction of the ring's wall evidence
 that the map explains, comparable from ring to ring.
 
+Successive rings see the same walls from nearly the same place, so their match errors
+are correlated (measured: biases of 5-20 cm persisting over several rings); treating them
+as independent makes the EKF overconfident. The covariance is therefore multiplied by
+``pose_cov_scale`` (about the number of rings over which the errors stay correlated;
+Bar-Shalom et al., "Estimation with applications to tracking", sec. 8.2, on correlated
+measurement noise) [ours, measured in tests/benchmarks].
+
 Likelihood [ours]: L = exp((s - s_max) / tau); tau, the loss of explained fraction per
 e-fold of likelihood, is calibrated on synthetic scans (benchmarks/bench_fixes.py).
-Eigen-directions of Sigma whose variance nears that of a uniform distribution over the
-window are unconstrained by the scan (a straight corridor along its axis): they are
-given a huge variance, so the EKF takes no information from them. A flat surface (all
+Directions whose variance nears that of a uniform distribution over the window are
+unconstrained by the scan (a straight corridor along its axis; the heading of a ring
+whose echo arcs are all centred on the robot): the eigen-directions of the xy block and
+the heading are tested separately, and a free one is given a huge variance and no
+correlation, so the EKF takes no information from it. A flat surface (all
 directions unconstrained), a peak on the window's edge, or a second separate mode
 (connected components of the L > e^-3 L_max region) are rejected.
 """
@@ -104,6 +114,12 @@ def flm_evidence(flm: BeliefMap, min_mass: float) -> tuple[np.ndarray, np.ndarra
     return pts, masses
 
 
+def _extents(dth: np.ndarray) -> np.ndarray:
+    """The rotation extent each sorted sample stands for (trapezoid rule weights)."""
+    edges = np.concatenate([[dth[0]], 0.5 * (dth[1:] + dth[:-1]), [dth[-1]]])
+    return np.diff(edges)
+
+
 class PoseMatcher:
     """Correlative FLM-to-FGM matcher; the FGM's lookup maps are built once (it is frozen)."""
 
@@ -142,32 +158,23 @@ class PoseMatcher:
         c = (np.asarray(pose0[:2], float) - np.asarray(self.grid.origin)) / res - 0.5
         base = np.floor(c).astype(int)
         frac = c - base
-        half = math.ceil(np.max(np.abs(pts)) / res * math.sqrt(2.0)) + 2 if len(pts) else 2
+        half = math.ceil(np.sqrt(np.max(np.sum(pts**2, axis=1))) / res) + 2 if len(pts) else 2
         size = 2 * half + 1
+        n = len(thetas)
         cs, sn = np.cos(thetas)[:, None], np.sin(thetas)[:, None]
         px, py = pts[None, :, 0] / res, pts[None, :, 1] / res
-        u = cs * px - sn * py + frac[0] + half  # template column (continuous)
-        v = sn * px + cs * py + frac[1] + half  # template row
-        iu, iv = np.floor(u).astype(np.int64), np.floor(v).astype(np.int64)
+        u = cs * px - sn * py + (frac[0] + half)  # template column (continuous), (n, N)
+        v = sn * px + cs * py + (frac[1] + half)  # template row
+        iu, iv = np.floor(u), np.floor(v)
         au, av = u - iu, v - iv
-        n = len(thetas)
-        k = np.arange(n)[:, None]
-        idx, wts = [], []
-        for dv, du, wb in (
-            (0, 0, (1 - av) * (1 - au)),
-            (0, 1, (1 - av) * au),
-            (1, 0, av * (1 - au)),
-            (1, 1, av * au),
-        ):
-            flat = ((k * size + iv + dv) * size + iu + du) * 2
-            idx += [flat, flat + 1]
-            wts += [wb * masses[None, :, 0], wb * masses[None, :, 1]]
-        tmpl = np.bincount(
-            np.concatenate([i.ravel() for i in idx]),
-            weights=np.concatenate([x.ravel() for x in wts]),
-            minlength=n * size * size * 2,
-        ).astype(np.float32)
-        tmpl = tmpl.reshape(n, size, size, 2)
+        # bilinear splat: 4 corners x 2 channels, one bincount
+        corner = (np.arange(n)[:, None] * size + iv.astype(np.int64)) * size + iu.astype(np.int64)
+        offs = np.array([0, 1, size, size + 1])
+        flat = (corner[..., None] + offs)[..., None] * 2 + np.array([0, 1])  # (n, N, 4, 2)
+        wb = np.stack([(1 - av) * (1 - au), (1 - av) * au, av * (1 - au), av * au], axis=-1)
+        wts = wb[..., None] * masses[None, :, None, :]
+        tmpl = np.bincount(flat.ravel(), weights=wts.ravel(), minlength=n * size * size * 2)
+        tmpl = tmpl.astype(np.float32).reshape(n, size, size, 2)
         patch = self._patch(base[1] - half - w, base[0] - half - w, size + 2 * w)
         return np.stack([cv2.matchTemplate(patch, tmpl[i], cv2.TM_CCORR) for i in range(n)])
 
@@ -195,24 +202,33 @@ class PoseMatcher:
         cstep, fstep = math.radians(p.pose_coarse_deg), math.radians(p.pose_fine_deg)
         nc = max(1, math.ceil(wth / cstep - 1e-9))
         coarse = np.arange(-nc, nc + 1) * cstep
-        s_coarse = self.scores(pts, masses, pose0, pose0[2] + coarse, w)
+        # normalised by the FLM's occupied mass: the score is the fraction of its wall
+        # evidence that the map explains (minus conflict), whatever the ring saw
+        s_coarse = self.scores(pts, masses, pose0, pose0[2] + coarse, w) / masses[:, 0].sum()
         kc = int(np.argmax(s_coarse.max(axis=(1, 2))))
+        # a heading the coarse surface leaves free (echo arcs centred on the robot) gains
+        # nothing from finer steps: skip them
+        lk = np.exp((s_coarse - s_coarse.max()) / p.pose_temperature).sum(axis=(1, 2))
+        pk = lk / lk.sum()
+        var_th = float(pk @ (coarse - pk @ coarse) ** 2)
+        if nc > 1 and var_th > p.pose_degenerate_fraction * (coarse[-1] - coarse[0]) ** 2 / 12:
+            return self._moments(pose0, coarse, _extents(coarse), s_coarse, w, res)
         # fine rotations within one coarse step of the coarse peak, trapezoid weights
         nf = max(1, round(cstep / fstep))
         fine = coarse[kc] + np.arange(-nf, nf + 1) * (cstep / nf)
         fine = fine[(fine >= coarse[0] - 1e-12) & (fine <= coarse[-1] + 1e-12)]
-        s_fine = self.scores(pts, masses, pose0, pose0[2] + fine, w)
+        s_fine = np.empty((len(fine), *s_coarse.shape[1:]), dtype=s_coarse.dtype)
+        same = np.abs((fine - coarse[0]) / cstep - np.round((fine - coarse[0]) / cstep)) < 1e-6
+        s_fine[same] = s_coarse[np.round((fine[same] - coarse[0]) / cstep).astype(int)]
+        s_fine[~same] = (
+            self.scores(pts, masses, pose0, pose0[2] + fine[~same], w) / masses[:, 0].sum()
+        )
         keep = np.abs(coarse - coarse[kc]) > cstep * (1 + 1e-9)
         dth = np.concatenate([coarse[keep], fine])
         s = np.concatenate([s_coarse[keep], s_fine])
         order = np.argsort(dth)
         dth, s = dth[order], s[order]
-        edges = np.concatenate([[dth[0]], 0.5 * (dth[1:] + dth[:-1]), [dth[-1]]])
-        wth_k = np.diff(edges)  # the rotation extent each sample stands for
-        # normalised by the FLM's occupied mass: the score is the fraction of its wall
-        # evidence that the map explains (minus conflict), whatever the ring saw
-        s = s / float(masses[:, 0].sum())
-        return self._moments(pose0, dth, wth_k, s, w, res)
+        return self._moments(pose0, dth, _extents(dth), s, w, res)
 
     def _moments(
         self,
@@ -245,23 +261,30 @@ class PoseMatcher:
             mass = ndimage.sum_labels(lik, labels, index=np.arange(1, nlab + 1)) / total
             if np.sort(mass)[-2] > p.pose_max_second_mode:
                 return PoseMatch(False, "multimodal", nan3, nan33, smax, 0, ncand)
-        # unconstrained directions: variance near that of a uniform over the window
-        span = np.array([2 * w * res, 2 * w * res, dth[-1] - dth[0]])
+        # unconstrained directions: variance near that of a uniform over the window. The
+        # xy block is analysed in its own eigen-basis (a corridor leaves one translation
+        # free), the heading alone; a free direction gets a huge variance and no
+        # correlation with the others (its truncated-window moments mean nothing).
+        span = np.array([2 * w * res, dth[-1] - dth[0]])
         uni = np.maximum(span**2 / 12.0, 1e-12)
-        scale = np.sqrt(uni)
-        cn = cov / np.outer(scale, scale)
-        evals, evecs = np.linalg.eigh(0.5 * (cn + cn.T))
-        degenerate = evals > p.pose_degenerate_fraction
+        exy, vxy = np.linalg.eigh(0.5 * (cov[:2, :2] + cov[:2, :2].T))
+        basis = np.eye(3)
+        basis[:2, :2] = vxy
+        degenerate = np.array([*(exy > p.pose_degenerate_fraction * uni[0]),
+                               cov[2, 2] > p.pose_degenerate_fraction * uni[1]])  # fmt: skip
         ndeg = int(np.count_nonzero(degenerate))
         if ndeg == 3:
             return PoseMatch(False, "flat", nan3, nan33, smax, ndeg, ncand)
         kb, iy, ix = np.unravel_index(int(np.argmax(s)), s.shape)
         if ndeg == 0 and (kb in (0, len(dth) - 1) or iy in (0, 2 * w) or ix in (0, 2 * w)):
             return PoseMatch(False, "edge", nan3, nan33, smax, ndeg, ncand)
-        evals = np.where(degenerate, UNCONSTRAINED_VAR / uni.min(), evals)
-        cov = np.outer(scale, scale) * (evecs @ np.diag(evals) @ evecs.T)
+        cb = basis.T @ cov @ basis
+        cb[degenerate, :] = 0.0
+        cb[:, degenerate] = 0.0
+        cb[degenerate, degenerate] = UNCONSTRAINED_VAR
+        cov = basis @ cb @ basis.T
         floor = np.array([p.pose_min_sigma, p.pose_min_sigma, math.radians(p.pose_min_sigma_deg)])
-        cov = 0.5 * (cov + cov.T) + np.diag(floor**2)
+        cov = p.pose_cov_scale * (0.5 * (cov + cov.T)) + np.diag(floor**2)
         pose = pose0 + mu
         pose[2] = wrap_angle(pose[2])
         return PoseMatch(True, "ok", pose, cov, smax, ndeg, ncand)
@@ -283,6 +306,7 @@ class PoseDecision:
     cov: np.ndarray
     degenerate: int
     nis: float
+    innovation: np.ndarray | None = None  # z - h(x) when the EKF was asked (3,)
 
     def row(self) -> list[str]:
         def num(v: float) -> str:
@@ -335,9 +359,30 @@ class PoseFixAid:
             return
         res = ekf.update_robot(m.pose, m.cov, [0, 1, 2], gate_chi2=self.params.pose_gate_chi2)
         reason = "ok" if res.accepted else "gated"
+        v = np.asarray(res.innovation, dtype=float).reshape(-1)
         self.decisions.append(
-            PoseDecision(t, bool(res.accepted), reason, m.pose, m.cov, m.degenerate, float(res.nis))
+            PoseDecision(
+                t, bool(res.accepted), reason, m.pose, m.cov, m.degenerate, float(res.nis), v
+            )
         )
+
+    def update_rows(self) -> list[dict[str, Any]]:
+        """The EKF update attempts, as rows of run's updates.csv (contracts.md sec. 2)."""
+        return [
+            {
+                "t": d.t,
+                "kind": self.kind,
+                "id": -1,
+                "dof": 3,
+                "nis": d.nis,
+                "accepted": int(d.accepted),
+                "v0": d.innovation[0],
+                "v1": d.innovation[1],
+                "v2": d.innovation[2],
+            }
+            for d in self.decisions
+            if d.innovation is not None
+        ]
 
     def summary(self) -> dict[str, Any]:
         reasons = Counter(d.reason for d in self.decisions)

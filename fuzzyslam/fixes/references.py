@@ -28,6 +28,7 @@ class Reference:
     angle: float
     strength: float
     polygon: np.ndarray  # (K, 2), K >= 3
+    ambiguous: bool = False  # the map stage found no single dominant direction
 
     def contains(self, xy: Sequence[float]) -> bool:
         return bool(points_in_polygon(np.asarray(xy, float).reshape(1, 2), self.polygon)[0])
@@ -95,7 +96,10 @@ def references_from_dicts(items: Iterable[dict[str, Any]], source: str) -> list[
             raise InputError(source, f"{where}: angle is not finite")
         poly = _region_polygon(d["region"], source, where)
         name = str(d.get("name", f"corridor{rid}"))
-        out.append(Reference(rid, name, float(wrap_angle_period(angle, np.pi)), strength, poly))
+        amb = bool(d.get("ambiguous", False))
+        out.append(
+            Reference(rid, name, float(wrap_angle_period(angle, np.pi)), strength, poly, amb)
+        )
     ids = [r.id for r in out]
     if len(set(ids)) != len(ids):
         raise InputError(source, "corridor ids are not unique")

@@ -187,11 +187,12 @@ def build_map(
     poses = interpolate_poses(times, t_traj, p_traj)
     builder = FgmBuilder.for_path(poses[:, :2], params)
     t_build = time.perf_counter()
+    batch = 64
     with Progress(len(times), "map: fusing sonar rings") as bar:
-        for k in range(len(times)):  # one ring at a time: the combination is sequential
-            builder.add_ring(poses[k], ranges[k], rmax[k], fov, mounts)
-            if k % 50 == 0:
-                bar.update_to(k + 1)
+        for k in range(0, len(times), batch):  # batches of rings, in time order
+            sl = slice(k, k + batch)
+            builder.add_rings(poses[sl], ranges[sl], rmax[sl], fov, mounts)
+            bar.update_to(min(k + batch, len(times)))
     build_s = time.perf_counter() - t_build
     fgm = builder.freeze(t_end)
     refs = extract_references(fgm, poses[:, :2], params)

@@ -68,36 +68,134 @@ def reading_masses(
 
 
 def cone_cells(
-    grid: Grid, sensors: np.ndarray, reach: np.ndarray, half_angle: float
+    grid: Grid, sensors: np.ndarray, r0: np.ndarray, r1: np.ndarray, half_angle: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(reading index, iy, ix) of every grid cell in the bounding box of each cone.
+    """(piece index, iy, ix) of every grid cell in the bounding box of each annular sector
+    r0[i] <= rho <= r1[i], |phi| <= half_angle about sensor i's axis.
 
-    The box of cone i spans the sensor origin and its arc of radius reach[i] (sampled
-    at 9 bearings, padded by one cell), clipped to the grid. All boxes are enumerated at
-    once with repeat/arange index arithmetic (no loop over readings or cells).
+    The box spans the sector's two arcs (each sampled at 9 bearings), padded by one cell
+    and clipped to the grid. All boxes are enumerated at once with repeat/arange index
+    arithmetic (no loop over sectors or cells).
     """
     n = len(sensors)
     if n == 0:
         e = np.zeros(0, dtype=np.int64)
         return e, e, e
     bear = sensors[:, 2:3] + np.linspace(-half_angle, half_angle, 9)[None, :]
-    ax = np.concatenate([sensors[:, 0:1], sensors[:, 0:1] + reach[:, None] * np.cos(bear)], 1)
-    ay = np.concatenate([sensors[:, 1:2], sensors[:, 1:2] + reach[:, None] * np.sin(bear)], 1)
+    c, s = np.cos(bear), np.sin(bear)
+    ax = np.concatenate([sensors[:, 0:1] + r0[:, None] * c, sensors[:, 0:1] + r1[:, None] * c], 1)
+    ay = np.concatenate([sensors[:, 1:2] + r0[:, None] * s, sensors[:, 1:2] + r1[:, None] * s], 1)
     res, (ox, oy) = grid.resolution, grid.origin
     ny, nx = grid.shape
     ix0 = np.clip(np.floor((ax.min(1) - ox) / res).astype(np.int64) - 1, 0, nx)
     ix1 = np.clip(np.floor((ax.max(1) - ox) / res).astype(np.int64) + 2, 0, nx)
     iy0 = np.clip(np.floor((ay.min(1) - oy) / res).astype(np.int64) - 1, 0, ny)
     iy1 = np.clip(np.floor((ay.max(1) - oy) / res).astype(np.int64) + 2, 0, ny)
-    wx = ix1 - ix0
-    wy = iy1 - iy0
-    count = np.maximum(wx, 0) * np.maximum(wy, 0)
+    wx = np.maximum(ix1 - ix0, 0)
+    wy = np.maximum(iy1 - iy0, 0)
+    count = wx * wy
     total = int(count.sum())
     rid = np.repeat(np.arange(n), count)
     start = np.cumsum(count) - count
     k = np.arange(total) - np.repeat(start, count)
-    w = wx[rid]
+    w = np.maximum(wx[rid], 1)
     return rid, iy0[rid] + k // w, ix0[rid] + k % w
+
+
+@dataclass
+class BatchEvidence:
+    """Combined evidence of K rings: ring k's cells are ``cells[ptr[k]:ptr[k + 1]]`` (flat
+    indices, unique and sorted within a ring) with ``masses`` sliced alike."""
+
+    ptr: np.ndarray
+    cells: np.ndarray
+    masses: Masses
+    pairs: int
+    readings: int
+
+    def ring(self, k: int) -> RingEvidence:
+        a, b = int(self.ptr[k]), int(self.ptr[k + 1])
+        return RingEvidence(
+            self.cells[a:b],
+            tuple(m[a:b] for m in self.masses),
+            0,
+            0,  # type: ignore[arg-type]
+        )
+
+
+def rings_evidence(
+    grid: Grid,
+    poses: np.ndarray,
+    ranges: np.ndarray,
+    max_range: np.ndarray | float,
+    fov: float,
+    mounts: np.ndarray,
+    params: MapParams,
+) -> BatchEvidence:
+    """Evidence of K rings at robot poses (K, 3), ranges (K, M), in ``grid``'s frame.
+
+    Sensor i of ring k sits at compose(poses[k], mounts[i]). NaN ranges (missing,
+    invalid) are skipped. Each reading's mass function (:func:`reading_masses`) is
+    evaluated on the cells of its cone; readings of one ring that reach a same cell
+    (overlapping cones) are combined with the conjunctive rule
+    (:func:`fuzzyslam.maps.tbm.conjunctive_grouped`). All rings, readings and cells are
+    processed in one vectorised pass (no loop).
+    """
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    k_rings = len(poses)
+    mounts = np.asarray(mounts, dtype=float).reshape(-1, 3)
+    m = len(mounts)
+    ranges = np.asarray(ranges, dtype=float).reshape(k_rings, -1)
+    if ranges.shape[1] != m:
+        raise ValueError(f"{ranges.shape[1]} ranges per ring but {m} sonar mounts")
+    rmax = np.broadcast_to(np.asarray(max_range, dtype=float), ranges.shape)
+    ok = np.isfinite(ranges) & (ranges > 0)
+    echo_all = ok & (~np.isfinite(rmax) | (ranges < rmax - 1e-6))
+    half = 0.5 * float(fov)
+    ring_of, sensor_of = np.nonzero(ok)
+    sensors = compose(poses[ring_of], mounts[sensor_of])
+    r = ranges[ok]
+    echo = echo_all[ok]
+    # Each reading's cone is split in two annular sectors, so that the cells between the
+    # empty evidence's reach and the occupied arc (no evidence) are never enumerated:
+    # near: [0, n1] (empty evidence, and the arc when it is near); far: [r - dr, r + dr].
+    dr = params.range_tolerance
+    reach = np.where(echo, r + dr, np.minimum(params.no_echo_reach, r))
+    near = np.where(echo & (r - dr > params.empty_reach), params.empty_reach, reach)
+    far = echo & (r - dr > params.empty_reach)
+    src = np.concatenate([np.arange(len(r)), np.flatnonzero(far)])
+    lo = np.concatenate([np.zeros(len(r)), (r - dr)[far]])
+    hi = np.concatenate([near, (r + dr)[far]])
+    pid, iy, ix = cone_cells(grid, sensors[src], lo, hi, half)
+    rid = src[pid]
+    res, (ox, oy) = grid.resolution, grid.origin
+    dx = ox + (ix + 0.5) * res - sensors[rid, 0]
+    dy = oy + (iy + 0.5) * res - sensors[rid, 1]
+    # along = rho cos(phi), across = rho sin(phi) in the sensor's frame: the cone test
+    # |phi| <= w is across^2 <= tan(w)^2 along^2 with along > 0 (no arctan on every cell)
+    ca, sa = np.cos(sensors[:, 2]), np.sin(sensors[:, 2])
+    along = dx * ca[rid] + dy * sa[rid]
+    across = dy * ca[rid] - dx * sa[rid]
+    rho2 = dx * dx + dy * dy
+    inside = (
+        (along > 0)
+        & (across * across <= np.tan(half) ** 2 * along * along)
+        & (rho2 >= lo[pid] ** 2)
+        & (rho2 < hi[pid] ** 2)
+    )
+    rid, iy, ix = rid[inside], iy[inside], ix[inside]
+    rho = np.sqrt(rho2[inside])
+    phi = np.arctan2(across[inside], along[inside])
+    m_e, m_o = reading_masses(rho, phi, r[rid], echo[rid], half, params)
+    keep = (m_e > 0) | (m_o > 0)
+    ncell = grid.shape[0] * grid.shape[1]
+    key = (ring_of[rid] * ncell + iy * grid.shape[1] + ix)[keep]
+    m_e, m_o = m_e[keep], m_o[keep]
+    ukey, inv = np.unique(key, return_inverse=True)
+    zeros = np.zeros_like(m_e)
+    masses = conjunctive_grouped((m_e, m_o, 1.0 - m_e - m_o, zeros), inv, len(ukey))
+    ptr = np.searchsorted(ukey, np.arange(k_rings + 1) * ncell)
+    return BatchEvidence(ptr, ukey % ncell, masses, int(key.size), int(ok.sum()))
 
 
 def ring_evidence(
@@ -109,39 +207,8 @@ def ring_evidence(
     mounts: np.ndarray,
     params: MapParams,
 ) -> RingEvidence:
-    """Evidence of one ring of readings placed at robot ``pose`` (in ``grid``'s frame).
-
-    Sensor i sits at compose(pose, mounts[i]). NaN ranges (missing, invalid) are skipped.
-    Each reading's mass function is evaluated on the cells of its cone; the readings that
-    reach a same cell (overlapping cones) are combined with the conjunctive rule
-    (:func:`fuzzyslam.maps.tbm.conjunctive_grouped`). Returns the touched cells (flat
-    indices into ``grid.shape``, unique) with their combined masses.
-    """
-    ranges = np.asarray(ranges, dtype=float).reshape(-1)
-    rmax = np.broadcast_to(np.asarray(max_range, dtype=float), ranges.shape)
-    mounts = np.asarray(mounts, dtype=float).reshape(-1, 3)
-    if len(mounts) != len(ranges):
-        raise ValueError(f"{len(ranges)} ranges but {len(mounts)} sonar mounts")
-    ok = np.isfinite(ranges) & (ranges > 0)
-    echo_all = ok & (~np.isfinite(rmax) | (ranges < rmax - 1e-6))
-    half = 0.5 * float(fov)
-    sensors = compose(np.asarray(pose, dtype=float), mounts[ok])
-    r = ranges[ok]
-    echo = echo_all[ok]
-    reach = np.where(echo, r + params.range_tolerance, np.minimum(params.no_echo_reach, r))
-    rid, iy, ix = cone_cells(grid, sensors, reach, half)
-    res, (ox, oy) = grid.resolution, grid.origin
-    dx = ox + (ix + 0.5) * res - sensors[rid, 0]
-    dy = oy + (iy + 0.5) * res - sensors[rid, 1]
-    rho = np.hypot(dx, dy)
-    phi = np.mod(np.arctan2(dy, dx) - sensors[rid, 2] + np.pi, 2.0 * np.pi) - np.pi
-    inside = (np.abs(phi) <= half) & (rho <= reach[rid])
-    rid, iy, ix, rho, phi = rid[inside], iy[inside], ix[inside], rho[inside], phi[inside]
-    m_e, m_o = reading_masses(rho, phi, r[rid], echo[rid], half, params)
-    keep = (m_e > 0) | (m_o > 0)
-    flat = (iy * grid.shape[1] + ix)[keep]
-    m_e, m_o = m_e[keep], m_o[keep]
-    cells, inv = np.unique(flat, return_inverse=True)
-    zeros = np.zeros_like(m_e)
-    masses = conjunctive_grouped((m_e, m_o, 1.0 - m_e - m_o, zeros), inv, len(cells))
-    return RingEvidence(cells, masses, int(flat.size), int(ok.sum()))
+    """Evidence of one ring at robot ``pose``: :func:`rings_evidence` with K = 1."""
+    ranges = np.asarray(ranges, dtype=float).reshape(1, -1)
+    rmax = np.broadcast_to(np.asarray(max_range, dtype=float), ranges.shape[1:]).reshape(1, -1)
+    b = rings_evidence(grid, np.asarray(pose, float)[None], ranges, rmax, fov, mounts, params)
+    return RingEvidence(b.cells, b.masses, b.pairs, b.readings)

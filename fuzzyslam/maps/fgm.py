@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fuzzyslam.maps.evidence import ring_evidence
+from fuzzyslam.maps.evidence import rings_evidence
 from fuzzyslam.maps.grid import BeliefMap, Grid
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.tbm import clip_masses, conjunctive, discount, forgetting_factor
@@ -69,25 +69,47 @@ class FgmBuilder:
         mounts: np.ndarray,
     ) -> int:
         """Fuse one ring taken at robot ``pose`` (map frame); returns the cells touched."""
+        ranges = np.asarray(ranges, dtype=float).reshape(1, -1)
+        rmax = np.broadcast_to(np.asarray(max_range, dtype=float), ranges.shape[1:])
+        return self.add_rings(np.asarray(pose, float)[None], ranges, rmax[None], fov, mounts)
+
+    def add_rings(
+        self,
+        poses: np.ndarray,
+        ranges: np.ndarray,
+        max_range: np.ndarray | float,
+        fov: float,
+        mounts: np.ndarray,
+    ) -> int:
+        """Fuse K rings in time order: poses (K, 3), ranges and max ranges (K, M).
+
+        The evidence of all K rings is computed in one vectorised pass; the per-cell
+        discount-and-combine then runs ring after ring (forgetting makes the fusion
+        order-dependent), each step vectorised over the ring's cells. Returns the number
+        of (ring, cell) updates.
+        """
         if self.frozen:
             raise FrozenMapError("the FGM is frozen; it accepts no more readings")
-        ev = ring_evidence(self.grid, pose, ranges, max_range, fov, mounts, self.params)
-        idx = ev.cells
+        ev = rings_evidence(self.grid, poses, ranges, max_range, fov, mounts, self.params)
         m = self.map
-        stored = (
-            m.m_e.ravel()[idx].astype(float),
-            m.m_o.ravel()[idx].astype(float),
-            m.m_t.ravel()[idx].astype(float),
-            m.m_c.ravel()[idx].astype(float),
-        )
-        alpha = forgetting_factor(stored[3], self.params.forgetting_gamma)
-        new = clip_masses(conjunctive(discount(stored, alpha), ev.masses))
-        for arr, val in zip((m.m_e, m.m_o, m.m_t, m.m_c), new, strict=True):
-            arr.ravel()[idx] = val
-        self.rings += 1
+        flat = (m.m_e.ravel(), m.m_o.ravel(), m.m_t.ravel(), m.m_c.ravel())
+        gamma = self.params.forgetting_gamma
+        for k in range(len(ev.ptr) - 1):  # sequential over rings, vectorised over cells
+            a, b = int(ev.ptr[k]), int(ev.ptr[k + 1])
+            if a == b:
+                continue
+            idx = ev.cells[a:b]
+            stored = tuple(f[idx].astype(float) for f in flat)
+            alpha = forgetting_factor(stored[3], gamma)
+            new = clip_masses(
+                conjunctive(discount(stored, alpha), tuple(x[a:b] for x in ev.masses))
+            )
+            for f, val in zip(flat, new, strict=True):
+                f[idx] = val
+        self.rings += len(ev.ptr) - 1
         self.readings += ev.readings
         self.cell_updates += ev.pairs
-        return int(idx.size)
+        return int(ev.cells.size)
 
     def freeze(self, t: float | None = None) -> BeliefMap:
         """Stop updating; returns the map (further :meth:`add_ring` calls raise)."""

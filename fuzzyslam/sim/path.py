@@ -68,7 +68,8 @@ def start_pose(centre: np.ndarray, scenario: ScenarioParams) -> np.ndarray:
 
 
 def _wrap(a: float) -> float:
-    return math.pi - math.fmod(math.pi - a, 2.0 * math.pi) if a > math.pi or a <= -math.pi else a
+    """Scalar angle wrap to (-pi, pi] (the float twin of fuzzyslam.se2.wrap_angle, for speed)."""
+    return math.pi - (math.pi - a) % (2.0 * math.pi)
 
 
 def drive(

@@ -8,11 +8,12 @@ ceiling-lamp localisation):
 3. gate each component on area, fill ratio (area / bounding box: pi/4 for a disc),
    aspect ratio of the box, and on touching the image border (a lamp cut by the
    border has a biased centroid);
-4. sub-pixel centroid: the intensity-weighted centroid (first image moments, via
-   ``cv2.moments``) of ``max(I - background, 0)`` over the component dilated by
-   one pixel, so that the partly lit rim pixels pull the centroid toward the true
-   centre. The background is the mean of the pixels around the component (its box
-   grown by two pixels, minus the dilated component): local, so shading does not bias it.
+4. sub-pixel centroid: the intensity-weighted centroid (first image moments) of
+   ``max(I - background, 0)`` over the component dilated by one pixel, so that the
+   partly lit rim pixels pull the centroid toward the true centre. The background is
+   the mean of the unlit pixels of the ring one pixel beyond the dilated component:
+   local, so shading does not bias it. Moments by ``cv2.moments`` on the component's
+   small box (a loop over components, never over pixels).
 
 Pixel coordinates follow OpenCV: pixel centres at integers, u = column, v = row.
 """
@@ -24,7 +25,7 @@ from dataclasses import dataclass
 import cv2
 import numpy as np
 
-_KERNEL = np.ones((3, 3), np.uint8)
+_KERNEL = np.ones((3, 3), np.uint8)  # 8-neighbourhood dilation
 
 
 @dataclass
@@ -77,20 +78,19 @@ def detect_lamps(
     rejected = int(n - 1 - len(ids))
     if len(ids) == 0:
         return Blobs(np.zeros((0, 2)), np.zeros(0), rejected)
+    # per component, on its box grown by two pixels (a loop over the few blobs, not pixels)
     uv = np.empty((len(ids), 2))
-    cw, chh = img.shape[1], img.shape[0]
+    ch, cw = img.shape
     for a, k in enumerate(ids):
-        # the component's box grown by two pixels, in crop coordinates
-        x0, y0 = max(st[k - 1, 0] - ox - 2, 0), max(st[k - 1, 1] - oy - 2, 0)
-        x1 = min(st[k - 1, 0] - ox + st[k - 1, 2] + 2, cw)
-        y1 = min(st[k - 1, 1] - oy + st[k - 1, 3] + 2, chh)
-        comp = (labels[y0:y1, x0:x1] == k).astype(np.uint8)
-        comp = cv2.dilate(comp, _KERNEL)
+        x0 = max(int(st[k - 1, 0]) - ox - 2, 0)
+        y0 = max(int(st[k - 1, 1]) - oy - 2, 0)
+        x1 = min(int(st[k - 1, 0]) - ox + int(st[k - 1, 2]) + 2, cw)
+        y1 = min(int(st[k - 1, 1]) - oy + int(st[k - 1, 3]) + 2, ch)
         crop = img[y0:y1, x0:x1]
-        ring = (comp == 0) & (crop < threshold)
+        d1 = cv2.dilate((labels[y0:y1, x0:x1] == k).view(np.uint8), _KERNEL)
+        ring = (cv2.dilate(d1, _KERNEL) > d1) & (crop < threshold)
         background = float(crop[ring].mean()) if ring.any() else 0.0
-        weights = np.where(comp > 0, np.maximum(crop - np.float32(background), 0.0), 0.0)
-        weights = weights.astype(np.float32)
-        mom = cv2.moments(weights, binaryImage=False)
+        w = (crop - np.float32(background)) * d1  # d1 is 0/1
+        mom = cv2.moments(np.maximum(w, 0.0, dtype=np.float32), binaryImage=False)
         uv[a] = (ox + x0 + mom["m10"] / mom["m00"], oy + y0 + mom["m01"] / mom["m00"])
     return Blobs(uv, area[ids - 1].astype(float), rejected)

@@ -153,6 +153,8 @@ class EkfSlam:
         if len(self.alpha) != 6:
             raise ValueError("alpha must have 6 coefficients")
         self.dim = 3
+        # (idx, UpdateResult) of every update_robot call, drained by the runner (updates.csv)
+        self.robot_updates: list[tuple[tuple[int, ...], UpdateResult]] = []
 
     # -- views ------------------------------------------------------------------------
 
@@ -209,7 +211,8 @@ class EkfSlam:
         self._x[:3] = motion_step(pose, d_trans, d_rot)
         n = self.dim
         p = self._p
-        p[:3, :3] = gx @ p[:3, :3] @ gx.T + gu @ m @ gu.T
+        prr = gx @ p[:3, :3] @ gx.T + gu @ m @ gu.T
+        p[:3, :3] = 0.5 * (prr + prr.T)
         if n > 3:
             cross = gx @ p[:3, 3:n]
             p[:3, 3:n] = cross
@@ -228,7 +231,8 @@ class EkfSlam:
         self._x[:3] = compose(pose, delta)
         n = self.dim
         p = self._p
-        p[:3, :3] = ja @ p[:3, :3] @ ja.T + jb @ q_delta @ jb.T
+        prr = ja @ p[:3, :3] @ ja.T + jb @ q_delta @ jb.T
+        p[:3, :3] = 0.5 * (prr + prr.T)
         if n > 3:
             cross = ja @ p[:3, 3:n]
             p[:3, 3:n] = cross
@@ -241,7 +245,9 @@ class EkfSlam:
 
         K = P H^T S^-1,  x' = x + K v,
         P' = (I - K H) P (I - K H)^T + K R K^T      (Joseph form)
-           = P - K (P H^T)^T - (P H^T) K^T + K S K^T (expanded: O(n^2), symmetric)
+           = P - K (P H^T)^T - (P H^T) K^T + K S K^T (expanded, valid for any K)
+           = P + X Y^T + Y X^T,  X = K, Y = K S / 2 - P H^T,
+        one (n x 4k)(4k x n) matrix product: O(n^2 k), then P is made exactly symmetric.
         """
         n = self.dim
         p = self._p[:n, :n]
@@ -251,35 +257,38 @@ class EkfSlam:
         k = np.linalg.solve(s, pht.T).T
         self._x[:n] += k @ v
         self._x[2] = wrap_angle(self._x[2])
-        kpht = k @ pht.T
-        p += k @ s @ k.T - kpht - kpht.T
+        y = 0.5 * (k @ s) - pht
+        p += np.hstack([k, y]) @ np.hstack([y, k]).T
         p[...] = 0.5 * (p + p.T)
 
     def innovation_cov(self, cols: np.ndarray, hc: np.ndarray, r: np.ndarray) -> np.ndarray:
         """S = H P H^T + R for H nonzero only on ``cols``."""
-        s = hc @ self._p[np.ix_(cols, cols)] @ hc.T + r
+        s = hc @ self._p[cols][:, cols] @ hc.T + r
         return 0.5 * (s + s.T)
 
     def predict_lamps(self, ids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Stacked prediction of lamps ``ids``: h (2k,), columns, H restricted to columns.
 
-        Columns are [0, 1, 2, l_i...]; H is (2k, 3 + 2k).
+        Columns are [0, 1, 2, l_i...]; H is (2k, 3 + 2k) with the blocks of
+        ``lamp_measurement`` (vectorised over the k lamps).
         """
-        ids = list(ids)
+        ids = np.asarray(ids, dtype=int).reshape(-1)
         k = len(ids)
-        pose = self._x[:3]
-        h = np.empty(2 * k)
+        x = self._x
+        c, s = math.cos(x[2]), math.sin(x[2])
+        rt = np.array([[c, s], [-s, c]])
+        j = 3 + 2 * ids
+        h = (x[np.column_stack([j, j + 1])] - x[:2]) @ rt.T  # (k, 2)
         hc = np.zeros((2 * k, 3 + 2 * k))
-        cols = np.empty(3 + 2 * k, dtype=int)
-        cols[:3] = (0, 1, 2)
-        for a, i in enumerate(ids):
-            j = 3 + 2 * i
-            hi, hr, hl = lamp_measurement(pose, self._x[j : j + 2])
-            h[2 * a : 2 * a + 2] = hi
-            hc[2 * a : 2 * a + 2, :3] = hr
-            hc[2 * a : 2 * a + 2, 3 + 2 * a : 5 + 2 * a] = hl
-            cols[3 + 2 * a : 5 + 2 * a] = (j, j + 1)
-        return h, cols, hc
+        rows = np.arange(k)
+        hv = hc.reshape(k, 2, 3 + 2 * k)
+        hv[:, :, :2] = -rt
+        hv[:, 0, 2] = h[:, 1]
+        hv[:, 1, 2] = -h[:, 0]
+        hv[rows, :, 3 + 2 * rows] = rt[:, 0]
+        hv[rows, :, 4 + 2 * rows] = rt[:, 1]
+        cols = np.concatenate([[0, 1, 2], np.column_stack([j, j + 1]).reshape(-1)])
+        return h.reshape(-1), cols, hc
 
     def update_lamps(
         self, ids, z: np.ndarray, r: np.ndarray, gate_chi2: float | None = None
@@ -319,9 +328,12 @@ class EkfSlam:
         s = self.innovation_cov(cols, hc, r)
         nis = float(v @ np.linalg.solve(s, v))
         if gate_chi2 is not None and not nis <= gate_chi2:
-            return UpdateResult(False, nis, v)
-        self._correct(cols, hc, v, r)
-        return UpdateResult(True, nis, v)
+            res = UpdateResult(False, nis, v)
+        else:
+            self._correct(cols, hc, v, r)
+            res = UpdateResult(True, nis, v)
+        self.robot_updates.append((tuple(int(c) for c in cols), res))
+        return res
 
     # -- augmentation -------------------------------------------------------------------
 
@@ -359,36 +371,39 @@ class EkfSlam:
     def individual_compatibility(self, z: np.ndarray, r: np.ndarray) -> np.ndarray:
         """(m, n) squared Mahalanobis distances of detections z (m, 2) to every lamp.
 
-        D2_ij = v_ij^T S_ij^-1 v_ij, S_ij = H_i P H_i^T + R_j (vectorised over lamps, O(n m)).
+        D2_ij = v_ij^T S_ij^-1 v_ij,  S_ij = H_i P H_i^T + R_j,  v_ij = z_j - h_i.
+        Computed in the map frame (O(n m), vectorised): with d_i = l_i - p,
+        H_i = R^T [-I, d_i^perp | I] (d^perp = (d_y, -d_x)), so S_ij = R^T (W_i + R R_j R^T) R
+        with W_i = G_i P_rr G_i^T + G_i P_rl_i + P_rl_i^T G_i^T + P_ll_i, G_i = [-I, d_i^perp],
+        and D2_ij = (R v_ij)^T (W_i + R R_j R^T)^-1 (R v_ij).
         """
         z = np.asarray(z, dtype=float).reshape(-1, 2)
         n = self.n_lamps
         if n == 0 or len(z) == 0:
             return np.full((len(z), n), np.inf)
-        pose = self._x[:3]
-        c, s = np.cos(pose[2]), np.sin(pose[2])
-        rt = np.array([[c, s], [-s, c]])
-        d = self.lamps - pose[:2]
-        h = d @ rt.T  # (n, 2)
-        # H_i = [ -R^T | (h_y, -h_x) | R^T ] on columns (x, y, theta, l_i)
-        hr = np.zeros((n, 2, 3))
-        hr[:, :, :2] = -rt
-        hr[:, 0, 2] = h[:, 1]
-        hr[:, 1, 2] = -h[:, 0]
-        prr = self._p[:3, :3]
-        idx = 3 + 2 * np.arange(n)
-        prl = np.stack([self._p[:3, idx], self._p[:3, idx + 1]], axis=-1)  # (3, n, 2)
-        prl = prl.transpose(1, 0, 2)  # (n, 3, 2)
-        pll = self.lamp_covs()
-        s_rr = np.einsum("nij,jk,nlk->nil", hr, prr, hr)
-        s_rl = np.einsum("nij,njk,lk->nil", hr, prl, rt)
-        s_ll = rt @ pll @ rt.T
-        s0 = s_rr + s_rl + s_rl.transpose(0, 2, 1) + s_ll  # (n, 2, 2)
+        p = self._p
+        x = self._x
+        c, s = math.cos(x[2]), math.sin(x[2])
+        rmat = np.array([[c, -s], [s, c]])
+        d = self.lamps - x[:2]  # (n, 2)
+        dp = np.column_stack([d[:, 1], -d[:, 0]])  # d^perp
+        end = self.dim
+        # G P_rr G^T = Pxx - (p_t dp^T + dp p_t^T) + q_tt dp dp^T
+        pxx, pt, qtt = p[:2, :2], p[:2, 2], p[2, 2]
+        w = pxx - (pt[None, :, None] * dp[:, None, :] + dp[:, :, None] * pt[None, None, :])
+        w += qtt * dp[:, :, None] * dp[:, None, :]
+        # G P_rl = -P_rl[:2] + dp P_rl[2]  (each 2x2); P_rl rows 0..2, lamp columns
+        prl = p[:3, 3:end].reshape(3, n, 2)  # [row, lamp, col]
+        gpl = -prl[:2].transpose(1, 0, 2) + dp[:, :, None] * prl[2][:, None, :]  # (n, 2, 2)
+        w += gpl + gpl.transpose(0, 2, 1)
+        w += self.lamp_covs()
         r = np.asarray(r, dtype=float).reshape(-1, 2, 2)
-        if len(r) == 1:
-            r = np.repeat(r, len(z), axis=0)
-        stot = s0[None, :, :, :] + r[:, None, :, :]  # (m, n, 2, 2)
-        v = z[:, None, :] - h[None, :, :]  # (m, n, 2)
+        rw = rmat @ r @ rmat.T  # (m or 1, 2, 2)
+        if len(rw) == 1:
+            rw = np.repeat(rw, len(z), axis=0)
+        zw = z @ rmat.T  # R z_j
+        v = zw[:, None, :] - d[None, :, :]  # R (z_j - h_i) = R z_j - d_i
+        stot = w[None, :, :, :] + rw[:, None, :, :]  # (m, n, 2, 2)
         a, b, dd = stot[..., 0, 0], stot[..., 0, 1], stot[..., 1, 1]
         det = a * dd - b * b
         return (dd * v[..., 0] ** 2 - 2 * b * v[..., 0] * v[..., 1] + a * v[..., 1] ** 2) / det

@@ -36,6 +36,7 @@ from fuzzyslam.errors import InputError
 from fuzzyslam.robot import WHEEL_NAMES, sonar_mounts, wheel_increments_to_odometry
 from fuzzyslam.se2 import between
 from fuzzyslam.slam.detect import detect_lamps
+from fuzzyslam.slam.fastread import indexed_messages
 from fuzzyslam.slam.runner import Event, Frame, Odom, RingEvent, SlamResult
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.logmeta import read_scenario
@@ -65,6 +66,8 @@ class LogInputs:
     warnings: dict[str, int] = field(default_factory=dict)
     ring_stats: RingStats = field(default_factory=RingStats)
     first_problem: str = ""
+    _names: list = field(default_factory=list)
+    _idx: list = field(default_factory=list)
 
     def warn(self, key: str, problem: str = "") -> None:
         self.warnings[key] = self.warnings.get(key, 0) + 1
@@ -85,7 +88,9 @@ class LogInputs:
         lamp = self._frame if self.lamp_source == "frames" else self._pose_array
         last_t = {self.odom_topic: -np.inf, self.lamp_topic: -np.inf}
         prev = None
-        for m in self.reader.messages([self.odom_topic, self.lamp_topic]):
+        topics = [self.odom_topic, self.lamp_topic]
+        stream = indexed_messages(self.reader, topics)
+        for m in stream if stream is not None else self.reader.messages(topics):
             t = M.stamp_to_sec(m.msg.header.stamp)
             if t < last_t[m.topic]:
                 self.warn("out_of_order", f"{m.topic}: header stamp {t:.3f} s goes back in time")
@@ -102,11 +107,14 @@ class LogInputs:
 
     def _odometry(self, t: float, msg, prev):
         names = list(msg.name)
-        try:
-            idx = [names.index(n) for n in WHEEL_NAMES]
-        except ValueError:
-            self.warn("joint_states_without_wheels", f"joint state lacks {WHEEL_NAMES}")
-            return None, prev
+        if names != self._names:
+            try:
+                self._idx = [names.index(n) for n in WHEEL_NAMES]
+            except ValueError:
+                self.warn("joint_states_without_wheels", f"joint state lacks {WHEEL_NAMES}")
+                return None, prev
+            self._names = names
+        idx = self._idx
         pos = np.asarray(msg.position, dtype=float)
         if len(pos) <= max(idx) or not np.all(np.isfinite(pos[idx])):
             self.warn("nan_odometry", f"NaN or missing wheel angle at t={t:.3f} s")
@@ -167,7 +175,8 @@ class LogInputs:
 
 
 def _first(reader: LogReader, topic: str):
-    for m in reader.messages([topic]):
+    stream = indexed_messages(reader, [topic])
+    for m in stream if stream is not None else reader.messages([topic]):
         return m.msg
     return None
 
@@ -251,6 +260,14 @@ def _num(v: float) -> str:
     return "" if not np.isfinite(v) else f"{v:.9g}"
 
 
+def _fmt_rows(a: np.ndarray) -> str:
+    """CSV rows of a finite float array (N, k), 9 significant digits (vectorised)."""
+    if len(a) == 0:
+        return ""
+    fmt = ",".join(["%.9g"] * a.shape[1])
+    return "\n".join(fmt % tuple(r) for r in a.tolist()) + "\n"
+
+
 def landmarks_dict(res: SlamResult) -> dict:
     return {
         "frame": "map",
@@ -270,7 +287,7 @@ def landmarks_dict(res: SlamResult) -> dict:
 
 
 def _lamp_markers(t: float, lamps: np.ndarray, covs: np.ndarray) -> object:
-    """One flat ellipse (3 sigma, at least 5 cm) and one text label per lamp."""
+    """One flat ellipse per lamp (3 sigma, at least 5 cm across); marker id = lamp id."""
     markers = []
     for i, (xy, c) in enumerate(zip(lamps, covs, strict=True)):
         w, v = np.linalg.eigh(c)
@@ -289,20 +306,6 @@ def _lamp_markers(t: float, lamps: np.ndarray, covs: np.ndarray) -> object:
                 (1.0, 0.8, 0.1, 0.8),
             )
         )
-        markers.append(
-            M.marker(
-                t,
-                "map",
-                "lamp_ids",
-                i,
-                9,
-                (xy[0], xy[1], 0.0),
-                2.6,
-                (0.2, 0.2, 0.2),
-                (1.0, 1.0, 1.0, 1.0),
-                text=str(i),
-            )
-        )
     return M.marker_array(markers)
 
 
@@ -316,9 +319,9 @@ def write_outputs(tmp: Path, res: SlamResult, cfg: Config) -> None:
     """The files of contracts.md sec. 2 but summary.json and the fix files, into ``tmp``."""
     (tmp / "trajectory.tum").write_text(format_tum(res.t, res.poses), encoding="utf-8")
     (tmp / "odometry.tum").write_text(format_tum(res.odo_t, res.odo_poses), encoding="utf-8")
-    cov_rows = ([_num(t), *(_num(v) for v in row)] for t, row in zip(res.t, res.cov, strict=True))
     (tmp / "covariance.csv").write_text(
-        _csv_text(["t", "pxx", "pxy", "pxt", "pyy", "pyt", "ptt"], cov_rows), encoding="utf-8"
+        "t,pxx,pxy,pxt,pyy,pyt,ptt\n" + _fmt_rows(np.column_stack([res.t, res.cov])),
+        encoding="utf-8",
     )
     upd_rows = (
         [

@@ -19,8 +19,9 @@ class SlamParams:
 
     # odometry motion model: a1..a6 of the docstring. a5, a6 are the random walks of the
     # simulated encoders measured against ground truth on quick.yaml (translation 2.5e-6
-    # m^2/m, heading 6.1e-5 rad^2/m); a3 covers the 1 % wheel-base error on turns.
-    alpha: list[float] = field(default_factory=lambda: [1e-4, 1e-4, 3e-4, 1e-4, 3e-6, 6.5e-5])
+    # m^2/m, heading 6.1e-5 rad^2/m); a3 covers the 1 % wheel-base error on turns
+    # (0.0016 rad of systematic error between two frames in a turn).
+    alpha: list[float] = field(default_factory=lambda: [1e-4, 1e-4, 1e-3, 1e-4, 3e-6, 6.5e-5])
     use_encoders: bool = True
     # start pose (x, y, theta) when the log carries none, and its standard deviation
     start_pose: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
@@ -46,4 +47,4 @@ class SlamParams:
     # outputs: trajectory rows at least this far apart (s) between camera updates
     record_period: float = field(default=0.2, metadata={"min": 0.0})
     # /slam/landmarks MarkerArray period in estimates.mcap (s)
-    landmarks_period: float = field(default=2.0, metadata={"min": 0.01})
+    landmarks_period: float = field(default=10.0, metadata={"min": 0.01})

@@ -22,7 +22,7 @@ from typing import Protocol
 
 import numpy as np
 
-from fuzzyslam.robot import motion_step
+from fuzzyslam.robot import integrate
 from fuzzyslam.se2 import rot
 from fuzzyslam.slam.association import (
     TentativeLamps,
@@ -125,10 +125,12 @@ class SlamRunner:
     start_pose: np.ndarray
     aids: list = field(default_factory=list)
     mounts: np.ndarray | None = None
-    snapshot_period: float = 2.0
+    snapshot_period: float | None = None  # default: params.landmarks_period
 
     def __post_init__(self) -> None:
         p = self.params
+        if self.snapshot_period is None:
+            self.snapshot_period = p.landmarks_period
         self.start_pose = np.asarray(self.start_pose, dtype=float)
         self.ekf = EkfSlam(self.start_pose, np.diag(np.square(p.start_sigma)), p.alpha)
         self.preint = Preintegrator(p.alpha)
@@ -148,8 +150,7 @@ class SlamRunner:
         self._rows_x: list[np.ndarray] = []
         self._rows_p: list[np.ndarray] = []
         self._odo_t: list[float] = []
-        self._odo: list[np.ndarray] = []
-        self._dr = self.start_pose.copy()
+        self._odo_u: list[tuple[float, float]] = []
         self._first_seen: list[float] = []
         self._last_seen: list[float] = []
         self._obs: list[int] = []
@@ -162,13 +163,17 @@ class SlamRunner:
     # -- steps ----------------------------------------------------------------------------
 
     def _record(self, t: float) -> None:
+        """Append the current pose and covariance (replacing a row of the same time)."""
         self.flush()
         p = self.ekf._p
-        self._rows_t.append(t)
-        self._rows_x.append(self.ekf._x[:3].copy())
-        self._rows_p.append(
-            np.array([p[0, 0], p[0, 1], p[0, 2], p[1, 1], p[1, 2], p[2, 2]], dtype=float)
-        )
+        row = np.array([p[0, 0], p[0, 1], p[0, 2], p[1, 1], p[1, 2], p[2, 2]], dtype=float)
+        if self._rows_t and self._rows_t[-1] == t:
+            self._rows_x[-1] = self.ekf._x[:3].copy()
+            self._rows_p[-1] = row
+        else:
+            self._rows_t.append(t)
+            self._rows_x.append(self.ekf._x[:3].copy())
+            self._rows_p.append(row)
         self._last_record = t
         if t - self._last_snapshot >= self.snapshot_period:
             self._snapshot(t)
@@ -186,9 +191,8 @@ class SlamRunner:
     def odometry(self, ev: Odom) -> None:
         """Odometry increment: preintegrated (applied at the next flush), and dead reckoning."""
         self.preint.add(ev.d_trans, ev.d_rot)
-        self._dr = motion_step(self._dr, ev.d_trans, ev.d_rot)
         self._odo_t.append(ev.t)
-        self._odo.append(self._dr)
+        self._odo_u.append((ev.d_trans, ev.d_rot))
         self.counts["odometry"] += 1
         if ev.t - self._last_record >= self.params.record_period:
             self._record(ev.t)
@@ -266,10 +270,13 @@ class SlamRunner:
         for j in range(len(z)):
             if d2.shape[1]:
                 i = int(np.argmin(d2[j]))
-                self.updates.append(
-                    UpdateRow(t, "lamp", i, 2, float(d2_before[j, i]), False, np.full(2, np.nan))
-                )
                 if d2[j, i] <= self.params.new_lamp_chi2:
+                    # near a mapped lamp but not paired with it: a rejected update attempt
+                    self.updates.append(
+                        UpdateRow(
+                            t, "lamp", i, 2, float(d2_before[j, i]), False, np.full(2, np.nan)
+                        )
+                    )
                     self.counts["duplicates_guarded"] += 1
                     continue
             world = ekf.x[:2] + rot(ekf.x[2]) @ z[j]
@@ -288,18 +295,33 @@ class SlamRunner:
             if ev.t >= aid.start_time:
                 aid.on_ring(ev.t, ev.ring, self.mounts, self.ekf)
                 self.counts["aid_calls"] += 1
+        for idx, res in self.ekf.robot_updates:
+            kind = "heading" if idx == (2,) else "pose"
+            self.updates.append(
+                UpdateRow(ev.t, kind, -1, len(idx), res.nis, res.accepted, res.innovation)
+            )
+        self.ekf.robot_updates.clear()
 
     # -- loop -----------------------------------------------------------------------------
 
     def run(
-        self, events: Iterable[Event], progress: Callable[[float], None] | None = None
+        self,
+        events: Iterable[Event],
+        progress: Callable[[float], None] | None = None,
+        t0: float | None = None,
     ) -> SlamResult:
-        """Process events in time order; an event older than the last one is counted, skipped."""
+        """Process events in time order; an event older than the last one is counted, skipped.
+
+        ``t0``: time of the start pose (default: the first event's).
+        """
         first = not self._rows_t
+        if first and t0 is not None:
+            self._odo_t.append(float(t0))
+            self._record(float(t0))
+            first = False
         for ev in events:
             if first:
                 self._odo_t.append(ev.t)
-                self._odo.append(self._dr.copy())
                 self._record(ev.t)
                 first = False
             if ev.t < self._last_t:
@@ -315,6 +337,13 @@ class SlamRunner:
             if progress is not None:
                 progress(ev.t)
         return self.result()
+
+    def dead_reckoning(self) -> np.ndarray:
+        """Poses (one per odometry time) integrating the same increments from the start pose."""
+        if not self._odo_t:
+            return np.zeros((0, 3))
+        u = np.asarray(self._odo_u, dtype=float).reshape(-1, 2)
+        return integrate(self.start_pose, u[:, 0], u[:, 1])
 
     def result(self) -> SlamResult:
         self.flush()
@@ -344,7 +373,7 @@ class SlamRunner:
             np.asarray(self._rows_x).reshape(-1, 3),
             np.asarray(self._rows_p).reshape(-1, 6),
             np.asarray(self._odo_t),
-            np.asarray(self._odo).reshape(-1, 3),
+            self.dead_reckoning(),
             lamps,
             self.updates,
             counts,

@@ -5,6 +5,7 @@ from __future__ import annotations
 import os
 import time
 
+import cv2
 import numpy as np
 
 from fuzzyslam.config import Config
@@ -63,9 +64,16 @@ def run_stage(
     check_outputs([log], [outdir])
     inputs = open_inputs(log, cfg, need_rings=bool(aids))
     runner = SlamRunner(cfg.slam, inputs.start_pose, aids, inputs.mounts, cfg.slam.landmarks_period)
-    with Progress(max(inputs.end - inputs.start, 1e-6), "run: EKF-SLAM") as bar:
-        t0 = inputs.start
-        res = runner.run(inputs.events(rings=bool(aids)), lambda t: bar.update_to(t - t0))
+    threads = cv2.getNumThreads()
+    cv2.setNumThreads(1)  # frames are tiny: OpenCV's thread pool only costs here
+    try:
+        with Progress(max(inputs.end - inputs.start, 1e-6), "run: EKF-SLAM") as bar:
+            t0 = inputs.start
+            res = runner.run(
+                inputs.events(rings=bool(aids)), lambda t: bar.update_to(t - t0), t0=t0
+            )
+    finally:
+        cv2.setNumThreads(threads)
     if res.counts["odometry"] == 0:
         raise InputError(inputs.reader.path, f"no usable odometry on {inputs.odom_topic}")
     if inputs.lamp_source == "frames" and res.counts["frames"] == 0:

@@ -1,0 +1,141 @@
+"""Benchmark of the map stage: fusion speed, four-run FGM time, reference and FLM accuracy.
+
+Usage::
+
+    python benchmarks/bench_map.py [LOG.mcap [TRAJECTORY.tum]]
+
+Without LOG it simulates the paper scenario into a temporary directory. Without a
+trajectory the log's ground truth is used. Prints one JSON object:
+
+- ``fusion``: cell updates (reading x cell evidence terms) per second of FgmBuilder.add_rings
+  on the rings up to the freeze, and the fusion time of the whole FGM;
+- ``stage``: wall time of the map stage without figures (log decoding included);
+- ``references``: each corridor's reference angle error against the true axis (deg);
+- ``wall_quality``: precision/recall of wall cells within one cell of the true walls;
+- ``flm``: time per FLM + Hough, and the heading error of theta = axis - t_local (mod pi)
+  against the true heading, over rings inside a corridor (away from its ends).
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from fuzzyslam.config import load_config
+from fuzzyslam.maps.build import MapOptions, build_map, interpolate_poses, read_rings
+from fuzzyslam.maps.fgm import FgmBuilder
+from fuzzyslam.maps.flm import build_flm
+from fuzzyslam.maps.hough import flm_wall_direction
+from fuzzyslam.se2 import wrap_angle_period
+from fuzzyslam.streams.logmeta import read_scenario, read_world
+from fuzzyslam.streams.messages import pose_of
+from fuzzyslam.streams.reader import LogReader
+from fuzzyslam.streams.tum import read_tum, write_tum
+
+
+def truth_tum(log: Path, out: Path) -> Path:
+    t, p = [], []
+    for m in LogReader(log).messages(["/ground_truth/odom"]):
+        t.append(m.t)
+        p.append(pose_of(m.msg.pose.pose))
+    write_tum(out, np.array(t), np.array(p))
+    return out
+
+
+def main() -> None:
+    tmp = Path(tempfile.mkdtemp(prefix="bench_map."))
+    if len(sys.argv) > 1:
+        log = Path(sys.argv[1])
+    else:
+        log = tmp / "paper.mcap"
+        subprocess.run(
+            [sys.executable, "-m", "fuzzyslam", "simulate", "paper", "-o", str(log)],
+            check=True,
+            stdout=subprocess.DEVNULL,
+        )
+    tum = Path(sys.argv[2]) if len(sys.argv) > 2 else truth_tum(log, tmp / "truth.tum")
+    cfg = load_config(None)
+    params = cfg.fgm
+    reader = LogReader(log)
+    scenario = read_scenario(reader)
+    world = read_world(reader)
+    t_end = scenario.run_end_time(params.freeze_run) if scenario else reader.end
+    times, ranges, rmax, fov, mounts, _ = read_rings(reader, cfg, t_end)
+    t, p = read_tum(tum)
+    poses = interpolate_poses(times, t, p)
+
+    best = np.inf
+    for _ in range(3):
+        b = FgmBuilder.for_path(poses[:, :2], params)
+        t0 = time.perf_counter()
+        for k in range(0, len(times), 64):
+            b.add_rings(poses[k : k + 64], ranges[k : k + 64], rmax[k : k + 64], fov, mounts)
+        best = min(best, time.perf_counter() - t0)
+    fusion = {
+        "rings": len(times),
+        "cell_updates": b.cell_updates,
+        "seconds": best,
+        "cell_updates_per_second": b.cell_updates / best,
+        "rings_per_second": len(times) / best,
+    }
+
+    t0 = time.perf_counter()
+    s = build_map(log, tum, tmp / "fgm", cfg, MapOptions(figures=False))
+    stage = {"seconds_without_figures": time.perf_counter() - t0}
+
+    # FLM heading error in corridors: measured heading = axis - t_local, mod pi
+    truth = interpolate_poses(times, *read_tum(truth_tum(log, tmp / "t2.tum")))
+    errs, amb, dt = [], 0, []
+    for k in range(0, len(times), 4):
+        pose = truth[k]
+        cor = None
+        for c in world.corridors if world else []:
+            a, bb = np.asarray(c.a), np.asarray(c.b)
+            d = (bb - a) / np.linalg.norm(bb - a)
+            u = (pose[:2] - a) @ d
+            if 1.5 < u < np.linalg.norm(bb - a) - 1.5 and abs((pose[:2] - a) @ [-d[1], d[0]]) < 0.5:
+                cor = c
+        if cor is None:
+            continue
+        t1 = time.perf_counter()
+        wd = flm_wall_direction(build_flm(ranges[k], rmax[k], fov, mounts, params), params)
+        dt.append(time.perf_counter() - t1)
+        if wd.ambiguous or not np.isfinite(wd.angle):
+            amb += 1
+            continue
+        meas = cor.axis - wd.angle
+        errs.append(np.rad2deg(wrap_angle_period(meas - pose[2], np.pi)))
+    e = np.array(errs)
+    flm = {
+        "rings": len(dt),
+        "ms_per_flm_and_hough": 1e3 * float(np.mean(dt)) if dt else None,
+        "ambiguous": amb,
+        "heading_error_mean_abs_deg": float(np.mean(np.abs(e))) if len(e) else None,
+        "heading_error_median_abs_deg": float(np.median(np.abs(e))) if len(e) else None,
+        "heading_error_bias_deg": float(np.mean(e)) if len(e) else None,
+        "heading_error_std_deg": float(np.std(e)) if len(e) else None,
+    }
+    print(
+        json.dumps(
+            {
+                "log": str(log),
+                "trajectory": str(tum),
+                "fusion": fusion,
+                "stage": stage,
+                "references": s["reference_truth"],
+                "wall_quality": s["wall_quality"],
+                "flm": flm,
+            },
+            indent=2,
+        )
+    )
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,117 @@
+"""Benchmark of `fuzzyslam run`: real-time factor on the paper log, update cost vs lamps.
+
+    python benchmarks/bench_run.py [LOG.mcap]    # default: simulates the paper log in /tmp
+
+Prints (1) wall and CPU time of the whole run stage (read, detect, filter, write) and the
+real-time factor (log duration / wall time), (2) the cost of one EKF step against the
+number of lamps in the state n = 15, 100, 1000: prediction (O(n)), a joint update with
+two lamps (O(n^2)), the individual compatibility of 3 detections against all lamps (O(n)),
+and the growth exponent log(cost ratio) / log(n ratio), which must stay <= 2. Below ~100
+lamps a step costs mostly Python/numpy call overhead; from 1000 lamps P (16 MB+) leaves
+the caches, so 1000 -> 2000 shows the asymptotic exponent.
+"""
+
+from __future__ import annotations
+
+import os
+import resource
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+os.environ.setdefault("FUZZYSLAM_NO_PROGRESS", "1")
+
+from fuzzyslam.config import load_config
+from fuzzyslam.slam.association import block_diag_cov
+from fuzzyslam.slam.ekf import EkfSlam
+from fuzzyslam.slam.stage import run_stage
+
+
+def bench_log(log: Path) -> None:
+    cfg = load_config("paper")
+    with tempfile.TemporaryDirectory() as d:
+        best = None
+        for _ in range(3):
+            c0, w0 = time.process_time(), time.perf_counter()
+            s = run_stage(log, Path(d) / "out", cfg)
+            wall, cpu = time.perf_counter() - w0, time.process_time() - c0
+            best = (wall, cpu) if best is None or wall < best[0] else best
+    dur = s["log_duration_s"]
+    print(
+        f"log {log}: {dur:.1f} s, {s['counts']['frames']} frames, "
+        f"{s['counts']['odometry']} odometry steps, {s['lamps']} lamps"
+    )
+    print(
+        f"run stage (best of 3): wall {best[0]:.2f} s, CPU {best[1]:.2f} s, "
+        f"real-time factor {dur / best[0]:.0f}x (wall), {dur / best[1]:.0f}x (CPU); "
+        f"load average {os.getloadavg()[0]:.2f} on {os.cpu_count()} cores; "
+        f"peak RSS {resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024:.0f} MB"
+    )
+
+
+def filled_filter(n: int, rng: np.random.Generator) -> EkfSlam:
+    ekf = EkfSlam([0.0, 0.0, 0.0], np.eye(3) * 1e-4, load_config("paper").slam.alpha, n)
+    for _ in range(n):
+        ekf.add_lamp(rng.uniform(-3, 3, 2), np.eye(2) * 1e-4)
+        ekf.predict(0.01, 0.001)
+    return ekf
+
+
+def per_call(f, reps: int) -> float:
+    f()
+    t0 = time.perf_counter()
+    for _ in range(reps):
+        f()
+    return (time.perf_counter() - t0) / reps
+
+
+def bench_scaling() -> None:
+    rng = np.random.default_rng(0)
+    sizes = (15, 100, 1000, 2000)
+    rows = {}
+    for n in sizes:
+        ekf = filled_filter(n, rng)
+        r = block_diag_cov(np.repeat((np.eye(2) * 1e-4)[None], 2, axis=0))
+        z = ekf.predict_lamps([0, 1])[0].reshape(2, 2)
+        dets = rng.uniform(-2, 2, (3, 2))
+        reps = 2000 if n < 500 else 20
+        rows[n] = (
+            per_call(lambda ekf=ekf: ekf.predict(0.01, 0.001), reps),
+            per_call(lambda ekf=ekf, z=z, r=r: ekf.update_lamps([0, 1], z, r), reps),
+            per_call(
+                lambda ekf=ekf, d=dets: ekf.individual_compatibility(d, np.eye(2) * 1e-4), reps
+            ),
+        )
+    print("lamps   predict(us)  update 2 lamps(us)  compat 3 dets(us)")
+    for n in sizes:
+        p, u, c = rows[n]
+        print(f"{n:5d}   {p * 1e6:10.1f}  {u * 1e6:18.1f}  {c * 1e6:17.1f}")
+    for a, b in ((15, 100), (100, 1000), (1000, 2000)):
+        ex = [np.log(rows[b][k] / rows[a][k]) / np.log(b / a) for k in range(3)]
+        print(
+            f"growth exponent {a}->{b}: predict {ex[0]:.2f}, update {ex[1]:.2f}, "
+            f"compat {ex[2]:.2f} (must be <= 2)"
+        )
+
+
+def main() -> None:
+    if len(sys.argv) > 1:
+        log = Path(sys.argv[1])
+    else:
+        log = Path(tempfile.gettempdir()) / "fuzzyslam_bench_paper.mcap"
+        if not log.exists():
+            subprocess.run(
+                [sys.executable, "-m", "fuzzyslam", "simulate", "paper", "-o", str(log)],
+                check=True,
+                stdout=subprocess.DEVNULL,
+            )
+    bench_log(log)
+    bench_scaling()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,181 @@
+"""`fuzzyslam map` end to end on a short simulated log (true poses as the trajectory)."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+
+from fuzzyslam.cli import main
+from fuzzyslam.maps.mapio import load_fgm, load_references, read_pgm
+from fuzzyslam.streams.messages import pose_of, range_msg
+from fuzzyslam.streams.reader import LogReader
+from fuzzyslam.streams.tum import read_tum, write_tum
+from fuzzyslam.streams.writer import LogWriter
+
+
+def run_cli(args: list[str], capsys) -> tuple[int, str, str]:
+    with pytest.raises(SystemExit) as exc:
+        main(args)
+    out, err = capsys.readouterr()
+    return int(exc.value.code or 0), out, err
+
+
+@pytest.fixture(scope="session")
+def one_run_log(tmp_path_factory) -> tuple[Path, Path]:
+    """A one-run simulated log and its ground truth as a TUM trajectory."""
+    d = tmp_path_factory.mktemp("maplog")
+    cfg = d / "one_run.yaml"
+    cfg.write_text("extends: quick.yaml\nname: one_run\nscenario:\n  runs: 1\n")
+    log = d / "one_run.mcap"
+    with pytest.raises(SystemExit) as exc:
+        main(["simulate", str(cfg), "-o", str(log)])
+    assert exc.value.code == 0
+    t, p = [], []
+    for m in LogReader(log).messages(["/ground_truth/odom"]):
+        t.append(m.t)
+        p.append(pose_of(m.msg.pose.pose))
+    tum = d / "truth.tum"
+    write_tum(tum, np.array(t), np.array(p))
+    return log, tum
+
+
+@pytest.fixture(scope="session")
+def built_map(one_run_log, tmp_path_factory):
+    log, tum = one_run_log
+    out = tmp_path_factory.mktemp("fgm") / "fgm"
+    with pytest.raises(SystemExit) as exc:
+        main(["map", str(log), "--trajectory", str(tum), "-o", str(out)])
+    assert exc.value.code == 0
+    return out
+
+
+def test_map_writes_every_output(built_map):
+    out = built_map
+    for name in (
+        "fgm.npz",
+        "fgm.yaml",
+        "fgm.pgm",
+        "references.yaml",
+        "fgm.png",
+        "conflict.png",
+        "hough.png",
+        "summary.json",
+    ):
+        assert (out / name).is_file(), name
+    f = load_fgm(out / "fgm.npz")
+    assert f.frozen and f.log_id.startswith("world-")
+    m = f.map
+    np.testing.assert_allclose(m.m_e + m.m_o + m.m_t + m.m_c, 1.0, atol=1e-5)
+    meta = yaml.safe_load((out / "fgm.yaml").read_text())
+    assert meta["mode"] == "trinary" and meta["negate"] == 0
+    assert meta["origin"] == [m.grid.origin[0], m.grid.origin[1], 0.0]
+    img = read_pgm(out / meta["image"])
+    assert img.shape == m.grid.shape
+    # top row of the picture is the map's largest y: the occupied cells agree after a flip
+    occupied = np.flipud(img) == 0
+    assert occupied.any() and np.all(m.pignistic_occupied()[occupied] > 0.65)
+
+
+def test_map_references_match_true_corridors(built_map):
+    summary = json.loads((built_map / "summary.json").read_text())
+    refs = load_references(built_map / "references.yaml")
+    assert len(refs) == 4 == len(summary["reference_truth"])
+    for r in refs:
+        assert 0.0 <= r["angle"] < np.pi
+        assert r["angle_deg"] == pytest.approx(np.rad2deg(r["angle"]))
+    errors = [abs(t["error_deg"]) for t in summary["reference_truth"]]
+    assert max(errors) < 0.5, errors
+    assert {t["true_corridor"] for t in summary["reference_truth"]} == {
+        "corridor_0",
+        "corridor_1",
+        "corridor_2",
+        "corridor_3",
+    }
+    assert summary["wall_quality"]["recall"] > 0.9
+    assert summary["readings_skipped"] == 0 and summary["readings_used"] > 1000
+
+
+def test_help(capsys):
+    code, out, _ = run_cli(["map", "--help"], capsys)
+    assert code == 0
+    for opt in ("--trajectory", "--until-run", "--until", "--skip-uncovered", "--config"):
+        assert opt in out
+
+
+def test_trajectory_not_covering_the_rings(one_run_log, tmp_path, capsys):
+    log, tum = one_run_log
+    t, p = read_tum(tum)
+    short = tmp_path / "short.tum"
+    half = len(t) // 2
+    write_tum(short, t[:half], p[:half])
+    out = tmp_path / "fgm"
+    code, _, err = run_cli(["map", str(log), "--trajectory", str(short), "-o", str(out)], capsys)
+    assert code == 3 and "does not cover" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+    code, stdout, _ = run_cli(
+        [
+            "map",
+            str(log),
+            "--trajectory",
+            str(short),
+            "-o",
+            str(out),
+            "--skip-uncovered",
+            "--no-figures",
+            "--until-run",
+            "1",
+        ],
+        capsys,
+    )
+    assert code == 0
+    s = json.loads(stdout)
+    assert s["readings_skipped"] > 0 and s["rings_skipped"] > 0
+    assert (out / "fgm.npz").is_file()
+
+
+def test_unreadable_trajectory(one_run_log, tmp_path, capsys):
+    log, _ = one_run_log
+    bad = tmp_path / "bad.tum"
+    bad.write_text("0 1 2\nnot a trajectory\n")
+    out = tmp_path / "fgm"
+    code, _, err = run_cli(["map", str(log), "--trajectory", str(bad), "-o", str(out)], capsys)
+    assert code == 3 and "bad.tum" in err and len(err.strip().splitlines()) == 1
+    assert not out.exists()
+
+
+def test_missing_sonar_stream(one_run_log, tmp_path, capsys):
+    log, tum = one_run_log
+    cfg = tmp_path / "nosonar.yaml"
+    cfg.write_text("extends: quick.yaml\ntopics:\n  sonar_prefix: /nope/s\n")
+    out = tmp_path / "fgm"
+    code, _, err = run_cli(
+        ["map", str(log), "--trajectory", str(tum), "-o", str(out), "--config", str(cfg)], capsys
+    )
+    assert code == 3 and "missing stream" in err and "/nope/s00" in err
+    assert not out.exists()
+
+
+def test_window_without_readings(tmp_path, capsys):
+    """A log whose sonar rings all come after the window's end."""
+    log = tmp_path / "late.mcap"
+    with LogWriter(log) as w:
+        for t in (5.0, 5.25):
+            for i in range(16):
+                w.write(
+                    f"/sonar/s{i:02d}",
+                    "sensor_msgs/msg/Range",
+                    range_msg(t, f"sonar_{i:02d}", 1.0, 0.436, 0.15, 6.5),
+                    t,
+                )
+    tum = tmp_path / "t.tum"
+    write_tum(tum, np.array([0.0, 10.0]), np.zeros((2, 3)))
+    out = tmp_path / "fgm"
+    code, _, err = run_cli(
+        ["map", str(log), "--trajectory", str(tum), "-o", str(out), "--until", "1.0"], capsys
+    )
+    assert code == 3 and "no sonar readings" in err
+    assert not out.exists()

@@ -1,0 +1,253 @@
+"""`fuzzyslam run` end to end on a simulated quick.yaml log, and on small hand-made logs."""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+import yaml
+from click.testing import CliRunner
+from scipy.optimize import linear_sum_assignment
+
+from fuzzyslam import se2
+from fuzzyslam.cli import _register, cli
+from fuzzyslam.config import load_config
+from fuzzyslam.streams import messages as M
+from fuzzyslam.streams.logmeta import read_world
+from fuzzyslam.streams.reader import LogReader
+from fuzzyslam.streams.tum import read_tum
+from fuzzyslam.streams.writer import LogWriter
+
+_register()
+
+
+def invoke(args):
+    return CliRunner().invoke(cli, args, catch_exceptions=False)
+
+
+@pytest.fixture(scope="session")
+def quick_log(tmp_path_factory) -> Path:
+    """One simulated quick.yaml recording (2 laps, ~250 s) per test session."""
+    path = tmp_path_factory.mktemp("sim") / "quick.mcap"
+    res = invoke(["simulate", "quick", "-o", str(path), "--seed", "3"])
+    assert res.exit_code == 0, res.output
+    return path
+
+
+@pytest.fixture(scope="session")
+def quick_run(quick_log, tmp_path_factory) -> tuple[Path, dict]:
+    out = tmp_path_factory.mktemp("run") / "est"
+    res = CliRunner().invoke(cli, ["run", str(quick_log), "-o", str(out), "--config", "quick"])
+    assert res.exit_code == 0, res.output
+    return out, json.loads(res.stdout)
+
+
+def truth(log: Path) -> np.ndarray:
+    rows = [
+        (m.t, *M.pose_of(m.msg.pose.pose)) for m in LogReader(log).messages(["/ground_truth/odom"])
+    ]
+    return np.array(rows)
+
+
+def test_quick_accuracy_and_no_duplicate(quick_log, quick_run):
+    out, summary = quick_run
+    t, est = read_tum(out / "trajectory.tum")
+    gt = truth(quick_log)
+    gx = np.interp(t, gt[:, 0], gt[:, 1])
+    gy = np.interp(t, gt[:, 0], gt[:, 2])
+    pos_err = np.hypot(est[:, 0] - gx, est[:, 1] - gy)
+    assert pos_err.mean() < 0.05
+    world = read_world(LogReader(quick_log))
+    lamps = yaml.safe_load((out / "landmarks.yaml").read_text())["landmarks"]
+    est_l = np.array([[d["x"], d["y"]] for d in lamps])
+    true_l = world.lamp_array
+    assert len(est_l) == len(true_l), "a duplicate or a missing lamp"
+    d = np.hypot(*(est_l[:, None, :] - true_l[None, :, :]).transpose(2, 0, 1))
+    ri, ci = linear_sum_assignment(d)
+    assert d[ri, ci].mean() < 0.05 and d[ri, ci].max() < 0.15
+    assert summary["lamps"] == len(true_l) and summary["counts"]["lamps_created"] == len(true_l)
+    # the filter is consistent on average: lamp NIS near its 2 dof (conservative allowed)
+    assert 0.5 < summary["mean_nis_lamp"] < 3.0
+
+
+def test_output_files_follow_the_contract(quick_run):
+    out, summary = quick_run
+    for name in (
+        "trajectory.tum",
+        "odometry.tum",
+        "covariance.csv",
+        "landmarks.yaml",
+        "updates.csv",
+        "estimates.mcap",
+        "summary.json",
+    ):
+        assert (out / name).is_file(), name
+    t, _ = read_tum(out / "trajectory.tum")
+    cov = (out / "covariance.csv").read_text().splitlines()
+    assert cov[0] == "t,pxx,pxy,pxt,pyy,pyt,ptt" and len(cov) - 1 == len(t)
+    c = np.loadtxt(out / "covariance.csv", delimiter=",", skiprows=1)
+    assert np.allclose(c[:, 0], t, atol=1e-6)
+    upd = (out / "updates.csv").read_text().splitlines()
+    assert upd[0] == "t,kind,id,dof,nis,accepted,v0,v1,v2"
+    assert len(upd) - 1 >= summary["counts"]["associated"]
+    _, odo = read_tum(out / "odometry.tum")
+    assert np.allclose(odo[0], summary["start_pose"])
+    assert json.loads((out / "summary.json").read_text()) == summary
+    topics = LogReader(out / "estimates.mcap").topics
+    assert topics["/slam/pose"] == M.POSE_COV_STAMPED
+    assert topics["/slam/landmarks"] == M.MARKER_ARRAY
+
+
+class CheckingAid:
+    """A test aid: at every ring P must be symmetric positive definite."""
+
+    def __init__(self, start_time: float) -> None:
+        self.start_time = start_time
+        self.calls = 0
+        self.first_t = None
+        self.min_eig = np.inf
+
+    def on_ring(self, t, ring, mounts, ekf) -> None:
+        assert t >= self.start_time and mounts.shape == (16, 3) and ring.ranges.shape == (16,)
+        p = ekf.P
+        assert np.array_equal(p, p.T)
+        self.min_eig = min(self.min_eig, float(np.linalg.eigvalsh(p)[0]))
+        self.first_t = t if self.first_t is None else self.first_t
+        self.calls += 1
+
+    def summary(self) -> dict:
+        return {"calls": self.calls}
+
+    def write(self, outdir: Path) -> None:
+        (outdir / "aid.txt").write_text(str(self.calls))
+
+
+def test_covariance_spd_through_a_whole_run_and_aid_protocol(quick_log, tmp_path):
+    from fuzzyslam.slam.stage import run_stage
+
+    aid = CheckingAid(start_time=10.0)
+    summary = run_stage(quick_log, tmp_path / "o", load_config("quick"), [aid])
+    assert aid.calls > 500 and aid.first_t >= 10.0 and aid.min_eig > 0.0
+    assert (tmp_path / "o" / "aid.txt").read_text() == str(aid.calls)
+    assert summary["aids"]["CheckingAid"] == {"calls": aid.calls}
+
+
+# -- small hand-made logs (a "real robot" log: /odom and PoseArray detections) -------------
+
+
+LAMPS = np.array([[1.0, 0.5], [2.5, -0.6], [4.0, 0.4], [5.5, -0.5]])
+
+
+def write_robot_log(path: Path, nan_at=None, back_at=None, encoding=None) -> None:
+    """Straight drive along x at 0.3 m/s for 20 s; exact /odom; lamps seen within 2 m."""
+    with LogWriter(path) as w:
+        for k in range(401):
+            t = 0.05 * k
+            pose = np.array([0.3 * t, 0.0, 0.0])
+            if nan_at is not None and k == nan_at:
+                pose = np.array([np.nan, 0.0, 0.0])
+            w.write("/odom", M.ODOMETRY, M.odometry(t, "odom", "base_link", pose), t)
+            if k % 4 == 0:
+                z = se2.inverse_transform_points(pose, LAMPS)
+                z = z[np.hypot(z[:, 0], z[:, 1]) < 2.0]
+                stamp = t - 1.0 if back_at is not None and k == back_at else t
+                if encoding is None:
+                    w.write(
+                        "/ceiling_camera/detections",
+                        M.POSE_ARRAY,
+                        M.pose_array(stamp, "base_link", z),
+                        t,
+                    )
+                else:
+                    img = M.image_mono8(t, "ceiling_camera", np.zeros((12, 16), np.uint8))
+                    img.encoding = encoding
+                    w.write("/ceiling_camera/image_raw", M.IMAGE, img, t)
+                    info = M.camera_info(t, "ceiling_camera", 16, 12, 10.0, 7.5, 5.5)
+                    w.write("/ceiling_camera/camera_info", M.CAMERA_INFO, info, t)
+
+
+def test_odom_and_pose_array_log_maps_lamps(tmp_path):
+    log = tmp_path / "robot.mcap"
+    write_robot_log(log)
+    res = invoke(["run", str(log), "-o", str(tmp_path / "o")])
+    assert res.exit_code == 0, res.output
+    s = json.loads(res.stdout)
+    assert s["odometry_source"].startswith("odom") and s["lamp_source"].startswith("detections")
+    lamps = yaml.safe_load((tmp_path / "o" / "landmarks.yaml").read_text())["landmarks"]
+    est = np.array([[d["x"], d["y"]] for d in lamps])
+    assert len(est) == len(LAMPS)
+    d = np.hypot(*(est[:, None, :] - LAMPS[None, :, :]).transpose(2, 0, 1))
+    assert np.all(d.min(axis=0) < 0.02)
+
+
+def test_nan_odometry_and_out_of_order_are_counted(tmp_path):
+    log = tmp_path / "glitch.mcap"
+    write_robot_log(log, nan_at=100, back_at=200)
+    res = invoke(["run", str(log), "-o", str(tmp_path / "o")])
+    assert res.exit_code == 0, res.output
+    s = json.loads(res.stdout)
+    assert s["warnings"]["nan_odometry"] == 1 and s["warnings"]["out_of_order"] == 1
+    assert s["lamps"] == len(LAMPS)
+
+
+def run_main(args) -> tuple[int, str]:
+    import contextlib
+    import io
+
+    from fuzzyslam.cli import main
+
+    err = io.StringIO()
+    with contextlib.redirect_stderr(err), pytest.raises(SystemExit) as ex:
+        main(args)
+    return int(ex.value.code), err.getvalue()
+
+
+def test_not_mcap_is_one_line_exit_3_nothing_left(tmp_path):
+    bad = tmp_path / "bad.mcap"
+    bad.write_text("not an mcap file")
+    code, err = run_main(["run", str(bad), "-o", str(tmp_path / "out")])
+    assert code == 3 and "not an MCAP file" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "out").exists()
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.mcap"]
+
+
+def test_missing_stream_names_topics_and_config_key(tmp_path):
+    log = tmp_path / "odom_only.mcap"
+    with LogWriter(log) as w:
+        for k in range(5):
+            w.write(
+                "/odom", M.ODOMETRY, M.odometry(k * 0.1, "odom", "base_link", np.zeros(3)), k * 0.1
+            )
+    code, err = run_main(["run", str(log), "-o", str(tmp_path / "out")])
+    assert code == 3
+    assert "/ceiling_camera/image_raw" in err and "/ceiling_camera/detections" in err
+    assert "topics.image" in err and not (tmp_path / "out").exists()
+
+
+def test_wrong_image_encoding_is_a_clear_error(tmp_path):
+    log = tmp_path / "rgb.mcap"
+    write_robot_log(log, encoding="rgb8")
+    code, err = run_main(["run", str(log), "-o", str(tmp_path / "out")])
+    assert code == 3 and "rgb8" in err and "mono8" in err
+    assert not (tmp_path / "out").exists()
+
+
+def test_fast_reader_equals_log_reader(quick_log):
+    from fuzzyslam.slam.fastread import indexed_messages
+
+    reader = LogReader(quick_log)
+    topics = ["/joint_states", "/ceiling_camera/image_raw"]
+    a = list(reader.messages(topics))
+    b = list(indexed_messages(reader, topics))
+    assert [(m.topic, m.t) for m in a] == [(m.topic, m.t) for m in b] and len(a) > 1000
+    for x, y in zip(a, b, strict=True):
+        assert x.msg.header.stamp.sec == y.msg.header.stamp.sec
+        assert x.msg.header.stamp.nanosec == y.msg.header.stamp.nanosec
+        if x.topic == "/joint_states":
+            assert x.msg.name == y.msg.name and np.array_equal(x.msg.position, y.msg.position)
+        else:
+            for f in ("height", "width", "encoding", "is_bigendian", "step"):
+                assert getattr(x.msg, f) == getattr(y.msg, f)
+            assert np.array_equal(x.msg.data, y.msg.data)
