@@ -37,3 +37,26 @@ def build_flm(
     for arr, val in zip((bm.m_e, bm.m_o, bm.m_t, bm.m_c), clip_masses(ev.masses), strict=True):
         arr.ravel()[ev.cells] = val
     return bm
+
+
+def build_flm_rings(
+    poses: np.ndarray,
+    ranges: np.ndarray,
+    max_range: np.ndarray | float,
+    fov: float,
+    mounts: np.ndarray,
+    params: MapParams | None = None,
+) -> BeliefMap:
+    """FLM of several recent rings (beyond the paper): rings (K, M) taken at ``poses``
+    (K, 3) expressed in the CURRENT robot frame (e.g. odometry increments composed back
+    from now; the last ring is usually at the identity). The rings are fused exactly as in
+    the FGM (:class:`fuzzyslam.maps.fgm.FgmBuilder` on :func:`flm_grid`). Odometry over a
+    second or two is accurate to a fraction of a degree, while the per-ring noise of the
+    wall direction averages down; with K = 1 at the identity this is :func:`build_flm`.
+    """
+    from fuzzyslam.maps.fgm import FgmBuilder
+
+    params = params if params is not None else MapParams()
+    b = FgmBuilder(flm_grid(params), params)
+    b.add_rings(poses, ranges, max_range, fov, mounts)
+    return b.map
