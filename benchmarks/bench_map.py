@@ -13,7 +13,8 @@ trajectory the log's ground truth is used. Prints one JSON object:
 - ``references``: each corridor's reference angle error against the true axis (deg);
 - ``wall_quality``: precision/recall of wall cells within one cell of the true walls;
 - ``flm``: time per FLM + Hough, and the heading error of theta = axis - t_local (mod pi)
-  against the true heading, over rings inside a corridor (away from its ends).
+  against the true heading, over rings inside a corridor (away from its ends); also for
+  FLMs of the last 8 rings (``build_flm_rings``, relative poses from the ground truth).
 """
 
 from __future__ import annotations
@@ -30,9 +31,9 @@ import numpy as np
 from fuzzyslam.config import load_config
 from fuzzyslam.maps.build import MapOptions, build_map, interpolate_poses, read_rings
 from fuzzyslam.maps.fgm import FgmBuilder
-from fuzzyslam.maps.flm import build_flm
+from fuzzyslam.maps.flm import build_flm, build_flm_rings
 from fuzzyslam.maps.hough import flm_wall_direction
-from fuzzyslam.se2 import wrap_angle_period
+from fuzzyslam.se2 import between, wrap_angle_period
 from fuzzyslam.streams.logmeta import read_scenario, read_world
 from fuzzyslam.streams.messages import pose_of
 from fuzzyslam.streams.reader import LogReader
@@ -91,7 +92,7 @@ def main() -> None:
 
     # FLM heading error in corridors: measured heading = axis - t_local, mod pi
     truth = interpolate_poses(times, *read_tum(truth_tum(log, tmp / "t2.tum")))
-    errs, amb, dt = [], 0, []
+    errs, amb, dt, errs8 = [], 0, [], []
     for k in range(0, len(times), 4):
         pose = truth[k]
         cor = None
@@ -111,6 +112,12 @@ def main() -> None:
             continue
         meas = cor.axis - wd.angle
         errs.append(np.rad2deg(wrap_angle_period(meas - pose[2], np.pi)))
+        if k >= 7:  # 8 rings (2 s), placed by relative true poses (an odometry stand-in)
+            sl = slice(k - 7, k + 1)
+            rel = between(truth[k], truth[sl])
+            flm8 = build_flm_rings(rel, ranges[sl], rmax[sl], fov, mounts, params)
+            w8 = flm_wall_direction(flm8, params)
+            errs8.append(np.rad2deg(wrap_angle_period(cor.axis - w8.angle - pose[2], np.pi)))
     e = np.array(errs)
     flm = {
         "rings": len(dt),
@@ -120,6 +127,8 @@ def main() -> None:
         "heading_error_median_abs_deg": float(np.median(np.abs(e))) if len(e) else None,
         "heading_error_bias_deg": float(np.mean(e)) if len(e) else None,
         "heading_error_std_deg": float(np.std(e)) if len(e) else None,
+        "eight_ring_heading_error_mean_abs_deg": float(np.mean(np.abs(errs8))) if errs8 else None,
+        "eight_ring_heading_error_std_deg": float(np.std(errs8)) if errs8 else None,
     }
     print(
         json.dumps(

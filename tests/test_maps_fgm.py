@@ -13,14 +13,14 @@ from maps_synth import corridor_lines, ring_in_lines, room_lines
 
 from fuzzyslam.maps.evidence import ring_evidence
 from fuzzyslam.maps.fgm import FgmBuilder, FrozenMapError
-from fuzzyslam.maps.flm import build_flm
+from fuzzyslam.maps.flm import build_flm, build_flm_rings
 from fuzzyslam.maps.grid import BeliefMap, Grid
 from fuzzyslam.maps.hough import dominant_direction, flm_wall_direction, hough_accumulator
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.quality import wall_quality
 from fuzzyslam.maps.references import extract_references
 from fuzzyslam.robot import sonar_mounts
-from fuzzyslam.se2 import wrap_angle_period
+from fuzzyslam.se2 import between, wrap_angle_period
 
 FOV = np.deg2rad(25.0)
 RMAX = 6.5
@@ -241,3 +241,20 @@ def test_flm_equals_fgm_evidence_at_the_origin():
     b.add_ring(np.zeros(3), r, RMAX, FOV, MOUNTS)
     np.testing.assert_allclose(flm.m_o, b.map.m_o, atol=1e-6)
     np.testing.assert_allclose(flm.m_e, b.map.m_e, atol=1e-6)
+
+
+def test_multi_ring_flm():
+    """build_flm_rings: one ring at the identity is build_flm; rings taken along the
+    corridor and placed by their relative poses keep the wall direction."""
+    params = MapParams()
+    h = np.deg2rad(12.0)
+    lines = corridor_lines(0.0, 1.0)
+    poses = np.array([[-0.3 * np.cos(h), 0.1 - 0.3 * np.sin(h), h], [0.0, 0.1, h]])
+    rings = np.array([ring_in_lines(p, MOUNTS, lines, FOV, RMAX) for p in poses])
+    one = build_flm_rings(np.zeros((1, 3)), rings[1:], RMAX, FOV, MOUNTS, params)
+    np.testing.assert_allclose(
+        one.m_o, build_flm(rings[1], RMAX, FOV, MOUNTS, params).m_o, atol=1e-6
+    )
+    rel = between(poses[-1], poses)
+    wd = flm_wall_direction(build_flm_rings(rel, rings, RMAX, FOV, MOUNTS, params), params)
+    assert angle_error_deg(wd.angle, -h) < 1.5

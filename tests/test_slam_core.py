@@ -352,3 +352,19 @@ def test_predict_lamps_blocks_equal_single_lamp_model():
         assert np.allclose(hc[2 * a : 2 * a + 2, 3 + 2 * a : 5 + 2 * a], hl)
         assert list(cols[3 + 2 * a : 5 + 2 * a]) == [3 + 2 * i, 4 + 2 * i]
     assert np.count_nonzero(hc[0:2, 5:7]) == 0 and np.count_nonzero(hc[2:4, 3:5]) == 0
+
+
+def test_inline_wheel_odometry_equals_robot_model():
+    from types import SimpleNamespace
+
+    from fuzzyslam.config import load_config
+    from fuzzyslam.robot import wheel_increments_to_odometry
+    from fuzzyslam.slam.io import LogInputs
+
+    cfg = load_config("quick")
+    inputs = SimpleNamespace(cfg=cfg)
+    rng = np.random.default_rng(9)
+    for dl, dr in rng.normal(0, 0.3, (20, 2)):
+        ours = LogInputs._wheel_odometry(inputs, dl, dr)
+        ref = wheel_increments_to_odometry(dl, dr, cfg.robot.wheel_radius, cfg.robot.wheel_base)
+        assert np.allclose(ours, ref, rtol=1e-14, atol=0)

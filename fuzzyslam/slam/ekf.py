@@ -75,6 +75,27 @@ def lamp_init(pose: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, ...]:
     return pose[:2] + d, jr, r
 
 
+_BLOCK = 256
+
+
+def _add_symmetric_update(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:
+    """P += A B^T for a symmetric A B^T, in place, keeping P exactly symmetric.
+
+    Row blocks of the upper triangle are updated (one small GEMM each), diagonal blocks
+    averaged with their transpose and the rest mirrored to the lower triangle: no
+    n x n temporary and no full-matrix transpose, so the cost stays O(n^2) once P
+    leaves the caches.
+    """
+    n = p.shape[0]
+    for i0 in range(0, n, _BLOCK):
+        i1 = min(i0 + _BLOCK, n)
+        p[i0:i1, i0:] += a[i0:i1] @ b[i0:].T
+        blk = p[i0:i1, i0:i1]
+        blk[...] = 0.5 * (blk + blk.T)
+        if i1 < n:
+            p[i1:, i0:i1] = p[i0:i1, i1:].T
+
+
 class Preintegrator:
     """Odometry increments composed into one relative motion and its covariance.
 
@@ -247,7 +268,8 @@ class EkfSlam:
         P' = (I - K H) P (I - K H)^T + K R K^T      (Joseph form)
            = P - K (P H^T)^T - (P H^T) K^T + K S K^T (expanded, valid for any K)
            = P + X Y^T + Y X^T,  X = K, Y = K S / 2 - P H^T,
-        one (n x 4k)(4k x n) matrix product: O(n^2 k), then P is made exactly symmetric.
+        one (n x 4k)(4k x n) matrix product: O(n^2 k), applied by row blocks to the upper
+        triangle and mirrored, so P stays exactly symmetric (``_add_symmetric_update``).
         """
         n = self.dim
         p = self._p[:n, :n]
@@ -258,8 +280,7 @@ class EkfSlam:
         self._x[:n] += k @ v
         self._x[2] = wrap_angle(self._x[2])
         y = 0.5 * (k @ s) - pht
-        p += np.hstack([k, y]) @ np.hstack([y, k]).T
-        p[...] = 0.5 * (p + p.T)
+        _add_symmetric_update(p, np.hstack([k, y]), np.hstack([y, k]))
 
     def innovation_cov(self, cols: np.ndarray, hc: np.ndarray, r: np.ndarray) -> np.ndarray:
         """S = H P H^T + R for H nonzero only on ``cols``."""

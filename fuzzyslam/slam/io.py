@@ -22,6 +22,7 @@ import csv
 import heapq
 import io
 import json
+import math
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
@@ -33,7 +34,7 @@ import yaml
 from fuzzyslam.camera import CeilingCamera
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
-from fuzzyslam.robot import WHEEL_NAMES, sonar_mounts, wheel_increments_to_odometry
+from fuzzyslam.robot import WHEEL_NAMES, sonar_mounts
 from fuzzyslam.se2 import between
 from fuzzyslam.slam.detect import detect_lamps
 from fuzzyslam.slam.fastread import indexed_messages
@@ -115,17 +116,23 @@ class LogInputs:
                 return None, prev
             self._names = names
         idx = self._idx
-        pos = np.asarray(msg.position, dtype=float)
-        if len(pos) <= max(idx) or not np.all(np.isfinite(pos[idx])):
-            self.warn("nan_odometry", f"NaN or missing wheel angle at t={t:.3f} s")
+        pos = msg.position
+        if len(pos) <= max(idx):
+            self.warn("nan_odometry", f"missing wheel angle at t={t:.3f} s")
             return None, prev
-        cur = pos[idx]
+        cur = (float(pos[idx[0]]), float(pos[idx[1]]))
+        if not (math.isfinite(cur[0]) and math.isfinite(cur[1])):
+            self.warn("nan_odometry", f"NaN wheel angle at t={t:.3f} s")
+            return None, prev
         if prev is None:
             return None, cur
-        dl, dr = cur - prev
-        rob = self.cfg.robot
-        d_trans, d_rot = wheel_increments_to_odometry(dl, dr, rob.wheel_radius, rob.wheel_base)
-        return Odom(t, float(d_trans), float(d_rot)), cur
+        return Odom(t, *self._wheel_odometry(cur[0] - prev[0], cur[1] - prev[1])), cur
+
+    def _wheel_odometry(self, d_left: float, d_right: float) -> tuple[float, float]:
+        """``robot.wheel_increments_to_odometry`` on two floats (the hot path, 20 Hz):
+        d_trans = r (dL + dR) / 2, d_rot = r (dR - dL) / b, nominal r and b."""
+        r, b = self.cfg.robot.wheel_radius, self.cfg.robot.wheel_base
+        return 0.5 * r * (d_left + d_right), r * (d_right - d_left) / b
 
     def _odom_pose(self, t: float, msg, prev):
         pose = M.pose_of(msg.pose.pose)
