@@ -13,12 +13,16 @@ trajectory the log's ground truth is used. Prints one JSON object:
 - ``references``: each corridor's reference angle error against the true axis (deg);
 - ``wall_quality``: precision/recall of wall cells within one cell of the true walls;
 - ``flm``: time per FLM + Hough, and the heading error of theta = axis - t_local (mod pi)
-  against the true heading, over rings inside a corridor (away from its ends); also for
-  FLMs of the last 8 rings (``build_flm_rings``, relative poses from the ground truth).
+  against the true heading, over every ring inside a corridor (1.5 m from its ends, 0.5 m
+  from its centre line), rings flagged ambiguous left out: ``hough`` (the paper's peak
+  alone), ``tangent`` (refined by the tangent-line fit, the default), and
+  ``tangent_8_rings_odometry`` (FLM of the last 8 rings, ``build_flm_rings``, placed by
+  the log's dead reckoning /odom).
 """
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import subprocess
 import sys
@@ -47,6 +51,14 @@ def truth_tum(log: Path, out: Path) -> Path:
         p.append(pose_of(m.msg.pose.pose))
     write_tum(out, np.array(t), np.array(p))
     return out
+
+
+def odom_tum(log: Path) -> tuple[np.ndarray, np.ndarray]:
+    t, p = [], []
+    for m in LogReader(log).messages(["/odom"]):
+        t.append(m.t)
+        p.append(pose_of(m.msg.pose.pose))
+    return np.array(t), np.array(p)
 
 
 def main() -> None:
@@ -92,8 +104,12 @@ def main() -> None:
 
     # FLM heading error in corridors: measured heading = axis - t_local, mod pi
     truth = interpolate_poses(times, *read_tum(truth_tum(log, tmp / "t2.tum")))
-    errs, amb, dt, errs8 = [], 0, [], []
-    for k in range(0, len(times), 4):
+    odom = interpolate_poses(times, *odom_tum(log))
+    hough_only = dataclasses.replace(params, flm_refine="hough")
+    errs: dict[str, list[float]] = {"hough": [], "tangent": [], "tangent_8_rings_odometry": []}
+    amb = dict.fromkeys(errs, 0)
+    dt: dict[str, list[float]] = {k: [] for k in errs}
+    for k in range(len(times)):
         pose = truth[k]
         cor = None
         for c in world.corridors if world else []:
@@ -104,32 +120,32 @@ def main() -> None:
                 cor = c
         if cor is None:
             continue
-        t1 = time.perf_counter()
-        wd = flm_wall_direction(build_flm(ranges[k], rmax[k], fov, mounts, params), params)
-        dt.append(time.perf_counter() - t1)
-        if wd.ambiguous or not np.isfinite(wd.angle):
-            amb += 1
-            continue
-        meas = cor.axis - wd.angle
-        errs.append(np.rad2deg(wrap_angle_period(meas - pose[2], np.pi)))
-        if k >= 7:  # 8 rings (2 s), placed by relative true poses (an odometry stand-in)
-            sl = slice(k - 7, k + 1)
-            rel = between(truth[k], truth[sl])
-            flm8 = build_flm_rings(rel, ranges[sl], rmax[sl], fov, mounts, params)
-            w8 = flm_wall_direction(flm8, params)
-            errs8.append(np.rad2deg(wrap_angle_period(cor.axis - w8.angle - pose[2], np.pi)))
-    e = np.array(errs)
-    flm = {
-        "rings": len(dt),
-        "ms_per_flm_and_hough": 1e3 * float(np.mean(dt)) if dt else None,
-        "ambiguous": amb,
-        "heading_error_mean_abs_deg": float(np.mean(np.abs(e))) if len(e) else None,
-        "heading_error_median_abs_deg": float(np.median(np.abs(e))) if len(e) else None,
-        "heading_error_bias_deg": float(np.mean(e)) if len(e) else None,
-        "heading_error_std_deg": float(np.std(e)) if len(e) else None,
-        "eight_ring_heading_error_mean_abs_deg": float(np.mean(np.abs(errs8))) if errs8 else None,
-        "eight_ring_heading_error_std_deg": float(np.std(errs8)) if errs8 else None,
-    }
+        sl = slice(max(k - 7, 0), k + 1)  # 8 rings (2 s), placed by dead reckoning
+        rel = between(odom[k], odom[sl])
+        for name in errs:
+            t1 = time.perf_counter()
+            if name == "tangent_8_rings_odometry":
+                flm = build_flm_rings(rel, ranges[sl], rmax[sl], fov, mounts, params)
+            else:
+                flm = build_flm(ranges[k], rmax[k], fov, mounts, params)
+            wd = flm_wall_direction(flm, hough_only if name == "hough" else params)
+            dt[name].append(time.perf_counter() - t1)
+            if wd.ambiguous or not np.isfinite(wd.angle):
+                amb[name] += 1
+                continue
+            errs[name].append(np.rad2deg(wrap_angle_period(cor.axis - wd.angle - pose[2], np.pi)))
+    flm = {}
+    for name, ev in errs.items():
+        e = np.array(ev)
+        flm[name] = {
+            "rings": len(dt[name]),
+            "ms_per_flm_and_hough": 1e3 * float(np.mean(dt[name])) if dt[name] else None,
+            "ambiguous": amb[name],
+            "heading_error_mean_abs_deg": float(np.mean(np.abs(e))) if len(e) else None,
+            "heading_error_median_abs_deg": float(np.median(np.abs(e))) if len(e) else None,
+            "heading_error_bias_deg": float(np.mean(e)) if len(e) else None,
+            "heading_error_std_deg": float(np.std(e)) if len(e) else None,
+        }
     print(
         json.dumps(
             {

@@ -6,6 +6,7 @@ Exit codes:
     2   usage error (bad option or argument, from click)
     3   bad input: a file or config that is missing, malformed or inconsistent
     130 interrupted (Ctrl-C); no partial outputs are left behind
+    143 terminated (SIGTERM); likewise
 """
 
 from __future__ import annotations
@@ -15,6 +16,7 @@ EXIT_INTERNAL = 1
 EXIT_USAGE = 2
 EXIT_INPUT = 3
 EXIT_INTERRUPTED = 130
+EXIT_TERMINATED = 143
 
 
 class FuzzyslamError(Exception):

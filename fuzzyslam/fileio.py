@@ -15,6 +15,34 @@ from pathlib import Path
 
 from fuzzyslam.errors import InputError
 
+# Inputs of the current command: every file checked by ``check_input_file`` or named as
+# an input of ``check_outputs`` while guarding is on (the CLI turns it on for each
+# command). ``atomic_path`` and ``OutputDir`` refuse to replace any of them, so an
+# input is never overwritten even when an output directory holds it.
+_inputs: set[Path] = set()
+_guarding = False
+
+
+def guard_inputs(on: bool = True) -> None:
+    """Start (and clear) or stop the record of the current command's inputs."""
+    global _guarding
+    _inputs.clear()
+    _guarding = on
+
+
+def _remember(path: Path) -> None:
+    if _guarding:
+        with contextlib.suppress(OSError):
+            _inputs.add(path.resolve())
+
+
+def _refuse_inputs(dests: Iterable[Path]) -> None:
+    """Raise InputError before anything is moved if a destination is a known input."""
+    for d in dests:
+        for inp in _inputs:
+            if _same_file(d, inp):
+                raise InputError(d, "output would overwrite an input of this command; refusing")
+
 
 def _same_file(a: Path, b: Path) -> bool:
     try:
@@ -28,6 +56,8 @@ def check_outputs(
 ) -> None:
     """Raise InputError if an output path is one of the inputs or lies in a missing directory."""
     ins = [Path(p) for p in inputs if p is not None]
+    for inp in ins:
+        _remember(inp)
     for out in outputs:
         out = Path(out)
         for inp in ins:
@@ -49,6 +79,7 @@ def check_input_file(path: str | os.PathLike, what: str = "input") -> Path:
         raise InputError(p, f"{what} is not a regular file")
     if not os.access(p, os.R_OK):
         raise InputError(p, f"{what} is not readable")
+    _remember(p)
     return p
 
 
@@ -65,6 +96,7 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     tmp_path = Path(tmp)
     try:
         yield tmp_path
+        _refuse_inputs([path])
         os.replace(tmp_path, path)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -103,8 +135,10 @@ class OutputDir:
         assert self.tmp is not None
         try:
             if exc_type is None:
+                items = sorted(self.tmp.rglob("*"))
+                _refuse_inputs(self.path / i.relative_to(self.tmp) for i in items if i.is_file())
                 self.path.mkdir(exist_ok=True)
-                for item in sorted(self.tmp.rglob("*")):
+                for item in items:
                     rel = item.relative_to(self.tmp)
                     dest = self.path / rel
                     if item.is_dir():

@@ -20,6 +20,8 @@ def wrap_angle(a: ArrayLike) -> Array | float:
     """Wrap angles to the half-open interval (-pi, pi]."""
     arr = np.asarray(a, dtype=float)
     w = np.pi - np.mod(np.pi - arr, 2.0 * np.pi)
+    # np.mod may round up to the period itself (a just above pi): -pi belongs to pi
+    w = np.where(w <= -np.pi, w + 2.0 * np.pi, w)
     if w.ndim == 0:
         return float(w)
     return w
@@ -30,6 +32,7 @@ def wrap_angle_period(a: ArrayLike, period: float) -> Array | float:
     arr = np.asarray(a, dtype=float)
     half = period / 2.0
     w = half - np.mod(half - arr, period)
+    w = np.where(w <= -half, w + period, w)  # as in wrap_angle
     if w.ndim == 0:
         return float(w)
     return w

@@ -290,14 +290,37 @@ def test_heading_from_sonar_flm_in_straight_corridor_within_1p5_deg():
 
 
 def test_ambiguous_corridor_fix_is_skipped_not_applied():
-    """At the junction of two corridors with different axes the fix is refused."""
+    """At the junction of two corridors with different axes the fix is refused (junctions
+    off), or, with junctions on, applied only when the prediction picks one corridor."""
     refs = [corridor_ref(0.0, 0), corridor_ref(math.radians(70), 1)]
     wall = SimpleNamespace(angle=0.05, strength=3.0, ambiguous=False)
     ekf = ToyEkf([0.0, 0.0, -0.05], np.diag([0.01, 0.01, (5 * DEG) ** 2]))
-    aid = HeadingFixAid(refs, FixParams(), lambda r, m: None, lambda flm: wall, 0.0)
+    off = FixParams(junction_margin=0.0)
+    aid = HeadingFixAid(refs, off, lambda r, m: None, lambda flm: wall, 0.0)
     aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
     assert aid.decisions[-1].reason == "ambiguous_corridor"
     assert ekf.updates == 0 and ekf.x[2] == -0.05
+    # junctions on: 70 degrees apart, the prediction (sigma 5 deg) picks corridor 0,
+    # and the fix has the junction noise
+    p = FixParams(junction_margin=1.0)
+    aid = HeadingFixAid(refs, p, lambda r, m: None, lambda flm: wall, 0.0)
+    aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
+    d = aid.decisions[-1]
+    assert d.reason == "ok" and d.corridor == 0 and ekf.updates == 1
+    assert d.sigma == pytest.approx(math.radians(p.sigma_junction_deg))
+    # two corridors 12 degrees apart: both candidates lie within 3 sigma, refused
+    close = [corridor_ref(0.0, 0), corridor_ref(math.radians(12), 1)]
+    ekf = ToyEkf([0.0, 0.0, -0.05], np.diag([0.01, 0.01, (3 * DEG) ** 2]))
+    aid = HeadingFixAid(close, p, lambda r, m: None, lambda flm: wall, 0.0)
+    aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
+    assert aid.decisions[-1].reason == "ambiguous_heading" and ekf.updates == 0
+    # a corner just outside both regions counts as a junction; far away: no corridor
+    r0 = corridor_ref(0.0, 0)
+    for xy, want in (([20.5, 0.0], "ok"), ([23.0, 0.0], "no_corridor")):
+        ekf = ToyEkf([*xy, -0.05], np.diag([0.01, 0.01, (3 * DEG) ** 2]))
+        aid = HeadingFixAid([r0], p, lambda r, m: None, lambda flm: wall, 0.0)
+        aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
+        assert aid.decisions[-1].reason == want
     # a prediction too uncertain to pick among the mod-pi candidates is refused too
     ekf = ToyEkf([0.0, 0.0, 0.2], np.diag([0.01, 0.01, (60 * DEG) ** 2]))
     aid = HeadingFixAid(refs[:1], FixParams(), lambda r, m: None, lambda flm: wall, 0.0)

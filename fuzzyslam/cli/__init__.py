@@ -6,7 +6,10 @@ the ``cli`` group. Exit codes follow :mod:`fuzzyslam.errors`.
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
+import signal
 import sys
 import traceback
 from typing import Any
@@ -14,7 +17,15 @@ from typing import Any
 import click
 
 from fuzzyslam import __version__
-from fuzzyslam.errors import EXIT_INPUT, EXIT_INTERNAL, EXIT_INTERRUPTED, FuzzyslamError
+from fuzzyslam.errors import (
+    EXIT_INPUT,
+    EXIT_INTERNAL,
+    EXIT_INTERRUPTED,
+    EXIT_OK,
+    EXIT_TERMINATED,
+    FuzzyslamError,
+)
+from fuzzyslam.fileio import guard_inputs
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 
@@ -34,9 +45,20 @@ def cli(debug: bool) -> None:
       fuzzyslam run sensors.mcap --map fgm -o est_fix
       fuzzyslam evaluate sensors.mcap est_fix -o report
 
-    Each command prints a JSON summary on stdout and progress on stderr.
-    Exit codes: 0 ok, 1 internal error, 2 usage error, 3 bad input, 130 interrupted.
+    Each command prints a JSON summary on stdout and progress on stderr. Errors
+    are one line naming the file and the problem; outputs are written under
+    temporary names and appear only when complete; an input is never overwritten.
+
+    \b
+    Exit codes:
+      0    success
+      1    internal error (a bug; --debug shows the traceback)
+      2    usage error (bad option or argument)
+      3    bad input: a missing, unreadable, malformed or inconsistent file or
+           config, or an output that would overwrite an input
+      130  interrupted (Ctrl-C); 143 terminated (SIGTERM): no partial outputs
     """
+    guard_inputs(True)
 
 
 def seed_option(f):
@@ -88,34 +110,81 @@ def _register() -> None:
                 raise
 
 
+class Terminated(KeyboardInterrupt):
+    """SIGTERM, raised like Ctrl-C so that temporary outputs are removed on the way out."""
+
+
+def _on_sigterm(signum: int, frame: object) -> None:
+    raise Terminated()
+
+
+def _one_line(text: str) -> str:
+    return " ".join(text.split()) if text else ""
+
+
 def main(argv: list[str] | None = None) -> None:
-    """Entry point: run the CLI and map failures to one line and an exit code."""
+    """Entry point: run the CLI and map failures to one line and an exit code.
+
+    ``--debug`` may be given anywhere on the command line (it is moved before the
+    command for click). SIGTERM is handled like Ctrl-C (temporary outputs removed,
+    exit 130 for SIGINT, 143 for SIGTERM). An OSError naming a file (permission
+    denied, disk full, ...) is a one-line error on that file with exit code 3.
+    """
     args = list(sys.argv[1:] if argv is None else argv)
     debug = "--debug" in args
-    _register()
+    if debug:
+        args = ["--debug", *(a for a in args if a != "--debug")]
+    if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, _on_sigterm)
+    code = EXIT_OK
     try:
+        _register()
         cli.main(args=args, prog_name="fuzzyslam", standalone_mode=False)
     except click.exceptions.Exit as exc:
-        sys.exit(exc.exit_code)
+        code = exc.exit_code
     except click.ClickException as exc:
         exc.show()
-        sys.exit(exc.exit_code)
-    except (KeyboardInterrupt, click.exceptions.Abort):
-        click.echo("fuzzyslam: interrupted; no partial outputs were kept", err=True)
-        sys.exit(EXIT_INTERRUPTED)
+        code = exc.exit_code
+    except (KeyboardInterrupt, click.exceptions.Abort) as exc:
+        # click turns KeyboardInterrupt into Abort (raised from it)
+        if isinstance(exc, Terminated) or isinstance(exc.__cause__, Terminated):
+            click.echo("fuzzyslam: terminated; no partial outputs were kept", err=True)
+            code = EXIT_TERMINATED
+        else:
+            click.echo("fuzzyslam: interrupted; no partial outputs were kept", err=True)
+            code = EXIT_INTERRUPTED
+    except BrokenPipeError:
+        # stdout closed early (e.g. piped into head): not an error of ours
+        with contextlib.suppress(OSError, ValueError):
+            os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # quiet exit flush
+        code = EXIT_OK
     except FuzzyslamError as exc:
         if debug:
             traceback.print_exc()
-        click.echo(f"fuzzyslam: error: {exc}", err=True)
-        sys.exit(getattr(exc, "exit_code", EXIT_INPUT))
+        click.echo(f"fuzzyslam: error: {_one_line(str(exc))}", err=True)
+        code = getattr(exc, "exit_code", EXIT_INPUT)
+    except OSError as exc:
+        if debug:
+            traceback.print_exc()
+        if exc.filename is None:
+            _internal(exc)
+            code = EXIT_INTERNAL
+        else:
+            problem = exc.strerror or type(exc).__name__
+            click.echo(f"fuzzyslam: error: {exc.filename}: {_one_line(problem)}", err=True)
+            code = EXIT_INPUT
     except Exception as exc:
         if debug:
             traceback.print_exc()
-        msg = str(exc).splitlines()[0] if str(exc) else type(exc).__name__
-        click.echo(
-            f"fuzzyslam: internal error: {type(exc).__name__}: {msg} "
-            "(rerun with --debug for the traceback)",
-            err=True,
-        )
-        sys.exit(EXIT_INTERNAL)
-    sys.exit(0)
+        _internal(exc)
+        code = EXIT_INTERNAL
+    sys.exit(code)
+
+
+def _internal(exc: BaseException) -> None:
+    msg = _one_line(str(exc).splitlines()[0]) if str(exc).strip() else type(exc).__name__
+    click.echo(
+        f"fuzzyslam: internal error: {type(exc).__name__}: {msg} "
+        "(rerun with --debug for the traceback)",
+        err=True,
+    )

@@ -10,7 +10,9 @@ from fuzzyslam.cli import cli, config_option, emit, seed_option
 from fuzzyslam.config import load_config
 
 
-def _build_aids(map_dir: Path | None, fix: str | None, cfg, log: Path) -> list:
+def _build_aids(
+    map_dir: Path | None, fix: str | None, cfg, log: Path, fix_from: float | None = None
+) -> list:
     """Heading/pose-fix aids from a frozen map (``fuzzyslam.fixes.aids.make_aids``)."""
     mode = fix if fix is not None else ("none" if map_dir is None else cfg.fixes.mode)
     if mode == "none":
@@ -24,7 +26,9 @@ def _build_aids(map_dir: Path | None, fix: str | None, cfg, log: Path) -> list:
 
     world = read_world(LogReader(log))  # the identity the map stage recorded (maps/build.py)
     world_dict = world.to_dict() if world is not None else None
-    return make_aids(map_dir, mode, cfg, expect_log_id=log_identity(world_dict, Path(log).name))
+    return make_aids(
+        map_dir, mode, cfg, fix_from, expect_log_id=log_identity(world_dict, Path(log).name)
+    )
 
 
 @cli.command("run")
@@ -52,8 +56,16 @@ def _build_aids(map_dir: Path | None, fix: str | None, cfg, log: Path) -> list:
     help="Fixes from the map: heading (the paper), pose (full pose), none. "
     "Default: the config's fixes.mode when --map is given, else none.",
 )
+@click.option(
+    "--fix-from",
+    type=float,
+    default=None,
+    metavar="SECONDS",
+    help="Log time (s) from which the fixes are applied. Default: the map's freeze time "
+    "(e.g. 0 to use a map frozen on another log of the same world from the start).",
+)
 @seed_option
-def run_command(log: Path, outdir: Path, config: str | None, map_dir, fix, seed) -> None:
+def run_command(log: Path, outdir: Path, config: str | None, map_dir, fix, fix_from, seed) -> None:
     """EKF-SLAM on ceiling lamps over the recorded LOG (MCAP), written into OUTDIR.
 
     \b
@@ -73,5 +85,5 @@ def run_command(log: Path, outdir: Path, config: str | None, map_dir, fix, seed)
     from fuzzyslam.slam.stage import run_stage
 
     cfg = load_config(config, seed)
-    aids = _build_aids(map_dir, fix, cfg, log)
+    aids = _build_aids(map_dir, fix, cfg, log, fix_from)
     emit(run_stage(log, outdir, cfg, aids))

@@ -170,6 +170,28 @@ class ChangeDetector:
     def write(self, outdir: Path) -> None:
         write_changes(Path(outdir) / "changes.csv", self.changes)
 
+    def messages(self, topics: Any) -> list[tuple[str, str, Any, float]]:
+        """``/slam/changes`` (topics.slam_changes) for estimates.mcap: one MarkerArray per
+        ring with detections, a red cylinder per detection (diameter = its size)."""
+        return change_messages(self.changes, topics.slam_changes)
+
+
+def change_messages(changes: Sequence[Change], topic: str) -> list[tuple[str, str, Any, float]]:
+    """(topic, type, MarkerArray, t) per time with detections, in time order (map frame)."""
+    from itertools import groupby
+
+    from fuzzyslam.streams import messages as M
+
+    out = []
+    for t, group in groupby(sorted(changes, key=lambda c: c.t), key=lambda c: c.t):
+        markers = [
+            M.marker(t, "map", "changes", k, 3, (c.x, c.y, 0.0), 0.5,
+                     (max(c.size, 0.1), max(c.size, 0.1), 1.0), (0.9, 0.1, 0.1, 0.7))
+            for k, c in enumerate(group)
+        ]  # fmt: skip
+        out.append((topic, M.MARKER_ARRAY, M.marker_array(markers), float(t)))
+    return out
+
 
 def write_changes(path: Path, changes: Sequence[Change]) -> None:
     """changes.csv: ``t,x,y,size,cells``."""

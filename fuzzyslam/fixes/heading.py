@@ -34,7 +34,7 @@ import numpy as np
 
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.fixes.params import FixParams
-from fuzzyslam.fixes.references import Reference, corridors_at
+from fuzzyslam.fixes.references import Reference, corridors_at, corridors_near
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import wrap_angle, wrap_angle_period
 
@@ -61,6 +61,7 @@ class HeadingDecision:
     reason: str
     strength: float
     nis: float = math.nan
+    sigma: float = math.nan  # standard deviation (rad) of the measurement when formed
 
     def row(self) -> list[str]:
         def num(v: float) -> str:
@@ -88,24 +89,35 @@ def nearest_candidate(theta0: float, predicted: float, period: float) -> tuple[f
     return theta, abs(d), period - abs(d)
 
 
-def select_corridor(xy: Sequence[float], refs: Sequence[Reference], period: float) -> tuple:
-    """The corridor containing ``xy``: (reference or None, reason or "").
+def select_corridor(
+    xy: Sequence[float], refs: Sequence[Reference], period: float, junction_margin: float = 0.0
+) -> tuple[list[Reference], str]:
+    """The candidate corridors at ``xy``: (references, "" | "junction" | why none).
 
-    Overlapping regions (junctions) are accepted only when their reference angles agree
-    mod ``period`` within 1 degree (then the strongest is used), else ``ambiguous_corridor``.
+    Inside one region, or overlapping regions whose reference angles agree mod
+    ``period`` within 1 degree: the strongest one (``ambiguous_reference`` if the map
+    stage flagged it). Regions that disagree (a junction): ``ambiguous_corridor``, or,
+    with ``junction_margin`` > 0, all of them ("junction"). Outside every region:
+    ``no_corridor``, or, with ``junction_margin`` > 0, the regions within that distance
+    (a corner, "junction"), all of whose angles then compete in :func:`decide_heading_fix`.
     """
     inside = corridors_at(xy, refs)
     if not inside:
-        return None, "no_corridor"
+        near = corridors_near(xy, refs, junction_margin) if junction_margin > 0 else []
+        near = [r for r in near if not r.ambiguous]
+        return (near, "junction") if near else ([], "no_corridor")
     if len(inside) > 1:
         a0 = inside[0].angle
         spread = [abs(float(wrap_angle_period(r.angle - a0, period))) for r in inside]
         if max(spread) > math.radians(1.0):
-            return None, "ambiguous_corridor"
+            if junction_margin > 0:
+                good = [r for r in inside if not r.ambiguous]
+                return (good, "junction") if good else ([], "ambiguous_reference")
+            return [], "ambiguous_corridor"
     best = max(inside, key=lambda r: r.strength)
     if best.ambiguous:
-        return None, "ambiguous_reference"
-    return best, ""
+        return [], "ambiguous_reference"
+    return [best], ""
 
 
 def decide_heading_fix(
@@ -116,7 +128,14 @@ def decide_heading_fix(
     pose_cov: np.ndarray,
     params: FixParams,
 ) -> HeadingDecision:
-    """Form, check and gate the heading measurement of one ring (module docstring)."""
+    """Form, check and gate the heading measurement of one ring (module docstring).
+
+    With several candidate corridors (a corner, ``fixes.junction_margin`` > 0) every
+    reference's comb t_ref - t_local + k period competes: the candidate nearest the
+    prediction is taken, refused as ``ambiguous_heading`` when the next one (of any
+    comb) is also within ``ambiguity_sigmas`` sqrt(P_tt + R); such a fix has the
+    (larger, measured) noise ``sigma_junction_deg``. The decision's ``sigma`` is the R used.
+    """
     predicted = float(pose[2])
     if wall is None or not np.isfinite(wall.angle):
         return HeadingDecision(t, -1, math.nan, predicted, False, "no_wall", math.nan)
@@ -126,19 +145,29 @@ def decide_heading_fix(
     if wall.ambiguous:
         return HeadingDecision(t, -1, math.nan, predicted, False, "ambiguous_wall", strength)
     period = math.pi / 2 if params.right_angles else math.pi
-    ref, why = select_corridor(pose[:2], refs, period)
-    if ref is None:
+    cands, why = select_corridor(pose[:2], refs, period, params.junction_margin)
+    if not cands:
         return HeadingDecision(t, -1, math.nan, predicted, False, why, strength)
-    theta, d1, d2 = nearest_candidate(ref.angle - float(wall.angle), predicted, period)
-    var = float(pose_cov[2, 2]) + math.radians(params.sigma_heading_deg) ** 2
+    sig = params.sigma_junction_deg if why == "junction" else params.sigma_heading_deg
+    sigma = math.radians(sig)
+    # every candidate corridor's nearest comb member, sorted by distance to the prediction
+    combs = sorted(
+        ((nearest_candidate(r.angle - float(wall.angle), predicted, period), r) for r in cands),
+        key=lambda c: c[0][1],
+    )
+    (theta, d1, d2), ref = combs[0]
+    for (th, dk, _), _r in combs[1:]:
+        if abs(float(wrap_angle(th - theta))) > math.radians(1.0):
+            d2 = min(d2, dk)  # a different heading another corridor would give
+    var = float(pose_cov[2, 2]) + sigma**2
     nis = d1 * d1 / var
     if d2 < params.ambiguity_sigmas * math.sqrt(var):
-        return HeadingDecision(
-            t, ref.id, theta, predicted, False, "ambiguous_heading", strength, nis
-        )
-    if nis > params.gate_chi2:
-        return HeadingDecision(t, ref.id, theta, predicted, False, "gated", strength, nis)
-    return HeadingDecision(t, ref.id, theta, predicted, True, "ok", strength, nis)
+        why = "ambiguous_heading"
+    elif nis > params.gate_chi2:
+        why = "gated"
+    else:
+        why = "ok"
+    return HeadingDecision(t, ref.id, theta, predicted, why == "ok", why, strength, nis, sigma)
 
 
 class FlmSource:
@@ -183,6 +212,10 @@ class HeadingFixAid:
         self.decisions: list[HeadingDecision] = []
         self.before_start = 0
         self.recoveries = 0
+        self._last_ok_xy: np.ndarray | None = None  # position at the last accepted fix
+        # the last formed fix disagreed with the prediction (NIS above suspect_chi2, or
+        # gated): ``run`` then creates no new lamp (it would be a duplicate)
+        self.pose_suspect = False
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: Any) -> None:
         if t < self.start_time:
@@ -190,28 +223,42 @@ class HeadingFixAid:
             return
         pose = ekf.pose
         period = math.pi / 2 if self.params.right_angles else math.pi
-        ref, why = select_corridor(pose[:2], self.refs, period)
-        if ref is None:  # no FLM or Hough needed (junctions, open space)
+        cands, why = select_corridor(pose[:2], self.refs, period, self.params.junction_margin)
+        if not cands:  # no FLM or Hough needed (junctions, open space)
             self.decisions.append(HeadingDecision(t, -1, math.nan, pose[2], False, why, math.nan))
             return
         wall = self.wall_direction(self.flm_source(ring, mounts))
         d = decide_heading_fix(t, wall, self.refs, pose, ekf.pose_cov, self.params)
         if d.reason == "gated" and hasattr(ekf, "inflate_robot") and self._recovery_due(d):
             # consistent gated fixes: the filter, not the map, is wrong (an unseen bump).
-            # Covariance inflation P_tt += v^2 (fading memory, Simon, "Optimal state
-            # estimation", sec. 7.4) makes the prediction admit the innovation v.
+            # Covariance inflation (fading memory, Simon, "Optimal state estimation",
+            # sec. 7.4) makes the prediction admit the innovation v: P_tt += v^2. The
+            # heading was wrong by up to |v| somewhere along the path since the last
+            # accepted fix (length d), so the position is off by up to |v| d in an unknown
+            # direction: P_xx, P_yy += (v d)^2, which lets the lamps re-associate.
             v = float(wrap_angle(d.measured - d.predicted))
-            ekf.inflate_robot(np.diag([0.0, 0.0, v * v]))
+            dist = (
+                float(np.hypot(*(pose[:2] - self._last_ok_xy)))
+                if self._last_ok_xy is not None
+                else 0.0
+            )
+            q_xy = (v * dist) ** 2
+            ekf.inflate_robot(np.diag([q_xy, q_xy, v * v]))
             d = replace(d, accepted=True, reason="recovered")
             self.recoveries += 1
         if d.accepted:
-            sigma = math.radians(self.params.sigma_heading_deg)
             res = ekf.update_robot(
-                [d.measured], [[sigma * sigma]], [2], gate_chi2=self.params.gate_chi2
+                [d.measured], [[d.sigma * d.sigma]], [2], gate_chi2=self.params.gate_chi2
             )
             d = replace(d, nis=float(res.nis))
             if not res.accepted:
                 d = replace(d, accepted=False, reason="gated")
+            else:
+                self._last_ok_xy = ekf.pose[:2]
+        if np.isfinite(d.measured):
+            self.pose_suspect = d.reason == "gated" or (
+                d.reason == "ok" and d.nis > self.params.suspect_chi2
+            )
         self.decisions.append(d)
 
     def update_rows(self) -> list[dict[str, Any]]:

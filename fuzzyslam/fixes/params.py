@@ -27,10 +27,20 @@ class FixParams:
     # refuse when the two candidate headings nearest the prediction are both within this
     # many standard deviations sqrt(P_tt + R) of it
     ambiguity_sigmas: float = field(default=3.0, metadata={"min": 0.5, "max": 20.0})
+    # corners and junctions (outside every corridor region, or in regions whose angles
+    # differ): with a margin > 0 (m), the regions within it all offer their reference
+    # angle and the prediction picks (refused when two are plausible); 0: skip the fix
+    junction_margin: float = field(default=2.0, metadata={"min": 0.0, "max": 10.0})
+    # R of such a fix: FLM walls near a corner are shorter and mixed (measured: std 4.0 deg
+    # at corners against 2.6 deg in corridors, paper.yaml seed 0, runs 5-6)
+    sigma_junction_deg: float = field(default=4.0, metadata={"min": 0.01, "max": 90.0})
     # recovery from an unseen heading jump (a bump): after this many consecutive gated
     # fixes whose measurements agree within recover_spread_deg, the heading variance is
     # inflated by the squared innovation (ekf.inflate_robot) and the fix applied; 0: never
     recover_after: int = field(default=3, metadata={"min": 0})
+    # a fix with NIS above this (1 dof, 95 %: 3.84) or gated marks the pose suspect:
+    # no new lamp is created until a fix agrees again (duplicates after a bump)
+    suspect_chi2: float = field(default=3.84, metadata={"min": 0.1})
     recover_spread_deg: float = field(default=3.0, metadata={"min": 0.0, "max": 90.0})
 
     # --- full-pose fixes (models.md sec. 10) ---

@@ -109,3 +109,19 @@ def references_from_dicts(items: Iterable[dict[str, Any]], source: str) -> list[
 def corridors_at(xy: Sequence[float], refs: Sequence[Reference]) -> list[Reference]:
     """The corridors whose region contains the point ``xy``."""
     return [r for r in refs if r.contains(xy)]
+
+
+def distance_to_polygon(xy: Sequence[float], poly: np.ndarray) -> float:
+    """Euclidean distance from ``xy`` to the polygon (0 inside), vectorised over its edges."""
+    p = np.asarray(xy, dtype=float).reshape(2)
+    a = np.asarray(poly, dtype=float).reshape(-1, 2)
+    if points_in_polygon(p[None], a)[0]:
+        return 0.0
+    e = np.roll(a, -1, axis=0) - a
+    u = np.clip(np.sum((p - a) * e, axis=1) / np.maximum(np.sum(e * e, axis=1), 1e-300), 0, 1)
+    return float(np.min(np.hypot(*(a + u[:, None] * e - p).T)))
+
+
+def corridors_near(xy: Sequence[float], refs: Sequence[Reference], margin: float) -> list:
+    """The corridors whose region lies within ``margin`` (m) of ``xy`` (junctions, corners)."""
+    return [r for r in refs if distance_to_polygon(xy, r.polygon) <= margin]

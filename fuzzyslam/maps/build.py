@@ -222,11 +222,7 @@ def build_map(
         "readings_used": builder.readings,
         "readings_skipped": skipped_readings,
         "rings_skipped": int((~ok).sum()),
-        "sonar_stats": {
-            "invalid": stats.invalid,
-            "no_echo": stats.no_echo,
-            "missing": stats.missing,
-        },
+        "sonar_stats": stats.as_dict(),
         "cell_updates": builder.cell_updates,
         "cells_touched": int((fgm.m_t < 1.0).sum()),
         "freeze_time": t_end,
@@ -244,6 +240,7 @@ def build_map(
         "reference_truth": truth,
         "wall_quality": quality,
         "build_seconds": build_s,
+        "log_damage": reader.damage(),
     }
     with OutputDir(outdir) as tmp:
         mapio.save_fgm(tmp / "fgm.npz", fgm, True, t_end, log_id)

@@ -26,7 +26,7 @@ Reference: Golub & Van Loan, "Matrix computations", sec. 12.3 (TLS); K. Kanatani
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -64,7 +64,10 @@ class WallDirection:
     the line x cell size); second_strength: the strongest line at least
     ``ambiguity_separation_deg`` away in direction; ambiguous: second_strength >=
     ambiguity_ratio * strength (junctions, corners); peaks: the lines found (dominant
-    direction first, then the second direction's peak); cells: voting cells.
+    direction first, then the second direction's peak); cells: voting cells;
+    sigma: standard deviation of ``angle`` (rad) from the tangent refinement (NaN when
+    the angle is the Hough's own); method: "hough" or "tangent"; inliers: echoes
+    supporting the tangent fit.
     """
 
     angle: float
@@ -74,6 +77,9 @@ class WallDirection:
     second_strength: float = 0.0
     cells: int = 0
     plane: HoughPlane | None = field(default=None, repr=False)
+    sigma: float = float("nan")
+    method: str = "hough"
+    inliers: int = 0
 
 
 def wall_weights(bm: BeliefMap, threshold: float) -> np.ndarray:
@@ -265,8 +271,56 @@ def flm_wall_direction(flm: BeliefMap, params: MapParams | None = None) -> WallD
     theta = t_ref - angle, reduced mod pi to the value nearest the prediction. Skip the
     fix when ``ambiguous`` or when ``strength`` (m of wall) is small. One ring's arcs are
     short and weak, so every cell from ``flm_wall_threshold`` votes (lower than the FGM's).
+
+    The paper's method is the Hough peak (:func:`map_wall_direction`). Beyond it, when
+    ``params.flm_refine == "tangent"`` and the FLM keeps its echoes (a
+    :class:`fuzzyslam.maps.flm.LocalMap`), the peak is refined by the tangent-line fit of
+    :func:`fuzzyslam.maps.tangent.fit_walls` (the corridor's two walls jointly), which
+    also gives the angle's standard deviation ``sigma``; a fit with fewer than three
+    echoes, or moving more than ``tangent_max_shift_deg`` from the peak, is not used.
+    With the refinement, ``ambiguous`` also flags rings whose echoes do not confirm the
+    peak (no fit, or one farther than ``tangent_max_shift_deg``) or confirm it only
+    loosely (sigma > ``tangent_max_sigma_deg``): junctions, corners, open space.
+    Simulated paper log, rings 0.5-1 m from a corridor end: 6.1 % gross (> 5 deg)
+    unflagged errors with the Hough ratio alone, 1.8 % with this flag; more than 1 m
+    from the ends, 1.4 % -> 0.3 % (at the cost of skipping 7-10 % of good rings).
     """
     params = params if params is not None else MapParams()
-    return map_wall_direction(
+    wd = map_wall_direction(
         flm, params, threshold=params.flm_wall_threshold, refine=params.flm_hough_refine
+    )
+    readings = getattr(flm, "readings", None)
+    if params.flm_refine != "tangent" or readings is None or not np.isfinite(wd.angle):
+        return wd
+    return refine_tangent(wd, readings, params)
+
+
+def refine_tangent(wd: WallDirection, readings, params: MapParams) -> WallDirection:
+    """``wd`` with its angle refined by the tangent-line fit of ``readings``
+    (:class:`fuzzyslam.maps.tangent.RingReadings`), or unchanged if the fit fails."""
+    from fuzzyslam.maps.tangent import fit_walls
+
+    if len(readings) < 3:
+        return wd
+    psi0 = wd.angle + np.pi / 2
+    fit = fit_walls(
+        readings,
+        psi0,
+        sigma_frac=params.range_noise_frac,
+        quantum=params.range_quantum,
+        tolerance=params.tangent_tolerance,
+        delta_max=np.deg2rad(params.tangent_max_incidence_deg),
+    )
+    shift = float(np.abs(wrap_angle_period(fit.psi - psi0, np.pi)))
+    if not fit.ok or shift > np.deg2rad(params.tangent_max_shift_deg):
+        return replace(wd, ambiguous=True)
+    angle = float(np.mod(fit.psi - np.pi / 2, np.pi))
+    loose = fit.sigma > np.deg2rad(params.tangent_max_sigma_deg)
+    return replace(
+        wd,
+        angle=angle,
+        sigma=fit.sigma,
+        method="tangent",
+        inliers=int(fit.inliers.sum()),
+        ambiguous=bool(wd.ambiguous or loose),
     )

@@ -259,6 +259,18 @@ class EkfSlam:
             p[:3, 3:n] = cross
             p[3:n, :3] = cross.T
 
+    def inflate_robot(self, q) -> None:
+        """Add ``q`` (3, 3, symmetric PSD) to the robot block: P_rr' = P_rr + Q.
+
+        Covariance inflation (fading memory; Simon, "Optimal state estimation", sec. 7.4)
+        after an unseen disturbance (a bump): the pose keeps its mean and its
+        correlations with the lamps, but admits the disturbance. P stays symmetric PSD.
+        """
+        q = np.asarray(q, dtype=float).reshape(3, 3)
+        if not np.allclose(q, q.T) or np.linalg.eigvalsh(0.5 * (q + q.T)).min() < -1e-12:
+            raise ValueError("inflate_robot: q must be symmetric positive semi-definite")
+        self._p[:3, :3] += 0.5 * (q + q.T)
+
     # -- updates ------------------------------------------------------------------------
 
     def _correct(self, cols: np.ndarray, hc: np.ndarray, v: np.ndarray, r: np.ndarray) -> None:

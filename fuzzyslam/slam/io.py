@@ -322,8 +322,11 @@ def write_summary(tmp: Path, summary: dict) -> None:
     )
 
 
-def write_outputs(tmp: Path, res: SlamResult, cfg: Config) -> None:
-    """The files of contracts.md sec. 2 but summary.json and the fix files, into ``tmp``."""
+def write_outputs(tmp: Path, res: SlamResult, cfg: Config, extra=()) -> None:
+    """The files of contracts.md sec. 2 but summary.json and the fix files, into ``tmp``.
+
+    ``extra``: further (topic, type name, message, t) for estimates.mcap (e.g. the aids'
+    ``/slam/changes``)."""
     (tmp / "trajectory.tum").write_text(format_tum(res.t, res.poses), encoding="utf-8")
     (tmp / "odometry.tum").write_text(format_tum(res.odo_t, res.odo_poses), encoding="utf-8")
     (tmp / "covariance.csv").write_text(
@@ -358,3 +361,5 @@ def write_outputs(tmp: Path, res: SlamResult, cfg: Config) -> None:
             )
         for t, lamps, covs in res.snapshots:
             w.write(tp.slam_landmarks, M.MARKER_ARRAY, _lamp_markers(t, lamps, covs), t)
+        for topic, typename, msg, t in extra:
+            w.write(topic, typename, msg, t)

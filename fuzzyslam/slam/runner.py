@@ -141,6 +141,7 @@ class SlamRunner:
             "detections": 0,
             "associated": 0,
             "lamps_created": 0,
+            "lamps_deferred": 0,
             "duplicates_guarded": 0,
             "rings": 0,
             "aid_calls": 0,
@@ -228,7 +229,11 @@ class SlamRunner:
                 self.counts["associated"] += len(pairs)
             paired = {j for j, _ in pairs}
             rest = [j for j in range(m) if j not in paired]
-            if rest:
+            if rest and any(getattr(a, "pose_suspect", False) for a in self.aids):
+                # an aid finds the pose inconsistent with the map (e.g. an unseen bump):
+                # a lamp initialised from it would be a duplicate; wait
+                self.counts["lamps_deferred"] += len(rest)
+            elif rest:
                 self._new_lamps(ev.t, z[rest], r[rest], d2[rest])
         self._record(ev.t)
 

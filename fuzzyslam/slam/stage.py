@@ -82,7 +82,8 @@ def run_stage(
     with OutputDir(outdir) as tmp:
         for aid in aids:
             aid.write(tmp)
-        write_outputs(tmp, res, cfg)
+        extra = [m for aid in aids if hasattr(aid, "messages") for m in aid.messages(cfg.topics)]
+        write_outputs(tmp, res, cfg, extra)
         summary = make_summary(res, inputs, time.perf_counter() - wall0, aids)
         write_summary(tmp, summary)
     return summary

@@ -8,22 +8,95 @@ say how much was lost. A file that is not MCAP is one clear InputError.
 
 from __future__ import annotations
 
+import io
 import json
 import os
+import struct
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
-from typing import Any
+from typing import Any, BinaryIO
 
+from mcap.data_stream import ReadDataStream
 from mcap.exceptions import McapError
+from mcap.opcode import Opcode
 from mcap.reader import SeekingReader
-from mcap.records import Attachment, Channel, Message, Metadata, Schema
-from mcap.stream_reader import StreamReader
+from mcap.records import Attachment, Channel, Chunk, Message, Metadata, Schema
+from mcap.stream_reader import get_chunk_data_stream
 
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import check_input_file
 from fuzzyslam.streams.typestore import deserialize, normalise_typename, typestore
 
 MCAP_MAGIC = b"\x89MCAP0\r\n"
+
+
+_RECORD_HEAD = struct.Struct("<BQ")
+
+
+def _parse_record(opcode: int, body: bytes, length: int) -> list[Any]:
+    """The records held by one whole top-level record (a chunk's inner records)."""
+    stream = ReadDataStream(io.BytesIO(body))
+    if opcode == Opcode.CHUNK:
+        chunk = Chunk.read(stream)
+        data, size = get_chunk_data_stream(chunk, validate_crc=True)  # CRCValidationError
+        if size != chunk.uncompressed_size:
+            raise ValueError("chunk decompressed to the wrong size")
+        return list(_inner_records(data.read(size), strict=True))
+    reader = _TOP_LEVEL.get(opcode)
+    if reader is None:
+        return []  # indexes, statistics, unknown opcodes: not needed when scanning
+    return [reader.read(stream, length) if opcode == Opcode.MESSAGE else reader.read(stream)]
+
+
+def _inner_records(raw: bytes, strict: bool = False) -> Iterator[Any]:
+    """Schema, Channel and Message records of (decompressed) chunk data, while whole.
+
+    ``strict``: the data must hold whole records to its end (ValueError otherwise).
+    """
+    pos, end = 0, len(raw)
+    while pos < end:
+        if pos + _RECORD_HEAD.size > end:
+            break
+        opcode, length = _RECORD_HEAD.unpack_from(raw, pos)
+        start = pos + _RECORD_HEAD.size
+        if start + length > end:
+            break
+        pos = start + length
+        reader = _CHUNK_RECORDS.get(opcode)
+        if reader is None:
+            continue
+        stream = ReadDataStream(io.BytesIO(raw[start:pos]))
+        try:
+            rec = reader.read(stream, length) if opcode == Opcode.MESSAGE else reader.read(stream)
+        except Exception:
+            if strict:
+                raise
+            return
+        yield rec
+    if strict and pos != end:
+        raise ValueError("chunk data ends inside a record")
+
+
+_CHUNK_RECORDS: dict[int, Any] = {
+    Opcode.SCHEMA: Schema,
+    Opcode.CHANNEL: Channel,
+    Opcode.MESSAGE: Message,
+}
+_TOP_LEVEL: dict[int, Any] = {
+    **_CHUNK_RECORDS,
+    Opcode.METADATA: Metadata,
+    Opcode.ATTACHMENT: Attachment,
+}
+
+
+@dataclass
+class Damage:
+    """What a record scan found wrong with a file (see ``LogReader``)."""
+
+    truncated: bool = False
+    lost_bytes: int = 0
+    damaged_records: int = 0
+    salvaged_messages: int = 0
 
 
 @dataclass(frozen=True)
@@ -41,7 +114,9 @@ class LogReader:
 
     Attributes after opening: ``topics`` (topic -> type name), ``counts`` (topic ->
     message count, when the summary is intact), ``start``/``end`` (s), ``metadata``
-    (name -> dict), ``attachments`` (name -> bytes), ``truncated``, ``lost_bytes``.
+    (name -> dict), ``attachments`` (name -> bytes), and what a damaged file lost:
+    ``truncated``, ``lost_bytes``, ``salvaged_messages``, ``damaged_records``,
+    ``undecodable`` (``damage()`` returns them as a dict for a JSON summary).
     """
 
     def __init__(self, path: str | os.PathLike) -> None:
@@ -59,6 +134,8 @@ class LogReader:
         self.end = 0.0
         self.truncated = False
         self.lost_bytes = 0
+        self.damaged_records = 0
+        self.salvaged_messages = 0
         self.undecodable = 0
         self._summary_ok = self._read_summary()
         if not self._summary_ok:
@@ -99,30 +176,90 @@ class LogReader:
             self.topics, self.counts, self.metadata, self.attachments = {}, {}, {}, {}
             return False
 
-    def _records(self) -> Iterator[Any]:
-        """Records of the file in file order, stopping quietly where it is damaged."""
+    def _records(self, damage: Damage | None = None) -> Iterator[Any]:
+        """Records of the file in file order, as far as it is intact (``_walk``)."""
         with open(self.path, "rb") as f:
-            reader = StreamReader(f, skip_magic=False)
-            it = reader.records
-            good = 0
-            while True:
-                try:
-                    rec = next(it)
-                except StopIteration:
-                    return
-                except Exception:
-                    self.truncated = True
-                    self.lost_bytes = max(self.size - good, 0)
-                    return
-                good = f.tell()
-                yield rec
+            yield from self._walk(f, damage if damage is not None else Damage())
+
+    def _walk(self, f: BinaryIO, dmg: Damage) -> Iterator[Any]:
+        """Walk the top-level records (opcode u8, length u64, body; MCAP spec "Records").
+
+        A whole record that fails to parse (e.g. a chunk whose compressed data is
+        corrupt) is skipped and counted in ``damaged_records``: its length field still
+        frames the next record. A record cut off by the end of the file ends the walk;
+        if it is a chunk, the messages of its intact compressed prefix are salvaged
+        (``_salvage_chunk``, counted in ``salvaged_messages``). ``lost_bytes`` counts
+        the bytes past the last whole record (the cut-off tail, partly salvaged) and
+        the bytes of damaged records.
+        """
+        f.seek(len(MCAP_MAGIC))
+        pos = len(MCAP_MAGIC)
+        while True:
+            head = f.read(_RECORD_HEAD.size)
+            if len(head) < _RECORD_HEAD.size:
+                dmg.truncated = True  # no footer: the recording was cut off
+                dmg.lost_bytes += len(head)
+                return
+            opcode, length = _RECORD_HEAD.unpack(head)
+            body = f.read(length) if length <= self.size - pos - _RECORD_HEAD.size else None
+            if body is None or len(body) < length:
+                if opcode == Opcode.CHUNK:
+                    f.seek(pos + _RECORD_HEAD.size)
+                    yield from self._salvage_chunk(f.read(), dmg)
+                dmg.truncated = True
+                dmg.lost_bytes += max(self.size - pos, 0)
+                return
+            pos += _RECORD_HEAD.size + length
+            if opcode in (Opcode.FOOTER, Opcode.DATA_END):
+                return  # the summary section repeats what the data section held
+            try:
+                records = _parse_record(opcode, body, length)
+            except Exception:
+                dmg.damaged_records += 1
+                dmg.lost_bytes += _RECORD_HEAD.size + length
+                continue
+            yield from records
+
+    def _salvage_chunk(self, partial: bytes, dmg: Damage) -> Iterator[Any]:
+        """Whole records of a chunk cut off by the end of the file.
+
+        Chunk body (MCAP spec "Chunk"): message_start_time u64, message_end_time u64,
+        uncompressed_size u64, uncompressed_crc u32, compression (u32-prefixed string),
+        records (u64-prefixed bytes). A zstd or lz4 frame decodes block by block, so a
+        streaming decompressor returns every block that arrived whole.
+        """
+        try:
+            stream = ReadDataStream(io.BytesIO(partial))
+            stream.read(28)
+            compression = stream.read_prefixed_string()
+            stream.read(8)
+            data = partial[stream.count :]
+            if compression == "zstd":
+                import zstandard
+
+                raw = zstandard.ZstdDecompressor().decompressobj().decompress(data)
+            elif compression == "lz4":
+                import lz4.frame
+
+                raw = lz4.frame.LZ4FrameDecompressor().decompress(data)
+            elif compression == "":
+                raw = data
+            else:
+                return
+        except Exception:
+            return
+        for rec in _inner_records(raw):
+            if isinstance(rec, Message):
+                dmg.salvaged_messages += 1
+            yield rec
 
     def _scan_stream(self) -> None:
         schemas: dict[int, str] = {}
         t0, t1, n = None, None, 0
         counts: dict[str, int] = {}
         channels: dict[int, str] = {}
-        for rec in self._records():
+        dmg = Damage()
+        for rec in self._records(dmg):
             if isinstance(rec, Schema):
                 schemas[rec.id] = normalise_typename(rec.name)
             elif isinstance(rec, Channel):
@@ -140,9 +277,11 @@ class LogReader:
                 self.metadata[rec.name] = dict(rec.metadata)
             elif isinstance(rec, Attachment):
                 self.attachments[rec.name] = bytes(rec.data)
-        if not self.truncated:
-            # no usable summary but the records parsed to the end: call it damaged index
-            self.truncated = True
+        # no usable summary: the file is damaged even if every record parsed
+        self.truncated = True
+        self.lost_bytes = dmg.lost_bytes
+        self.damaged_records = dmg.damaged_records
+        self.salvaged_messages = dmg.salvaged_messages
         self.counts = counts
         self.start = (t0 or 0) / 1e9
         self.end = (t1 or 0) / 1e9
@@ -150,6 +289,25 @@ class LogReader:
             raise InputError(self.path, "MCAP file holds no readable messages (damaged or empty)")
 
     # -- queries ------------------------------------------------------------------
+
+    def damage(self) -> dict[str, Any]:
+        """How much of the file was lost, for a stage's JSON summary.
+
+        ``truncated``: the summary/footer is missing or damaged (the file was read by a
+        record scan); ``lost_bytes``: bytes past the last whole record (a cut-off tail,
+        partly salvaged) and of damaged records; ``salvaged_messages``: messages recovered
+        from a cut-off chunk;
+        ``damaged_records``: whole records that failed to parse and were skipped;
+        ``undecodable``: messages skipped because their payload failed to decode.
+        """
+        return {
+            "truncated": bool(self.truncated),
+            "lost_bytes": int(self.lost_bytes),
+            "lost_fraction": round(self.lost_bytes / self.size, 6) if self.size else 0.0,
+            "salvaged_messages": int(self.salvaged_messages),
+            "damaged_records": int(self.damaged_records),
+            "undecodable": int(self.undecodable),
+        }
 
     def has(self, topic: str) -> bool:
         return topic in self.topics
@@ -194,8 +352,9 @@ class LogReader:
                         out = self._decode(channel.topic, schema.name, message)
                         if out is not None:
                             yield out
-                except McapError as exc:
-                    raise InputError(self.path, f"damaged MCAP data: {exc}") from None
+                except Exception as exc:  # McapError, zstd errors, short reads
+                    problem = f"{type(exc).__name__}: {exc}".splitlines()[0]
+                    raise InputError(self.path, f"damaged MCAP data ({problem})") from None
             return
         schemas: dict[int, str] = {}
         channels: dict[int, tuple[str, str]] = {}

@@ -7,7 +7,12 @@ reads NaN. Glitches are made explicit and counted, never silently used:
 
 - NaN, infinite or negative ranges become NaN (``invalid``);
 - ranges at or beyond max_range are "no echo" and stay as max_range (``no_echo``);
-- ranges below min_range become NaN (``invalid``).
+- ranges below min_range become NaN (``invalid``);
+- a reading whose max_range is not a positive finite number becomes NaN (``invalid``);
+- a second reading of the same sonar at the same stamp is dropped (``duplicates``);
+- a reading stamped more than ``tolerance`` before the latest one is dropped
+  (``out_of_order``);
+- a non-finite or negative field of view is replaced by the last valid one (``bad_fov``).
 """
 
 from __future__ import annotations
@@ -40,6 +45,22 @@ class RingStats:
     missing: int = 0
     out_of_order: int = 0
     extra: dict[str, int] = field(default_factory=dict)
+    duplicates: int = 0
+    bad_fov: int = 0
+
+    def as_dict(self) -> dict[str, int]:
+        """The counts, for a stage's JSON summary."""
+        return {
+            "rings": self.rings,
+            "readings": self.readings,
+            "invalid": self.invalid,
+            "no_echo": self.no_echo,
+            "missing": self.missing,
+            "out_of_order": self.out_of_order,
+            "duplicates": self.duplicates,
+            "bad_fov": self.bad_fov,
+            **self.extra,
+        }
 
 
 def group_rings(
@@ -57,12 +78,13 @@ def group_rings(
     cur_t: float | None = None
     ranges = np.full(count, np.nan)
     rmax = np.full(count, np.nan)
+    seen = np.zeros(count, dtype=bool)
     fov = 0.0
     last_t = -np.inf
 
     def flush() -> Ring:
         st.rings += 1
-        st.missing += int(np.sum(np.isnan(rmax)))
+        st.missing += int(count - np.count_nonzero(seen))
         return Ring(float(cur_t), ranges.copy(), rmax.copy(), fov)
 
     for m in messages:
@@ -73,26 +95,41 @@ def group_rings(
         if t < last_t - tolerance:
             st.out_of_order += 1
             continue
-        if cur_t is None or t - cur_t > tolerance or not np.isnan(rmax[i]):
+        if cur_t is not None and t == cur_t and seen[i]:
+            st.duplicates += 1  # the same sonar twice at one stamp: a repeated message
+            continue
+        if cur_t is None or t - cur_t > tolerance or seen[i]:
             if cur_t is not None:
                 yield flush()
             cur_t = t
             ranges[:] = np.nan
             rmax[:] = np.nan
+            seen[:] = False
+        seen[i] = True
         last_t = max(last_t, t)
         st.readings += 1
         r = float(m.msg.range)
         hi = float(m.msg.max_range)
         lo = float(m.msg.min_range)
-        fov = float(m.msg.field_of_view)
-        rmax[i] = hi if np.isfinite(hi) and hi > 0 else np.nan
-        if not np.isfinite(r) or r < 0 or r < lo:
+        f = float(m.msg.field_of_view)
+        if np.isfinite(f) and f > 0:
+            fov = f
+        else:
+            st.bad_fov += 1
+        if not (np.isfinite(hi) and hi > 0):
+            st.invalid += 1  # no usable max range: the reading cannot be interpreted
+            rmax[i] = np.nan
+            ranges[i] = np.nan
+        elif not np.isfinite(r) or r < 0 or r < lo:
             st.invalid += 1
+            rmax[i] = hi
             ranges[i] = np.nan
         elif r >= hi:
             st.no_echo += 1
+            rmax[i] = hi
             ranges[i] = hi
         else:
+            rmax[i] = hi
             ranges[i] = r
     if cur_t is not None:
         yield flush()

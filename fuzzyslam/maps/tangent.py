@@ -1,0 +1,192 @@
+"""Sub-degree wall direction from the sonar echoes themselves: the tangent-line model.
+
+Beyond the paper (which reads the wall direction off the Hough peak of the FLM): the
+Hough direction of one ring is limited by the shape of its evidence. Each echo paints an
+arc centred on its sonar's AXIS, and the arcs of a ring come only at the 16 sonar
+bearings (22.5 deg apart), so the arcs' own direction pulls the peak toward the sonar
+axes (measured: 2.2 deg mean error on the simulated paper log). The readings carry more:
+
+Model (Leonard & Durrant-Whyte, "Directed sonar sensing for mobile robot navigation",
+1992, ch. 2-3: a specular sonar returns the NEAREST point of a plane within its beam,
+so a line target is tangent to the echo's arc, or passes through one of the arc's
+ends). For a wall line n . x = c (unit normal n at angle psi, c > 0 its distance from the
+frame's origin) and a sonar at s (position, axis a) with cone half-angle w::
+
+    p      = c - n . s                              (perpendicular distance)
+    delta  = max(|psi - a| - w, 0)                  (normal outside the cone by delta)
+    r(psi, c) = p / cos(delta)                      (the nearest point of the line in the cone)
+
+valid while delta < delta_max (beyond the critical angle a smooth wall does not echo).
+Inside the cone (delta = 0) r = p: the echo's circle is TANGENT to the wall; outside it
+the echo lies on the cone's edge ray. Readings of several sonars of one wall therefore
+fix its direction through their common tangent.
+
+Fit: psi (shared by the parallel walls of a corridor: normals psi and psi + pi) and one
+offset c_j per wall by weighted non-linear least squares (Gauss-Newton) on the ranges,
+sigma_i^2 = (k r_i)^2 + q^2 / 12 (relative range noise k, quantum q); readings farther
+than ``tolerance`` from every wall's prediction (specular bounces, crosstalk, other
+walls) are outliers, re-selected at every iteration (iteratively reweighted with a hard
+cut, as in RANSAC's final refit). Started from the Hough direction, so the paper's FLM +
+Hough remains the detector; this is the refinement. The fit's covariance
+(J^T W J)^-1 gives the direction's standard deviation. Readings of several rings, placed
+in one frame by odometry, are fitted jointly alike (:func:`readings_in_frame`).
+
+Measured on the simulated paper log (rings in corridors, 1.5 m from the ends; heading
+error of axis - direction): one ring 1.37 deg mean |e|, std 2.0 deg (Hough alone: 2.2 /
+2.8); the fit's normalised errors have std 1.05, i.e. one ring is at its noise floor
+(1 % range noise + 1-inch quantisation). Eight rings (2 s) placed by odometry:
+0.35 / 0.44 deg.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fuzzyslam.se2 import compose, wrap_angle
+
+
+@dataclass(frozen=True)
+class RingReadings:
+    """Echo readings in one frame: sensor poses (N, 3) (x, y, axis), ranges (N,), the
+    cone half-angle (rad). Only echoes (no max-range readings, no NaN)."""
+
+    sensors: np.ndarray
+    ranges: np.ndarray
+    half_angle: float
+
+    def __len__(self) -> int:
+        return len(self.ranges)
+
+
+def readings_in_frame(
+    poses: np.ndarray,
+    ranges: np.ndarray,
+    max_range: np.ndarray | float,
+    fov: float,
+    mounts: np.ndarray,
+) -> RingReadings:
+    """Echoes of K rings (ranges (K, M)) taken at ``poses`` (K, 3) of one frame."""
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    mounts = np.asarray(mounts, dtype=float).reshape(-1, 3)
+    ranges = np.asarray(ranges, dtype=float).reshape(len(poses), len(mounts))
+    rmax = np.broadcast_to(np.asarray(max_range, dtype=float), ranges.shape)
+    ok = np.isfinite(ranges) & (ranges > 0) & (~np.isfinite(rmax) | (ranges < rmax - 1e-6))
+    k, i = np.nonzero(ok)
+    return RingReadings(compose(poses[k], mounts[i]), ranges[ok], 0.5 * float(fov))
+
+
+@dataclass
+class TangentFit:
+    """Result of :func:`fit_walls`: normal angle psi (rad) of the first wall, offsets c
+    (one per wall, NaN where unseen), inlier mask and wall of each reading (-1: outlier),
+    sigma (rad, standard deviation of psi; inf when not determined)."""
+
+    psi: float
+    offsets: np.ndarray
+    inliers: np.ndarray
+    wall_of: np.ndarray
+    sigma: float
+
+    @property
+    def ok(self) -> bool:
+        return bool(np.isfinite(self.sigma))
+
+
+def predict_ranges(
+    psi: float, c: float, sensors: np.ndarray, half: float
+) -> tuple[np.ndarray, ...]:
+    """r(psi, c) of every sensor (module docstring) with dr/dpsi, dr/dc, delta, p."""
+    n = np.array([np.cos(psi), np.sin(psi)])
+    dn = np.array([-np.sin(psi), np.cos(psi)])
+    p = c - sensors[:, :2] @ n
+    off = wrap_angle(psi - sensors[:, 2])
+    outside = np.abs(off) > half
+    delta = np.where(outside, np.abs(off) - half, 0.0)
+    sec = 1.0 / np.cos(delta)
+    r = p * sec
+    dp_dpsi = -(sensors[:, :2] @ dn)
+    dr_dpsi = dp_dpsi * sec + np.where(outside, np.sign(off), 0.0) * r * np.tan(delta)
+    return r, dr_dpsi, sec, delta, p
+
+
+def _initial_offset(psi: float, rd: RingReadings, delta_max: float, tolerance: float) -> float:
+    """The offset c most readings agree on (within ``tolerance``), the nearest on ties:
+    c_i = n . s_i + r_i cos(delta_i) inverts each reading's model."""
+    n = np.array([np.cos(psi), np.sin(psi)])
+    off = np.abs(wrap_angle(psi - rd.sensors[:, 2]))
+    delta = np.maximum(off - rd.half_angle, 0.0)
+    ok = delta < delta_max
+    if not ok.any():
+        return float("nan")
+    ci = rd.sensors[ok, :2] @ n + rd.ranges[ok] * np.cos(delta[ok])
+    ci = ci[ci > 0]
+    if ci.size == 0:
+        return float("nan")
+    support = (np.abs(ci[:, None] - ci[None, :]) < tolerance).sum(axis=1)
+    return float(ci[support == support.max()].min())
+
+
+def fit_walls(
+    rd: RingReadings,
+    psi0: float,
+    sigma_frac: float = 0.01,
+    quantum: float = 0.0254,
+    tolerance: float = 0.06,
+    delta_max: float = np.deg2rad(20.0),
+    walls: tuple[float, ...] = (0.0, np.pi),
+    iterations: int = 4,
+) -> TangentFit:
+    """Weighted Gauss-Newton fit of psi and the walls' offsets (module docstring).
+
+    Wall j has normal psi + walls[j] (default: the two sides of a corridor). Starts at
+    ``psi0``; at every iteration each reading is assigned to the wall predicting it best
+    if within ``tolerance`` (else an outlier), then one Gauss-Newton step solves the
+    weighted normal equations J^T W J dx = J^T W (r - r_hat)."""
+    nw = len(walls)
+    psi = float(psi0)
+    cs = np.array([_initial_offset(psi + w, rd, delta_max, tolerance) for w in walls])
+    nread = len(rd)
+    sig = np.hypot(sigma_frac * rd.ranges, quantum / np.sqrt(12.0))
+    assign = np.full(nread, -1)
+    normal = None
+    for _ in range(iterations):
+        active = np.flatnonzero(np.isfinite(cs))
+        if active.size == 0:
+            break
+        best = np.full(nread, np.inf)
+        assign = np.full(nread, -1)
+        jac = np.zeros((nread, 1 + nw))
+        resid = np.zeros(nread)
+        for j in active:  # one pass per wall (2)
+            r, dpsi, dc, delta, p = predict_ranges(psi + walls[j], cs[j], rd.sensors, rd.half_angle)
+            e = rd.ranges - r
+            take = (delta < delta_max) & (p > 0) & (np.abs(e) < tolerance) & (np.abs(e) < best)
+            best[take] = np.abs(e[take])
+            assign[take] = j
+            jac[take] = 0.0
+            jac[take, 0] = dpsi[take]
+            jac[take, 1 + j] = dc[take]
+            resid[take] = e[take]
+        sel = assign >= 0
+        if sel.sum() < 3:
+            return TangentFit(psi, cs, sel, assign, float("inf"))
+        cols = np.concatenate([[0], 1 + active])
+        a = jac[sel][:, cols] / sig[sel, None]
+        b = resid[sel] / sig[sel]
+        normal = a.T @ a
+        try:
+            dx = np.linalg.solve(normal, a.T @ b)
+        except np.linalg.LinAlgError:
+            return TangentFit(psi, cs, sel, assign, float("inf"))
+        psi += float(dx[0])
+        cs[active] += dx[1:]
+    if normal is None:
+        return TangentFit(psi, cs, assign >= 0, assign, float("inf"))
+    try:
+        var = float(np.linalg.inv(normal)[0, 0])
+    except np.linalg.LinAlgError:
+        var = float("inf")
+    sigma = float(np.sqrt(var)) if np.isfinite(var) and var >= 0 else float("inf")
+    return TangentFit(float(wrap_angle(psi)), cs, assign >= 0, assign, sigma)

@@ -1,0 +1,202 @@
+"""Robustness of every command (issue 7): bad configs and files are one line naming
+the file with exit code 3, usage errors 2, internal failures 1 (``--debug`` shows
+the traceback), Ctrl-C 130 and SIGTERM 143 leave no partial output, and an input
+is never overwritten. The exit-code scheme is the one of ``fuzzyslam.errors``."""
+
+from __future__ import annotations
+
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from test_robust_logs import TINY_YAML, cli, error_lines, leftovers
+
+from fuzzyslam import errors
+
+FUZZYSLAM = [sys.executable, "-m", "fuzzyslam"]
+
+
+@pytest.fixture(scope="module")
+def tiny_log(tmp_path_factory) -> tuple[Path, Path]:
+    d = tmp_path_factory.mktemp("robust_cli")
+    cfg = d / "tiny.yaml"
+    cfg.write_text(TINY_YAML, encoding="utf-8")
+    log = d / "tiny.mcap"
+    code, _, err = cli("simulate", cfg, "-o", log)
+    assert code == 0, err
+    return cfg, log
+
+
+def test_help_documents_the_exit_codes() -> None:
+    code, out, _ = cli("--help")
+    assert code == errors.EXIT_OK
+    for c in (errors.EXIT_INTERNAL, errors.EXIT_USAGE, errors.EXIT_INPUT, errors.EXIT_INTERRUPTED):
+        assert f"  {c} " in out
+    for cmd in ("simulate", "run", "map", "evaluate"):
+        code, out, _ = cli(cmd, "--help")
+        assert code == 0 and "Usage:" in out
+
+
+BAD_CONFIGS = {
+    "unknown key": "extends: quick.yaml\nscenario: {runz: 2}\n",
+    "wrong type": "extends: quick.yaml\nscenario: {runs: two}\n",
+    "out of range": "extends: quick.yaml\nscenario: {runs: 0}\n",
+    "bad choice": "extends: quick.yaml\nfixes: {mode: bogus}\n",
+    "negative seed": "extends: quick.yaml\nseed: -4\n",
+    "malformed yaml": "extends: quick.yaml\nscenario: [1, 2\n",
+    "not a mapping": "- a list\n",
+    "unknown section": "extends: quick.yaml\nslamm: {}\n",
+    "cycle": "extends: bad.yaml\n",
+}
+
+
+@pytest.mark.parametrize("kind", sorted(BAD_CONFIGS))
+def test_bad_config_is_one_line_naming_the_file(kind: str, tmp_path: Path, tiny_log) -> None:
+    cfg = tmp_path / "bad.yaml"
+    cfg.write_text(BAD_CONFIGS[kind], encoding="utf-8")
+    out = tmp_path / "out.mcap"
+    for args in (["simulate", cfg, "-o", out], ["run", tiny_log[1], "-o", tmp_path / "est",
+                                                 "--config", cfg]):  # fmt: skip
+        code, stdout, stderr = cli(*args)
+        lines = error_lines(stderr)
+        assert code == errors.EXIT_INPUT, stderr
+        assert len(lines) == 1 and lines[0].startswith(f"fuzzyslam: error: {cfg}: "), lines
+        assert stdout == ""
+        assert not out.exists() and not (tmp_path / "est").exists() and not leftovers(tmp_path)
+
+
+def test_missing_config_and_missing_log(tmp_path: Path, tiny_log) -> None:
+    code, _, stderr = cli("simulate", tmp_path / "nope.yaml", "-o", tmp_path / "x.mcap")
+    assert code == 3 and error_lines(stderr)[0].startswith(f"fuzzyslam: error: {tmp_path}")
+    code, _, stderr = cli("run", tmp_path / "nope.mcap", "-o", tmp_path / "est")
+    assert code == 3
+    assert error_lines(stderr) == [
+        f"fuzzyslam: error: {tmp_path / 'nope.mcap'}: log does not exist"
+    ]
+    code, _, stderr = cli("run", tmp_path, "-o", tmp_path / "est")
+    assert code == 3 and "not a regular file" in stderr and len(error_lines(stderr)) == 1
+    code, _, stderr = cli(
+        "map", tiny_log[1], "--trajectory", tmp_path / "none.tum", "-o", tmp_path / "fgm"
+    )
+    assert code == 3 and len(error_lines(stderr)) == 1 and "none.tum" in stderr
+    assert not leftovers(tmp_path) and not (tmp_path / "fgm").exists()
+
+
+def test_usage_errors_exit_2(tmp_path: Path, tiny_log) -> None:
+    code, _, stderr = cli("run", tiny_log[1])  # no -o
+    assert code == errors.EXIT_USAGE and "Missing option" in stderr
+    code, _, _ = cli("simulate", "-o", tmp_path / "x.mcap", "--seed", "-1")
+    assert code == errors.EXIT_USAGE and not (tmp_path / "x.mcap").exists()
+    code, _, _ = cli("nosuchcommand")
+    assert code == errors.EXIT_USAGE
+
+
+def test_inputs_are_never_overwritten(tmp_path: Path, tiny_log) -> None:
+    """Output == input is refused (exit 3, input byte-identical), also when the output
+    directory holds the input under an output's name."""
+    cfg, log = tiny_log
+    before = log.read_bytes()
+    code, _, stderr = cli("simulate", cfg, "-o", cfg)
+    assert code == 3 and "input" in stderr and cfg.read_text(encoding="utf-8") == TINY_YAML
+    d = tmp_path / "est"
+    d.mkdir()
+    inside = d / "estimates.mcap"  # 'run' writes estimates.mcap into its output directory
+    inside.write_bytes(before)
+    code, _, stderr = cli("run", inside, "-o", d, "--config", cfg)
+    assert code == 3 and len(error_lines(stderr)) == 1 and "overwrite an input" in stderr
+    assert inside.read_bytes() == before
+    assert sorted(p.name for p in d.iterdir()) == ["estimates.mcap"]
+    code, _, stderr = cli("run", log, "-o", log)
+    assert code == 3 and log.read_bytes() == before
+
+
+def test_internal_error_is_one_line_and_debug_shows_traceback(monkeypatch, tmp_path: Path):
+    import fuzzyslam.sim.record as record
+
+    def boom(*a, **k):
+        raise RuntimeError("simulated bug\nsecond line")
+
+    monkeypatch.setattr(record, "simulate_to_mcap", boom)
+    out = tmp_path / "x.mcap"
+    code, _, stderr = cli("simulate", "quick", "-o", out)
+    assert code == errors.EXIT_INTERNAL
+    assert error_lines(stderr) == [
+        "fuzzyslam: internal error: RuntimeError: simulated bug (rerun with --debug for the "
+        "traceback)"
+    ]
+    for args in (["--debug", "simulate", "quick", "-o", out], ["simulate", "quick", "-o", out,
+                                                               "--debug"]):  # fmt: skip
+        code, _, stderr = cli(*args)
+        assert code == errors.EXIT_INTERNAL
+        assert "Traceback (most recent call last)" in stderr and "in boom" in stderr
+    assert not out.exists() and not leftovers(tmp_path)
+
+
+def test_os_error_on_a_file_is_one_line_exit_3(monkeypatch, tmp_path: Path) -> None:
+    import fuzzyslam.sim.record as record
+
+    def denied(*a, **k):
+        raise PermissionError(13, "Permission denied", str(tmp_path / "x.mcap"))
+
+    monkeypatch.setattr(record, "simulate_to_mcap", denied)
+    code, _, stderr = cli("simulate", "quick", "-o", tmp_path / "x.mcap")
+    assert code == errors.EXIT_INPUT
+    assert error_lines(stderr) == [f"fuzzyslam: error: {tmp_path / 'x.mcap'}: Permission denied"]
+
+
+def _interrupt(args: list[str], cwd: Path, sig: int, after: float) -> tuple[int, str]:
+    env = dict(os.environ, FUZZYSLAM_NO_PROGRESS="1")
+    p = subprocess.Popen(
+        [*FUZZYSLAM, *args], cwd=cwd, env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE
+    )
+    time.sleep(after)
+    assert p.poll() is None, "the command ended before it could be interrupted"
+    p.send_signal(sig)
+    _, err = p.communicate(timeout=60)
+    return p.returncode, err.decode()
+
+
+@pytest.mark.parametrize(
+    ("sig", "code"),
+    [(signal.SIGINT, errors.EXIT_INTERRUPTED), (signal.SIGTERM, errors.EXIT_TERMINATED)],
+)
+def test_interrupted_simulate_leaves_nothing(tmp_path: Path, sig: int, code: int) -> None:
+    """Ctrl-C (SIGINT) or SIGTERM ~1 s into simulating the paper's six runs (~12 s):
+    exit 130/143, one line, and neither the recording nor a temporary file exists."""
+    rc, err = _interrupt(["simulate", "-o", "paper.mcap"], tmp_path, sig, 1.5)
+    assert rc == code, err
+    assert error_lines(err)[-1].endswith("no partial outputs were kept")
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_interrupted_run_keeps_the_previous_outputs(monkeypatch, tmp_path: Path, tiny_log):
+    """Ctrl-C while 'run' writes its files into an existing output directory: exit 130,
+    the directory is exactly as it was and no temporary is left."""
+    import fuzzyslam.slam.stage as stage
+
+    cfg, log = tiny_log
+    d = tmp_path / "est"
+    d.mkdir()
+    (d / "trajectory.tum").write_text("0 0 0 0 0 0 0 1\n", encoding="utf-8")
+    (d / "notes.txt").write_text("mine\n", encoding="utf-8")
+    before = {p.name: p.read_bytes() for p in d.iterdir()}
+    real = stage.write_outputs
+
+    def interrupted(tmp, *a, **k):
+        real(tmp, *a, **k)  # every file written to the temporary directory, then Ctrl-C
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(stage, "write_outputs", interrupted)
+    code, out, err = cli("run", log, "-o", d, "--config", cfg)
+    assert code == errors.EXIT_INTERRUPTED and out == ""
+    assert error_lines(err) == ["fuzzyslam: interrupted; no partial outputs were kept"]
+    assert {p.name: p.read_bytes() for p in d.iterdir()} == before
+    assert not leftovers(tmp_path)
+    monkeypatch.setattr(stage, "write_outputs", real)
+    code, out, _ = cli("run", log, "-o", d, "--config", cfg)
+    assert code == 0 and (d / "trajectory.tum").read_bytes() != before["trajectory.tum"]
+    assert (d / "notes.txt").read_bytes() == before["notes.txt"]

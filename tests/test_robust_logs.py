@@ -1,0 +1,448 @@
+"""Robustness on damaged and glitched recordings (issue 7).
+
+A tiny simulated log (a third of a lap, ~38 s) is made once per session; damaged
+copies are cut from it at many byte offsets (property-based) or re-written with
+``LogWriter`` with injected faults (``rewrite``), and the stages are run on them
+in-process through ``fuzzyslam.cli.main`` (exit code, stdout and stderr as a user
+sees them). Every test asserts the exit code, the one-line message or the
+glitch counts of the summary, and that no partial output was left behind.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import math
+import tempfile
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+from hypothesis import HealthCheck, example, given, settings
+from hypothesis import strategies as st
+
+from fuzzyslam.cli import main
+from fuzzyslam.streams.reader import MCAP_MAGIC, LogMessage, LogReader
+from fuzzyslam.streams.writer import LogWriter
+
+TINY_YAML = """\
+extends: quick.yaml
+name: tiny
+scenario:
+  runs: 1
+  lap_fraction: 0.3
+"""
+SONAR = "/sonar/s"
+IMAGE = "/ceiling_camera/image_raw"
+JOINTS = "/joint_states"
+
+Out = tuple[str, str, object, float]  # topic, type name, message, log time
+
+
+# -- helpers ------------------------------------------------------------------------------
+
+
+def cli(*args: str) -> tuple[int, str, str]:
+    """Run ``fuzzyslam ARGS`` in-process: (exit code, stdout, stderr)."""
+    out, err = io.StringIO(), io.StringIO()
+    code = 0
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            main([str(a) for a in args])
+        except SystemExit as exc:
+            code = int(exc.code or 0)
+    return code, out.getvalue(), err.getvalue()
+
+
+def error_lines(stderr: str) -> list[str]:
+    """The lines of stderr that are not progress output (progress is off in tests)."""
+    return [ln for ln in stderr.splitlines() if ln.strip()]
+
+
+def leftovers(folder: Path) -> list[Path]:
+    """Temporary files or directories (``.NAME.XXXX.part``) left in ``folder``."""
+    return sorted(folder.glob(".*.part"))
+
+
+def rewrite(
+    src: Path,
+    dst: Path,
+    fault: Callable[[LogMessage], Iterable[Out]] | None = None,
+    chunk_size: int = 1024 * 1024,
+) -> Path:
+    """Copy a log message by message (metadata first), passing each through ``fault``.
+
+    ``fault(m)`` returns the messages to write instead of ``m`` (none to drop it, two
+    to duplicate it, a changed one to corrupt it).
+    """
+    reader = LogReader(src)
+    with LogWriter(dst, chunk_size=chunk_size) as w:
+        for name in sorted(reader.metadata, key=lambda n: (n != "fuzzyslam.world", n)):
+            w.metadata(name, reader.metadata[name])
+        for m in reader.messages():
+            for topic, typename, msg, t in (
+                fault(m) if fault else [(m.topic, m.typename, m.msg, m.t)]
+            ):
+                w.write(topic, typename, msg, t)
+    return dst
+
+
+def keep(m: LogMessage) -> list[Out]:
+    return [(m.topic, m.typename, m.msg, m.t)]
+
+
+def set_stamp(msg, t: float) -> None:
+    msg.header.stamp.sec = math.floor(t)
+    msg.header.stamp.nanosec = round((t - math.floor(t)) * 1e9) % 1_000_000_000
+
+
+def load_tum(path: Path) -> np.ndarray:
+    return np.loadtxt(path, ndmin=2)
+
+
+@dataclass
+class Tiny:
+    dir: Path
+    config: Path
+    log: Path
+    small_chunks: Path
+    est: Path
+    run: dict
+    map: dict
+
+
+@pytest.fixture(scope="session")
+def tiny(tmp_path_factory) -> Tiny:
+    d = tmp_path_factory.mktemp("robust")
+    cfg = d / "tiny.yaml"
+    cfg.write_text(TINY_YAML, encoding="utf-8")
+    log = d / "tiny.mcap"
+    code, _, err = cli("simulate", cfg, "-o", log)
+    assert code == 0, err
+    # 256 KiB chunks: more chunk boundaries for the truncation tests
+    small = rewrite(log, d / "small_chunks.mcap", chunk_size=256 * 1024)
+    code, out, err = cli("run", log, "-o", d / "est", "--config", cfg)
+    assert code == 0, err
+    run = json.loads(out)
+    code, out, err = cli(
+        "map", log, "--trajectory", d / "est" / "trajectory.tum", "-o", d / "fgm",
+        "--config", cfg, "--no-figures",
+    )  # fmt: skip
+    assert code == 0, err
+    return Tiny(d, cfg, log, small, d / "est", run, json.loads(out))
+
+
+# -- not MCAP, random bytes ---------------------------------------------------------------
+
+
+@given(data=st.binary(min_size=0, max_size=4096), magic=st.booleans())
+@settings(max_examples=30, deadline=None)
+def test_random_bytes_are_one_line_errors(tiny: Tiny, data: bytes, magic: bool) -> None:
+    """Random bytes (with or without the MCAP magic in front): exit 3, one line naming
+    the file, no output directory and no temporary left."""
+    with tempfile.TemporaryDirectory() as td:
+        log = Path(td) / "junk.mcap"
+        log.write_bytes((MCAP_MAGIC if magic else b"") + data)
+        out = Path(td) / "est"
+        code, stdout, stderr = cli("run", log, "-o", out, "--config", tiny.config)
+        lines = error_lines(stderr)
+        assert code == 3, stderr
+        assert len(lines) == 1 and lines[0].startswith(f"fuzzyslam: error: {log}: ")
+        assert stdout == ""
+        assert not out.exists() and not leftovers(Path(td))
+
+
+def test_not_mcap_says_so(tiny: Tiny, tmp_path: Path) -> None:
+    text = tmp_path / "notes.mcap"
+    text.write_text("this is a text file, not a recording\n", encoding="utf-8")
+    code, _, stderr = cli("run", text, "-o", tmp_path / "est", "--config", tiny.config)
+    assert code == 3
+    assert error_lines(stderr) == [f"fuzzyslam: error: {text}: not an MCAP file (bad magic bytes)"]
+
+
+# -- truncation ---------------------------------------------------------------------------
+
+
+def chunk_index(path: Path) -> list:
+    from mcap.reader import SeekingReader
+
+    with open(path, "rb") as f:
+        summary = SeekingReader(f).get_summary()
+    return sorted(summary.chunk_indexes, key=lambda c: c.chunk_start_offset)
+
+
+def chunk_offsets(path: Path) -> list[int]:
+    return [c.chunk_start_offset for c in chunk_index(path)]
+
+
+def test_reader_reads_a_cut_log_as_far_as_it_is_intact(tiny: Tiny) -> None:
+    """At a cut inside a chunk the whole records of the chunk's intact part are kept
+    (salvaged); the messages read are exactly the first ones of the intact log, and
+    a later cut never gives fewer messages."""
+    data = tiny.log.read_bytes()
+    full = [(m.topic, m.t) for m in LogReader(tiny.log).messages()]
+    starts = chunk_offsets(tiny.log)  # 1 MiB chunks (uncompressed): zstd blocks of 128 KiB
+    a, b = starts[1], starts[2]
+    got = []
+    with tempfile.TemporaryDirectory() as td:
+        cut = Path(td) / "cut.mcap"
+        for off in [a + (b - a) // 2, a + (b - a) * 9 // 10, b + 9, b]:
+            cut.write_bytes(data[:off])
+            r = LogReader(cut)
+            msgs = [(m.topic, m.t) for m in r.messages()]
+            assert msgs == full[: len(msgs)]
+            assert r.truncated and 0 <= r.lost_bytes <= off
+            got.append((off, len(msgs), r.salvaged_messages))
+    # inside a chunk: some of its messages were salvaged, more with a later cut
+    assert got[0][2] > 0 and got[1][1] > got[0][1] > 0
+    # at a chunk start nothing is salvaged and nothing after the previous chunk is lost
+    assert got[3][2] == 0 and got[2][1] == got[3][1]
+
+
+def test_damaged_chunk_in_the_middle_is_skipped_and_counted(tiny: Tiny, tmp_path: Path) -> None:
+    """Bytes overwritten inside one chunk's compressed data and the summary gone: the
+    chunk is counted as damaged, the chunks after it are still read."""
+    data = bytearray(tiny.small_chunks.read_bytes())
+    chunks = chunk_index(tiny.small_chunks)
+    a = chunks[4].chunk_start_offset + 200
+    data[a : a + 64] = bytes(64)  # corrupt the zstd stream of chunk 4
+    bad = tmp_path / "damaged.mcap"
+    bad.write_bytes(bytes(data[: len(data) - 100]))  # and lose the footer
+    r = LogReader(bad)
+    msgs = [(m.topic, m.t) for m in r.messages()]
+    full = [(m.topic, m.t) for m in LogReader(tiny.small_chunks).messages()]
+    assert r.truncated and r.damaged_records == 1
+    assert r.lost_bytes == chunks[4].chunk_length  # the cut fell in the summary section
+    assert 0 < len(msgs) < len(full) and set(msgs) <= set(full)
+    assert msgs[-1] == full[-1]  # read to the end past the damaged chunk
+
+
+@given(frac=st.floats(0.0, 1.0))
+@example(frac=0.0)
+@example(frac=0.001)
+@example(frac=0.999)
+@example(frac=1.0)
+@settings(
+    max_examples=20, deadline=None, suppress_health_check=[HealthCheck.function_scoped_fixture]
+)
+def test_truncated_log_runs_with_every_complete_message(tiny: Tiny, frac: float) -> None:
+    """``run`` on the log cut at any byte: either one line and exit 3 (nothing readable)
+    and no output, or success whose summary counts the loss and whose trajectory is
+    the full run's trajectory up to the cut (the filter is causal)."""
+    data = tiny.small_chunks.read_bytes()
+    off = int(frac * len(data))
+    full = load_tum(tiny.est / "trajectory.tum")
+    with tempfile.TemporaryDirectory() as td:
+        log = Path(td) / "cut.mcap"
+        log.write_bytes(data[:off])
+        out = Path(td) / "est"
+        code, stdout, stderr = cli("run", log, "-o", out, "--config", tiny.config)
+        assert not leftovers(Path(td))
+        if code != 0:
+            lines = error_lines(stderr)
+            assert code == 3 and len(lines) == 1, stderr
+            assert lines[0].startswith(f"fuzzyslam: error: {log}: ")
+            assert not out.exists()
+            return
+        summary = json.loads(stdout)
+        dmg = summary["log_damage"]
+        assert dmg["truncated"] == (off < len(data))
+        assert 0 <= dmg["lost_bytes"] <= off
+        traj = load_tum(out / "trajectory.tum")
+        n = len(traj) - 1  # the last row is the state at the last event read
+        assert n <= len(full)
+        np.testing.assert_allclose(traj[:n], full[:n], rtol=0, atol=1e-9)
+        assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in tiny.est.iterdir())
+
+
+@given(frac=st.floats(0.05, 1.0))
+@settings(max_examples=8, deadline=None)
+def test_truncated_log_maps_with_every_complete_ring(tiny: Tiny, frac: float) -> None:
+    """``map`` on a cut log: the rings used are the full map's first rings; the summary
+    counts the loss; failures are one line with no output."""
+    data = tiny.small_chunks.read_bytes()
+    off = int(frac * len(data))
+    with tempfile.TemporaryDirectory() as td:
+        log = Path(td) / "cut.mcap"
+        log.write_bytes(data[:off])
+        out = Path(td) / "fgm"
+        code, stdout, stderr = cli(
+            "map", log, "--trajectory", tiny.est / "trajectory.tum", "-o", out,
+            "--config", tiny.config, "--no-figures",
+        )  # fmt: skip
+        assert not leftovers(Path(td))
+        if code != 0:
+            lines = error_lines(stderr)
+            assert code == 3 and len(lines) == 1 and str(log) in lines[0], stderr
+            assert not out.exists()
+            return
+        s = json.loads(stdout)
+        assert s["log_damage"]["truncated"] == (off < len(data))
+        assert 0 < s["rings_used"] <= tiny.map["rings_used"]
+        with np.load(out / "fgm.npz") as z:
+            masses = sum(z[k].astype(float) for k in ("m_e", "m_o", "m_t", "m_c"))
+        np.testing.assert_allclose(masses, 1.0, atol=1e-5)
+
+
+# -- glitches -----------------------------------------------------------------------------
+
+
+class Every:
+    """Pick every ``n``-th message of topics starting with ``prefix`` (and ``cond``)."""
+
+    def __init__(self, prefix: str, n: int, cond: Callable[[LogMessage], bool] = lambda m: True):
+        self.prefix, self.n, self.cond, self.seen, self.hits = prefix, n, cond, 0, 0
+
+    def __call__(self, m: LogMessage) -> bool:
+        if not m.topic.startswith(self.prefix) or not self.cond(m):
+            return False
+        self.seen += 1
+        if self.seen % self.n:
+            return False
+        self.hits += 1
+        return True
+
+
+def run_json(tiny: Tiny, log: Path, out: Path) -> dict:
+    code, stdout, stderr = cli("run", log, "-o", out, "--config", tiny.config)
+    assert code == 0, stderr
+    assert not leftovers(out.parent)
+    return json.loads(stdout)
+
+
+def map_json(tiny: Tiny, log: Path, out: Path) -> dict:
+    code, stdout, stderr = cli(
+        "map", log, "--trajectory", tiny.est / "trajectory.tum", "-o", out,
+        "--config", tiny.config, "--no-figures",
+    )  # fmt: skip
+    assert code == 0, stderr
+    with np.load(out / "fgm.npz") as z:
+        masses = [z[k].astype(float) for k in ("m_e", "m_o", "m_t", "m_c")]
+    assert all(np.all(np.isfinite(m)) and np.all(m >= 0) for m in masses)
+    np.testing.assert_allclose(sum(masses), 1.0, atol=1e-5)
+    return json.loads(stdout)
+
+
+def test_sonar_glitches_are_counted_never_used(tiny: Tiny, tmp_path: Path) -> None:
+    """NaN, infinite, negative and far out-of-range echoes and repeated messages: the
+    map counts each exactly (invalid, no_echo, duplicates) and its masses stay valid."""
+    echo = Every(SONAR, 6, lambda m: 0 < m.msg.range < m.msg.max_range)
+    dup = Every(SONAR, 40)
+    bad = [math.nan, math.inf, -1.0, 1e6]
+    kinds: list[float] = []
+
+    def fault(m: LogMessage) -> list[Out]:
+        if echo(m):
+            m.msg.range = bad[len(kinds) % 4]
+            kinds.append(m.msg.range)
+        return keep(m) * (2 if dup(m) else 1)
+
+    log = rewrite(tiny.log, tmp_path / "sonar.mcap", fault)
+    s = map_json(tiny, log, tmp_path / "fgm")["sonar_stats"]
+    clean = tiny.map["sonar_stats"]
+    n_big = sum(k == 1e6 for k in kinds)
+    assert echo.hits > 20 and dup.hits > 10
+    assert s["invalid"] == clean["invalid"] + len(kinds) - n_big
+    assert s["no_echo"] == clean["no_echo"] + n_big
+    assert s["duplicates"] == clean["duplicates"] + dup.hits
+    assert s["readings"] == clean["readings"]
+    assert s["rings"] == clean["rings"] and s["missing"] == clean["missing"]
+
+
+def test_frame_glitches_are_counted_and_skipped(tiny: Tiny, tmp_path: Path) -> None:
+    """Empty, wrongly sized and wrongly encoded frames: each counted in bad_frames,
+    skipped, and the lamps found are the clean run's."""
+    pick = Every(IMAGE, 9)
+
+    def fault(m: LogMessage) -> list[Out]:
+        if pick(m):
+            kind = pick.hits % 3
+            if kind == 0:
+                m.msg.data = np.zeros(0, dtype=np.uint8)
+            elif kind == 1:
+                m.msg.data = m.msg.data[: len(m.msg.data) // 2]
+            else:
+                m.msg.encoding = "rgb8"
+        return keep(m)
+
+    log = rewrite(tiny.log, tmp_path / "frames.mcap", fault)
+    s = run_json(tiny, log, tmp_path / "est")
+    assert pick.hits >= 15
+    assert s["warnings"]["bad_frames"] == pick.hits
+    assert s["counts"]["frames"] == tiny.run["counts"]["frames"] - pick.hits
+    assert s["lamps"] == tiny.run["lamps"]
+
+
+def test_stamps_back_in_time_are_counted(tiny: Tiny, tmp_path: Path) -> None:
+    """Header stamps that go back in time: odometry is kept (its motion is real), a
+    frame is dropped; each is counted once, and the final pose barely moves."""
+    js = Every(JOINTS, 25)
+    img = Every(IMAGE, 17)
+
+    def fault(m: LogMessage) -> list[Out]:
+        if js(m):
+            set_stamp(m.msg, m.t - 0.5)
+        elif img(m):
+            set_stamp(m.msg, m.t - 1.0)
+        return keep(m)
+
+    log = rewrite(tiny.log, tmp_path / "stamps.mcap", fault)
+    s = run_json(tiny, log, tmp_path / "est")
+    assert s["warnings"]["out_of_order"] == js.hits + img.hits
+    assert s["counts"]["frames"] == tiny.run["counts"]["frames"] - img.hits
+    d = np.subtract(s["final_pose"][:2], tiny.run["final_pose"][:2])
+    assert np.hypot(*d) < 3 * max(tiny.run["final_pose_sigma"][:2])
+
+
+def test_nan_odometry_is_counted(tiny: Tiny, tmp_path: Path) -> None:
+    pick = Every(JOINTS, 30)
+
+    def fault(m: LogMessage) -> list[Out]:
+        if pick(m):
+            m.msg.position = np.full_like(m.msg.position, np.nan)
+        return keep(m)
+
+    s = run_json(tiny, rewrite(tiny.log, tmp_path / "nan.mcap", fault), tmp_path / "est")
+    assert s["warnings"]["nan_odometry"] == pick.hits
+    assert s["counts"]["odometry"] <= tiny.run["counts"]["odometry"] - pick.hits
+
+
+def test_odometry_gap_loses_no_motion(tiny: Tiny, tmp_path: Path) -> None:
+    """Three seconds without /joint_states: the wheel angles are cumulative, so the
+    motion across the gap is one increment; the final pose stays near the clean one."""
+
+    def fault(m: LogMessage) -> list[Out]:
+        return [] if m.topic == JOINTS and 10.0 < m.t < 13.0 else keep(m)
+
+    s = run_json(tiny, rewrite(tiny.log, tmp_path / "gap.mcap", fault), tmp_path / "est")
+    d = np.subtract(s["final_pose"][:2], tiny.run["final_pose"][:2])
+    assert np.hypot(*d) < 0.05
+    assert s["counts"]["odometry"] < tiny.run["counts"]["odometry"] - 50
+
+
+def test_flickering_lamps_make_no_duplicates(tiny: Tiny, tmp_path: Path) -> None:
+    """The leftmost lamp in view dark in every other frame (its whole blob erased):
+    no extra lamp is created and the final pose stays near the clean run's."""
+    import cv2
+
+    pick = Every(IMAGE, 2)
+
+    def fault(m: LogMessage) -> list[Out]:
+        if pick(m):
+            img = np.asarray(m.msg.data, dtype=np.uint8).reshape(m.msg.height, m.msg.step).copy()
+            lit = (img > 100).astype(np.uint8)  # the background is ~36 grey levels
+            n, labels, _, centroids = cv2.connectedComponentsWithStats(lit)
+            if n > 1:
+                blob = (labels == 1 + int(np.argmin(centroids[1:, 0]))).astype(np.uint8)
+                img[cv2.dilate(blob, np.ones((5, 5), np.uint8)) > 0] = 36
+            m.msg.data = img.reshape(-1)
+        return keep(m)
+
+    s = run_json(tiny, rewrite(tiny.log, tmp_path / "flicker.mcap", fault), tmp_path / "est")
+    assert s["lamps"] == tiny.run["lamps"]
+    assert s["counts"]["detections"] < tiny.run["counts"]["detections"] - 50
+    d = np.subtract(s["final_pose"][:2], tiny.run["final_pose"][:2])
+    assert np.hypot(*d) < 3 * max(tiny.run["final_pose_sigma"][:2]) + 0.02
