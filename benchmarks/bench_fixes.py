@@ -12,6 +12,10 @@ Prints, for each part, one line of JSON:
   implied real-time factor at 4 rings/s for pose fixes on every ring;
 - accuracy: heading-fix error (deg) in a straight corridor, sonar and clean FLMs; pose
   match position / heading error and mean NEES (3 dof, consistency: about 3).
+- with ``--run`` (or ``--log LOG --map FGMDIR``): the real-time factor of the whole
+  ``fuzzyslam run`` (log duration / wall time, reading the log included) with
+  ``--fix none|heading|pose`` on a paper.yaml log (simulated, run and mapped first into a
+  temporary directory when no log is given). Target: pose >= 100x.
 """
 
 from __future__ import annotations
@@ -66,10 +70,59 @@ def timeit(fn, reps):
     return (time.perf_counter() - t0) / reps * 1e3
 
 
+def run_rtf(log: Path | None, fgm_dir: Path | None, config: str, seed: int) -> dict:
+    """Real-time factor of ``run`` with each fix mode (best of 2 runs each)."""
+    import tempfile
+
+    from fuzzyslam.config import load_config
+    from fuzzyslam.fixes.aids import make_aids
+    from fuzzyslam.maps.mapio import log_identity
+    from fuzzyslam.sim.record import simulate_to_mcap
+    from fuzzyslam.slam.stage import run_stage
+    from fuzzyslam.streams.logmeta import read_world
+    from fuzzyslam.streams.reader import LogReader
+
+    cfg = load_config(config, seed)
+    tmp = Path(tempfile.mkdtemp(prefix="bench_fixes_"))
+    if log is None:
+        from click.testing import CliRunner
+
+        from fuzzyslam.cli import _register, cli
+
+        _register()
+        log = tmp / "log.mcap"
+        simulate_to_mcap(cfg, log)
+        run_stage(log, tmp / "A", cfg)
+        res = CliRunner().invoke(
+            cli, ["map", str(log), "--trajectory", str(tmp / "A" / "trajectory.tum"),
+                  "-o", str(tmp / "fgm")]
+        )  # fmt: skip
+        assert res.exit_code == 0, res.output
+        fgm_dir = tmp / "fgm"
+    world = read_world(LogReader(log))
+    lid = log_identity(world.to_dict() if world else None, Path(log).name)
+    out = {"log": str(log)}
+    for mode in ("none", "heading", "pose"):
+        best = 0.0
+        for k in range(2):
+            aids = make_aids(fgm_dir, mode, cfg, expect_log_id=lid)
+            summ = run_stage(log, tmp / f"{mode}{k}", cfg, aids)
+            best = max(best, summ["real_time_factor"])
+        out[f"rtf_{mode}"] = best
+        out["log_duration_s"] = summ["log_duration_s"]
+    return out
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--n", type=int, default=40, help="random poses per figure")
+    ap.add_argument("--run", action="store_true", help="also time 'run' on a full log")
+    ap.add_argument("--log", type=Path, default=None, help="log for --run (else simulated)")
+    ap.add_argument("--map", type=Path, default=None, help="frozen map dir of --log")
+    ap.add_argument("--config", default="paper.yaml", help="config of the simulated log")
     args = ap.parse_args()
+    if args.run or args.log is not None:
+        print(json.dumps({"run_real_time_factor": run_rtf(args.log, args.map, args.config, 0)}))
     rng = np.random.default_rng(0)
     params = FixParams()
     walls, fgm = room_world()

@@ -308,8 +308,8 @@ def test_ambiguous_corridor_fix_is_skipped_not_applied():
     d = aid.decisions[-1]
     assert d.reason == "ok" and d.corridor == 0 and ekf.updates == 1
     assert d.sigma == pytest.approx(math.radians(p.sigma_junction_deg))
-    # two corridors 12 degrees apart: both candidates lie within 3 sigma, refused
-    close = [corridor_ref(0.0, 0), corridor_ref(math.radians(12), 1)]
+    # two corridors 8 degrees apart: both candidates lie within 3 sigma, refused
+    close = [corridor_ref(0.0, 0), corridor_ref(math.radians(8), 1)]
     ekf = ToyEkf([0.0, 0.0, -0.05], np.diag([0.01, 0.01, (3 * DEG) ** 2]))
     aid = HeadingFixAid(close, p, lambda r, m: None, lambda flm: wall, 0.0)
     aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
@@ -486,7 +486,9 @@ def _drive_with_pose_fixes(fgm, walls, start, kind, rings=30):
         true + np.array([0.15, -0.1, 2.5 * DEG]), np.diag([0.1**2, 0.1**2, (2 * DEG) ** 2])
     )
     src = {}
-    aid = PoseFixAid(fgm, FixParams(), lambda r, m: src["flm"], 0.0)
+    # 30 rings over 3 m: far fewer correlated rings than the calibration of
+    # pose_cov_scale assumes (run on the paper scenario), hence the toy's own scale
+    aid = PoseFixAid(fgm, FixParams(pose_cov_scale=8.0), lambda r, m: src["flm"], 0.0)
     nees = []
     for k in range(rings):
         true = compose(true, [0.1, 0.0, 0.0])
@@ -603,8 +605,14 @@ def test_make_aids_loads_and_checks_map_dir(room, tmp_path):
     (aid,) = make_aids(tmp_path / "ok", "heading", cfg)
     assert isinstance(aid, HeadingFixAid) and aid.start_time == 123.5
     aids = make_aids(tmp_path / "ok", "pose", cfg, start_time=5.0)
-    assert [type(a) for a in aids] == [PoseFixAid, ChangeDetector]
+    # pose mode also applies the heading fixes (the match leaves the heading free)
+    assert [type(a) for a in aids] == [HeadingFixAid, PoseFixAid, ChangeDetector]
     assert all(a.start_time == 5.0 for a in aids)
+    cfg_alone = load_config("quick.yaml")
+    cfg_alone.fixes.pose_with_heading = False
+    alone = make_aids(tmp_path / "ok", "pose", cfg_alone)
+    assert [type(a) for a in alone] == [PoseFixAid, ChangeDetector]
+    aids = aids[1:]
     # the plug-in protocol end to end, with the maps stage's FLM builder behind it
     pose = np.array([1.5, 1.2, 0.3])
     ekf = ToyEkf(pose + np.array([0.05, 0.0, 0.01]), np.diag([0.01, 0.01, 1e-3]))

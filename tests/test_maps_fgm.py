@@ -11,8 +11,8 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 from maps_synth import corridor_lines, ring_in_lines, room_lines
 
-from fuzzyslam.maps.evidence import ring_evidence
-from fuzzyslam.maps.fgm import FgmBuilder, FrozenMapError
+from fuzzyslam.maps.evidence import reading_masses, ring_evidence
+from fuzzyslam.maps.fgm import FgmBuilder, FrozenMapError, fuse_ranked
 from fuzzyslam.maps.flm import build_flm, build_flm_rings
 from fuzzyslam.maps.grid import BeliefMap, Grid
 from fuzzyslam.maps.hough import dominant_direction, flm_wall_direction, hough_accumulator
@@ -20,7 +20,7 @@ from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.quality import wall_quality
 from fuzzyslam.maps.references import extract_references
 from fuzzyslam.robot import sonar_mounts
-from fuzzyslam.se2 import between, wrap_angle_period
+from fuzzyslam.se2 import between, compose, wrap_angle_period
 
 FOV = np.deg2rad(25.0)
 RMAX = 6.5
@@ -258,3 +258,77 @@ def test_multi_ring_flm():
     rel = between(poses[-1], poses)
     wd = flm_wall_direction(build_flm_rings(rel, rings, RMAX, FOV, MOUNTS, params), params)
     assert angle_error_deg(wd.angle, -h) < 1.5
+
+
+# --- fast fusion (fuse_ranked) and tight cone enumeration -------------------------------
+
+
+@pytest.mark.parametrize("gamma", [0.0, 0.6, 1.0])
+def test_ranked_fusion_is_bitwise_the_ring_by_ring_path(gamma):
+    """add_rings (fuse_ranked: one step per rank of a cell's evidence) against the
+    reference path (one step per ring): the same operations per cell in the same order,
+    so the maps are identical to the last bit, forgetting included."""
+    rng = np.random.default_rng(int(10 * gamma))
+    params = MapParams(forgetting_gamma=gamma)
+    poses = room_path(60) + rng.normal(0.0, [0.05, 0.05, 0.03], (60, 3))  # some contradiction
+    ranges = np.array([ring_in_lines(p, MOUNTS, room_lines(*ROOM), FOV, RMAX) for p in poses])
+    ranges = ranges * (1 + 0.02 * rng.standard_normal(ranges.shape))
+    grid = FgmBuilder.for_path(poses[:, :2], params).grid
+    fast, ref = FgmBuilder(grid, params), FgmBuilder(grid, params)
+    fast.add_rings(poses, ranges, RMAX, FOV, MOUNTS)
+    for k in range(0, 60, 7):
+        ref.add_rings_reference(poses[k : k + 7], ranges[k : k + 7], RMAX, FOV, MOUNTS)
+    assert fast.cell_updates == ref.cell_updates > 0
+    assert (ref.map.m_c > 0.01).any()  # contradiction, so forgetting acts
+    for a, b in zip(
+        (fast.map.m_e, fast.map.m_o, fast.map.m_t, fast.map.m_c),
+        (ref.map.m_e, ref.map.m_o, ref.map.m_t, ref.map.m_c),
+        strict=True,
+    ):
+        np.testing.assert_array_equal(a, b)
+
+
+def test_fuse_ranked_steps_are_the_largest_multiplicity():
+    """A cell seen by n rings of a batch needs n steps; no more are taken."""
+    grid = Grid((0.0, 0.0), 0.1, (1, 5))
+    bm = BeliefMap.vacuous(grid)
+    ring_of = np.array([0, 0, 1, 2, 2, 2])
+    cells = np.array([0, 3, 3, 0, 3, 4])
+    e = np.full(6, 0.2)
+    o = np.full(6, 0.1)
+    steps = fuse_ranked(bm, ring_of, cells, (e, o, 1 - e - o, np.zeros(6)), 1.0)
+    assert steps == 3  # cell 3 is in rings 0, 1 and 2
+    assert bm.m_t.ravel()[1] == 1.0 and bm.m_t.ravel()[2] == 1.0  # untouched cells
+
+
+def test_cone_enumeration_misses_no_cell():
+    """rings_evidence (bounding boxes of cell centres) against a brute-force evaluation of
+    the same mass function on EVERY cell of the grid: the same cells, the same masses."""
+    rng = np.random.default_rng(5)
+    params = MapParams()
+    grid = Grid.centred(71, 0.1)
+    for trial in range(20):
+        fov = FOV if trial % 2 else np.deg2rad(rng.uniform(5.0, 80.0))
+        pose = np.array([rng.uniform(-0.5, 0.5), rng.uniform(-0.5, 0.5), rng.uniform(-3, 3)])
+        r = np.minimum(rng.uniform(0.3, 4.0, 16), RMAX)
+        r[rng.integers(0, 16, 3)] = RMAX
+        ev = ring_evidence(grid, pose, r, RMAX, fov, MOUNTS, params)
+        X, Y = grid.centres()
+        sensors = compose(np.repeat(pose[None], 16, 0), MOUNTS)
+        dx = X.ravel()[None, :] - sensors[:, 0:1]
+        dy = Y.ravel()[None, :] - sensors[:, 1:2]
+        rho = np.hypot(dx, dy)
+        phi = wrap_angle_period(np.arctan2(dy, dx) - sensors[:, 2:3], 2 * np.pi)
+        inside = np.abs(phi) <= fov / 2
+        m_e, m_o = reading_masses(rho, phi, r[:, None], (r < RMAX)[:, None], fov / 2, params)
+        m_e, m_o = np.where(inside, m_e, 0.0), np.where(inside, m_o, 0.0)
+        touched = np.flatnonzero(((m_e > 0) | (m_o > 0)).any(axis=0))
+        np.testing.assert_array_equal(np.sort(ev.cells), touched)
+        # combined masses of the brute force: product of commonalities over readings
+        q_e = np.prod(1 - m_o, axis=0)[touched]
+        q_o = np.prod(1 - m_e, axis=0)[touched]
+        q_t = np.prod(1 - m_e - m_o, axis=0)[touched]
+        order = np.argsort(ev.cells)
+        np.testing.assert_allclose(ev.masses[2][order], q_t, atol=1e-9)
+        np.testing.assert_allclose(ev.masses[0][order], q_e - q_t, atol=1e-9)
+        np.testing.assert_allclose(ev.masses[1][order], q_o - q_t, atol=1e-9)

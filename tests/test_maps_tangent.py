@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 from maps_synth import cone_ranges, corridor_lines, ring_in_lines, room_lines
 
-from fuzzyslam.maps.flm import build_flm, build_flm_rings
+from fuzzyslam.maps.flm import RecentRings, build_flm, build_flm_rings
 from fuzzyslam.maps.hough import flm_wall_direction
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.tangent import fit_walls, predict_ranges, readings_in_frame
@@ -155,3 +155,47 @@ def test_corner_is_ambiguous_and_corridor_is_not():
     straight = ring_in_lines(np.array([0.0, 0.1, 0.1]), MOUNTS, corridor_lines(0.0, 1.0), FOV, RMAX)
     ws = flm_wall_direction(build_flm(straight, RMAX, FOV, MOUNTS, params), params)
     assert not ws.ambiguous and ws.method == "tangent"
+
+
+def test_recent_rings_window():
+    """RecentRings keeps the last `count` rings within `window` s and builds the same FLM
+    as build_flm_rings with the relative poses; time going back starts afresh."""
+    params = MapParams()
+    lines = corridor_lines(0.0, 1.0)
+    path = np.array([[0.08 * k, 0.05, 0.1 + 0.01 * k] for k in range(10)])
+    rings = np.array([ring_in_lines(p, MOUNTS, lines, FOV, RMAX) for p in path])
+    rr = RecentRings(count=8, window=10.0)
+    for k in range(10):
+        rr.push(0.25 * k, path[k], rings[k], RMAX, FOV)
+    assert len(rr) == 8
+    want = build_flm_rings(between(path[-1], path[2:]), rings[2:], RMAX, FOV, MOUNTS, params)
+    got = rr.flm(MOUNTS, params)
+    np.testing.assert_array_equal(got.m_o, want.m_o)
+    np.testing.assert_allclose(got.readings.sensors, want.readings.sensors, atol=1e-12)
+    short = RecentRings(count=8, window=0.6)
+    for k in range(10):
+        short.push(0.25 * k, path[k], rings[k], RMAX, FOV)
+    assert len(short) == 3  # 1.75, 2.0, 2.25 s
+    short.push(0.0, path[0], rings[0], RMAX, FOV)
+    assert len(short) == 1
+
+
+def test_multi_ring_flm_at_a_corridor_end_is_ambiguous():
+    """8 rings approaching the end wall of a 2 m corridor (to 0.5 m from it): the end
+    wall's echoes (the other direction) flag the FLM ambiguous; mid-corridor they do not."""
+    params = MapParams()
+    lines = room_lines(-10.0, 0.0, 6.0, 2.0)  # a 2 m wide corridor closed at x = 6
+    h = np.deg2rad(3.0)
+
+    def flm_at(x_end: float):
+        path = np.array([[x_end - 0.6 + 0.075 * k, 1.05, h] for k in range(9)])
+        rings = np.array([ring_in_lines(p, MOUNTS, lines, FOV, RMAX) for p in path])
+        return flm_wall_direction(
+            build_flm_rings(between(path[-1], path), rings, RMAX, FOV, MOUNTS, params), params
+        )
+
+    end = flm_at(5.5)
+    assert end.ambiguous
+    mid = flm_at(0.0)
+    assert not mid.ambiguous and mid.method == "tangent"
+    assert err_deg(mid.angle, -h) < 0.05  # noise-free rings: the exact direction

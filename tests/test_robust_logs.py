@@ -376,22 +376,28 @@ def test_frame_glitches_are_counted_and_skipped(tiny: Tiny, tmp_path: Path) -> N
     assert s["lamps"] == tiny.run["lamps"]
 
 
-def test_stamps_back_in_time_are_counted(tiny: Tiny, tmp_path: Path) -> None:
+def test_stamps_back_in_time_and_repeated_are_counted(tiny: Tiny, tmp_path: Path) -> None:
     """Header stamps that go back in time: odometry is kept (its motion is real), a
-    frame is dropped; each is counted once, and the final pose barely moves."""
+    frame is dropped; repeated messages (same stamp) are dropped; each is counted once,
+    and the final pose barely moves (wheel angles are cumulative)."""
     js = Every(JOINTS, 25)
     img = Every(IMAGE, 17)
+    js_dup = Every(JOINTS, 33)
+    img_dup = Every(IMAGE, 21)
 
     def fault(m: LogMessage) -> list[Out]:
         if js(m):
             set_stamp(m.msg, m.t - 0.5)
         elif img(m):
             set_stamp(m.msg, m.t - 1.0)
+        elif js_dup(m) or img_dup(m):
+            return keep(m) * 2
         return keep(m)
 
     log = rewrite(tiny.log, tmp_path / "stamps.mcap", fault)
     s = run_json(tiny, log, tmp_path / "est")
     assert s["warnings"]["out_of_order"] == js.hits + img.hits
+    assert s["warnings"]["duplicate_stamps"] == js_dup.hits + img_dup.hits
     assert s["counts"]["frames"] == tiny.run["counts"]["frames"] - img.hits
     d = np.subtract(s["final_pose"][:2], tiny.run["final_pose"][:2])
     assert np.hypot(*d) < 3 * max(tiny.run["final_pose_sigma"][:2])
@@ -418,6 +424,8 @@ def test_odometry_gap_loses_no_motion(tiny: Tiny, tmp_path: Path) -> None:
         return [] if m.topic == JOINTS and 10.0 < m.t < 13.0 else keep(m)
 
     s = run_json(tiny, rewrite(tiny.log, tmp_path / "gap.mcap", fault), tmp_path / "est")
+    assert s["warnings"]["odometry_gaps"] == 1
+    assert s["filter_health"]["odometry_gap_s"] == pytest.approx(3.0, abs=0.11)
     d = np.subtract(s["final_pose"][:2], tiny.run["final_pose"][:2])
     assert np.hypot(*d) < 0.05
     assert s["counts"]["odometry"] < tiny.run["counts"]["odometry"] - 50
@@ -446,3 +454,34 @@ def test_flickering_lamps_make_no_duplicates(tiny: Tiny, tmp_path: Path) -> None
     assert s["counts"]["detections"] < tiny.run["counts"]["detections"] - 50
     d = np.subtract(s["final_pose"][:2], tiny.run["final_pose"][:2])
     assert np.hypot(*d) < 3 * max(tiny.run["final_pose_sigma"][:2]) + 0.02
+
+
+# -- filter health in the summary ---------------------------------------------------------
+
+
+def test_clean_run_is_healthy(tiny: Tiny) -> None:
+    h = tiny.run["filter_health"]
+    assert not h["diverged"] and h["p_repaired"] == 0
+    assert h["nis_windows"] >= 3 and h["nis_windows_out_of_bounds"] == 0
+    assert h["association_windows"] >= 3 and h["association_windows_out_of_bounds"] == 0
+    assert tiny.run["log_damage"]["truncated"] is False
+
+
+@pytest.mark.parametrize("scale", [0.9, 1.2])
+def test_divergence_is_detected_and_reported(tiny: Tiny, tmp_path: Path, scale: float) -> None:
+    """A wheel radius 10-20 % off in the filter's config: the odometry drifts faster than
+    its noise model admits, detections stop matching the mapped lamps and duplicates
+    pile up; the summary says the filter diverged (exit 0: the outputs are kept, but
+    flagged) instead of returning silent garbage."""
+    from fuzzyslam.config import load_config
+
+    r = load_config(tiny.config).robot.wheel_radius * scale
+    cfg = tmp_path / "wrong.yaml"
+    cfg.write_text(TINY_YAML + f"robot: {{wheel_radius: {r}}}\n", encoding="utf-8")
+    code, out, err = cli("run", tiny.log, "-o", tmp_path / "est", "--config", cfg)
+    assert code == 0, err
+    s = json.loads(out)
+    h = s["filter_health"]
+    assert h["diverged"] and 0 < h["diverged_at"] <= s["log_duration_s"] + 1e-6
+    assert h["association_windows_out_of_bounds"] >= 3
+    assert s["lamps"] > 3 * tiny.run["lamps"]  # what the flag warns about

@@ -70,12 +70,18 @@ def reading_masses(
 def cone_cells(
     grid: Grid, sensors: np.ndarray, r0: np.ndarray, r1: np.ndarray, half_angle: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """(piece index, iy, ix) of every grid cell in the bounding box of each annular sector
-    r0[i] <= rho <= r1[i], |phi| <= half_angle about sensor i's axis.
+    """(piece index, iy, ix) of candidate cells of each annular sector r0[i] <= rho <=
+    r1[i], |phi| <= half_angle about sensor i's axis: a superset of the cells whose
+    CENTRES lie in the sector (the caller applies the exact test).
 
-    The box spans the sector's two arcs (each sampled at 9 bearings), padded by one cell
-    and clipped to the grid. All boxes are enumerated at once with repeat/arange index
-    arithmetic (no loop over sectors or cells).
+    Rows: those of the sector's bounding box (its two arcs sampled at 9 bearings, padded
+    by r1 (1 - cos(w / 8)), the most an arc bulges between two samples). Per row, the
+    x-interval of the centres inside the disc rho <= r1 + pad and between the cone's two
+    edge rays (two half-planes: the wedge is convex for w < 90 deg); the inner radius is
+    not used. Paper log: 1.6 candidates per kept cell (5.8 with the whole-cell padded
+    boxes of the first version, 2.9 with tight boxes). All rows and cells are
+    enumerated at once with repeat/arange index arithmetic (no loop over sectors, rows or
+    cells; the loop is over the two edge rays).
     """
     n = len(sensors)
     if n == 0:
@@ -87,19 +93,43 @@ def cone_cells(
     ay = np.concatenate([sensors[:, 1:2] + r0[:, None] * s, sensors[:, 1:2] + r1[:, None] * s], 1)
     res, (ox, oy) = grid.resolution, grid.origin
     ny, nx = grid.shape
-    ix0 = np.clip(np.floor((ax.min(1) - ox) / res).astype(np.int64) - 1, 0, nx)
-    ix1 = np.clip(np.floor((ax.max(1) - ox) / res).astype(np.int64) + 2, 0, nx)
-    iy0 = np.clip(np.floor((ay.min(1) - oy) / res).astype(np.int64) - 1, 0, ny)
-    iy1 = np.clip(np.floor((ay.max(1) - oy) / res).astype(np.int64) + 2, 0, ny)
-    wx = np.maximum(ix1 - ix0, 0)
+    pad = np.asarray(r1, dtype=float) * (1.0 - np.cos(half_angle / 8.0)) + 1e-9
+    # cell ix has its centre at ox + (ix + 0.5) res: centres in [xmin, xmax] are
+    # ix in [ceil((xmin - ox) / res - 0.5), floor((xmax - ox) / res - 0.5)]
+    ix0 = np.clip(np.ceil((ax.min(1) - pad - ox) / res - 0.5).astype(np.int64), 0, nx)
+    ix1 = np.clip(np.floor((ax.max(1) + pad - ox) / res - 0.5).astype(np.int64) + 1, 0, nx)
+    iy0 = np.clip(np.ceil((ay.min(1) - pad - oy) / res - 0.5).astype(np.int64), 0, ny)
+    iy1 = np.clip(np.floor((ay.max(1) + pad - oy) / res - 0.5).astype(np.int64) + 1, 0, ny)
+    # rows of each box, then per row the x-interval of the cell centres that can lie in
+    # the sector: inside the disc rho <= r1 and between the cone's two edge rays
     wy = np.maximum(iy1 - iy0, 0)
-    count = wx * wy
+    nrow = int(wy.sum())
+    rp = np.repeat(np.arange(n), wy)
+    iy = iy0[rp] + np.arange(nrow) - np.repeat(np.cumsum(wy) - wy, wy)
+    dy = oy + (iy + 0.5) * res - sensors[rp, 1]
+    h2 = (r1[rp] + pad[rp]) ** 2 - dy * dy
+    h = np.sqrt(np.maximum(h2, 0.0))
+    lo, hi = -h, np.where(h2 >= 0.0, h, -np.inf)
+    eps = 1e-6  # the cone test is exact; the interval only has to contain its cells
+    edges = (1.0, -1.0) if half_angle < np.pi / 2 else ()  # a wider cone is not convex
+    for sign in edges:  # edge rays at axis + w (cells to its right), axis - w (left)
+        b = sensors[rp, 2] + sign * half_angle
+        ux, uy = np.cos(b), np.sin(b)
+        # inside: sign * (ux dy - uy dx) <= 0, i.e. sign * uy dx >= sign * ux dy
+        su, sv = sign * uy, sign * ux * dy
+        with np.errstate(divide="ignore", invalid="ignore"):
+            bound = sv / su
+        lo = np.where(su > 1e-12, np.maximum(lo, bound - eps), lo)
+        hi = np.where(su < -1e-12, np.minimum(hi, bound + eps), hi)
+        hi = np.where((np.abs(su) <= 1e-12) & (sv > eps), -np.inf, hi)
+    xs = sensors[rp, 0] - ox
+    a = np.clip(np.ceil((xs + lo) / res - 0.5), ix0[rp], ix1[rp]).astype(np.int64)
+    z = np.clip(np.floor((xs + np.maximum(hi, lo - res)) / res - 0.5) + 1, ix0[rp], ix1[rp])
+    count = np.maximum(z.astype(np.int64) - a, 0)
     total = int(count.sum())
-    rid = np.repeat(np.arange(n), count)
-    start = np.cumsum(count) - count
-    k = np.arange(total) - np.repeat(start, count)
-    w = np.maximum(wx[rid], 1)
-    return rid, iy0[rid] + k // w, ix0[rid] + k % w
+    row = np.repeat(np.arange(nrow), count)
+    k = np.arange(total) - np.repeat(np.cumsum(count) - count, count)
+    return rp[row], iy[row], a[row] + k
 
 
 @dataclass

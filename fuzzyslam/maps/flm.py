@@ -21,6 +21,7 @@ from fuzzyslam.maps.grid import BeliefMap, Grid
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.tangent import RingReadings, readings_in_frame
 from fuzzyslam.maps.tbm import clip_masses
+from fuzzyslam.se2 import between
 
 
 @dataclass
@@ -82,3 +83,64 @@ def build_flm_rings(
     b = FgmBuilder(flm_grid(params), params)
     b.add_rings(poses, ranges, max_range, fov, mounts)
     return LocalMap.of(b.map, readings_in_frame(poses, ranges, max_range, fov, mounts))
+
+
+class RecentRings:
+    """The last few rings with the robot's poses when they were taken, for multi-ring FLMs
+    (beyond the paper; see :func:`build_flm_rings`).
+
+    ``push`` one ring per firing with a pose from a smooth source (dead reckoning: its
+    relative error over 2 s is far below a ring's own noise; a filter estimate jumps at
+    its updates); ``flm()`` is the FLM of the rings of the last ``window`` seconds (at most
+    ``count``) placed in the newest ring's frame. Successive multi-ring FLMs share rings,
+    so their wall directions are correlated: feed a filter one of them every ``count``
+    rings, or inflate its noise accordingly.
+    """
+
+    def __init__(self, count: int = 8, window: float = 2.5) -> None:
+        if count < 1:
+            raise ValueError(f"count must be >= 1, got {count}")
+        self.count = int(count)
+        self.window = float(window)
+        self._t: list[float] = []
+        self._poses: list[np.ndarray] = []
+        self._ranges: list[np.ndarray] = []
+        self._rmax: list[np.ndarray] = []
+        self.fov = 0.0
+
+    def __len__(self) -> int:
+        return len(self._t)
+
+    def push(
+        self,
+        t: float,
+        pose: np.ndarray,
+        ranges: np.ndarray,
+        max_range: np.ndarray | float,
+        fov: float,
+    ) -> None:
+        ranges = np.asarray(ranges, dtype=float).ravel()
+        if self._t and (t < self._t[-1] or len(ranges) != len(self._ranges[-1])):
+            self.clear()  # time went back or the ring changed: start afresh
+        self._t.append(float(t))
+        self._poses.append(np.asarray(pose, dtype=float).reshape(3))
+        self._ranges.append(ranges)
+        self._rmax.append(np.broadcast_to(np.asarray(max_range, dtype=float), ranges.shape))
+        self.fov = float(fov)
+        while len(self._t) > self.count or self._t[-1] - self._t[0] > self.window:
+            for buf in (self._t, self._poses, self._ranges, self._rmax):
+                buf.pop(0)
+
+    def clear(self) -> None:
+        for buf in (self._t, self._poses, self._ranges, self._rmax):
+            buf.clear()
+
+    def flm(self, mounts: np.ndarray, params: MapParams | None = None) -> LocalMap:
+        """FLM of the kept rings in the newest ring's robot frame."""
+        if not self._t:
+            raise ValueError("no rings pushed")
+        poses = np.array(self._poses)
+        rel = between(poses[-1], poses)
+        return build_flm_rings(
+            rel, np.array(self._ranges), np.array(self._rmax), self.fov, mounts, params
+        )

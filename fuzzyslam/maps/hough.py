@@ -279,11 +279,13 @@ def flm_wall_direction(flm: BeliefMap, params: MapParams | None = None) -> WallD
     also gives the angle's standard deviation ``sigma``; a fit with fewer than three
     echoes, or moving more than ``tangent_max_shift_deg`` from the peak, is not used.
     With the refinement, ``ambiguous`` also flags rings whose echoes do not confirm the
-    peak (no fit, or one farther than ``tangent_max_shift_deg``) or confirm it only
-    loosely (sigma > ``tangent_max_sigma_deg``): junctions, corners, open space.
-    Simulated paper log, rings 0.5-1 m from a corridor end: 6.1 % gross (> 5 deg)
-    unflagged errors with the Hough ratio alone, 1.8 % with this flag; more than 1 m
-    from the ends, 1.4 % -> 0.3 % (at the cost of skipping 7-10 % of good rings).
+    peak, confirm it only loosely, or also support a second wall direction
+    (:func:`refine_tangent`): junctions, corners, open space. Simulated paper log, share
+    of rings with a gross (> 5 deg) error NOT flagged, by distance to the corridor's end:
+    one ring, 0.5-1 m: 6.1 % (Hough ratio alone) -> 1.2 %; beyond 1 m: 1.4 % -> 0.4 %
+    (12 % of the good mid-corridor rings are skipped); 8 rings (``build_flm_rings``),
+    0.5-1 m: 20 % -> 4.2 % (the other corridor's walls, 70-90 deg off), beyond 1.5 m:
+    0 % with 0.1 % skipped.
     """
     params = params if params is not None else MapParams()
     wd = map_wall_direction(
@@ -297,30 +299,44 @@ def flm_wall_direction(flm: BeliefMap, params: MapParams | None = None) -> WallD
 
 def refine_tangent(wd: WallDirection, readings, params: MapParams) -> WallDirection:
     """``wd`` with its angle refined by the tangent-line fit of ``readings``
-    (:class:`fuzzyslam.maps.tangent.RingReadings`), or unchanged if the fit fails."""
-    from fuzzyslam.maps.tangent import fit_walls
+    (:class:`fuzzyslam.maps.tangent.RingReadings`); see :func:`flm_wall_direction`.
+
+    Ambiguous (besides the Hough's own flag) when there is no fit (fewer than three
+    echoes, no convergence, or a fit farther than ``tangent_max_shift_deg`` from the
+    peak: the Hough angle is then kept), when the fit is loose (sigma >
+    ``tangent_max_sigma_deg``), or when the echoes the fit leaves out support walls of
+    the Hough's second direction with at least ``tangent_second_ratio`` times as many
+    echoes (a junction or a corner seen by several rings)."""
+    from fuzzyslam.maps.tangent import RingReadings, fit_walls
 
     if len(readings) < 3:
-        return wd
+        return replace(wd, ambiguous=True)
     psi0 = wd.angle + np.pi / 2
-    fit = fit_walls(
-        readings,
-        psi0,
-        sigma_frac=params.range_noise_frac,
-        quantum=params.range_quantum,
-        tolerance=params.tangent_tolerance,
-        delta_max=np.deg2rad(params.tangent_max_incidence_deg),
-    )
+    kw = {
+        "sigma_frac": params.range_noise_frac,
+        "quantum": params.range_quantum,
+        "tolerance": params.tangent_tolerance,
+        "delta_max": np.deg2rad(params.tangent_max_incidence_deg),
+    }
+    fit = fit_walls(readings, psi0, **kw)
     shift = float(np.abs(wrap_angle_period(fit.psi - psi0, np.pi)))
     if not fit.ok or shift > np.deg2rad(params.tangent_max_shift_deg):
         return replace(wd, ambiguous=True)
-    angle = float(np.mod(fit.psi - np.pi / 2, np.pi))
+    n1 = int(fit.inliers.sum())
+    second = False
+    rest = ~fit.inliers
+    if rest.sum() >= 3 and wd.second_strength > 0 and len(wd.peaks) > 1:
+        others = RingReadings(readings.sensors[rest], readings.ranges[rest], readings.half_angle)
+        fit2 = fit_walls(others, wd.peaks[-1].theta, **kw)
+        sep = abs(float(wrap_angle_period(fit2.psi - fit.psi, np.pi)))
+        far = sep >= np.deg2rad(params.ambiguity_separation_deg)
+        second = fit2.ok and far and fit2.inliers.sum() >= params.tangent_second_ratio * n1
     loose = fit.sigma > np.deg2rad(params.tangent_max_sigma_deg)
     return replace(
         wd,
-        angle=angle,
+        angle=float(np.mod(fit.psi - np.pi / 2, np.pi)),
         sigma=fit.sigma,
         method="tangent",
-        inliers=int(fit.inliers.sum()),
-        ambiguous=bool(wd.ambiguous or loose),
+        inliers=n1,
+        ambiguous=bool(wd.ambiguous or loose or second),
     )

@@ -48,7 +48,11 @@ Sonar evidence constants (models.md sec. 5, Oriolo, Ulivi & Vendittelli 1997) an
   ``tangent_max_shift_deg`` = 10: a fit that moves farther from the Hough peak is
   refused (the Hough angle is kept, flagged ambiguous); ``tangent_max_sigma_deg`` = 3:
   a fit less certain than this flags the ring ambiguous (2 deg flagged 12 % of good
-  mid-corridor rings, 3 deg 10 %, 4 deg 7 % but let 1.7 % gross errors through).
+  mid-corridor rings, 3 deg 10 %, 4 deg 7 % but let 1.7 % gross errors through);
+  ``tangent_second_ratio`` = 0.5: the echoes left out of the fit that support the
+  Hough's second direction flag a junction when they number at least half the fit's
+  (8-ring FLMs 0.5-1 m from a corridor end: unflagged wrong-corridor directions 20 % ->
+  4 %; mid-corridor rings unaffected).
 - ``segment_end_trim`` = 0.5 m: corridor regions stop short of the junctions, whose
   cells carry the next corridor's walls.
 - ``forgetting_gamma``: alpha = 1 - gamma * m(conflict) (models.md sec. 6).
@@ -92,6 +96,7 @@ class MapParams:
     tangent_max_incidence_deg: float = field(default=20.0, metadata={"min": 0.0, "max": 80.0})
     tangent_max_shift_deg: float = field(default=10.0, metadata={"min": 0.1, "max": 90.0})
     tangent_max_sigma_deg: float = field(default=3.0, metadata={"min": 0.01, "max": 90.0})
+    tangent_second_ratio: float = field(default=0.5, metadata={"min": 0.0, "max": 100.0})
     range_noise_frac: float = field(default=0.01, metadata={"min": 0.0, "max": 0.5})
     range_quantum: float = field(default=0.0254, metadata={"min": 0.0, "max": 1.0})
     ambiguity_ratio: float = field(default=0.85, metadata={"min": 0.0, "max": 1.0})

@@ -7,8 +7,8 @@ chunk once and reads only the wanted messages at the offsets given by the chunk'
 MessageIndex records (MCAP specification, "Chunk", "Message Index", "Chunk Index":
 https://mcap.dev/spec). It returns None (the caller falls back to ``LogReader``)
 when the file has no usable summary or its chunks overlap in time, so log-time
-order is always kept. JointState and Image, the messages the filter reads most, are
-decoded by small CDR readers (the rest by rosbags).
+order is always kept. JointState, Image and Range, the messages the filter reads most,
+are decoded by small CDR readers (the rest by rosbags).
 """
 
 from __future__ import annotations
@@ -118,8 +118,39 @@ def decode_image(buf: bytes | memoryview) -> ImageLite:
     return ImageLite(header, height, width, encoding, big, step, data)
 
 
-# fast decoders of the two frequent types; called only on little-endian CDR
-_DECODERS = {JOINT_STATE: decode_joint_state, "sensor_msgs/msg/Image": decode_image}
+@dataclass
+class RangeLite:
+    """sensor_msgs/Range fields (the sonar rings: 16 messages per ring)."""
+
+    header: _Header
+    radiation_type: int
+    field_of_view: float
+    min_range: float
+    max_range: float
+    range: float
+
+
+_RANGE_TAIL = struct.Struct("<ffff")
+
+
+def decode_range(buf: bytes | memoryview) -> RangeLite:
+    """Decode a little-endian CDR sensor_msgs/Range (header, radiation_type u8, then four
+    float32 aligned to 4: field_of_view, min_range, max_range, range)."""
+    o = 4
+    header, p = _read_header(buf, o)
+    kind = buf[o + p]
+    p += 1
+    p += -p % 4
+    fov, lo, hi, r = _RANGE_TAIL.unpack_from(buf, o + p)
+    return RangeLite(header, kind, fov, lo, hi, r)
+
+
+# fast decoders of the frequent types; called only on little-endian CDR
+_DECODERS = {
+    JOINT_STATE: decode_joint_state,
+    "sensor_msgs/msg/Image": decode_image,
+    "sensor_msgs/msg/Range": decode_range,
+}
 
 
 def _decompress(data: bytes, compression: str, size: int) -> bytes:

@@ -176,7 +176,8 @@ class LogInputs:
 
     def _ring_events(self) -> Iterator[Event]:
         topics = {self.cfg.topics.sonar(i): i for i in range(self.cfg.sonar.count)}
-        msgs = self.reader.messages(list(topics))
+        stream = indexed_messages(self.reader, list(topics))  # the fast path, as for odometry
+        msgs = stream if stream is not None else self.reader.messages(list(topics))
         for ring in group_rings(msgs, topics, self.cfg.sonar.count, stats=self.ring_stats):
             yield RingEvent(ring.t, ring)
 

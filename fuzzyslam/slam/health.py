@@ -1,0 +1,195 @@
+"""Numerical guards of the filter and a divergence monitor (issue 7).
+
+- :func:`solve_spd`: S^-1 b for an innovation covariance S that should be symmetric
+  positive definite, by Cholesky; a near-singular or indefinite S (a perfect
+  measurement of a perfectly known state, rounding) is regularised with the smallest
+  diagonal load that makes the factorisation succeed (Tikhonov; Golub & Van Loan,
+  "Matrix Computations", 4th ed., sec. 4.2.8 and 6.1), never inverted blindly.
+- :func:`repair_covariance`: the nearest symmetric matrix with eigenvalues >= a floor
+  (Higham, "Computing a nearest symmetric positive semidefinite matrix", Linear
+  Algebra Appl. 103, 1988: clip the eigenvalues of the symmetric part).
+- :class:`DivergenceMonitor`: normalised innovation squared (NIS) consistency test over
+  windows (Bar-Shalom, Li, Kirubarajan, "Estimation with Applications to Tracking and
+  Navigation", 2001, sec. 5.4.2): the sum of N NIS values of dof d is chi2(N d) when
+  the filter is consistent; a window whose sum exceeds the ``1 - alpha`` quantile is
+  out of bounds. Gated updates hide a diverged filter's large innovations (its
+  detections fail the gate and become new lamps instead), so a second test watches the
+  association rate: a window of detections, made while lamps are mapped, of which
+  fewer than ``min_association`` were associated is out of bounds too. ``patience``
+  consecutive out-of-bounds windows of either test mean divergence.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.stats import chi2
+
+
+def solve_spd(
+    s: np.ndarray, b: np.ndarray, rel_eps: float = 1e-12, abs_eps: float = 1e-15
+) -> tuple[np.ndarray, bool]:
+    """x = S^-1 b for symmetric S; returns (x, regularised).
+
+    Cholesky S = L L^T. S counts as near-singular when the factorisation fails or
+    min(diag L)^2 <= rel_eps max(diag L)^2 (a condition number beyond ~1/rel_eps); it is
+    then solved as S + e I with e = max(rel_eps trace(S)/k, abs_eps) (abs_eps in the
+    units of S: 1e-15 m^2 or rad^2), e grown tenfold until the factorisation succeeds.
+    """
+    s = 0.5 * (s + s.T)
+    if not (np.all(np.isfinite(s)) and np.all(np.isfinite(b))):
+        raise np.linalg.LinAlgError("innovation covariance or innovation is not finite")
+    try:
+        c = np.linalg.cholesky(s)
+        d = np.diagonal(c) ** 2
+        if d.min() > rel_eps * d.max():
+            return _cho_solve(c, b), False
+    except np.linalg.LinAlgError:
+        pass
+    k = s.shape[0]
+    eps = max(rel_eps * float(np.abs(np.trace(s))) / k, abs_eps)
+    for _ in range(40):
+        try:
+            c = np.linalg.cholesky(s + eps * np.eye(k))
+            return _cho_solve(c, b), True
+        except np.linalg.LinAlgError:
+            eps *= 10.0
+    raise np.linalg.LinAlgError("innovation covariance cannot be regularised")
+
+
+def _cho_solve(c: np.ndarray, b: np.ndarray) -> np.ndarray:
+    from scipy.linalg import solve_triangular
+
+    y = solve_triangular(c, b, lower=True)
+    return solve_triangular(c.T, y, lower=False)
+
+
+def is_spd(p: np.ndarray) -> bool:
+    """True if P is finite, exactly symmetric and its Cholesky factorisation succeeds."""
+    if not np.all(np.isfinite(p)) or not np.array_equal(p, p.T):
+        return False
+    try:
+        np.linalg.cholesky(p)
+    except np.linalg.LinAlgError:
+        return False
+    return True
+
+
+def repair_covariance(p: np.ndarray, floor: float = 1e-12) -> tuple[np.ndarray, bool]:
+    """(P', repaired): P itself if symmetric positive definite, else its nearest symmetric
+    matrix with eigenvalues >= ``floor`` (relative to the largest): V max(L, f) V^T."""
+    if is_spd(p):
+        return p, False
+    sym = 0.5 * (p + p.T)
+    sym = np.where(np.isfinite(sym), sym, 0.0)
+    w, v = np.linalg.eigh(sym)
+    f = floor * max(float(np.abs(w).max()), 1e-300)
+    out = (v * np.maximum(w, f)) @ v.T
+    return 0.5 * (out + out.T), True
+
+
+@dataclass
+class _Windows:
+    """Consecutive windows of one test: counts, the current streak, the spans out of bounds."""
+
+    windows: int = 0
+    out_of_bounds: int = 0
+    streak: int = 0
+    spans: list[tuple[float, float]] = field(default_factory=list)
+
+    def close(self, t0: float, t1: float, bad: bool) -> int:
+        self.windows += 1
+        if not bad:
+            self.streak = 0
+            return 0
+        self.out_of_bounds += 1
+        self.streak += 1
+        if self.streak == 1:
+            self.spans.append((t0, t1))
+        else:
+            self.spans[-1] = (self.spans[-1][0], t1)
+        return self.streak
+
+
+@dataclass
+class DivergenceMonitor:
+    """Windowed NIS and association-rate tests (module docstring).
+
+    ``observe(t, nis, dof)`` per update; ``observe_frame(t, detections, associated)``
+    per camera frame taken while lamps are mapped. ``diverged`` once ``patience``
+    consecutive windows of one test are out of bounds.
+    """
+
+    window: int = 50
+    alpha: float = 1e-3
+    patience: int = 3
+    assoc_window: int = 100
+    min_association: float = 0.5
+    diverged_at: float | None = None
+    worst_ratio: float = 0.0
+    nis: _Windows = field(default_factory=_Windows)
+    assoc: _Windows = field(default_factory=_Windows)
+    _sum: float = 0.0
+    _dof: int = 0
+    _n: int = 0
+    _t0: float = 0.0
+    _det: int = 0
+    _ok: int = 0
+    _ta: float = 0.0
+
+    def observe(self, t: float, nis: float, dof: int) -> None:
+        """One update's NIS (``dof`` its degrees of freedom)."""
+        if self._n == 0:
+            self._t0 = t
+        self._sum += nis if np.isfinite(nis) else 1e6
+        self._dof += dof
+        self._n += 1
+        if self._n >= self.window:
+            bound = float(chi2.ppf(1.0 - self.alpha, self._dof))
+            ratio = self._sum / bound
+            self.worst_ratio = max(self.worst_ratio, ratio)
+            self._streak(t, self.nis.close(self._t0, t, ratio > 1.0))
+            self._sum, self._dof, self._n = 0.0, 0, 0
+
+    def observe_frame(self, t: float, detections: int, associated: int) -> None:
+        """One frame's detections and how many were associated with mapped lamps."""
+        if detections <= 0:
+            return
+        if self._det == 0:
+            self._ta = t
+        self._det += detections
+        self._ok += associated
+        if self._det >= self.assoc_window:
+            bad = self._ok < self.min_association * self._det
+            self._streak(t, self.assoc.close(self._ta, t, bad))
+            self._det, self._ok = 0, 0
+
+    def _streak(self, t: float, streak: int) -> None:
+        if streak >= self.patience and self.diverged_at is None:
+            self.diverged_at = t
+
+    @property
+    def diverged(self) -> bool:
+        return self.diverged_at is not None
+
+    @property
+    def windows(self) -> int:
+        return self.nis.windows
+
+    @property
+    def out_of_bounds(self) -> int:
+        return self.nis.out_of_bounds
+
+    def summary(self) -> dict:
+        spans = sorted(self.nis.spans + self.assoc.spans)
+        return {
+            "nis_windows": self.nis.windows,
+            "nis_windows_out_of_bounds": self.nis.out_of_bounds,
+            "nis_worst_window_ratio": round(self.worst_ratio, 3),
+            "association_windows": self.assoc.windows,
+            "association_windows_out_of_bounds": self.assoc.out_of_bounds,
+            "diverged": self.diverged,
+            "diverged_at": self.diverged_at,
+            "out_of_bounds_spans": [[round(a, 3), round(b, 3)] for a, b in spans[:5]],
+        }
