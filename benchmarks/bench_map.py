@@ -7,10 +7,9 @@ Usage::
 Without LOG it simulates the paper scenario into a temporary directory. Without a
 trajectory the log's ground truth is used. Prints one JSON object:
 
-- ``fusion``: cell updates (reading x cell evidence terms) per second on the rings up to
-  the freeze, and the fusion time of the whole FGM, for the reference path
-  (``add_rings_reference``, one vectorised step per ring, batches of 64) and the default
-  (``add_rings``: ``fuse_ranked``, batches of 256), best of 3;
+- ``fusion``: cell updates (reading x cell evidence terms) per second of FgmBuilder.add_rings
+  (batches of 64 rings, best of 3) on the rings up to the freeze, and the fusion time of
+  the whole FGM (the machine's load matters: compare figures taken together);
 - ``stage``: wall time of the map stage without figures (log decoding included);
 - ``references``: each corridor's reference angle error against the true axis (deg);
 - ``wall_quality``: precision/recall of wall cells within one cell of the true walls;
@@ -85,31 +84,20 @@ def main() -> None:
     t, p = read_tum(tum)
     poses = interpolate_poses(times, t, p)
 
-    def fuse(method: str, batch: int) -> tuple[FgmBuilder, float]:
-        best = np.inf
-        for _ in range(3):
-            b = FgmBuilder.for_path(poses[:, :2], params)
-            add = getattr(b, method)
-            t0 = time.perf_counter()
-            for k in range(0, len(times), batch):
-                sl = slice(k, k + batch)
-                add(poses[sl], ranges[sl], rmax[sl], fov, mounts)
-            best = min(best, time.perf_counter() - t0)
-        return b, best
-
-    fusion = {}
-    for label, method, batch in (
-        ("ring_by_ring_64", "add_rings_reference", 64),
-        ("ranked_256", "add_rings", 256),
-    ):
-        b, sec = fuse(method, batch)
-        fusion[label] = {
-            "rings": len(times),
-            "cell_updates": b.cell_updates,
-            "seconds": sec,
-            "cell_updates_per_second": b.cell_updates / sec,
-            "rings_per_second": len(times) / sec,
-        }
+    best = np.inf
+    for _ in range(3):
+        b = FgmBuilder.for_path(poses[:, :2], params)
+        t0 = time.perf_counter()
+        for k in range(0, len(times), 64):
+            b.add_rings(poses[k : k + 64], ranges[k : k + 64], rmax[k : k + 64], fov, mounts)
+        best = min(best, time.perf_counter() - t0)
+    fusion = {
+        "rings": len(times),
+        "cell_updates": b.cell_updates,
+        "seconds": best,
+        "cell_updates_per_second": b.cell_updates / best,
+        "rings_per_second": len(times) / best,
+    }
 
     t0 = time.perf_counter()
     s = build_map(log, tum, tmp / "fgm", cfg, MapOptions(figures=False))

@@ -9,7 +9,9 @@ from __future__ import annotations
 import contextlib
 import os
 import shutil
+import signal
 import tempfile
+import threading
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
@@ -137,14 +139,52 @@ class OutputDir:
             if exc_type is None:
                 items = sorted(self.tmp.rglob("*"))
                 _refuse_inputs(self.path / i.relative_to(self.tmp) for i in items if i.is_file())
-                self.path.mkdir(exist_ok=True)
-                for item in items:
-                    rel = item.relative_to(self.tmp)
-                    dest = self.path / rel
-                    if item.is_dir():
-                        dest.mkdir(parents=True, exist_ok=True)
-                    else:
-                        dest.parent.mkdir(parents=True, exist_ok=True)
-                        os.replace(item, dest)
+                with _deferred_interrupts():
+                    self._move(items)
         finally:
             shutil.rmtree(self.tmp, ignore_errors=True)
+
+    def _move(self, items: list[Path]) -> None:
+        """A new directory: one atomic rename of the whole staging directory. An existing
+        one: file by file (each ``os.replace`` atomic), Ctrl-C deferred until done."""
+        assert self.tmp is not None
+        if not self.path.exists():
+            umask = os.umask(0)
+            os.umask(umask)
+            os.chmod(self.tmp, 0o777 & ~umask)  # mkdtemp made it private
+            with contextlib.suppress(OSError):
+                os.rename(self.tmp, self.path)
+                return
+        self.path.mkdir(exist_ok=True)
+        for item in items:
+            dest = self.path / item.relative_to(self.tmp)
+            if item.is_dir():
+                dest.mkdir(parents=True, exist_ok=True)
+            else:
+                dest.parent.mkdir(parents=True, exist_ok=True)
+                os.replace(item, dest)
+
+
+@contextlib.contextmanager
+def _deferred_interrupts() -> Iterator[None]:
+    """Hold SIGINT/SIGTERM while outputs are moved into place, then deliver them, so an
+    interruption never leaves a mix of new and old files (main thread only)."""
+    if threading.current_thread() is not threading.main_thread():
+        yield
+        return
+    caught: list[tuple[int, object]] = []
+    old = {}
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        old[sig] = signal.getsignal(sig)
+        signal.signal(sig, lambda signum, frame: caught.append((signum, frame)))
+    try:
+        yield
+    finally:
+        for sig, handler in old.items():
+            signal.signal(sig, handler)
+        for signum, frame in caught[:1]:
+            handler = old[signum]
+            if callable(handler):
+                handler(signum, frame)
+            elif handler == signal.SIG_DFL:
+                os.kill(os.getpid(), signum)

@@ -626,7 +626,7 @@ def test_make_aids_loads_and_checks_map_dir(room, tmp_path):
     for a in [aid, *aids]:
         a.write(out)
     assert sorted(p.name for p in out.iterdir()) == [
-        "changes.csv", "heading_fixes.csv", "pose_fixes.csv"
+        "changes.csv", "changes.png", "heading_fixes.csv", "pose_fixes.csv"
     ]  # fmt: skip
     fm = load_frozen_map(tmp_path / "ok")
     assert np.array_equal(fm.fgm.m_o, fgm.m_o) and fm.log_id == "world-x"
@@ -646,3 +646,55 @@ def test_make_aids_loads_and_checks_map_dir(room, tmp_path):
         make_aids(tmp_path / "bad", "pose", cfg)
     with pytest.raises(InputError, match="does not exist"):
         make_aids(tmp_path / "missing", "pose", cfg)
+
+
+# --- what the fixes need from the SLAM stage ----------------------------------------------
+
+
+def test_ekf_inflate_robot_adds_q_to_robot_block_only():
+    from fuzzyslam.slam.ekf import EkfSlam
+
+    ekf = EkfSlam([0.0, 0.0, 0.1], np.diag([1e-4, 2e-4, 1e-5]), [1e-4] * 6)
+    ekf.add_lamp([1.0, 0.5], np.eye(2) * 1e-3)
+    before = ekf.P.copy()
+    q = np.array([[0.01, 0.002, 0.0], [0.002, 0.02, 0.0], [0.0, 0.0, 0.03]])
+    ekf.inflate_robot(q)
+    after = ekf.P
+    assert np.allclose(after[:3, :3] - before[:3, :3], q)
+    assert np.array_equal(after[3:, :], before[3:, :]) and np.array_equal(
+        after[:3, 3:], before[:3, 3:]
+    )
+    assert np.array_equal(after, after.T) and np.linalg.eigvalsh(after).min() > 0
+    with pytest.raises(ValueError):
+        ekf.inflate_robot(np.diag([0.0, 0.0, -1.0]))
+
+
+def test_suspect_pose_defers_new_lamps():
+    """While an aid flags the pose suspect (an unseen bump), run creates no lamp."""
+    from fuzzyslam.slam.params import SlamParams
+    from fuzzyslam.slam.runner import Frame, SlamRunner
+
+    class Flag:
+        start_time = 0.0
+        pose_suspect = True
+
+    z = np.array([[1.0, 0.3]])
+    cov = np.eye(2)[None] * 1e-4
+    frames = [Frame(0.2 * k, z, cov) for k in range(1, 8)]
+    flagged = SlamRunner(SlamParams(), np.zeros(3), [Flag()]).run(frames)
+    free = SlamRunner(SlamParams(), np.zeros(3), []).run(frames)
+    assert free.counts["lamps_created"] == 1 and len(free.lamps) == 1
+    assert flagged.counts["lamps_created"] == 0 and flagged.counts["lamps_deferred"] == 7
+
+
+def test_heading_aid_flags_suspect_pose_until_a_fix_agrees():
+    wall = SimpleNamespace(angle=0.0, strength=3.0, ambiguous=False)
+    refs = [corridor_ref(0.0, 0)]
+    p = FixParams(recover_after=0)
+    ekf = ToyEkf([0.0, 0.0, math.radians(10)], np.diag([1e-4, 1e-4, (0.5 * DEG) ** 2]))
+    aid = HeadingFixAid(refs, p, lambda r, m: None, lambda flm: wall, 0.0)
+    aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
+    assert aid.decisions[-1].reason == "gated" and aid.pose_suspect
+    ekf.x[2] = math.radians(0.3)
+    aid.on_ring(2.0, ring(2.0), MOUNTS, ekf)
+    assert aid.decisions[-1].reason == "ok" and not aid.pose_suspect

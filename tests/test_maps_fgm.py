@@ -12,7 +12,7 @@ from hypothesis import strategies as st
 from maps_synth import corridor_lines, ring_in_lines, room_lines
 
 from fuzzyslam.maps.evidence import reading_masses, ring_evidence
-from fuzzyslam.maps.fgm import FgmBuilder, FrozenMapError, fuse_ranked
+from fuzzyslam.maps.fgm import FgmBuilder, FrozenMapError
 from fuzzyslam.maps.flm import build_flm, build_flm_rings
 from fuzzyslam.maps.grid import BeliefMap, Grid
 from fuzzyslam.maps.hough import dominant_direction, flm_wall_direction, hough_accumulator
@@ -260,45 +260,32 @@ def test_multi_ring_flm():
     assert angle_error_deg(wd.angle, -h) < 1.5
 
 
-# --- fast fusion (fuse_ranked) and tight cone enumeration -------------------------------
+# --- batched fusion with forgetting and the cone enumeration ------------------------------
 
 
 @pytest.mark.parametrize("gamma", [0.0, 0.6, 1.0])
-def test_ranked_fusion_is_bitwise_the_ring_by_ring_path(gamma):
-    """add_rings (fuse_ranked: one step per rank of a cell's evidence) against the
-    reference path (one step per ring): the same operations per cell in the same order,
-    so the maps are identical to the last bit, forgetting included."""
+def test_batched_fusion_is_bitwise_ring_by_ring_with_forgetting(gamma):
+    """add_rings over batches (one evidence pass per batch) against add_ring per ring,
+    with contradicting (noisy) rings so that forgetting acts: identical to the last bit."""
     rng = np.random.default_rng(int(10 * gamma))
     params = MapParams(forgetting_gamma=gamma)
-    poses = room_path(60) + rng.normal(0.0, [0.05, 0.05, 0.03], (60, 3))  # some contradiction
+    poses = room_path(60) + rng.normal(0.0, [0.05, 0.05, 0.03], (60, 3))
     ranges = np.array([ring_in_lines(p, MOUNTS, room_lines(*ROOM), FOV, RMAX) for p in poses])
     ranges = ranges * (1 + 0.02 * rng.standard_normal(ranges.shape))
     grid = FgmBuilder.for_path(poses[:, :2], params).grid
-    fast, ref = FgmBuilder(grid, params), FgmBuilder(grid, params)
-    fast.add_rings(poses, ranges, RMAX, FOV, MOUNTS)
-    for k in range(0, 60, 7):
-        ref.add_rings_reference(poses[k : k + 7], ranges[k : k + 7], RMAX, FOV, MOUNTS)
-    assert fast.cell_updates == ref.cell_updates > 0
-    assert (ref.map.m_c > 0.01).any()  # contradiction, so forgetting acts
+    batch, one = FgmBuilder(grid, params), FgmBuilder(grid, params)
+    for k in range(0, 60, 25):
+        batch.add_rings(poses[k : k + 25], ranges[k : k + 25], RMAX, FOV, MOUNTS)
+    for p, r in zip(poses, ranges, strict=True):
+        one.add_ring(p, r, RMAX, FOV, MOUNTS)
+    assert batch.cell_updates == one.cell_updates > 0
+    assert (one.map.m_c > 0.01).any()  # contradiction, so forgetting acts
     for a, b in zip(
-        (fast.map.m_e, fast.map.m_o, fast.map.m_t, fast.map.m_c),
-        (ref.map.m_e, ref.map.m_o, ref.map.m_t, ref.map.m_c),
+        (batch.map.m_e, batch.map.m_o, batch.map.m_t, batch.map.m_c),
+        (one.map.m_e, one.map.m_o, one.map.m_t, one.map.m_c),
         strict=True,
     ):
         np.testing.assert_array_equal(a, b)
-
-
-def test_fuse_ranked_steps_are_the_largest_multiplicity():
-    """A cell seen by n rings of a batch needs n steps; no more are taken."""
-    grid = Grid((0.0, 0.0), 0.1, (1, 5))
-    bm = BeliefMap.vacuous(grid)
-    ring_of = np.array([0, 0, 1, 2, 2, 2])
-    cells = np.array([0, 3, 3, 0, 3, 4])
-    e = np.full(6, 0.2)
-    o = np.full(6, 0.1)
-    steps = fuse_ranked(bm, ring_of, cells, (e, o, 1 - e - o, np.zeros(6)), 1.0)
-    assert steps == 3  # cell 3 is in rings 0, 1 and 2
-    assert bm.m_t.ravel()[1] == 1.0 and bm.m_t.ravel()[2] == 1.0  # untouched cells
 
 
 def test_cone_enumeration_misses_no_cell():

@@ -200,3 +200,50 @@ def test_interrupted_run_keeps_the_previous_outputs(monkeypatch, tmp_path: Path,
     code, out, _ = cli("run", log, "-o", d, "--config", cfg)
     assert code == 0 and (d / "trajectory.tum").read_bytes() != before["trajectory.tum"]
     assert (d / "notes.txt").read_bytes() == before["notes.txt"]
+
+
+def test_output_in_a_missing_directory(tmp_path: Path, tiny_log) -> None:
+    cfg, log = tiny_log
+    for args, named in (
+        (["simulate", cfg, "-o", tmp_path / "no" / "x.mcap"], tmp_path / "no" / "x.mcap"),
+        (["run", log, "-o", tmp_path / "no" / "est", "--config", cfg], tmp_path / "no" / "est"),
+    ):
+        code, _, stderr = cli(*args)
+        lines = error_lines(stderr)
+        assert code == 3 and len(lines) == 1 and lines[0].startswith(f"fuzzyslam: error: {named}")
+        assert "does not exist" in lines[0]
+    assert sorted(tmp_path.iterdir()) == []
+
+
+def test_outputs_move_into_place_whole(tmp_path: Path) -> None:
+    """A new output directory appears by one rename with the usual permissions; a
+    Ctrl-C while outputs move into an existing one is delivered only after the move."""
+    from fuzzyslam.fileio import OutputDir
+
+    fresh = tmp_path / "fresh"
+    with OutputDir(fresh) as tmp:
+        (tmp / "a.txt").write_text("a", encoding="utf-8")
+    umask = os.umask(0)
+    os.umask(umask)
+    assert fresh.stat().st_mode & 0o777 == 0o777 & ~umask
+    assert [p.name for p in fresh.iterdir()] == ["a.txt"] and not leftovers(tmp_path)
+
+    import fuzzyslam.fileio as fileio
+
+    real_move = OutputDir._move
+
+    def move_with_interrupt(self, items):
+        os.kill(os.getpid(), signal.SIGINT)  # arrives while the files move
+        real_move(self, items)
+
+    old = fresh / "a.txt"
+    with pytest.raises(KeyboardInterrupt):
+        with pytest.MonkeyPatch.context() as mp:
+            mp.setattr(fileio.OutputDir, "_move", move_with_interrupt)
+            with OutputDir(fresh) as tmp:
+                for name in ("a.txt", "b.txt", "c.txt"):
+                    (tmp / name).write_text("new", encoding="utf-8")
+    # the interrupt came after every file was in place: no mix of old and new
+    assert sorted(p.name for p in fresh.iterdir()) == ["a.txt", "b.txt", "c.txt"]
+    assert all(p.read_text(encoding="utf-8") == "new" for p in fresh.iterdir())
+    assert old.read_text(encoding="utf-8") == "new" and not leftovers(tmp_path)

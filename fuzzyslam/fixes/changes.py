@@ -13,7 +13,8 @@ pose error does not fire. Cells with conflict above a threshold are grouped with
 ``cv2.connectedComponentsWithStats`` (8-connectivity, on the mask dilated by
 ``change_link_cells`` so that the fragments of one object join); components of at least
 ``change_min_cells`` conflicting cells are detections, at their conflict-weighted
-centroid; size is the component's larger bounding-box side (m).
+centroid; size is the component's larger bounding-box side (m). The plug-in writes
+``changes.csv``, ``changes.png`` (detections over the FGM) and ``/slam/changes``.
 """
 
 from __future__ import annotations
@@ -131,6 +132,7 @@ class ChangeDetector:
         start_time: float = 0.0,
     ) -> None:
         self.grid = fgm.grid
+        self.fgm = fgm
         self.params = params
         self.free = free_space(fgm, params.change_erode_cells)
         self.flm_source = flm_source
@@ -169,6 +171,7 @@ class ChangeDetector:
 
     def write(self, outdir: Path) -> None:
         write_changes(Path(outdir) / "changes.csv", self.changes)
+        draw_changes(Path(outdir) / "changes.png", self.fgm, self.changes)
 
     def messages(self, topics: Any) -> list[tuple[str, str, Any, float]]:
         """``/slam/changes`` (topics.slam_changes) for estimates.mcap: one MarkerArray per
@@ -191,6 +194,35 @@ def change_messages(changes: Sequence[Change], topic: str) -> list[tuple[str, st
         ]  # fmt: skip
         out.append((topic, M.MARKER_ARRAY, M.marker_array(markers), float(t)))
     return out
+
+
+def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change]) -> None:
+    """changes.png: the frozen FGM (pignistic occupancy, grey) with every detection drawn
+    over it (red, coloured by time from light to dark)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    g = fgm.grid
+    ny, nx = g.shape
+    x0, y0 = g.origin
+    extent = (x0, x0 + nx * g.resolution, y0, y0 + ny * g.resolution)
+    occ = fgm.m_o + 0.5 * fgm.m_t
+    fig, ax = plt.subplots(figsize=(8, 6), dpi=100)
+    ax.imshow(occ, origin="lower", extent=extent, cmap="gray_r", vmin=0, vmax=1)
+    if changes:
+        xy = np.array([[c.x, c.y] for c in changes])
+        t = np.array([c.t for c in changes])
+        sc = ax.scatter(xy[:, 0], xy[:, 1], c=t, cmap="autumn_r", s=12, edgecolors="none")
+        fig.colorbar(sc, ax=ax, label="time (s)")
+    ax.set_title(f"change detections ({len(changes)}) over the frozen FGM")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_aspect("equal")
+    with atomic_path(path) as tmp:
+        fig.savefig(tmp, format="png", bbox_inches="tight")
+    plt.close(fig)
 
 
 def write_changes(path: Path, changes: Sequence[Change]) -> None:

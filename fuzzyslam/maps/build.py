@@ -187,7 +187,7 @@ def build_map(
     poses = interpolate_poses(times, t_traj, p_traj)
     builder = FgmBuilder.for_path(poses[:, :2], params)
     t_build = time.perf_counter()
-    batch = 256  # rings per vectorised pass (fgm.fuse_ranked); fastest on the paper log
+    batch = 64
     with Progress(len(times), "map: fusing sonar rings") as bar:
         for k in range(0, len(times), batch):  # batches of rings, in time order
             sl = slice(k, k + batch)

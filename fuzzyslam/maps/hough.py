@@ -282,8 +282,8 @@ def flm_wall_direction(flm: BeliefMap, params: MapParams | None = None) -> WallD
     peak, confirm it only loosely, or also support a second wall direction
     (:func:`refine_tangent`): junctions, corners, open space. Simulated paper log, share
     of rings with a gross (> 5 deg) error NOT flagged, by distance to the corridor's end:
-    one ring, 0.5-1 m: 6.1 % (Hough ratio alone) -> 1.2 %; beyond 1 m: 1.4 % -> 0.4 %
-    (12 % of the good mid-corridor rings are skipped); 8 rings (``build_flm_rings``),
+    one ring, 0.5-1 m: 6.1 % (Hough ratio alone) -> 1.2 %; beyond 1 m: 1.7 % -> 0.6 %
+    (about 10 % of the good mid-corridor rings are skipped); 8 rings (``build_flm_rings``),
     0.5-1 m: 20 % -> 4.2 % (the other corridor's walls, 70-90 deg off), beyond 1.5 m:
     0 % with 0.1 % skipped.
     """
@@ -301,16 +301,19 @@ def refine_tangent(wd: WallDirection, readings, params: MapParams) -> WallDirect
     """``wd`` with its angle refined by the tangent-line fit of ``readings``
     (:class:`fuzzyslam.maps.tangent.RingReadings`); see :func:`flm_wall_direction`.
 
-    Ambiguous (besides the Hough's own flag) when there is no fit (fewer than three
-    echoes, no convergence, or a fit farther than ``tangent_max_shift_deg`` from the
-    peak: the Hough angle is then kept), when the fit is loose (sigma >
-    ``tangent_max_sigma_deg``), or when the echoes the fit leaves out support walls of
-    the Hough's second direction with at least ``tangent_second_ratio`` times as many
-    echoes (a junction or a corner seen by several rings)."""
+    With fewer than three echoes ``wd`` is returned as it is. Ambiguous (besides the
+    Hough's own flag) when there is no fit (no convergence, or a fit farther than
+    ``tangent_max_shift_deg`` from the peak: the Hough angle is then kept), when the fit
+    is loose (sigma > ``tangent_max_sigma_deg``), or when the echoes the fit leaves out
+    support walls of the Hough's second direction (at least ``ambiguity_separation_deg``
+    from the first) with at least ``tangent_second_ratio`` times as many echoes (a
+    junction or a corner). Trying the perpendicular direction as well flagged 30-50 % of
+    the mid-corridor rings (bounced echoes fit some perpendicular line), so it is not
+    done."""
     from fuzzyslam.maps.tangent import RingReadings, fit_walls
 
-    if len(readings) < 3:
-        return replace(wd, ambiguous=True)
+    if len(readings) < 3:  # too few echoes to fit (or an FLM made otherwise): the Hough's
+        return wd
     psi0 = wd.angle + np.pi / 2
     kw = {
         "sigma_frac": params.range_noise_frac,

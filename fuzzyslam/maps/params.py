@@ -39,8 +39,8 @@ Sonar evidence constants (models.md sec. 5, Oriolo, Ulivi & Vendittelli 1997) an
   the walls bias a line fit: 0.8 deg against 2.0 deg mean error on analytic rings).
 - ``flm_refine`` = tangent (beyond the paper, :mod:`fuzzyslam.maps.tangent`): the FLM's
   Hough direction is refined by a least-squares fit of the walls' common tangent to the
-  ring's echo circles. Simulated paper log, rings in corridors: 1.37 deg mean |error|,
-  std 2.0 deg per ring against 2.2 / 2.8 for the Hough alone; 8 rings placed by
+  ring's echo circles. Simulated paper log, rings in corridors: 1.18 deg mean |error|,
+  std 1.57 deg per ring against 2.23 / 2.81 for the Hough alone; 8 rings placed by
   odometry (``build_flm_rings``): 0.35 / 0.44 deg. ``tangent_tolerance`` = 6 cm: outlier
   cut on the range residual (about 5 sigma of 1 % noise + 1-inch quantisation at 1 m;
   3 cm gave 1.48, 9 cm 1.38 deg); ``tangent_max_incidence_deg`` = 20: a wall farther

@@ -2,8 +2,12 @@
 
 A complete file is read through its summary and index, in log-time order. A file
 whose summary is missing or damaged (a robot that lost power mid-recording) is
-read record by record as far as it is intact; ``truncated`` and ``lost_bytes``
-say how much was lost. A file that is not MCAP is one clear InputError.
+read record by record, in file order, as far as it is intact: a whole record that
+fails to parse (a corrupt chunk) is skipped and counted, and a chunk cut off by the
+end of the file gives the messages of its intact compressed blocks (zstd and lz4
+frames decode block by block). ``damage()`` says how much was lost (``truncated``,
+``lost_bytes``, ``salvaged_messages``, ``damaged_records``, ``undecodable``). A file
+that is not MCAP is one clear InputError.
 """
 
 from __future__ import annotations
