@@ -314,6 +314,16 @@ def test_ambiguous_corridor_fix_is_skipped_not_applied():
     aid = HeadingFixAid(close, p, lambda r, m: None, lambda flm: wall, 0.0)
     aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
     assert aid.decisions[-1].reason == "ambiguous_heading" and ekf.updates == 0
+    # a FLM with two wall directions: skipped in a corridor; at a junction it is used
+    # (junction_walls) since every corner corridor's comb competes, or skipped (off)
+    two = SimpleNamespace(angle=0.05, strength=3.0, ambiguous=True)
+    for refs_k, jw, want in ((refs[:1], True, "ambiguous_wall"), (refs, True, "ok"),
+                             (refs, False, "ambiguous_wall")):  # fmt: skip
+        ekf = ToyEkf([0.0, 0.0, -0.05], np.diag([0.01, 0.01, (5 * DEG) ** 2]))
+        q = FixParams(junction_margin=1.0, junction_walls=jw)
+        aid = HeadingFixAid(refs_k, q, lambda r, m: None, lambda flm: two, 0.0)
+        aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
+        assert aid.decisions[-1].reason == want
     # a corner just outside both regions counts as a junction; far away: no corridor
     r0 = corridor_ref(0.0, 0)
     for xy, want in (([20.5, 0.0], "ok"), ([23.0, 0.0], "no_corridor")):
@@ -698,3 +708,18 @@ def test_heading_aid_flags_suspect_pose_until_a_fix_agrees():
     ekf.x[2] = math.radians(0.3)
     aid.on_ring(2.0, ring(2.0), MOUNTS, ekf)
     assert aid.decisions[-1].reason == "ok" and not aid.pose_suspect
+
+
+def test_pose_fix_skipped_while_filter_knows_better_than_the_map(room):
+    """Below pose_map_sigma the ring is not matched (the map's error would be averaged in)."""
+    walls, fgm = room
+    pose = np.array([1.5, 1.2, 0.3])
+    flm = flm_at(pose, walls)
+    for sigma, want in ((0.005, "prior_better"), (0.05, "ok")):
+        ekf = ToyEkf(
+            pose + np.array([0.02, -0.01, 0.0]), np.diag([sigma**2, sigma**2, (0.5 * DEG) ** 2])
+        )
+        aid = PoseFixAid(fgm, FixParams(pose_map_sigma=0.02), lambda r, m: flm, 0.0)
+        aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
+        assert aid.decisions[-1].reason == want
+        assert ekf.updates == (want == "ok")

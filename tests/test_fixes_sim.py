@@ -130,7 +130,8 @@ def test_every_lamp_off_pose_fixes_keep_error_bounded(dark_case):
     assert worst["pose"] <= 0.15
     assert worst["none"] > 2.0 * worst["pose"]  # without fixes the dark lap drifts
     aid = summaries["pose"]["aids"]["PoseFixAid"]
-    assert aid["accepted"] > 0.5 * aid["rings"]
+    # matched whenever the filter is less sure of its position than the map is accurate
+    assert aid["accepted"] > 0.2 * aid["rings"] and aid["reasons"].get("prior_better", 0) > 0
     # the pose updates reached the filter and are in updates.csv
     with open(tmp / "pose" / "updates.csv", newline="") as fh:
         kinds = [r["kind"] for r in csv.DictReader(fh)]

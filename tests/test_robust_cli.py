@@ -247,3 +247,28 @@ def test_outputs_move_into_place_whole(tmp_path: Path) -> None:
     assert sorted(p.name for p in fresh.iterdir()) == ["a.txt", "b.txt", "c.txt"]
     assert all(p.read_text(encoding="utf-8") == "new" for p in fresh.iterdir())
     assert old.read_text(encoding="utf-8") == "new" and not leftovers(tmp_path)
+
+
+@pytest.mark.parametrize("command", ["map_log", "map_trajectory", "evaluate_truth", "evaluate_est"])
+def test_junk_inputs_of_every_command(command: str, tmp_path: Path, tiny_log) -> None:
+    """Random bytes, a text file or a wrong TUM given to map and evaluate: exit 3, one
+    line naming that file, no output."""
+    _cfg, log = tiny_log
+    junk = tmp_path / "junk.bin"
+    junk.write_bytes(bytes(range(256)) * 8)
+    tum = tmp_path / "bad.tum"
+    tum.write_text("0 1 2\n", encoding="utf-8")
+    good_tum = tmp_path / "ok.tum"
+    good_tum.write_text("0 5 0 0 0 0 0 1\n1000 5 0 0 0 0 0 1\n", encoding="utf-8")
+    out = tmp_path / "out"
+    args, named = {
+        "map_log": (["map", junk, "--trajectory", good_tum], junk),
+        "map_trajectory": (["map", log, "--trajectory", tum], tum),
+        "evaluate_truth": (["evaluate", junk, good_tum], junk),
+        "evaluate_est": (["evaluate", log, tum], tum),
+    }[command]
+    code, stdout, stderr = cli(*args, "-o", out)
+    lines = error_lines(stderr)
+    assert code == 3, stderr
+    assert len(lines) == 1 and lines[0].startswith(f"fuzzyslam: error: {named}: ")
+    assert stdout == "" and not out.exists() and not leftovers(tmp_path)

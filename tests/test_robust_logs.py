@@ -220,6 +220,24 @@ def test_damaged_chunk_in_the_middle_is_skipped_and_counted(tiny: Tiny, tmp_path
     assert msgs[-1] == full[-1]  # read to the end past the damaged chunk
 
 
+def test_damaged_chunk_with_intact_index_is_skipped_and_counted(tiny: Tiny, tmp_path: Path) -> None:
+    """A chunk whose data is corrupt (CRC mismatch) in a file whose summary is intact:
+    run and map skip that chunk, count it in log_damage, and use every other one."""
+    data = bytearray(tiny.small_chunks.read_bytes())
+    chunks = chunk_index(tiny.small_chunks)
+    a = chunks[3].chunk_start_offset + 5000
+    data[a : a + 64] = bytes(64)
+    bad = tmp_path / "bad_chunk.mcap"
+    bad.write_bytes(bytes(data))
+    s = run_json(tiny, bad, tmp_path / "est")
+    assert s["log_damage"]["damaged_records"] == 1 and not s["log_damage"]["truncated"]
+    assert s["log_damage"]["lost_bytes"] == chunks[3].chunk_length
+    assert 0 < s["counts"]["frames"] < tiny.run["counts"]["frames"]
+    m = map_json(tiny, bad, tmp_path / "fgm")
+    assert m["log_damage"]["damaged_records"] == 1
+    assert 0 < m["rings_used"] < tiny.map["rings_used"]
+
+
 @given(frac=st.floats(0.0, 1.0))
 @example(frac=0.0)
 @example(frac=0.001)

@@ -156,10 +156,12 @@ def decide_heading_fix(
     strength = float(wall.strength)
     if strength < params.min_strength:
         return HeadingDecision(t, -1, math.nan, predicted, False, "weak_peak", strength)
-    if wall.ambiguous:
-        return HeadingDecision(t, -1, math.nan, predicted, False, "ambiguous_wall", strength)
     period = math.pi / 2 if params.right_angles else math.pi
     cands, why = select_corridor(pose[:2], refs, period, params.junction_margin)
+    # two wall directions in one FLM (a corner) disqualify it, unless the corner's
+    # corridors all compete (junction_walls): the strongest wall is then one of theirs
+    if wall.ambiguous and not (why == "junction" and params.junction_walls):
+        return HeadingDecision(t, -1, math.nan, predicted, False, "ambiguous_wall", strength)
     if not cands:
         return HeadingDecision(t, -1, math.nan, predicted, False, why, strength)
     sig = params.sigma_junction_deg if why == "junction" else params.sigma_heading_deg

@@ -33,6 +33,12 @@ class FixParams:
     junction_margin: float = field(default=2.0, metadata={"min": 0.0, "max": 10.0})
     # R of such a fix: FLM walls near a corner are shorter and mixed (measured: std 1.8
     # deg, mean -0.2 deg at corners, 198 fixes, same run as sigma_heading_deg)
+    # at a junction, accept a FLM with two wall directions (its strongest wall is one of
+    # the competing corridors'; a wrong pick is far off and gated) instead of skipping it
+    # as ambiguous_wall. Measured on paper_bumps.yaml seeds 0-2 (heading fixes from t=0):
+    # max position error 34 / 33 / 31 cm -> 9 / 8 / 12 cm, duplicate lamps 3 / 3 / 8 ->
+    # 0 / 0 / 5 (a bump while turning in a corner was left uncorrected for seconds)
+    junction_walls: bool = True
     sigma_junction_deg: float = field(default=2.0, metadata={"min": 0.01, "max": 90.0})
     # recovery from an unseen heading jump (a bump): after this many consecutive gated
     # fixes whose measurements agree within recover_spread_deg, the heading variance is
@@ -67,12 +73,17 @@ class FixParams:
     # likelihood exp((s - s_max) / temperature), s the explained fraction of the FLM's walls
     pose_temperature: float = field(default=0.02, metadata={"min": 1e-4, "max": 1.0})
     # inflation of the surface's covariance for the correlation of successive rings' errors
-    # (their lag-1/2/4/8 autocorrelation: 0.7/0.5/0.3/0.0, plus a slow map bias). Chosen on
-    # paper.yaml seed 0, runs 5-6 (mean 3-dof NEES of the run against truth, with the
-    # heading fixes on): all lamps off: 10.4 at 8, 5.5 at 32, 4.9 at 100 (errors 1.8 cm
-    # mean, 4.6 cm max); 8 lamps lit: 6.9 at 32, 4.8 at 100. Still over 3: the rest is
-    # a map bias correlated over metres, which only a bias state would model
+    # (measured against truth: 4.5 cm RMS per ring, autocorrelation 0.7 / 0.5 / 0.3 / 0.0
+    # at lags 1 / 2 / 4 / 8 rings). Chosen on paper_dark.yaml seed 0, runs 5-6, 3-dof NEES
+    # (before pose_map_sigma): 10.4 at 8, 5.5 at 32, 4.9 at 100
     pose_cov_scale: float = field(default=100.0, metadata={"min": 1.0, "max": 1000.0})
+    # accuracy of the frozen map itself (m, 1 sigma): a match is skipped ("prior_better")
+    # while the filter's position sigma (largest axis) is below it, since the map's error
+    # is the same ring after ring and would be averaged in as if it were information.
+    # Measured (paper.yaml, seeds 0-2, runs 5-6, 3-dof NEES against truth): 8 lamps lit
+    # 5.5 / 19.1 / 1.9 at 0 -> 1.6 / 2.5 / 1.2 at 0.02 (errors 0.9 / 2.0 / 0.6 cm -> 0.7 /
+    # 1.3 / 0.8 cm); every lamp off 4.7 / 8.5 / 4.1 -> 3.7 / 3.6 / 3.1
+    pose_map_sigma: float = field(default=0.02, metadata={"min": 0.0, "max": 1.0})
     # floor of the measurement's standard deviations (the grid's own quantisation)
     pose_min_sigma: float = field(default=0.02, metadata={"min": 1e-4, "max": 1.0})
     pose_min_sigma_deg: float = field(default=0.25, metadata={"min": 1e-3, "max": 10.0})

@@ -167,8 +167,12 @@ def _decompress(data: bytes, compression: str, size: int) -> bytes:
     raise ValueError(f"unknown chunk compression {compression!r}")
 
 
-def indexed_messages(reader: LogReader, topics: list[str]) -> Iterator[LogMessage] | None:
-    """Messages of ``topics`` in log-time order via the chunk indexes, or None if not possible."""
+def indexed_messages(
+    reader: LogReader, topics: list[str], start: float | None = None
+) -> Iterator[LogMessage] | None:
+    """Messages of ``topics`` in log-time order via the chunk indexes, or None if not possible.
+
+    ``start`` (s): skip messages logged before it (chunks ending before it are not read)."""
     if not getattr(reader, "_summary_ok", False):
         return None
     with open(reader.path, "rb") as f:
@@ -190,10 +194,14 @@ def indexed_messages(reader: LogReader, topics: list[str]) -> Iterator[LogMessag
     for a, b in itertools.pairwise(chunks):
         if b.message_start_time < a.message_end_time:
             return None
-    return _iterate(reader, wanted, chunks)
+    start_ns = -1 if start is None else round(start * 1e9)
+    chunks = [c for c in chunks if c.message_end_time >= start_ns]
+    return _iterate(reader, wanted, chunks, start_ns)
 
 
-def _iterate(reader: LogReader, wanted: dict, chunks: list) -> Iterator[LogMessage]:
+def _iterate(
+    reader: LogReader, wanted: dict, chunks: list, start_ns: int = -1
+) -> Iterator[LogMessage]:
     types = typestore().types
     with open(reader.path, "rb") as f:
         for c in chunks:
@@ -221,7 +229,9 @@ def _iterate(reader: LogReader, wanted: dict, chunks: list) -> Iterator[LogMessa
                 entries.extend(_MSG_INDEX_ENTRY.iter_unpack(body))
             entries.sort()
             view = memoryview(data)
-            for _t, off in entries:
+            for t_ns, off in entries:
+                if t_ns < start_ns:
+                    continue
                 _op, length, cid, _seq, log_time, _pub = _MSG.unpack_from(data, off)
                 topic, schema = wanted[cid]
                 typename = normalise_typename(schema)

@@ -77,12 +77,13 @@ class LogInputs:
 
     # -- streams --------------------------------------------------------------------------
 
-    def events(self, rings: bool = False) -> Iterator[Event]:
-        """All events in time order (rings merged in only when ``rings``)."""
+    def events(self, rings: bool = False, ring_start: float | None = None) -> Iterator[Event]:
+        """All events in time order (rings merged in only when ``rings``, from
+        ``ring_start`` on when given: the aids' start, e.g. the map's freeze time)."""
         main = self._main_events()
         if not rings:
             return main
-        return heapq.merge(main, self._ring_events(), key=lambda e: e.t)
+        return heapq.merge(main, self._ring_events(ring_start), key=lambda e: e.t)
 
     def _main_events(self) -> Iterator[Event]:
         odo = self._odometry if self.odom_source == "encoders" else self._odom_pose
@@ -174,9 +175,10 @@ class LogInputs:
             z = z[ok]
         return Frame(t, z, self._measurement_cov(len(z), self.cfg.slam.detection_sigma))
 
-    def _ring_events(self) -> Iterator[Event]:
+    def _ring_events(self, start: float | None = None) -> Iterator[Event]:
         topics = {self.cfg.topics.sonar(i): i for i in range(self.cfg.sonar.count)}
-        stream = indexed_messages(self.reader, list(topics))  # the fast path, as for odometry
+        # the fast path, as for odometry (rings before ``start`` are not even read)
+        stream = indexed_messages(self.reader, list(topics), start)
         msgs = stream if stream is not None else self.reader.messages(list(topics))
         for ring in group_rings(msgs, topics, self.cfg.sonar.count, stats=self.ring_stats):
             yield RingEvent(ring.t, ring)

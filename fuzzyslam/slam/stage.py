@@ -69,8 +69,11 @@ def run_stage(
     try:
         with Progress(max(inputs.end - inputs.start, 1e-6), "run: EKF-SLAM") as bar:
             t0 = inputs.start
+            ring_start = min((a.start_time for a in aids), default=None)
             res = runner.run(
-                inputs.events(rings=bool(aids)), lambda t: bar.update_to(t - t0), t0=t0
+                inputs.events(rings=bool(aids), ring_start=ring_start),
+                lambda t: bar.update_to(t - t0),
+                t0=t0,
             )
     finally:
         cv2.setNumThreads(threads)

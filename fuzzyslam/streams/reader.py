@@ -294,6 +294,12 @@ class LogReader:
 
     # -- queries ------------------------------------------------------------------
 
+    def mark_damaged(self, nbytes: int) -> None:
+        """Count one damaged record of ``nbytes`` found by another reader of this file
+        (e.g. an indexed reader that met a chunk failing its CRC and skipped it)."""
+        self.damaged_records += 1
+        self.lost_bytes += int(nbytes)
+
     def damage(self) -> dict[str, Any]:
         """How much of the file was lost, for a stage's JSON summary.
 
@@ -341,34 +347,60 @@ class LogReader:
         """Decoded messages of ``topics`` (all if None) in log-time order.
 
         On a truncated file, messages come in file order, as far as the file is intact.
-        Messages that fail to decode are skipped and counted in ``undecodable``.
+        Chunk CRCs are checked: if an indexed file holds a damaged chunk, reading goes on
+        from the last message yielded by a record walk that skips (and counts) the
+        damaged chunk. Messages that fail to decode are skipped and counted in
+        ``undecodable``.
         """
         wanted = set(topics) if topics is not None else None
-        if self._summary_ok:
-            with open(self.path, "rb") as f:
-                reader = SeekingReader(f)
-                try:
-                    for schema, channel, message in reader.iter_messages(
-                        topics=sorted(wanted) if wanted is not None else None, log_time_order=True
-                    ):
-                        if schema is None:
-                            continue
-                        out = self._decode(channel.topic, schema.name, message)
-                        if out is not None:
-                            yield out
-                except Exception as exc:  # McapError, zstd errors, short reads
-                    problem = f"{type(exc).__name__}: {exc}".splitlines()[0]
-                    raise InputError(self.path, f"damaged MCAP data ({problem})") from None
+        if not self._summary_ok:
+            yield from self._walk_messages(wanted, Damage())
             return
+        last_ns, at_last = -1, set()
+        with open(self.path, "rb") as f:
+            reader = SeekingReader(f, validate_crcs=True)
+            try:
+                for schema, channel, message in reader.iter_messages(
+                    topics=sorted(wanted) if wanted is not None else None, log_time_order=True
+                ):
+                    if message.log_time != last_ns:
+                        last_ns, at_last = message.log_time, set()
+                    at_last.add((message.channel_id, message.sequence))
+                    if schema is None:
+                        continue
+                    out = self._decode(channel.topic, schema.name, message)
+                    if out is not None:
+                        yield out
+                return
+            except Exception:  # a damaged chunk (CRC, zstd, short read): walk on from here
+                pass
+        dmg = Damage()
+        yield from self._walk_messages(wanted, dmg, last_ns, at_last)
+        self.damaged_records = max(self.damaged_records, dmg.damaged_records, 1)
+        self.lost_bytes = max(self.lost_bytes, dmg.lost_bytes)
+
+    def _walk_messages(
+        self,
+        wanted: set[str] | None,
+        dmg: Damage,
+        from_ns: int = -1,
+        seen: set[tuple[int, int]] | frozenset = frozenset(),
+    ) -> Iterator[LogMessage]:
+        """Messages of the record walk in file order, those before ``from_ns`` (log time)
+        and the ``seen`` (channel id, sequence) at ``from_ns`` left out."""
         schemas: dict[int, str] = {}
         channels: dict[int, tuple[str, str]] = {}
-        for rec in self._records():
+        for rec in self._records(dmg):
             if isinstance(rec, Schema):
                 schemas[rec.id] = rec.name
             elif isinstance(rec, Channel):
                 if rec.schema_id in schemas:
                     channels[rec.id] = (rec.topic, schemas[rec.schema_id])
             elif isinstance(rec, Message):
+                if rec.log_time < from_ns or (
+                    rec.log_time == from_ns and (rec.channel_id, rec.sequence) in seen
+                ):
+                    continue
                 ch = channels.get(rec.channel_id)
                 if ch is None or (wanted is not None and ch[0] not in wanted):
                     continue
