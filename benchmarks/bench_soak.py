@@ -55,7 +55,7 @@ def fuzzyslam(*args: str | Path) -> list[str]:
     return [sys.executable, "-m", "fuzzyslam", *(str(a) for a in args)]
 
 
-def soak(workdir: Path, factor: int) -> None:
+def soak(workdir: Path, factor: int, reuse: bool = False) -> None:
     long_cfg = workdir / "soak.yaml"
     long_cfg.write_text(
         f"extends: paper.yaml\nname: soak_x{factor}\nscenario:\n  runs: {PAPER_RUNS * factor}\n",
@@ -67,21 +67,25 @@ def soak(workdir: Path, factor: int) -> None:
         (f"x{factor}", str(long_cfg), PAPER_RUNS * factor),
     ):
         log = workdir / f"{name}.mcap"
-        sim = measured(fuzzyslam("simulate", cfg, "-o", log))
-        dur = sim["summary"]["duration_s"]
+        stages = {}
+        if not (reuse and log.exists()):
+            stages["simulate"] = measured(fuzzyslam("simulate", cfg, "-o", log))
         size = log.stat().st_size / 1e6
         est = workdir / f"{name}_est"
         run = measured(fuzzyslam("run", log, "-o", est, "--config", cfg))
+        dur = run["summary"]["log_duration_s"]
         fgm = workdir / f"{name}_fgm"
         map_args = ["--config", cfg, "--until-run", runs, "--no-figures"]
         mp = measured(
             fuzzyslam("map", log, "--trajectory", est / "trajectory.tum", "-o", fgm, *map_args)
         )
-        rows.append((name, dur, size, {"simulate": sim, "run": run, "map": mp}))
+        stages.update({"run": run, "map": mp})
+        rows.append((name, dur, size, stages))
         print(
             f"{name}: {runs} runs, {dur:.0f} s of log, {size:.0f} MB; "
             f"run: {run['summary']['lamps']} lamps, "
             f"final sigma {run['summary']['final_pose_sigma']}; "
+            f"diverged: {run['summary'].get('filter_health', {}).get('diverged')}; "
             f"map: {mp['summary']['rings_used']} rings",
             flush=True,
         )
@@ -110,11 +114,12 @@ def main() -> None:
     ap.add_argument("--factor", type=int, default=10, help="long log = factor x paper runs")
     ap.add_argument("--workdir", type=Path, default=None, help="where to write (default: tmp)")
     ap.add_argument("--keep", action="store_true", help="keep the logs and outputs")
+    ap.add_argument("--reuse", action="store_true", help="reuse logs already in --workdir")
     a = ap.parse_args()
     work = a.workdir or Path(tempfile.mkdtemp(prefix="fuzzyslam_soak_"))
     work.mkdir(parents=True, exist_ok=True)
     try:
-        soak(work, a.factor)
+        soak(work, a.factor, a.reuse)
     finally:
         if not a.keep and a.workdir is None:
             shutil.rmtree(work, ignore_errors=True)

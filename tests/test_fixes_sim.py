@@ -89,7 +89,7 @@ def dark_case(tmp_path_factory):
     """Every lamp fails at the start of run 2, and a box and a person (unknown to the map)
     appear: pose fixes against none, and change detection."""
     tmp = tmp_path_factory.mktemp("dark")
-    scenario = {"lamp_failures": [{"run": 2, "lamps": ALL_LAMPS}]}
+    scenario = {"lamp_failures": [{"run": 2, "lamps": ALL_LAMPS}], "obstacles": [BOX, PERSON]}
     log, fgm = chain(tmp, {"scenario": scenario}, 6)
     out = {}
     for mode in ("pose", "none"):
@@ -157,6 +157,30 @@ def test_heading_fixes_on_a_simulated_log_agree_with_truth(bump_case):
     assert abs(float(np.mean(err))) < 1.0
     assert float(np.sqrt(np.mean(err**2))) < 4.0
     assert math.isfinite(float(np.std(err)))
+
+
+def test_change_detection_finds_the_simulated_box_and_person(dark_case):
+    """Detections in run 2 against the simulator's truth (the log's obstacle record)."""
+    from fuzzyslam.evaluation.changes import change_detection_scores
+
+    log, tmp, _ = dark_case
+    obstacles = LogReader(log).json_metadata("fuzzyslam.obstacles")["obstacles"]
+    assert [o["kind"] for o in obstacles] == ["box", "disc"]
+    det = np.loadtxt(tmp / "pose" / "changes.csv", delimiter=",", skiprows=1, ndmin=2)
+    gt = np.array(
+        [
+            (m.t, *M.pose_of(m.msg.pose.pose))
+            for m in LogReader(log).messages(["/ground_truth/odom"])
+        ]
+    )
+    s = change_detection_scores(det[:, :3], obstacles, gt[:, 0], gt[:, 1:3])
+    box, person = s["objects"]
+    assert box["encounters"] >= 1 and box["found"] == box["encounters"]
+    assert person["found"] >= 1
+    assert s["precision"] >= 0.7
+    # the detections are on /slam/changes in estimates.mcap too, one marker each
+    msgs = list(LogReader(tmp / "pose" / "estimates.mcap").messages(["/slam/changes"]))
+    assert sum(len(m.msg.markers) for m in msgs) == len(det)
 
 
 def test_fast_range_decoder_matches_rosbags(dark_case):

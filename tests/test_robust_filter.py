@@ -140,3 +140,13 @@ def test_damaged_covariance_is_repaired_and_counted() -> None:
     assert ekf.check_covariance() is True
     assert ekf.guards["p_repaired"] == 1 and is_spd(ekf.P)
     assert ekf.check_covariance() is False
+
+
+def test_chi2_quantile_matches_scipy_stats() -> None:
+    from scipy.stats import chi2
+
+    from fuzzyslam.slam.health import chi2_quantile
+
+    for dof in (1, 2, 3, 100, 1000):
+        for p in (0.5, 0.95, 0.999):
+            assert chi2_quantile(p, dof) == pytest.approx(chi2.ppf(p, dof), rel=1e-10)

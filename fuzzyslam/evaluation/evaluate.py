@@ -298,6 +298,11 @@ def run_evaluate(
         ev = evaluate(truth, est, params)
     except SpanError as exc:
         raise InputError(estimate_path, str(exc)) from None
+    from fuzzyslam.evaluation.changes import change_metrics
+
+    changes = change_metrics(truth_path, estimate_path, truth.t, truth.poses[:, :2])
+    if changes is not None:  # --fix pose on a log with obstacles (issue 8)
+        ev.metrics["change_detection"] = changes
     with OutputDir(outdir) as tmp:
         figs = figures.draw_all(tmp, truth, est, ev, fgm)
         report.write_metrics(tmp / "metrics.json", ev.metrics)

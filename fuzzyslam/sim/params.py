@@ -108,6 +108,26 @@ class Bump:
 
 
 @dataclass
+class Obstacle:
+    """An object the sonars see and the map does not (``sim.obstacles``; issue 8).
+
+    ``box``: a static rectangle (centre [x, y], size [length, width], angle_deg);
+    ``disc``: a person of ``radius`` walking back and forth along ``path`` at ``speed``.
+    Present from the start of run ``from_run`` to the end of run ``to_run``.
+    """
+
+    kind: str = field(default="box", metadata={"choices": ["box", "disc"]})
+    from_run: int = field(default=5, metadata={"min": 1})
+    to_run: int = field(default=6, metadata={"min": 1})
+    centre: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    size: list[float] = field(default_factory=lambda: [0.5, 0.5])
+    angle_deg: float = field(default=0.0, metadata={"min": -360.0, "max": 360.0})
+    radius: float = field(default=0.25, metadata={"min": 0.01, "max": 5.0})
+    path: list[list[float]] = field(default_factory=list)
+    speed: float = field(default=0.5, metadata={"min": 0.0, "max": 10.0})
+
+
+@dataclass
 class ScenarioParams:
     """Runs (laps, alternating direction) and scheduled events.
 
@@ -122,3 +142,5 @@ class ScenarioParams:
     lap_fraction: float = field(default=1.0, metadata={"min": 0.01, "max": 1.0})
     lamp_failures: list[LampFailure] = field(default_factory=list)
     bumps: list[Bump] = field(default_factory=list)
+    # unexpected objects (boxes, people) seen by the sonars only
+    obstacles: list[Obstacle] = field(default_factory=list)

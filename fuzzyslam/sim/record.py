@@ -21,6 +21,7 @@ from fuzzyslam.robot import WHEEL_NAMES, sonar_frame, sonar_mounts
 from fuzzyslam.se2 import inverse_transform_points, wrap_angle
 from fuzzyslam.sim import camera as simcam
 from fuzzyslam.sim import sonar as simsonar
+from fuzzyslam.sim.obstacles import OBSTACLES_KEY, box_segments, discs_at, obstacles_record
 from fuzzyslam.sim.scenario import Plan, lamps_lit, make_plan, rng_streams
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.logmeta import SCENARIO_KEY, WORLD_KEY, Scenario, World
@@ -141,6 +142,9 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
     with LogWriter(out) as w, Progress(dr.duration, "simulate") as bar:
         w.json_metadata(WORLD_KEY, world.to_dict())
         w.json_metadata(SCENARIO_KEY, scenario.to_dict())
+        if plan.obstacles:
+            ring_times = sensor_times(cfg.sonar.rate_hz, dr.duration)
+            w.json_metadata(OBSTACLES_KEY, obstacles_record(plan.obstacles, ring_times))
         w.write(topics.tf_static, M.TF_MESSAGE, static_transforms(cfg, mounts), 0.0)
         lamp_z = cfg.camera.mount_height + cfg.camera.ceiling_height
         w.write(topics.world_markers, M.MARKER_ARRAY, world_markers(world, lamp_z), 0.0)
@@ -167,7 +171,13 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
                 bar.update_to(t)
             elif kind == SONAR:
                 pose = interpolate_pose(dr.t, dr.pose, t)
-                r = simsonar.ring(walls, pose, mounts, cfg.sonar, rngs["sonar"])
+                if plan.obstacles:  # boxes reflect like walls; people are discs
+                    r = simsonar.ring(
+                        np.vstack([walls, box_segments(plan.obstacles, t)]), pose, mounts,
+                        cfg.sonar, rngs["sonar"], discs_at(plan.obstacles, t),
+                    )  # fmt: skip
+                else:
+                    r = simsonar.ring(walls, pose, mounts, cfg.sonar, rngs["sonar"])
                 st.rings += 1
                 st.no_echo += int(np.sum(r >= cfg.sonar.max_range))
                 for j, topic in enumerate(sonar_topics):

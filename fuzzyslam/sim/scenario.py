@@ -15,12 +15,13 @@ simulated (so a shorter variant can extend the paper config).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from fuzzyslam.errors import ConfigError
 from fuzzyslam.sim.encoders import Encoders, simulate_encoders
+from fuzzyslam.sim.obstacles import Track, plan_tracks
 from fuzzyslam.sim.path import Drive, drive
 from fuzzyslam.sim.world import build_world, centreline_array
 from fuzzyslam.streams.logmeta import Event, World
@@ -42,6 +43,7 @@ class Plan:
     drive: Drive
     encoders: Encoders
     events: list[Event]
+    obstacles: list[Track] = field(default_factory=list)  # boxes and people (issue 8)
 
     @property
     def start_pose(self) -> np.ndarray:
@@ -82,4 +84,8 @@ def make_plan(cfg, rngs: dict[str, np.random.Generator], source: str = "config")
     events = dr.events + lamp_failure_events(cfg, dr.events, len(world.lamps), source)
     order = {"run_end": 0, "run_start": 1, "lamp_failure": 2, "bump": 3}
     events.sort(key=lambda e: (e.t, order.get(e.kind, 9)))
-    return Plan(world, dr, enc, events)
+    starts = {e.run: e.t for e in events if e.kind == "run_start"}
+    ends = {e.run: e.t for e in events if e.kind == "run_end"}
+    intervals = {r: (t0, ends.get(r, dr.duration)) for r, t0 in starts.items()}
+    tracks = plan_tracks(cfg.scenario.obstacles, intervals, source)
+    return Plan(world, dr, enc, events, tracks)

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fuzzyslam.sim.obstacles import ray_circle_hits
 from fuzzyslam.sim.params import SonarParams
 
 EPS = 1e-9
@@ -63,10 +64,13 @@ def ideal_ranges(
     walls: np.ndarray,
     sensors: np.ndarray,
     params: SonarParams,
+    discs: np.ndarray | None = None,
 ) -> np.ndarray:
     """Noise-free first-echo range of each sensor; inf where no echo.
 
-    ``sensors`` (M, 3) are world poses (x, y, yaw) of the transducers.
+    ``sensors`` (M, 3) are world poses (x, y, yaw) of the transducers. ``discs`` (J, 3)
+    x y radius: people (``sim.obstacles``), rough reflectors: a ray meeting one before
+    any wall echoes from it whatever its incidence.
     """
     m = len(sensors)
     n = params.rays_per_cone
@@ -84,6 +88,11 @@ def ideal_ranges(
     alive = np.ones(len(ang), dtype=bool)
     for bounce in range(params.max_bounces + 1):
         t, seg = cast_rays(walls, org, d)
+        if discs is not None and len(discs):
+            tc = ray_circle_hits(org, d, discs)
+            person = alive & (tc < t)
+            echo = np.where(person, path + tc, echo)
+            alive &= ~person
         hit = alive & (seg >= 0)
         alive &= hit
         nrm = normals[np.maximum(seg, 0)]
@@ -140,6 +149,7 @@ def ring(
     mounts: np.ndarray,
     params: SonarParams,
     rng: np.random.Generator,
+    discs: np.ndarray | None = None,
 ) -> np.ndarray:
-    """One ring of readings (M,) from a robot at world ``pose``."""
-    return measure(ideal_ranges(walls, sensor_poses(pose, mounts), params), params, rng)
+    """One ring of readings (M,) from a robot at world ``pose`` (``discs``: people)."""
+    return measure(ideal_ranges(walls, sensor_poses(pose, mounts), params, discs), params, rng)

@@ -18,6 +18,7 @@ import numpy as np
 
 from fuzzyslam.robot import motion_step
 from fuzzyslam.se2 import compose, jacobians_compose, rot, wrap_angle
+from fuzzyslam.slam.health import repair_covariance, solve_spd
 
 
 @dataclass
@@ -176,6 +177,8 @@ class EkfSlam:
         self.dim = 3
         # (idx, UpdateResult) of every update_robot call, drained by the runner (updates.csv)
         self.robot_updates: list[tuple[tuple[int, ...], UpdateResult]] = []
+        # numerical guards (slam/health.py): near-singular S regularised, P repaired
+        self.guards = {"s_regularised": 0, "p_repaired": 0}
 
     # -- views ------------------------------------------------------------------------
 
@@ -288,11 +291,32 @@ class EkfSlam:
         pht = p[:, cols] @ hc.T
         s = hc @ pht[cols] + r
         s = 0.5 * (s + s.T)
-        k = np.linalg.solve(s, pht.T).T
+        kt, reg = solve_spd(s, pht.T)  # S near-singular: regularised (and counted)
+        self.guards["s_regularised"] += reg
+        k = kt.T
         self._x[:n] += k @ v
         self._x[2] = wrap_angle(self._x[2])
         y = 0.5 * (k @ s) - pht
         _add_symmetric_update(p, np.hstack([k, y]), np.hstack([y, k]))
+        d = np.diagonal(p)
+        if not (np.all(np.isfinite(d)) and np.all(d > 0.0)):  # O(n) check; full one below
+            self.check_covariance()
+
+    def check_covariance(self) -> bool:
+        """Repair P if it is not symmetric positive definite (``health.repair_covariance``,
+        the nearest such matrix); count it in ``guards['p_repaired']``. O(n^3): called
+        after an update breaks the O(n) diagonal check, and periodically by the runner."""
+        p, repaired = repair_covariance(self.P)
+        if repaired:
+            self._p[: self.dim, : self.dim] = p
+            self.guards["p_repaired"] += 1
+        return repaired
+
+    def _nis(self, s: np.ndarray, v: np.ndarray) -> float:
+        """v^T S^-1 v, with a near-singular S regularised (and counted)."""
+        w, reg = solve_spd(s, v)
+        self.guards["s_regularised"] += reg
+        return float(v @ w)
 
     def innovation_cov(self, cols: np.ndarray, hc: np.ndarray, r: np.ndarray) -> np.ndarray:
         """S = H P H^T + R for H nonzero only on ``cols``."""
@@ -334,7 +358,7 @@ class EkfSlam:
         h, cols, hc = self.predict_lamps(ids)
         v = np.asarray(z, dtype=float).reshape(-1) - h
         s = self.innovation_cov(cols, hc, r)
-        nis = float(v @ np.linalg.solve(s, v))
+        nis = self._nis(s, v)
         if gate_chi2 is not None and not nis <= gate_chi2:
             return UpdateResult(False, nis, v)
         self._correct(cols, hc, v, r)
@@ -359,7 +383,7 @@ class EkfSlam:
         v[cols == 2] = wrap_angle(v[cols == 2])
         hc = np.eye(len(cols))
         s = self.innovation_cov(cols, hc, r)
-        nis = float(v @ np.linalg.solve(s, v))
+        nis = self._nis(s, v)
         if gate_chi2 is not None and not nis <= gate_chi2:
             res = UpdateResult(False, nis, v)
         else:

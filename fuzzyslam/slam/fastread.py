@@ -15,6 +15,7 @@ from __future__ import annotations
 
 import itertools
 import struct
+import zlib
 from collections.abc import Iterator
 from dataclasses import dataclass
 
@@ -217,7 +218,14 @@ def _iterate(
             pos += 4 + clen
             rlen = _U64.unpack_from(raw, pos)[0]
             pos += 8
-            data = _decompress(raw[pos : pos + rlen], compression, size)
+            try:
+                data = _decompress(raw[pos : pos + rlen], compression, size)
+                crc = _U32.unpack_from(raw, 1 + 8 + 8 + 8 + 8)[0]
+                if len(data) != size or (crc and zlib.crc32(data) != crc):
+                    raise ValueError("chunk CRC mismatch")
+            except Exception:  # a damaged chunk: skipped and counted (LogReader.damage)
+                reader.mark_damaged(c.chunk_length)
+                continue
             entries: list[tuple[int, int]] = []
             for cid, off in c.message_index_offsets.items():
                 if cid not in wanted:
@@ -232,8 +240,12 @@ def _iterate(
             for t_ns, off in entries:
                 if t_ns < start_ns:
                     continue
-                _op, length, cid, _seq, log_time, _pub = _MSG.unpack_from(data, off)
-                topic, schema = wanted[cid]
+                try:
+                    _op, length, cid, _seq, log_time, _pub = _MSG.unpack_from(data, off)
+                    topic, schema = wanted[cid]
+                except (KeyError, struct.error):  # a damaged message index entry
+                    reader.undecodable += 1
+                    continue
                 typename = normalise_typename(schema)
                 if typename not in types:
                     reader.undecodable += 1

@@ -47,6 +47,7 @@ from fuzzyslam.streams.tum import format_tum
 from fuzzyslam.streams.writer import LogWriter
 
 CAMERA_FRAME = "ceiling_camera"
+ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
 
 
 @dataclass
@@ -67,6 +68,7 @@ class LogInputs:
     warnings: dict[str, int] = field(default_factory=dict)
     ring_stats: RingStats = field(default_factory=RingStats)
     first_problem: str = ""
+    gap_seconds: float = 0.0
     _names: list = field(default_factory=list)
     _idx: list = field(default_factory=list)
 
@@ -99,6 +101,15 @@ class LogInputs:
                 if m.topic == self.lamp_topic:
                     continue
                 t = last_t[m.topic]  # an odometry increment is still motion: keep it
+            elif t == last_t[m.topic]:
+                # a repeated stamp: a duplicated message; odometry is cumulative (wheel
+                # angles, poses), so the next message still carries any motion in it
+                self.warn("duplicate_stamps", f"{m.topic}: header stamp {t:.3f} s repeated")
+                continue
+            elif m.topic == self.odom_topic and ODOM_GAP_S < t - last_t[m.topic] < np.inf:
+                gap = t - last_t[m.topic]
+                self.warn("odometry_gaps", f"{m.topic}: silent for {gap:.2f} s before {t:.3f} s")
+                self.gap_seconds += gap
             last_t[m.topic] = t
             if m.topic == self.odom_topic:
                 ev, prev = odo(t, m.msg, prev)

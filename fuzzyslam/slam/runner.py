@@ -33,6 +33,7 @@ from fuzzyslam.slam.association import (
     unique_hypothesis,
 )
 from fuzzyslam.slam.ekf import EkfSlam, Preintegrator
+from fuzzyslam.slam.health import DivergenceMonitor
 from fuzzyslam.slam.params import SlamParams
 from fuzzyslam.streams.sonar import Ring
 
@@ -134,6 +135,7 @@ class SlamRunner:
         self.start_pose = np.asarray(self.start_pose, dtype=float)
         self.ekf = EkfSlam(self.start_pose, np.diag(np.square(p.start_sigma)), p.alpha)
         self.preint = Preintegrator(p.alpha)
+        self.health = DivergenceMonitor()  # NIS and association-rate windows (health.py)
         self.tentative = TentativeLamps(p.tentative_hits, p.tentative_radius, p.tentative_timeout)
         self.counts: dict[str, int] = {
             "odometry": 0,
@@ -176,6 +178,8 @@ class SlamRunner:
             self._rows_x.append(self.ekf._x[:3].copy())
             self._rows_p.append(row)
         self._last_record = t
+        if len(self._rows_t) % 50 == 0:
+            self.ekf.check_covariance()  # O(n^3), every 50 rows (health.repair_covariance)
         if t - self._last_snapshot >= self.snapshot_period:
             self._snapshot(t)
 
@@ -227,6 +231,10 @@ class SlamRunner:
                     self._last_seen[i] = ev.t
                     self._obs[i] += 1
                 self.counts["associated"] += len(pairs)
+                for j, i in pairs:
+                    self.health.observe(ev.t, float(d2[j, i]), 2)
+            if m and ekf.n_lamps:
+                self.health.observe_frame(ev.t, m, len(pairs))
             paired = {j for j, _ in pairs}
             rest = [j for j in range(m) if j not in paired]
             if rest and any(getattr(a, "pose_suspect", False) for a in self.aids):
@@ -305,6 +313,7 @@ class SlamRunner:
             self.updates.append(
                 UpdateRow(ev.t, kind, -1, len(idx), res.nis, res.accepted, res.innovation)
             )
+            self.health.observe(ev.t, res.nis, len(idx))
         self.ekf.robot_updates.clear()
 
     # -- loop -----------------------------------------------------------------------------

@@ -28,6 +28,7 @@ def make_summary(res: SlamResult, inputs, wall: float, aids: list) -> dict:
         "start_pose": [float(v) for v in inputs.start_pose],
         "log_duration_s": round(duration, 3),
         "counts": res.counts,
+        "filter_health": getattr(res, "health", {}),
         "lamps": len(res.lamps),
         "duplicates_guarded": res.counts["duplicates_guarded"],
         "mean_nis_lamp": float(np.mean(lamp_nis)) if lamp_nis else None,
@@ -39,6 +40,7 @@ def make_summary(res: SlamResult, inputs, wall: float, aids: list) -> dict:
         "trajectory_rows": len(res.t),
         "warnings": dict(sorted(inputs.warnings.items())),
         "truncated_log": bool(inputs.reader.truncated),
+        "log_damage": inputs.reader.damage(),
         "wall_time_s": round(wall, 3),
         "real_time_factor": round(duration / wall, 1) if wall > 0 else None,
     }
@@ -46,12 +48,7 @@ def make_summary(res: SlamResult, inputs, wall: float, aids: list) -> dict:
         out["first_warning"] = inputs.first_problem
     if aids:
         out["aids"] = {type(a).__name__: a.summary() for a in aids}
-        out["rings"] = {
-            "rings": inputs.ring_stats.rings,
-            "invalid": inputs.ring_stats.invalid,
-            "no_echo": inputs.ring_stats.no_echo,
-            "missing": inputs.ring_stats.missing,
-        }
+        out["rings"] = inputs.ring_stats.as_dict()
     return out
 
 
@@ -77,6 +74,12 @@ def run_stage(
             )
     finally:
         cv2.setNumThreads(threads)
+    res.ekf.check_covariance()
+    res.health = {  # numerical guards and the divergence test (slam/health.py)
+        **res.ekf.guards,
+        **runner.health.summary(),
+        "odometry_gap_s": round(inputs.gap_seconds, 3),
+    }
     if res.counts["odometry"] == 0:
         raise InputError(inputs.reader.path, f"no usable odometry on {inputs.odom_topic}")
     if inputs.lamp_source == "frames" and res.counts["frames"] == 0:
