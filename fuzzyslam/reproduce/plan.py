@@ -1,0 +1,178 @@
+"""The paper's experiment as a graph of stage commands (pure: no I/O).
+
+Each :class:`Step` is one ``fuzzyslam`` command line with paths relative to the
+reproduce output directory, the steps it needs first, and an expected cost (for
+scheduling and progress). Per seed the graph is, in experiment.md's terms::
+
+    paper.mcap  --run-->        AB       (phases A and B: lamps only, no help)
+                --map(AB)-->    fgm      (FGM frozen at the end of the freeze run)
+                --run --map-->  C        (phase C: heading fixes, the paper)
+                --run --map-->  C_pose   (beyond: full-pose fixes)
+    bumps.mcap  --run --map fgm --fix-from 0-->  D   (phase D: a bump each run)
+    dark.mcap   --run--> dark_none, --map--> dark_fgm, --run --map--> dark_heading, dark_pose
+    people.mcap --run--> people_none, --map--> people_fgm, --run --map --fix pose--> people_pose
+
+and every estimate is evaluated against its log's ground truth. Phase D borrows the
+map of the paper log: with a 10-degree bump in every run, the bump log's own phase A
+is lost at its first bump (lamps alone cannot recover a heading jump they never saw).
+"""
+
+from __future__ import annotations
+
+import shlex
+from dataclasses import dataclass, field
+
+
+@dataclass(frozen=True)
+class Suite:
+    """The embedded configs of one experiment: the paper's, or its two-run version."""
+
+    paper: str
+    bumps: str
+    dark: str
+    people: str
+
+
+FULL = Suite("paper.yaml", "paper_bumps.yaml", "paper_dark.yaml", "paper_people.yaml")
+QUICK = Suite("quick_failures.yaml", "quick_bumps.yaml", "quick_dark.yaml", "quick_people.yaml")
+
+
+@dataclass(frozen=True)
+class Step:
+    """One ``fuzzyslam`` command of the experiment."""
+
+    key: str  # unique: "seed0/C"
+    argv: tuple[str, ...]  # arguments after ``fuzzyslam``
+    deps: tuple[str, ...] = ()
+    cost: float = 1.0  # expected seconds (full scenario), for scheduling and progress
+    kind: str = field(default="")  # simulate | run | map | evaluate
+
+    @property
+    def command(self) -> str:
+        """The shell form of the step."""
+        return "fuzzyslam " + shlex.join(self.argv)
+
+
+# Evaluations drawn in the report, per seed: key -> (log, estimate dir, map dir, label)
+EVALUATIONS: dict[str, tuple[str, str, str, str]] = {
+    "AB": ("paper", "AB", "fgm", "A+B: lamps only"),
+    "C": ("paper", "C", "fgm", "C: heading fixes (paper)"),
+    "C_pose": ("paper", "C_pose", "fgm", "C: pose fixes (beyond)"),
+    "D": ("bumps", "D", "fgm", "D: bumps, heading fixes"),
+    "dark_none": ("dark", "dark_none", "dark_fgm", "all lamps off: no fixes"),
+    "dark_heading": ("dark", "dark_heading", "dark_fgm", "all lamps off: heading fixes"),
+    "dark_pose": ("dark", "dark_pose", "dark_fgm", "all lamps off: pose fixes"),
+    "people_pose": ("people", "people_pose", "people_fgm", "people and boxes: pose fixes"),
+}
+
+# Expected seconds of each command on the full scenario (measured on a 2-core machine).
+COST = {"simulate": 16.0, "run": 4.0, "run_heading": 8.0, "run_pose": 9.0, "map": 3.0}
+COST_EVALUATE = 5.0
+
+
+def seed_steps(seed: int, suite: Suite) -> list[Step]:
+    """Every step of one seed, in a valid order (dependencies first)."""
+    d = f"seed{seed}"
+    logs = {"paper": suite.paper, "bumps": suite.bumps, "dark": suite.dark, "people": suite.people}
+    steps: list[Step] = []
+
+    def add(name: str, kind: str, argv: list[str], deps: list[str], cost: float) -> None:
+        steps.append(Step(f"{d}/{name}", tuple(argv), tuple(f"{d}/{x}" for x in deps), cost, kind))
+
+    for name, config in logs.items():
+        add(
+            f"{name}.mcap",
+            "simulate",
+            ["simulate", config, "-o", f"{d}/{name}.mcap", "--seed", str(seed)],
+            [],
+            COST["simulate"],
+        )
+
+    def run(name: str, log: str, fix: str = "none", fgm: str = "", extra: tuple = ()) -> None:
+        argv = ["run", f"{d}/{log}.mcap", "-o", f"{d}/{name}", "--config", logs[log]]
+        deps = [f"{log}.mcap"]
+        if fix != "none":
+            argv += ["--map", f"{d}/{fgm}", "--fix", fix, *extra]
+            deps.append(fgm)
+        cost = COST["run"] if fix == "none" else COST[f"run_{fix}"]
+        add(name, "run", argv, deps, cost)
+
+    def fgm(name: str, log: str, est: str) -> None:
+        argv = [
+            "map", f"{d}/{log}.mcap", "--trajectory", f"{d}/{est}/trajectory.tum",
+            "--landmarks", f"{d}/{est}/landmarks.yaml", "-o", f"{d}/{name}",
+            "--config", logs[log],
+        ]  # fmt: skip
+        add(name, "map", argv, [f"{log}.mcap", est], COST["map"])
+
+    run("AB", "paper")
+    fgm("fgm", "paper", "AB")
+    run("C", "paper", "heading", "fgm")
+    run("C_pose", "paper", "pose", "fgm")
+    run("D", "bumps", "heading", "fgm", ("--fix-from", "0"))
+    for log in ("dark", "people"):
+        run(f"{log}_none", log)
+        fgm(f"{log}_fgm", log, f"{log}_none")
+    run("dark_heading", "dark", "heading", "dark_fgm")
+    run("dark_pose", "dark", "pose", "dark_fgm")
+    run("people_pose", "people", "pose", "people_fgm")
+
+    for name, (log, est, map_dir, label) in EVALUATIONS.items():
+        argv = [
+            "evaluate", f"{d}/{log}.mcap", f"{d}/{est}", "-o", f"{d}/eval_{name}",
+            "--map", f"{d}/{map_dir}", "--label", label,
+        ]  # fmt: skip
+        add(f"eval_{name}", "evaluate", argv, [f"{log}.mcap", est, map_dir], COST_EVALUATE)
+    return steps
+
+
+def build_plan(seeds: list[int], suite: Suite) -> list[Step]:
+    """The steps of every seed; keys are unique and every dependency is a step."""
+    steps = [s for seed in seeds for s in seed_steps(seed, suite)]
+    keys = {s.key for s in steps}
+    if len(keys) != len(steps):
+        raise ValueError("duplicate step keys in the plan")
+    for s in steps:
+        missing = [k for k in s.deps if k not in keys]
+        if missing:
+            raise ValueError(f"step {s.key} depends on unknown steps {missing}")
+    return steps
+
+
+def critical_path(steps: list[Step]) -> dict[str, float]:
+    """Longest expected cost from each step to the end of the graph (itself included).
+
+    Run first the step with the longest remaining chain (list scheduling by critical path,
+    Hu 1961), so that the last seconds are not spent waiting on one long chain.
+    """
+    children: dict[str, list[str]] = {s.key: [] for s in steps}
+    for s in steps:
+        for d in s.deps:
+            children[d].append(s.key)
+    cost = {s.key: s.cost for s in steps}
+    memo: dict[str, float] = {}
+    for s in reversed(_topological(steps)):
+        memo[s.key] = cost[s.key] + max((memo[c] for c in children[s.key]), default=0.0)
+    return memo
+
+
+def _topological(steps: list[Step]) -> list[Step]:
+    """Steps ordered so that each comes after its dependencies (Kahn's algorithm)."""
+    by_key = {s.key: s for s in steps}
+    indeg = {s.key: len(s.deps) for s in steps}
+    children: dict[str, list[str]] = {s.key: [] for s in steps}
+    for s in steps:
+        for d in s.deps:
+            children[d].append(s.key)
+    ready = [s.key for s in steps if indeg[s.key] == 0]
+    order: list[Step] = []
+    while ready:
+        k = ready.pop(0)
+        order.append(by_key[k])
+        for c in children[k]:
+            indeg[c] -= 1
+            if indeg[c] == 0:
+                ready.append(c)
+    if len(order) != len(steps):
+        raise ValueError("the plan has a dependency cycle")
+    return order

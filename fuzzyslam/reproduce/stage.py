@@ -1,0 +1,92 @@
+"""``fuzzyslam reproduce``: the paper's experiment over seeds, from the embedded configs.
+
+Builds the plan (:mod:`~fuzzyslam.reproduce.plan`), runs it in a temporary directory
+beside OUTDIR (:mod:`~fuzzyslam.reproduce.execute`), reads every evaluation's
+metrics.json, aggregates the table (:mod:`~fuzzyslam.reproduce.table`), writes the
+report (:mod:`~fuzzyslam.reproduce.report`) and moves the whole tree into OUTDIR only
+when everything succeeded.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import time
+from pathlib import Path
+from typing import Any
+
+from fuzzyslam import __version__
+from fuzzyslam.errors import InputError
+from fuzzyslam.fileio import OutputDir
+from fuzzyslam.reproduce.execute import StepResult, execute
+from fuzzyslam.reproduce.plan import EVALUATIONS, FULL, QUICK, build_plan
+from fuzzyslam.reproduce.report import draw_summary, write_commands, write_report, write_results
+from fuzzyslam.reproduce.table import aggregate, run_labels
+
+
+def seed_result(root: Path, seed: int, done: dict[str, StepResult]) -> dict[str, Any]:
+    """The evaluations' metrics and the runs' summaries of one seed (table.SeedResult)."""
+    d = f"seed{seed}"
+    evals = {}
+    for name in EVALUATIONS:
+        p = root / d / f"eval_{name}" / "metrics.json"
+        evals[name] = json.loads(p.read_text(encoding="utf-8"))
+    runs = {
+        k.split("/", 1)[1]: r.summary
+        for k, r in done.items()
+        if k.startswith(f"{d}/") and r.summary and r.summary.get("command") == "run"
+    }
+    seconds = sum(r.seconds for k, r in done.items() if k.startswith(f"{d}/"))
+    return {"seed": seed, "eval": evals, "run": runs, "seconds": seconds}
+
+
+def reproduce(
+    outdir: str | os.PathLike, seeds: list[int], quick: bool = False, jobs: int | None = None
+) -> dict[str, Any]:
+    """Run the experiment for ``seeds`` into ``outdir``; return the stdout summary."""
+    if not seeds:
+        raise InputError(outdir, "no seeds to run")
+    suite = QUICK if quick else FULL
+    jobs = max(1, jobs or os.cpu_count() or 1)
+    steps = build_plan(seeds, suite)
+    t0 = time.perf_counter()
+    with OutputDir(outdir) as tmp:
+        for s in seeds:
+            (tmp / f"seed{s}").mkdir()
+        write_commands(tmp / "commands.sh", steps)
+        done = execute(steps, tmp, jobs)
+        results = [seed_result(tmp, s, done) for s in seeds]
+        aggs = aggregate(results)
+        info = {
+            "command": "fuzzyslam reproduce"
+            + (" --quick" if quick else "")
+            + f" --seeds {len(seeds)}",
+            "suite": "quick" if quick else "paper",
+            "configs": [suite.paper, suite.bumps, suite.dark, suite.people],
+            "seeds": seeds,
+            "jobs": jobs,
+            "steps": len(steps),
+            "version": __version__,
+        }
+        png = "summary.png" if draw_summary(tmp, f"seed{seeds[0]}", tmp / "summary.png") else None
+        info["wall_s"] = time.perf_counter() - t0
+        step_log = [
+            {"key": s.key, "command": s.command, "seconds": round(done[s.key].seconds, 2),
+             "stderr": done[s.key].stderr}
+            for s in steps
+        ]  # fmt: skip
+        write_results(tmp / "results.json", aggs, results, info, step_log)
+        write_report(tmp / "report.md", aggs, results, seeds, info, png)
+    labels = run_labels(results[0])
+    headline = {f"{a.row.group}: {a.row.measure}".format(**labels): a.mean for a in aggs}
+    out = Path(outdir)
+    return {
+        "command": "reproduce",
+        "report": str(out / "report.md"),
+        "results": str(out / "results.json"),
+        "commands": str(out / "commands.sh"),
+        "seeds": seeds,
+        "suite": info["suite"],
+        "wall_time_s": round(info["wall_s"], 1),
+        "headline": headline,
+    }

@@ -1,0 +1,261 @@
+"""experiment.md's table: the paper's figure, our target and fuzzyslam's, over seeds (pure).
+
+A seed's results are a plain dict: ``{"eval": {name: metrics.json of eval_<name>},
+"run": {name: run summary}, "seconds": wall time of the seed's steps}`` (names of
+:data:`fuzzyslam.reproduce.plan.EVALUATIONS`). Each :class:`Row` extracts one number per
+seed; :func:`aggregate` gives its mean and spread and whether the target is met.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from typing import Any
+
+SeedResult = dict[str, Any]
+
+
+def dig(d: Any, *path: str | int) -> Any:
+    """``d[p0][p1]...`` or None when a key is missing (a metric a run could not give)."""
+    for p in path:
+        if not isinstance(d, dict) or p not in d:
+            return None
+        d = d[p]
+    return d
+
+
+def _num(v: Any, scale: float = 1.0) -> float | None:
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v):
+        return None
+    return float(v) * scale
+
+
+def phase_stat(ev: str, phase: str, *path: str, scale: float = 1.0):
+    """Extractor of ``eval[ev].phases[phase][path...]`` (``phase``: 'A', 'after', 'overall')."""
+
+    def get(r: SeedResult) -> float | None:
+        return _num(dig(r, "eval", ev, "phases", phase, *path), scale)
+
+    return get
+
+
+def _lamp_snapshot(r: SeedResult, ev: str, which: str) -> dict | None:
+    """Lamp matching at the end of the freeze run ('freeze') or of the last run ('last')."""
+    m = dig(r, "eval", ev)
+    by_run = dig(m, "lamps_by_run") or {}
+    if not by_run:
+        return None
+    if which == "freeze":
+        return by_run.get(f"run{m.get('freeze_run')}")
+    return by_run[max(by_run, key=lambda k: int(k[3:]))]
+
+
+def lamp_error(ev: str, which: str = "freeze", scale: float = 100.0):
+    def get(r: SeedResult) -> float | None:
+        return _num(dig(_lamp_snapshot(r, ev, which), "error_m", "mean"), scale)
+
+    return get
+
+
+def duplicates(ev: str, which: str = "last"):
+    def get(r: SeedResult) -> float | None:
+        return _num(dig(_lamp_snapshot(r, ev, which), "duplicates"))
+
+    return get
+
+
+def ratio(num: Callable, den: Callable):
+    def get(r: SeedResult) -> float | None:
+        a, b = num(r), den(r)
+        return None if a is None or b is None or b <= 0 else a / b
+
+    return get
+
+
+def run_value(run: str, key: str):
+    def get(r: SeedResult) -> float | None:
+        return _num(dig(r, "run", run, key))
+
+    return get
+
+
+def seed_seconds(r: SeedResult) -> float | None:
+    return _num(r.get("seconds"))
+
+
+def change_score(key: str):
+    def get(r: SeedResult) -> float | None:
+        return _num(dig(r, "eval", "people_pose", "change_detection", key))
+
+    return get
+
+
+@dataclass(frozen=True)
+class Row:
+    """One line of the table: what is measured, the paper's figure, the target, how to get it."""
+
+    group: str
+    measure: str
+    paper: str
+    target: str
+    get: Callable[[SeedResult], float | None]
+    unit: str = ""
+    ok: Callable[[float], bool] | None = None
+    digits: int = 2
+    integer: bool = False  # a count: per-seed values are shown without decimals
+
+
+def _le(limit: float) -> Callable[[float], bool]:
+    return lambda v: v <= limit
+
+
+def _eq0(v: float) -> bool:
+    return v == 0
+
+
+CM = 100.0
+A_POS = phase_stat("AB", "A", "position_m", "mean", scale=CM)
+
+ROWS: tuple[Row, ...] = (
+    Row("A. SLAM and map building", "mean position error, {A}", "< 5 cm", "<= 3 cm",
+        A_POS, "cm", _le(3.0)),
+    Row("A. SLAM and map building", "mean lamp error, end of run {freeze}", "< 5 cm", "<= 3 cm",
+        lamp_error("AB", "freeze"), "cm", _le(3.0)),
+    Row("A. SLAM and map building", "NEES mean (3 dof; 3 = consistent)", "-", "-",
+        phase_stat("AB", "A", "nees", "mean"), ""),
+    Row("A. SLAM and map building", "duplicate lamps, end of run {freeze}", "-", "0",
+        duplicates("AB", "freeze"), "", _eq0, 1, True),
+    Row("B. lamp failure, no help", "mean position error, {after}", "diverges", "-",
+        phase_stat("AB", "after", "position_m", "mean", scale=CM), "cm"),
+    Row("B. lamp failure, no help", "max position error, {after}", "diverges", "-",
+        phase_stat("AB", "after", "position_m", "max", scale=CM), "cm"),
+    Row("B. lamp failure, no help", "duplicate lamps, end of run {last}", "created", "0",
+        duplicates("AB"), "", _eq0, 1, True),
+    Row("C. lamp failure with Hough", "mean position error, {after}", "about 2x A",
+        "<= 1.5x A", phase_stat("C", "after", "position_m", "mean", scale=CM), "cm"),
+    Row("C. lamp failure with Hough", "ratio to phase A", "about 2", "<= 1.5",
+        ratio(phase_stat("C", "after", "position_m", "mean"), phase_stat("C", "A", "position_m",
+              "mean")), "x", _le(1.5)),
+    Row("C. lamp failure with Hough", "max position error, {after}", "-", "-",
+        phase_stat("C", "after", "position_m", "max", scale=CM), "cm"),
+    Row("C. lamp failure with Hough", "duplicate lamps, end of run {last}", "-", "0",
+        duplicates("C"), "", _eq0, 1, True),
+    Row("Hough accuracy", "heading-fix error, mean abs., {after}", "1.0 deg", "<= 0.5 deg",
+        phase_stat("C", "after", "heading_fix", "error_deg", "mean"), "deg", _le(0.5)),
+    Row("Hough accuracy", "heading-fix error std, {after}", "0.66 deg", "<= 0.5 deg",
+        phase_stat("C", "after", "heading_fix", "error_deg", "std"), "deg", _le(0.5)),
+    Row("D. bumps (heading fixes)", "max x error, {all}", "25 cm", "<= 10 cm",
+        phase_stat("D", "overall", "x_m", "max", scale=CM), "cm", _le(10.0)),
+    Row("D. bumps (heading fixes)", "max y error, {all}", "18 cm", "<= 10 cm",
+        phase_stat("D", "overall", "y_m", "max", scale=CM), "cm", _le(10.0)),
+    Row("D. bumps (heading fixes)", "mean heading error", "-", "<= 3 deg",
+        phase_stat("D", "overall", "heading_deg", "mean"), "deg", _le(3.0)),
+    Row("D. bumps (heading fixes)", "max heading error (the unseen bump itself)", "15 deg", "-",
+        phase_stat("D", "overall", "heading_deg", "max"), "deg"),
+    Row("D. bumps (heading fixes)", "duplicate lamps, end of run {last}", "-", "0",
+        duplicates("D"), "", _eq0, 1, True),
+    Row("Beyond: all lamps off", "mean position error, {after}, no fixes", "not attempted",
+        "-", phase_stat("dark_none", "after", "position_m", "mean", scale=CM), "cm"),
+    Row("Beyond: all lamps off", "mean position error, {after}, heading fixes",
+        "not attempted", "-",
+        phase_stat("dark_heading", "after", "position_m", "mean", scale=CM), "cm"),
+    Row("Beyond: all lamps off", "mean position error, {after}, pose fixes", "not attempted",
+        "<= 15 cm", phase_stat("dark_pose", "after", "position_m", "mean", scale=CM), "cm",
+        _le(15.0)),
+    Row("Beyond: all lamps off", "max position error, {after}, pose fixes", "not attempted",
+        "<= 15 cm", phase_stat("dark_pose", "after", "position_m", "max", scale=CM), "cm",
+        _le(15.0)),
+    Row("Beyond: people and boxes", "mean position error, {after}, pose fixes", "-",
+        "as without them",
+        phase_stat("people_pose", "after", "position_m", "mean", scale=CM), "cm"),
+    Row("Beyond: people and boxes", "same log without them (phase C, pose fixes)", "-", "-",
+        phase_stat("C_pose", "after", "position_m", "mean", scale=CM), "cm"),
+    Row("Beyond: people and boxes", "change detection precision", "-", "-",
+        change_score("precision"), ""),
+    Row("Beyond: people and boxes", "change detection recall", "-", "-",
+        change_score("recall"), ""),
+    Row("Cost", "run real-time factor, lamps only (A+B)", "-", ">= 300x",
+        run_value("AB", "real_time_factor"), "x", lambda v: v >= 300.0, 0),
+    Row("Cost", "run real-time factor, heading fixes (C)", "-", "-",
+        run_value("C", "real_time_factor"), "x", None, 0),
+    Row("Cost", "run real-time factor, pose fixes (C)", "-", ">= 100x",
+        run_value("C_pose", "real_time_factor"), "x", lambda v: v >= 100.0, 0),
+    Row("Cost", "time of one seed's steps, summed (one core each)", "-", "-", seed_seconds, "s",
+        None, 0),
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class Aggregate:
+    """A row's values over seeds (None where a seed could not give it)."""
+
+    row: Row
+    values: tuple[float | None, ...]
+
+    @property
+    def valid(self) -> list[float]:
+        return [v for v in self.values if v is not None]
+
+    @property
+    def mean(self) -> float | None:
+        v = self.valid
+        return sum(v) / len(v) if v else None
+
+    @property
+    def spread(self) -> float | None:
+        """Sample standard deviation over seeds (None for fewer than two)."""
+        v = self.valid
+        if len(v) < 2:
+            return None
+        m = sum(v) / len(v)
+        return math.sqrt(sum((x - m) ** 2 for x in v) / (len(v) - 1))
+
+    @property
+    def met(self) -> tuple[int, int] | None:
+        """(seeds meeting the target, seeds measured), or None for rows without a target."""
+        if self.row.ok is None or not self.valid:
+            return None
+        return sum(bool(self.row.ok(v)) for v in self.valid), len(self.valid)
+
+    def to_dict(self) -> dict[str, Any]:
+        v = self.valid
+        return {
+            "group": self.row.group,
+            "measure": self.row.measure,
+            "unit": self.row.unit,
+            "paper": self.row.paper,
+            "target": self.row.target,
+            "values": list(self.values),
+            "mean": self.mean,
+            "std": self.spread,
+            "min": min(v) if v else None,
+            "max": max(v) if v else None,
+            "met": list(self.met) if self.met is not None else None,
+        }
+
+
+def aggregate(results: list[SeedResult], rows: tuple[Row, ...] = ROWS) -> list[Aggregate]:
+    """Each row's value for each seed's results, in seed order."""
+    return [Aggregate(row, tuple(row.get(r) for r in results)) for row in rows]
+
+
+def run_labels(result: SeedResult) -> dict[str, str]:
+    """Run ranges that fill the measures' placeholders: {A}, {after}, {all}, {freeze}, {last}."""
+    ph = dig(result, "eval", "AB", "phases") or {}
+
+    def span(runs: list[int] | None) -> str:
+        if not runs:
+            return "runs ?"
+        return f"run {runs[0]}" if len(runs) == 1 else f"runs {runs[0]}-{runs[-1]}"
+
+    a, after = dig(ph, "A", "runs"), dig(ph, "after", "runs")
+    every = sorted({*(a or []), *(after or [])})
+    freeze = dig(result, "eval", "AB", "freeze_run")
+    return {
+        "A": span(a),
+        "after": span(after),
+        "all": span(every),
+        "freeze": str(freeze) if freeze is not None else "?",
+        "last": str(every[-1]) if every else "?",
+    }
