@@ -85,6 +85,13 @@ def check_input_file(path: str | os.PathLike, what: str = "input") -> Path:
     return p
 
 
+def _umask() -> int:
+    """The process's file-creation mask (read by setting it and putting it back)."""
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return mask
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
@@ -99,6 +106,8 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     try:
         yield tmp_path
         _refuse_inputs([path])
+        with contextlib.suppress(OSError):  # mkstemp made it private: give it a file's usual mode
+            os.chmod(tmp_path, 0o666 & ~_umask())
         os.replace(tmp_path, path)
     except BaseException:
         with contextlib.suppress(OSError):
@@ -149,9 +158,7 @@ class OutputDir:
         one: file by file (each ``os.replace`` atomic), Ctrl-C deferred until done."""
         assert self.tmp is not None
         if not self.path.exists():
-            umask = os.umask(0)
-            os.umask(umask)
-            os.chmod(self.tmp, 0o777 & ~umask)  # mkdtemp made it private
+            os.chmod(self.tmp, 0o777 & ~_umask())  # mkdtemp made it private
             with contextlib.suppress(OSError):
                 os.rename(self.tmp, self.path)
                 return

@@ -228,6 +228,14 @@ def test_outputs_move_into_place_whole(tmp_path: Path) -> None:
     assert fresh.stat().st_mode & 0o777 == 0o777 & ~umask
     assert [p.name for p in fresh.iterdir()] == ["a.txt"] and not leftovers(tmp_path)
 
+    # a single file written through atomic_path gets a file's usual mode, not mkstemp's 0600
+    from fuzzyslam.fileio import atomic_path
+
+    with atomic_path(tmp_path / "one.txt") as part:
+        part.write_text("x", encoding="utf-8")
+    assert (tmp_path / "one.txt").stat().st_mode & 0o777 == 0o666 & ~umask
+    (tmp_path / "one.txt").unlink()
+
     import fuzzyslam.fileio as fileio
 
     real_move = OutputDir._move
