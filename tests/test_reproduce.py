@@ -217,3 +217,15 @@ def test_quick_reproduce_writes_the_chain_as_commands_and_figures(quick_run):
         assert (out / rel).is_file(), rel
     assert (out / "summary.png").stat().st_size > 10_000
     assert not list(out.parent.glob(".*.part"))
+
+
+def test_paper_only_plan_is_the_paper_phases_subset():
+    full = {s.key: s for s in build_plan([0], FULL)}
+    paper = build_plan([0], FULL, beyond=False)
+    assert {s.key for s in paper} < set(full)
+    assert all(full[s.key] == s for s in paper)
+    assert {s.argv[1] for s in paper if s.kind == "simulate"} == {FULL.paper, FULL.bumps}
+    assert not any("pose" in s.argv for s in paper)
+    assert {s.key.split("/")[1] for s in paper if s.kind == "evaluate"} == {
+        "eval_AB", "eval_C", "eval_D"
+    }  # fmt: skip

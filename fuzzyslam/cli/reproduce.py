@@ -39,13 +39,20 @@ from fuzzyslam.cli import cli, emit
     help="Two-run versions of the scenarios (quick_*.yaml): a smoke test in about a minute.",
 )
 @click.option(
+    "--paper-only",
+    is_flag=True,
+    help="Only the paper's phases A-D (no all-lamps-off or people scenarios, no pose fixes).",
+)
+@click.option(
     "-j",
     "--jobs",
     type=click.IntRange(min=1),
     default=None,
     help="Worker processes (default: the machine's cores).",
 )
-def reproduce_command(outdir: Path, seeds: int, first_seed: int, quick: bool, jobs) -> None:
+def reproduce_command(
+    outdir: Path, seeds: int, first_seed: int, quick: bool, paper_only: bool, jobs
+) -> None:
     """Reproduce the paper's experiment: simulate, run, map, run with fixes, evaluate.
 
     \b
@@ -71,4 +78,5 @@ def reproduce_command(outdir: Path, seeds: int, first_seed: int, quick: bool, jo
     """
     from fuzzyslam.reproduce.stage import reproduce
 
-    emit(reproduce(outdir, list(range(first_seed, first_seed + seeds)), quick, jobs))
+    seed_list = list(range(first_seed, first_seed + seeds))
+    emit(reproduce(outdir, seed_list, quick, jobs, beyond=not paper_only))

@@ -65,15 +65,26 @@ EVALUATIONS: dict[str, tuple[str, str, str, str]] = {
     "people_pose": ("people", "people_pose", "people_fgm", "people and boxes: pose fixes"),
 }
 
+# Estimates and evaluations of the paper's own phases (A-D); the others go beyond it.
+PAPER_ONLY = ("AB", "C", "D")
+
 # Expected seconds of each command on the full scenario (measured on a 2-core machine).
 COST = {"simulate": 16.0, "run": 4.0, "run_heading": 8.0, "run_pose": 9.0, "map": 3.0}
 COST_EVALUATE = 5.0
 
 
-def seed_steps(seed: int, suite: Suite) -> list[Step]:
-    """Every step of one seed, in a valid order (dependencies first)."""
+def evaluations(beyond: bool = True) -> dict[str, tuple[str, str, str, str]]:
+    """The evaluations of the plan: all, or the paper's phases only."""
+    return {k: v for k, v in EVALUATIONS.items() if beyond or k in PAPER_ONLY}
+
+
+def seed_steps(seed: int, suite: Suite, beyond: bool = True) -> list[Step]:
+    """Every step of one seed, in a valid order (dependencies first); ``beyond=False``
+    keeps only the paper's phases A-D (no dark or people logs, no pose fixes)."""
     d = f"seed{seed}"
-    logs = {"paper": suite.paper, "bumps": suite.bumps, "dark": suite.dark, "people": suite.people}
+    logs = {"paper": suite.paper, "bumps": suite.bumps}
+    if beyond:
+        logs |= {"dark": suite.dark, "people": suite.people}
     steps: list[Step] = []
 
     def add(name: str, kind: str, argv: list[str], deps: list[str], cost: float) -> None:
@@ -108,16 +119,17 @@ def seed_steps(seed: int, suite: Suite) -> list[Step]:
     run("AB", "paper")
     fgm("fgm", "paper", "AB")
     run("C", "paper", "heading", "fgm")
-    run("C_pose", "paper", "pose", "fgm")
     run("D", "bumps", "heading", "fgm", ("--fix-from", "0"))
-    for log in ("dark", "people"):
-        run(f"{log}_none", log)
-        fgm(f"{log}_fgm", log, f"{log}_none")
-    run("dark_heading", "dark", "heading", "dark_fgm")
-    run("dark_pose", "dark", "pose", "dark_fgm")
-    run("people_pose", "people", "pose", "people_fgm")
+    if beyond:
+        run("C_pose", "paper", "pose", "fgm")
+        for log in ("dark", "people"):
+            run(f"{log}_none", log)
+            fgm(f"{log}_fgm", log, f"{log}_none")
+        run("dark_heading", "dark", "heading", "dark_fgm")
+        run("dark_pose", "dark", "pose", "dark_fgm")
+        run("people_pose", "people", "pose", "people_fgm")
 
-    for name, (log, est, map_dir, label) in EVALUATIONS.items():
+    for name, (log, est, map_dir, label) in evaluations(beyond).items():
         argv = [
             "evaluate", f"{d}/{log}.mcap", f"{d}/{est}", "-o", f"{d}/eval_{name}",
             "--map", f"{d}/{map_dir}", "--label", label,
@@ -126,9 +138,9 @@ def seed_steps(seed: int, suite: Suite) -> list[Step]:
     return steps
 
 
-def build_plan(seeds: list[int], suite: Suite) -> list[Step]:
+def build_plan(seeds: list[int], suite: Suite, beyond: bool = True) -> list[Step]:
     """The steps of every seed; keys are unique and every dependency is a step."""
-    steps = [s for seed in seeds for s in seed_steps(seed, suite)]
+    steps = [s for seed in seeds for s in seed_steps(seed, suite, beyond)]
     keys = {s.key for s in steps}
     if len(keys) != len(steps):
         raise ValueError("duplicate step keys in the plan")

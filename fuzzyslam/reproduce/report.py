@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from fuzzyslam.reproduce.plan import EVALUATIONS, Step
+from fuzzyslam.reproduce.plan import Step, evaluations
 from fuzzyslam.reproduce.table import Aggregate, run_labels
 
 
@@ -98,13 +98,13 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
          [("dark_none", "lamps only"), ("dark_heading", "heading fixes"),
           ("dark_pose", "pose fixes")]),
     ]  # fmt: skip
-    fig, axes = plt.subplots(len(panels), 1, figsize=(10, 7), sharex=False)
+    panels = [p for p in panels if (root / seed_dir / f"{p[0]}.mcap").is_file()]
+    if not panels:
+        return False
+    fig, axes = plt.subplots(len(panels), 1, figsize=(10, 3.5 * len(panels)), squeeze=False)
+    axes = axes[:, 0]
     for ax, (log, title, runs) in zip(axes, panels, strict=True):
-        mcap = root / seed_dir / f"{log}.mcap"
-        if not mcap.is_file():
-            plt.close(fig)
-            return False
-        truth = read_truth(mcap)
+        truth = read_truth(root / seed_dir / f"{log}.mcap")
         for name, label in runs:
             tum = root / seed_dir / name / "trajectory.tum"
             if not tum.is_file():
@@ -137,6 +137,7 @@ def write_report(
     seeds: list[int],
     info: dict[str, Any],
     summary_png: str | None,
+    beyond: bool = True,
 ) -> None:
     """report.md: how it was made, the table, per-seed values and the figures of one seed."""
     labels = run_labels(results[0]) if results else {}
@@ -203,7 +204,7 @@ def write_report(
         if (root / rel).is_file():
             lines += [f"### {title}", "", f"![{title}]({rel})", ""]
     lines += ["## Every evaluation", ""]
-    for name, (_log, _est, _map, label) in EVALUATIONS.items():
+    for name, (_log, _est, _map, label) in evaluations(beyond).items():
         links = ", ".join(f"[seed {s}](seed{s}/eval_{name}/report.md)" for s in seeds)
         lines.append(f"- {label}: {links}")
     lines.append("")

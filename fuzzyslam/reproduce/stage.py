@@ -19,16 +19,18 @@ from fuzzyslam import __version__
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir
 from fuzzyslam.reproduce.execute import StepResult, execute
-from fuzzyslam.reproduce.plan import EVALUATIONS, FULL, QUICK, build_plan
+from fuzzyslam.reproduce.plan import FULL, QUICK, build_plan, evaluations
 from fuzzyslam.reproduce.report import draw_summary, write_commands, write_report, write_results
 from fuzzyslam.reproduce.table import aggregate, run_labels
 
 
-def seed_result(root: Path, seed: int, done: dict[str, StepResult]) -> dict[str, Any]:
+def seed_result(
+    root: Path, seed: int, done: dict[str, StepResult], beyond: bool = True
+) -> dict[str, Any]:
     """The evaluations' metrics and the runs' summaries of one seed (table.SeedResult)."""
     d = f"seed{seed}"
     evals = {}
-    for name in EVALUATIONS:
+    for name in evaluations(beyond):
         p = root / d / f"eval_{name}" / "metrics.json"
         evals[name] = json.loads(p.read_text(encoding="utf-8"))
     runs = {
@@ -41,28 +43,34 @@ def seed_result(root: Path, seed: int, done: dict[str, StepResult]) -> dict[str,
 
 
 def reproduce(
-    outdir: str | os.PathLike, seeds: list[int], quick: bool = False, jobs: int | None = None
+    outdir: str | os.PathLike,
+    seeds: list[int],
+    quick: bool = False,
+    jobs: int | None = None,
+    beyond: bool = True,
 ) -> dict[str, Any]:
-    """Run the experiment for ``seeds`` into ``outdir``; return the stdout summary."""
+    """Run the experiment for ``seeds`` into ``outdir``; return the stdout summary.
+    ``beyond=False``: the paper's phases A-D only."""
     if not seeds:
         raise InputError(outdir, "no seeds to run")
     suite = QUICK if quick else FULL
     jobs = max(1, jobs or os.cpu_count() or 1)
-    steps = build_plan(seeds, suite)
+    steps = build_plan(seeds, suite, beyond)
     t0 = time.perf_counter()
     with OutputDir(outdir) as tmp:
         for s in seeds:
             (tmp / f"seed{s}").mkdir()
         write_commands(tmp / "commands.sh", steps)
         done = execute(steps, tmp, jobs)
-        results = [seed_result(tmp, s, done) for s in seeds]
+        results = [seed_result(tmp, s, done, beyond) for s in seeds]
         aggs = aggregate(results)
         info = {
             "command": "fuzzyslam reproduce"
             + (" --quick" if quick else "")
-            + f" --seeds {len(seeds)}",
+            + f" --seeds {len(seeds)}"
+            + ("" if beyond else " --paper-only"),
             "suite": "quick" if quick else "paper",
-            "configs": [suite.paper, suite.bumps, suite.dark, suite.people],
+            "configs": [suite.paper, suite.bumps] + ([suite.dark, suite.people] if beyond else []),
             "seeds": seeds,
             "jobs": jobs,
             "steps": len(steps),
@@ -76,7 +84,7 @@ def reproduce(
             for s in steps
         ]  # fmt: skip
         write_results(tmp / "results.json", aggs, results, info, step_log)
-        write_report(tmp / "report.md", aggs, results, seeds, info, png)
+        write_report(tmp / "report.md", aggs, results, seeds, info, png, beyond)
     labels = run_labels(results[0])
     headline = {f"{a.row.group}: {a.row.measure}".format(**labels): a.mean for a in aggs}
     out = Path(outdir)

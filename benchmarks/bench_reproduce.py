@@ -1,0 +1,87 @@
+"""Benchmark of ``fuzzyslam reproduce``: the whole experiment for one seed, wall time.
+
+    python benchmarks/bench_reproduce.py [--seeds 1] [--jobs N] [--workdir DIR]
+
+Runs ``reproduce --paper-only`` (the paper's phases A-D: two simulations, three runs, a
+map, three evaluations; target: under 60 s on 2 cores) and the full ``reproduce`` (plus
+the all-lamps-off and people scenarios, pose fixes), each in a fresh directory and its own
+process, and prints one JSON object per variant: wall time, the sum of the steps' times
+(the work), the work of each kind of step, and two lower bounds of the wall time: the
+longest chain of dependent steps (measured times) and the work divided by the jobs.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+
+
+def chain_bound(steps: list[dict], deps: dict[str, tuple[str, ...]]) -> float:
+    """Longest path through the step graph with the measured step times."""
+    t = {s["key"]: s["seconds"] for s in steps}
+    memo: dict[str, float] = {}
+
+    def finish(k: str) -> float:
+        if k not in memo:
+            memo[k] = t[k] + max((finish(d) for d in deps[k]), default=0.0)
+        return memo[k]
+
+    return max(finish(k) for k in t)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seeds", type=int, default=1)
+    ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
+    ap.add_argument("--workdir", type=Path, default=None)
+    ap.add_argument("--only", choices=["paper", "full"], default=None)
+    args = ap.parse_args()
+
+    from fuzzyslam.reproduce.plan import FULL, build_plan
+
+    work = args.workdir or Path(tempfile.mkdtemp(prefix="bench_reproduce."))
+    env = {**os.environ, "FUZZYSLAM_NO_PROGRESS": "1", "MPLBACKEND": "Agg"}
+    variants = [("paper", ["--paper-only"]), ("full", [])]
+    for name, extra in variants:
+        if args.only and name != args.only:
+            continue
+        out = work / f"reproduce_{name}"
+        cmd = [sys.executable, "-m", "fuzzyslam", "reproduce", "-o", str(out),
+               "--seeds", str(args.seeds), "--jobs", str(args.jobs), *extra]  # fmt: skip
+        t0 = time.perf_counter()
+        p = subprocess.run(cmd, env=env, capture_output=True, text=True)
+        wall = time.perf_counter() - t0
+        if p.returncode != 0:
+            print(json.dumps({"variant": name, "error": p.stderr.strip()}))
+            continue
+        res = json.loads((out / "results.json").read_text())
+        steps = res["steps"]
+        plan = build_plan(list(range(args.seeds)), FULL, beyond=(name == "full"))
+        deps = {s.key: s.deps for s in plan}
+        by_kind: dict[str, float] = defaultdict(float)
+        for s in steps:
+            by_kind[s["command"].split()[1]] += s["seconds"]
+        work_s = sum(s["seconds"] for s in steps)
+        print(json.dumps({
+            "variant": name,
+            "seeds": args.seeds,
+            "jobs": args.jobs,
+            "wall_s": round(wall, 1),
+            "target_wall_s": 60.0 if name == "paper" and args.seeds == 1 else None,
+            "work_s": round(work_s, 1),
+            "work_by_command_s": {k: round(v, 1) for k, v in sorted(by_kind.items())},
+            "bound_longest_chain_s": round(chain_bound(steps, deps), 1),
+            "bound_work_over_jobs_s": round(work_s / args.jobs, 1),
+            "steps": len(steps),
+        }))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
