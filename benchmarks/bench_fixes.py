@@ -11,7 +11,9 @@ Prints, for each part, one line of JSON:
   per heading decision (Hough + decide), per change detection, per FLM build; and the
   implied real-time factor at 4 rings/s for pose fixes on every ring;
 - accuracy: heading-fix error (deg) in a straight corridor, sonar and clean FLMs; pose
-  match position / heading error and mean NEES (3 dof, consistency: about 3).
+  match position / heading error and mean NEES (3 dof, consistency: about 3); wall direction
+  of one ring vs the FLM of the last k rings placed by odometry (``fixes.flm_rings``), and
+  the cost of one multi-ring fix.
 - with ``--run`` (or ``--log LOG --map FGMDIR``): the real-time factor of the whole
   ``fuzzyslam run`` (log duration / wall time, reading the log included) with
   ``--fix none|heading|pose`` on a paper.yaml log (simulated, run and mapped first into a
@@ -37,6 +39,7 @@ from fuzzyslam.fixes.changes import detect_changes, free_space
 from fuzzyslam.fixes.heading import decide_heading_fix
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.pose_match import PoseMatcher
+from fuzzyslam.maps.flm import RecentRings
 from fuzzyslam.maps.grid import Grid
 from fuzzyslam.maps.hough import flm_wall_direction
 from fuzzyslam.se2 import rot, wrap_angle
@@ -183,6 +186,20 @@ def main() -> None:
         if len(errs):
             acc[f"heading_{kind}_err_mean_deg"] = round(float(np.mean(errs)), 3)
             acc[f"heading_{kind}_err_std_deg"] = round(float(np.std(errs)), 3)
+    # multi-ring FLM (issue 5): wall direction of the newest ring vs the last k rings placed
+    # by odometry, weaving along the corridor with 1 % range noise; and the cost of one
+    # multi-ring FLM + Hough + tangent refinement (one fix every k rings)
+    for k in sorted({8, params.flm_rings}):
+        single, multi = tf._window_heading_errors(7, args.n, k)
+        acc[f"flm_rings_{k}_single_err_mean_deg"] = round(float(np.mean(single)), 3)
+        acc[f"flm_rings_{k}_multi_err_mean_deg"] = round(float(np.mean(multi)), 3)
+        acc[f"flm_rings_{k}_multi_err_std_deg"] = round(float(np.std(multi)), 3)
+        recent = RecentRings(k, 100.0)
+        for j in range(k):
+            pose = np.array([*(rot(angle) @ [0.08 * j, 0.1]), angle + 0.05])
+            recent.push(float(j), pose, tf.sonar_ranges(pose, cwalls, rng), tf.MAXR, tf.FOV)
+        ms = timeit(lambda recent=recent: flm_wall_direction(recent.flm(tf.MOUNTS, tf.MP)), 20)
+        acc[f"flm_rings_{k}_fix_ms"] = round(ms, 2)
     print(json.dumps({"heading_accuracy": acc}))
 
     # --- pose accuracy and consistency in the L room (the score surface itself: no

@@ -30,7 +30,7 @@ from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.pose_match import PoseFixAid, PoseMatcher
 from fuzzyslam.fixes.references import Reference, points_in_polygon, references_from_dicts
 from fuzzyslam.maps.fgm import FgmBuilder
-from fuzzyslam.maps.flm import build_flm
+from fuzzyslam.maps.flm import RecentRings, build_flm
 from fuzzyslam.maps.grid import Grid
 from fuzzyslam.maps.hough import flm_wall_direction
 from fuzzyslam.maps.params import MapParams
@@ -658,7 +658,191 @@ def test_make_aids_loads_and_checks_map_dir(room, tmp_path):
         make_aids(tmp_path / "missing", "pose", cfg)
 
 
+# --- multi-ring FLM heading fixes (beyond the paper) ----------------------------------------
+
+
+def sonar_ranges(pose, walls, rng):
+    """A ray-cast ring with the simulator's range noise: 1 % Gaussian, 1-inch quantum."""
+    r = raycast(pose, walls)
+    r = r * (1.0 + 0.01 * rng.standard_normal(r.shape))
+    return np.round(r / 0.0254) * 0.0254
+
+
+def _window_heading_errors(seed: int, trials: int, k: int, place_by_odometry: bool = True):
+    """|wall direction error| (deg) of the newest ring's FLM and of the FLM of the last k
+    rings (RecentRings), the robot weaving along a corridor at 0.3 rad; the rings are
+    placed by odometry that is off by 0.05 deg per ring (or, to show that placing
+    matters, all at the newest pose)."""
+    rng = np.random.default_rng(seed)
+    angle = 0.3
+    walls = corridor_walls(angle)
+    single, multi = [], []
+    for _ in range(trials):
+        xy = rot(angle) @ [rng.uniform(-8.0, 6.0), rng.uniform(-0.4, 0.4)]
+        back = rng.choice([0.0, math.pi])
+        true = np.array([*xy, angle + back + rng.uniform(-0.15, 0.15)])
+        odo = true.copy()
+        recent = RecentRings(k, 10.0)
+        for j in range(k):
+            step = np.array([0.08, 0.0, rng.normal(0.0, 1.0 * DEG)])
+            true = compose(true, step)
+            odo = compose(odo, step + np.array([0.0, 0.0, rng.normal(0.0, 0.05 * DEG)]))
+            ranges = sonar_ranges(true, walls, rng)
+            recent.push(float(j), odo if place_by_odometry else np.zeros(3), ranges, MAXR, FOV)
+        t_local = angle - true[2]  # the walls' true direction in the robot frame
+        for flm, out in (
+            (build_flm(ranges, np.full(16, MAXR), FOV, MOUNTS, MP), single),
+            (recent.flm(MOUNTS, MP), multi),
+        ):
+            w = flm_wall_direction(flm, MP)
+            if np.isfinite(w.angle) and not w.ambiguous:
+                out.append(abs(float(wrap_angle_period(w.angle - t_local, math.pi))))
+    return np.degrees(single), np.degrees(multi)
+
+
+def test_multi_ring_flm_measures_the_wall_direction_better_than_one_ring():
+    """Issue 5: the FLM of the last 8 rings placed by odometry gives the wall direction
+    within 0.5 deg (mean |error|), at most half the single ring's error; the same rings
+    NOT placed by their relative motion (all at the newest pose) do worse."""
+    single, multi = _window_heading_errors(11, 12, 8)
+    assert len(single) >= 8 and len(multi) >= 10
+    assert multi.mean() < 0.5 and multi.mean() < 0.5 * single.mean()
+    _, unplaced = _window_heading_errors(11, 12, 8, place_by_odometry=False)
+    assert len(unplaced) < len(multi) or unplaced.mean() > 1.5 * multi.mean()
+
+
+class OdoEkf(ToyEkf):
+    """ToyEkf that also keeps its dead reckoning (slam.ekf.EkfSlam.odometry_pose)."""
+
+    def __init__(self, pose, cov):
+        super().__init__(pose, cov)
+        self.odometry_pose = np.asarray(pose, float).copy()
+
+    def move(self, d_fwd: float, q: np.ndarray, d_rot: float = 0.0):
+        super().move(d_fwd, q, d_rot)
+        self.odometry_pose = compose(self.odometry_pose, [d_fwd, 0.0, d_rot])
+
+
+def sonar_ring(t: float):
+    return SimpleNamespace(t=t, ranges=np.full(16, 2.0), max_range=MAXR, fov=FOV)
+
+
+@pytest.mark.parametrize("every", [0, 2])
+def test_multi_ring_fix_rate_noise_and_dead_reckoning_window(every):
+    """One multi-ring fix every ``flm_fix_every`` rings (default: every flm_rings, disjoint
+    windows) with R = sigma_flm^2 flm_rings / every for overlapping windows; in between the
+    single-ring decision is not applied; the window holds dead-reckoning poses, not the
+    filter's (which jumps at the fixes)."""
+    k = 4
+    p = FixParams(flm_rings=k, flm_fix_every=every, flm_window_s=100.0)
+    ref = corridor_ref(0.0)
+    seen = []
+
+    def rings_flm(recent, mounts):
+        seen.append(np.array(recent._poses))
+        return "multi"
+
+    walls = {
+        "multi": SimpleNamespace(angle=0.0, strength=3.0, ambiguous=False, sigma=0.1 * DEG),
+        "single": SimpleNamespace(angle=0.0, strength=3.0, ambiguous=False),
+    }
+    ekf = OdoEkf([0.0, 0.0, 0.5 * DEG], np.diag([1e-4, 1e-4, (2 * DEG) ** 2]))
+    aid = HeadingFixAid(
+        [ref], p, lambda r, m: "single", walls.__getitem__, 0.0, rings_flm=rings_flm
+    )
+    n = 12
+    for j in range(n):
+        ekf.move(0.1, np.diag([1e-6, 1e-6, (0.05 * DEG) ** 2]))
+        aid.on_ring(float(j), sonar_ring(float(j)), MOUNTS, ekf)
+    step = every or k
+    formed = [d for d in aid.decisions if d.reason == "ok"]
+    assert [d.t for d in formed] == [float(j) for j in range(n) if (j + 1) % step == 0 and j >= 1]
+    assert ekf.updates == len(formed) == aid.summary()["multi_ring_fixes_formed"]
+    want = p.sigma_flm_deg * math.sqrt(max(1.0, k / step))
+    assert all(d.sigma == pytest.approx(want * DEG) for d in formed)
+    others = [d for d in aid.decisions if d.reason != "ok"]
+    assert others and all(d.reason == "between_fixes" and not d.accepted for d in others)
+    # the window: consecutive dead-reckoning poses 0.1 m apart along x, although the
+    # filter's heading was pulled by the fixes
+    last = seen[-1]
+    assert len(last) == k and np.allclose(np.diff(last[:, 0]), 0.1, atol=1e-4)
+    assert np.allclose(last[:, 2], 0.5 * DEG) and abs(ekf.x[2]) < 0.4 * DEG
+
+
+def test_multi_ring_fix_noise_follows_a_loose_tangent_fit():
+    """A wall whose tangent fit reports sigma above sigma_flm_deg gets that sigma."""
+    p = FixParams(flm_rings=2, flm_fix_every=0)
+    loose = SimpleNamespace(angle=0.0, strength=3.0, ambiguous=False, sigma=1.2 * DEG)
+    ekf = OdoEkf([0.0, 0.0, 0.0], np.diag([1e-4, 1e-4, (2 * DEG) ** 2]))
+    aid = HeadingFixAid(
+        [corridor_ref(0.0)], p, lambda r, m: None, lambda f: loose, 0.0, lambda rr, m: None
+    )
+    for j in range(2):
+        aid.on_ring(float(j), sonar_ring(float(j)), MOUNTS, ekf)
+    assert aid.decisions[-1].reason == "ok"
+    assert aid.decisions[-1].sigma == pytest.approx(1.2 * DEG)
+    # flm_rings = 1: the paper's single-ring fixes, the multi-ring builder is not used
+    aid = HeadingFixAid(
+        [corridor_ref(0.0)], FixParams(flm_rings=1), lambda r, m: None, lambda f: loose, 0.0,
+        rings_flm=lambda rr, m: pytest.fail("multi-ring FLM built with flm_rings=1"),
+    )  # fmt: skip
+    aid.on_ring(0.0, sonar_ring(0.0), MOUNTS, ekf)
+    assert aid.decisions[-1].sigma == pytest.approx(FixParams().sigma_heading_deg * DEG)
+
+
+def test_multi_ring_bump_recovered_by_the_single_ring_watchdog():
+    """A 10 deg bump unseen by odometry: the multi-ring windows straddle it, but the
+    single-ring decisions (every ring) are gated, then recovered; the window restarts."""
+    angle = 0.3
+    walls = corridor_walls(angle)
+    ref = corridor_ref(angle)
+    true = np.array([*(rot(angle) @ [-6.0, 0.2]), angle + 0.05])
+    ekf = OdoEkf(true + np.array([0.0, 0.0, 10 * DEG]), np.diag([1e-4, 1e-4, (0.5 * DEG) ** 2]))
+    state = {}
+    aid = HeadingFixAid(
+        [ref],
+        FixParams(flm_rings=4, flm_fix_every=0),
+        lambda r, m: state["flm"],
+        lambda f: flm_wall_direction(f, MP),
+        0.0,
+        rings_flm=lambda recent, m: state["flm"],
+    )
+    errs = []
+    for k in range(10):
+        true = compose(true, [0.1, 0.0, 0.0])
+        ekf.move(0.1, np.diag([1e-6, 1e-6, (0.1 * DEG) ** 2]))
+        state["flm"] = ideal_flm(true, walls)
+        aid.on_ring(float(k), sonar_ring(float(k)), MOUNTS, ekf)
+        errs.append(abs(wrap_angle(ekf.x[2] - true[2])))
+    reasons = [d.reason for d in aid.decisions]
+    assert reasons[:2] == ["gated", "gated"] and reasons[2] == "recovered"
+    # the window restarted at the recovery: the first multi-ring fix is 4 rings later
+    assert next(d.t for d in aid.decisions if d.reason == "ok") == 6.0
+    assert np.degrees(errs[-1]) < 1.0
+    assert aid.summary()["recoveries"] == 1
+
+
 # --- what the fixes need from the SLAM stage ----------------------------------------------
+
+
+def test_ekf_odometry_pose_is_dead_reckoning_untouched_by_updates():
+    """EkfSlam.odometry_pose composes the predictions' motions only (slam.ekf)."""
+    from fuzzyslam.robot import integrate
+    from fuzzyslam.slam.ekf import EkfSlam, Preintegrator
+
+    start = np.array([1.0, 2.0, 0.3])
+    ekf = EkfSlam(start, np.diag([1e-4, 1e-4, 1e-4]), [1e-3] * 6)
+    u = [(0.05, 0.01)] * 10 + [(0.04, -0.02)] * 7
+    for d_trans, d_rot in u[:10]:
+        ekf.predict(d_trans, d_rot)
+    pre = Preintegrator([1e-3] * 6)
+    for d_trans, d_rot in u[10:]:
+        pre.add(d_trans, d_rot)
+    ekf.update_robot([0.2], [[1e-4]], [2])  # a heading fix moves the estimate ...
+    ekf.predict_relative(pre.delta, pre.q)
+    want = integrate(start, *np.array(u).T)[-1]
+    assert np.allclose(ekf.odometry_pose, want, atol=1e-9)  # ... not the dead reckoning
+    assert abs(wrap_angle(ekf.pose[2] - want[2])) > 0.01
 
 
 def test_ekf_inflate_robot_adds_q_to_robot_block_only():

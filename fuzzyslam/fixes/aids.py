@@ -7,7 +7,8 @@ is missing, malformed or was never frozen (one-line :class:`InputError`), and re
 the plug-ins for the chosen mode, sharing one FLM per ring:
 
 - ``none``: no aids;
-- ``heading``: :class:`HeadingFixAid` (the paper);
+- ``heading``: :class:`HeadingFixAid` (the paper; with ``fixes.flm_rings`` > 1 on FLMs
+  of the last few rings, see fixes.heading);
 - ``pose``: :class:`PoseFixAid` (with ``fixes.pose_with_heading`` also the
   :class:`HeadingFixAid`, which measures the heading the match leaves free) and, with
   ``fixes.detect_changes``, :class:`ChangeDetector`.
@@ -111,24 +112,26 @@ def aids_for_map(fm: FrozenMap, mode: str, cfg: Any, start_time: float | None = 
     source = FlmSource(
         lambda ring, mounts: build_flm(ring.ranges, ring.max_range, ring.fov, mounts, mp)
     )
+
+    def heading_aid() -> HeadingFixAid:
+        return HeadingFixAid(
+            fm.references,
+            cfg.fixes,
+            source,
+            lambda flm: flm_wall_direction(flm, mp),
+            t0,
+            rings_flm=lambda recent, mounts: recent.flm(mounts, mp),
+        )
+
     if mode == "heading":
         if not fm.references:
             raise InputError("references.yaml", "no corridor references: heading fixes need some")
-        return [
-            HeadingFixAid(
-                fm.references, cfg.fixes, source, lambda flm: flm_wall_direction(flm, mp), t0
-            )
-        ]
+        return [heading_aid()]
     aids: list[Any] = [PoseFixAid(fm.fgm, cfg.fixes, source, t0)]
     if cfg.fixes.pose_with_heading and fm.references:
         # sonar echo arcs are centred on the robot, so the correlative match rarely pins
         # the heading (measured: free in > 98 % of the rings); the Hough heading fix does
-        aids.insert(
-            0,
-            HeadingFixAid(
-                fm.references, cfg.fixes, source, lambda flm: flm_wall_direction(flm, mp), t0
-            ),
-        )
+        aids.insert(0, heading_aid())
     if cfg.fixes.detect_changes:
         aids.append(ChangeDetector(fm.fgm, cfg.fixes, source, t0))
     return aids

@@ -26,6 +26,24 @@ position by (v d)^2, d the path since the last accepted fix) and the fix applied
 While the last fix disagreed (gated, or NIS above ``suspect_chi2``) the aid flags
 ``pose_suspect`` and ``run`` creates no new lamp (it would be a duplicate).
 
+Multi-ring FLM [ours] (``fixes.flm_rings`` > 1, and a multi-ring FLM builder given):
+one ring's wall direction scatters by about 1.5 deg (echo noise, short arcs); the FLM of
+the last ``flm_rings`` rings (:class:`fuzzyslam.maps.flm.RecentRings`) gives about 0.4
+deg. The rings are placed by their DEAD-RECKONING relative poses (``EkfSlam.odometry_pose``,
+never corrected): over 2 s odometry is accurate to a fraction of a degree and, unlike
+the filter's pose, it does not jump at lamp updates or at the heading fixes themselves
+(a fix would otherwise enter the windows of the next fixes: the measurement would not
+be independent of the state it corrects). Windows that share rings have correlated
+errors, so one multi-ring fix is formed every ``flm_fix_every`` rings (0: every
+``flm_rings``, disjoint windows) with R = sigma_flm^2 * max(1, flm_rings / flm_fix_every)
+(overlapping windows: each ring's information counted once), larger when the wall's
+tangent fit reports a larger standard deviation (``flm_fit_sigma``). The single-ring decision is
+still made on every ring as a watchdog: its gated streaks drive the bump recovery (a
+bump makes the window's older rings disagree with the newer ones, so the multi-ring FLM
+cannot see it quickly), after which the window restarts from the current ring; it also
+sets ``pose_suspect``. Single-ring decisions are not applied between multi-ring fixes
+(reason ``between_fixes``, or ``gated`` when the watchdog refused it).
+
 Reasons recorded per ring (``heading_fixes.csv``): ``ok``, ``recovered``, ``no_wall``
 (no Hough peak), ``weak_peak``, ``ambiguous_wall`` (the FLM's peaks disagree: junction,
 open space), ``no_corridor``, ``ambiguous_corridor`` (two regions with different
@@ -49,6 +67,7 @@ import numpy as np
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.references import Reference, corridors_at, corridors_near
+from fuzzyslam.maps.flm import RecentRings
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import wrap_angle, wrap_angle_period
 
@@ -141,6 +160,7 @@ def decide_heading_fix(
     pose: np.ndarray,
     pose_cov: np.ndarray,
     params: FixParams,
+    sigmas_deg: tuple[float, float] | None = None,
 ) -> HeadingDecision:
     """Form, check and gate the heading measurement of one ring (module docstring).
 
@@ -149,6 +169,8 @@ def decide_heading_fix(
     prediction is taken, refused as ``ambiguous_heading`` when the next one (of any
     comb) is also within ``ambiguity_sigmas`` sqrt(P_tt + R); such a fix has the
     (larger, measured) noise ``sigma_junction_deg``. The decision's ``sigma`` is the R used.
+    ``sigmas_deg``: (corridor, junction) standard deviations replacing
+    (``sigma_heading_deg``, ``sigma_junction_deg``), e.g. for a multi-ring FLM.
     """
     predicted = float(pose[2])
     if wall is None or not np.isfinite(wall.angle):
@@ -164,7 +186,9 @@ def decide_heading_fix(
         return HeadingDecision(t, -1, math.nan, predicted, False, "ambiguous_wall", strength)
     if not cands:
         return HeadingDecision(t, -1, math.nan, predicted, False, why, strength)
-    sig = params.sigma_junction_deg if why == "junction" else params.sigma_heading_deg
+    if sigmas_deg is None:
+        sigmas_deg = (params.sigma_heading_deg, params.sigma_junction_deg)
+    sig = sigmas_deg[1] if why == "junction" else sigmas_deg[0]
     sigma = math.radians(sig)
     # every candidate corridor's nearest comb member, sorted by distance to the prediction
     combs = sorted(
@@ -207,7 +231,9 @@ class HeadingFixAid:
 
     ``flm_source(ring, mounts) -> BeliefMap`` (robot frame) and ``wall_direction(flm) ->
     WallLike`` are the maps stage's FLM builder and Hough (injected, so that tests can
-    use synthetic ones).
+    use synthetic ones). ``rings_flm(recent, mounts) -> BeliefMap`` builds the FLM of a
+    :class:`RecentRings` (``RecentRings.flm``); with it and ``params.flm_rings`` > 1 the
+    fixes come from multi-ring FLMs (module docstring), without it from single rings.
     """
 
     kind = "heading"
@@ -219,6 +245,7 @@ class HeadingFixAid:
         flm_source: Callable[[Any, np.ndarray], BeliefMap],
         wall_direction: Callable[[BeliefMap], WallLike | None],
         start_time: float = 0.0,
+        rings_flm: Callable[[RecentRings, np.ndarray], BeliefMap] | None = None,
     ) -> None:
         self.refs = list(refs)
         self.params = params
@@ -232,20 +259,44 @@ class HeadingFixAid:
         # the last formed fix disagreed with the prediction (NIS above suspect_chi2, or
         # gated): ``run`` then creates no new lamp (it would be a duplicate)
         self.pose_suspect = False
+        p = params
+        self.rings_flm = rings_flm if p.flm_rings > 1 else None
+        self.recent = RecentRings(p.flm_rings, p.flm_window_s) if self.rings_flm else None
+        self.fix_every = p.flm_fix_every if p.flm_fix_every > 0 else p.flm_rings
+        infl = math.sqrt(max(1.0, p.flm_rings / self.fix_every))
+        scale = p.sigma_flm_deg / p.sigma_heading_deg
+        self.multi_sigmas_deg = (p.sigma_flm_deg * infl, p.sigma_junction_deg * scale * infl)
+        self._since_fix = 0  # rings since the last multi-ring fix was formed
+        self._single: list[HeadingDecision] = []  # single-ring decisions (the watchdog)
+        self.multi_formed = 0
+
+    def _push(self, t: float, ring: Any, ekf: Any) -> None:
+        """Add the ring to the window with its dead-reckoning pose (module docstring)."""
+        assert self.recent is not None
+        pose = getattr(ekf, "odometry_pose", None)
+        pose = ekf.pose if pose is None else pose
+        self.recent.push(t, pose, ring.ranges, ring.max_range, ring.fov)
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: Any) -> None:
         if t < self.start_time:
             self.before_start += 1
             return
+        if self.recent is not None:
+            self._push(t, ring, ekf)
+            self._since_fix += 1
         pose = ekf.pose
         period = math.pi / 2 if self.params.right_angles else math.pi
         cands, why = select_corridor(pose[:2], self.refs, period, self.params.junction_margin)
         if not cands:  # no FLM or Hough needed (junctions, open space)
             self.decisions.append(HeadingDecision(t, -1, math.nan, pose[2], False, why, math.nan))
+            if self.recent is not None:
+                self._single.append(self.decisions[-1])  # breaks a gated streak, as above
             return
         wall = self.wall_direction(self.flm_source(ring, mounts))
         d = decide_heading_fix(t, wall, self.refs, pose, ekf.pose_cov, self.params)
-        if d.reason == "gated" and hasattr(ekf, "inflate_robot") and self._recovery_due(d):
+        history = self._single if self.recent is not None else self.decisions
+        recover = d.reason == "gated" and hasattr(ekf, "inflate_robot")
+        if recover and self._recovery_due(d, history):
             # consistent gated fixes: the filter, not the map, is wrong (an unseen bump).
             # Covariance inflation (fading memory, Simon, "Optimal state estimation",
             # sec. 7.4) makes the prediction admit the innovation v: P_tt += v^2. The
@@ -262,6 +313,16 @@ class HeadingFixAid:
             ekf.inflate_robot(np.diag([q_xy, q_xy, v * v]))
             d = replace(d, accepted=True, reason="recovered")
             self.recoveries += 1
+            if self.recent is not None:  # the window's older rings are from before the bump
+                self.recent.clear()
+                self._push(t, ring, ekf)
+                self._since_fix = 0
+        single = d
+        if self.recent is not None:
+            self._single.append(d)
+            del self._single[: -max(self.params.recover_after, 1)]
+            if d.reason != "recovered":
+                d = self._multi_decision(t, d, mounts, ekf)
         if d.accepted:
             res = ekf.update_robot(
                 [d.measured], [[d.sigma * d.sigma]], [2], gate_chi2=self.params.gate_chi2
@@ -271,11 +332,38 @@ class HeadingFixAid:
                 d = replace(d, accepted=False, reason="gated")
             else:
                 self._last_ok_xy = ekf.pose[:2]
-        if np.isfinite(d.measured):
-            self.pose_suspect = d.reason == "gated" or (
-                d.reason == "ok" and d.nis > self.params.suspect_chi2
+        # single ring: the applied decision; multi-ring: the watchdog (as in the paper path)
+        watch = d if self.recent is None or d.reason == "recovered" else single
+        if np.isfinite(watch.measured):
+            self.pose_suspect = watch.reason == "gated" or (
+                watch.reason == "ok" and watch.nis > self.params.suspect_chi2
             )
         self.decisions.append(d)
+
+    def _multi_decision(
+        self, t: float, single: HeadingDecision, mounts: np.ndarray, ekf: Any
+    ) -> HeadingDecision:
+        """The multi-ring fix when one is due (every ``fix_every`` rings, a window at least
+        half full), else the single-ring decision as a row that is not applied."""
+        assert self.recent is not None and self.rings_flm is not None
+        due = self._since_fix >= self.fix_every and 2 * len(self.recent) >= self.recent.count
+        if not due:
+            if single.reason == "gated":
+                return single
+            return replace(single, measured=math.nan, accepted=False, reason="between_fixes")
+        self._since_fix = 0
+        self.multi_formed += 1
+        wall = self.wall_direction(self.rings_flm(self.recent, mounts))
+        sig_c, sig_j = self.multi_sigmas_deg
+        fit = math.degrees(float(getattr(wall, "sigma", math.nan))) if wall is not None else 0.0
+        if self.params.flm_fit_sigma and math.isfinite(fit) and fit > self.params.sigma_flm_deg:
+            # the tangent fit's own standard deviation (range noise through the fit's
+            # Jacobian) when it exceeds the floor: a loose fit weighs less
+            k = fit / self.params.sigma_flm_deg
+            sig_c, sig_j = sig_c * k, sig_j * k
+        return decide_heading_fix(
+            t, wall, self.refs, ekf.pose, ekf.pose_cov, self.params, (sig_c, sig_j)
+        )
 
     def update_rows(self) -> list[dict[str, Any]]:
         """The EKF update attempts, as rows of run's updates.csv (contracts.md sec. 2):
@@ -296,13 +384,14 @@ class HeadingFixAid:
             if d.reason in ("ok", "recovered", "gated")
         ]
 
-    def _recovery_due(self, d: HeadingDecision) -> bool:
-        """True when this and the previous recover_after - 1 decisions were all gated and
-        their innovations (measured - predicted) agree within recover_spread_deg."""
+    def _recovery_due(self, d: HeadingDecision, history: Sequence[HeadingDecision]) -> bool:
+        """True when this and the previous recover_after - 1 decisions of ``history`` were
+        all gated and their innovations (measured - predicted) agree within
+        recover_spread_deg."""
         k = self.params.recover_after
         if k <= 0:
             return False
-        last = [*self.decisions[len(self.decisions) - (k - 1) :], d] if k > 1 else [d]
+        last = [*history[len(history) - (k - 1) :], d] if k > 1 else [d]
         if len(last) < k or any(x.reason != "gated" for x in last):
             return False
         v = np.array([float(wrap_angle(x.measured - x.predicted)) for x in last])
@@ -318,6 +407,8 @@ class HeadingFixAid:
             "before_start": self.before_start,
             "accepted": len(accepted),
             "recoveries": self.recoveries,
+            "flm_rings": self.recent.count if self.recent is not None else 1,
+            "multi_ring_fixes_formed": self.multi_formed,
             "reasons": dict(sorted(reasons.items())),
             "mean_nis": float(nis.mean()) if nis.size else None,
         }

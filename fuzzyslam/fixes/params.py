@@ -49,6 +49,34 @@ class FixParams:
     suspect_chi2: float = field(default=3.84, metadata={"min": 0.1})
     recover_spread_deg: float = field(default=3.0, metadata={"min": 0.0, "max": 90.0})
 
+    # --- multi-ring FLM heading fixes (beyond the paper; fixes.heading, maps.flm) ---
+    # rings fused into the FLM the wall direction is measured on, placed by dead reckoning
+    # (EkfSlam.odometry_pose) in the newest ring's frame; 1: the paper's single-ring FLM.
+    # Measured on paper.yaml seeds 0 / 1 / 2, runs 5-6, accepted fixes, error against truth
+    # (mean |error| / std, deg): 1 ring 1.20 / 1.54, 1.20 / 1.51, 1.20 / 1.53; 10 rings
+    # (every 5) 0.37 / 0.49, 0.34 / 0.42, 0.33 / 0.44; 4 rings 0.58 / 0.73 (seed 0); 8 rings
+    # 0.40 / 0.51, 0.36 / 0.45, 0.35 / 0.45; 12 rings 0.33 / 0.43, 0.33 / 0.41, 0.31 / 0.42
+    # (every 12 rings: 3 s between fixes)
+    flm_rings: int = field(default=10, metadata={"min": 1, "max": 64})
+    # only rings of the last flm_window_s seconds are fused (10 rings at 4 Hz: 2.25 s)
+    flm_window_s: float = field(default=3.0, metadata={"min": 0.0, "max": 30.0})
+    # one multi-ring fix every this many rings (0: every flm_rings rings, disjoint windows);
+    # with overlapping windows (flm_fix_every < flm_rings) the fixes share rings, so R is
+    # inflated by flm_rings / flm_fix_every (the information per ring stays that of one fix).
+    # Chosen on seeds 0-2 (10 rings; every 10 / 5 / 2): fix accuracy alike; phase D worst
+    # max axis error 9.8 / 9.1 / 9.0, 7.8 / 8.7 / 10.2, 7.5 / 10.2 / 6.3 cm (1 ring: 8.9 /
+    # 7.6 / 11.3); every lamp off (pose mode) mean 2.9 / 2.4 / 1.6, 1.3 / 2.8 / 1.2, 1.4 /
+    # 2.8 / 1.5 cm (1 ring: 2.0 / 2.3 / 2.1); real-time factor of run (heading, seed 0)
+    # 124 / 116 / 98 (1 ring: 130), pose mode 111 / 104 / 89: every 5
+    flm_fix_every: int = field(default=5, metadata={"min": 0, "max": 64})
+    # R = sigma^2 of one multi-ring fix in a corridor (disjoint windows; the measured std is
+    # 0.40-0.49 deg); at a junction sigma_junction_deg * sigma_flm_deg / sigma_heading_deg
+    sigma_flm_deg: float = field(default=0.5, metadata={"min": 0.01, "max": 90.0})
+    # scale R up by (fit sigma / sigma_flm_deg)^2 when the wall's tangent fit reports a
+    # standard deviation above sigma_flm_deg (a loose fit weighs less; measured: the fit's
+    # sigma is at least 0.35 deg, above 0.7 for 10 % of the windows, whose errors are larger)
+    flm_fit_sigma: bool = True
+
     # --- full-pose fixes (models.md sec. 10) ---
     # also apply the Hough heading fixes in pose mode (the match leaves the heading free)
     pose_with_heading: bool = True

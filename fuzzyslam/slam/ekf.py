@@ -179,6 +179,9 @@ class EkfSlam:
         self.robot_updates: list[tuple[tuple[int, ...], UpdateResult]] = []
         # numerical guards (slam/health.py): near-singular S regularised, P repaired
         self.guards = {"s_regularised": 0, "p_repaired": 0}
+        # dead reckoning of the same odometry, never corrected by updates: a smooth pose
+        # whose differences are the robot's relative motion (multi-ring FLMs, fixes.heading)
+        self.odometry_pose = self._x[:3].copy()
 
     # -- views ------------------------------------------------------------------------
 
@@ -233,6 +236,7 @@ class EkfSlam:
         gx, gu = motion_jacobians(pose, d_trans, d_rot)
         m = motion_noise(d_trans, d_rot, self.alpha)
         self._x[:3] = motion_step(pose, d_trans, d_rot)
+        self.odometry_pose = motion_step(self.odometry_pose, d_trans, d_rot)
         n = self.dim
         p = self._p
         prr = gx @ p[:3, :3] @ gx.T + gu @ m @ gu.T
@@ -253,6 +257,7 @@ class EkfSlam:
         pose = self._x[:3].copy()
         ja, jb = jacobians_compose(pose, delta)
         self._x[:3] = compose(pose, delta)
+        self.odometry_pose = compose(self.odometry_pose, delta)
         n = self.dim
         p = self._p
         prr = ja @ p[:3, :3] @ ja.T + jb @ q_delta @ jb.T
