@@ -503,3 +503,27 @@ def test_divergence_is_detected_and_reported(tiny: Tiny, tmp_path: Path, scale: 
     assert h["diverged"] and 0 < h["diverged_at"] <= s["log_duration_s"] + 1e-6
     assert h["association_windows_out_of_bounds"] >= 3
     assert s["lamps"] > 3 * tiny.run["lamps"]  # what the flag warns about
+
+
+def test_map_ring_table_keeps_every_reading_exactly(tiny: Tiny, monkeypatch) -> None:
+    """``map`` keeps its rings in float32 blocks (memory, issue 7): with 5-ring blocks
+    (many boundaries) the table holds exactly the rings of ``group_rings`` (float32 is
+    lossless for Range fields), so the map stage fuses the same float64 values."""
+    from fuzzyslam.config import load_config
+    from fuzzyslam.maps import build
+    from fuzzyslam.streams.sonar import group_rings
+
+    cfg = load_config(str(tiny.config))
+    reader = LogReader(tiny.log)
+    topics = [cfg.topics.sonar(i) for i in range(cfg.sonar.count)]
+    index = {tp: i for i, tp in enumerate(topics)}
+    rings = list(group_rings(reader.messages(topics), index, cfg.sonar.count))
+    monkeypatch.setattr(build._RingTable, "block", 5)
+    t_end = rings[-3].t  # a window ending inside a block
+    times, ranges, rmax, *_ = build.read_rings_compact(reader, cfg, t_end)
+    rings = rings[:-2]
+    assert ranges.dtype == np.float32 and len(times) == len(rings) > 20
+    assert len(rings) % 5 != 0
+    assert np.array_equal(times, [r.t for r in rings])
+    assert np.array_equal(ranges.astype(float), [r.ranges for r in rings], equal_nan=True)
+    assert np.array_equal(rmax.astype(float), [r.max_range for r in rings], equal_nan=True)

@@ -251,3 +251,78 @@ def test_fast_reader_equals_log_reader(quick_log):
             for f in ("height", "width", "encoding", "is_bigendian", "step"):
                 assert getattr(x.msg, f) == getattr(y.msg, f)
             assert np.array_equal(x.msg.data, y.msg.data)
+
+
+# -- streamed outputs (issue 7) ---------------------------------------------------------------
+
+
+def _mcap_messages(path: Path) -> dict:
+    """Per topic: (log time, publish time, sequence, CDR payload) of every message."""
+    from mcap.reader import make_reader
+
+    out: dict = {}
+    with open(path, "rb") as f:
+        for _schema, channel, msg in make_reader(f).iter_messages(log_time_order=False):
+            out.setdefault(channel.topic, []).append(
+                (msg.log_time, msg.publish_time, msg.sequence, bytes(msg.data))
+            )
+    return out
+
+
+def test_streamed_outputs_equal_the_in_memory_path(quick_log, tmp_path, monkeypatch):
+    """`run` streams its rows to files in small blocks (7 rows, 5 odometry increments
+    here, so that many block boundaries are crossed); a second implementation keeps
+    the whole result in memory (MemorySink, robot.integrate, rosbags messages) and
+    writes it at the end. The text files must be the same bytes, estimates.mcap the
+    same messages (payload bytes, times, sequence numbers), the summary the same rows."""
+    from fuzzyslam.slam.io import StreamingOutputs, open_inputs, write_result
+    from fuzzyslam.slam.runner import SlamRunner
+    from fuzzyslam.slam.stage import run_stage
+
+    cfg = load_config("quick")
+    monkeypatch.setattr(StreamingOutputs, "rows_block", 7)
+    monkeypatch.setattr(StreamingOutputs, "odometry_block", 5)
+    summary = run_stage(quick_log, tmp_path / "streamed", cfg)
+
+    inputs = open_inputs(quick_log, cfg)
+    runner = SlamRunner(cfg.slam, inputs.start_pose, [], inputs.mounts, cfg.slam.landmarks_period)
+    res = runner.run(inputs.events(), t0=inputs.start)
+    (tmp_path / "memory").mkdir()
+    write_result(tmp_path / "memory", res, cfg)
+
+    a, b = tmp_path / "streamed", tmp_path / "memory"
+    for name in ("trajectory.tum", "odometry.tum", "covariance.csv", "updates.csv"):
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+    assert (a / "landmarks.yaml").read_bytes() == (b / "landmarks.yaml").read_bytes()
+    ma, mb = _mcap_messages(a / "estimates.mcap"), _mcap_messages(b / "estimates.mcap")
+    assert ma == mb and len(ma["/slam/pose"]) == len(res.t) > 1000
+    assert len(ma["/slam/landmarks"]) == len(res.snapshots) > 10
+    # the streamed file is in log-time order (poses and lamp snapshots interleaved)
+    times = [m.t for m in LogReader(a / "estimates.mcap").messages()]
+    assert times == sorted(times)
+    assert summary["trajectory_rows"] == len(res.t)
+    assert summary["final_pose"] == [float(v) for v in res.poses[-1]]
+    assert summary["mean_nis_lamp"] == pytest.approx(res.mean_nis("lamp"), rel=1e-12)
+
+
+def test_interrupted_mid_run_leaves_nothing(quick_log, tmp_path, monkeypatch):
+    """Ctrl-C in the middle of the filter, after rows were streamed into the staging
+    directory: no output directory, no temporary file or directory left."""
+    from fuzzyslam.slam import runner as runner_mod
+    from fuzzyslam.slam.stage import run_stage
+
+    real = runner_mod.SlamRunner.frame
+    seen = []
+
+    def frame(self, ev):
+        seen.append(ev.t)
+        if len(seen) == 600:  # rows are being written to the staging directory
+            staged = [p for p in tmp_path.iterdir() if p.name.endswith(".part")]
+            assert len(staged) == 1 and (staged[0] / "trajectory.tum").is_file()
+            raise KeyboardInterrupt
+        return real(self, ev)
+
+    monkeypatch.setattr(runner_mod.SlamRunner, "frame", frame)
+    with pytest.raises(KeyboardInterrupt):
+        run_stage(quick_log, tmp_path / "est", load_config("quick"))
+    assert len(seen) == 600 and list(tmp_path.iterdir()) == []

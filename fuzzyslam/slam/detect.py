@@ -64,33 +64,35 @@ def detect_lamps(
     img = img[oy:ey, ox:ex]
     mask = full[oy:ey, ox:ex]
     n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
-    stats[:, 0] += ox
-    stats[:, 1] += oy
-    st = stats[1:]
-    x, y, w, h, area = (st[:, i] for i in range(5))
-    fill = area / (w * h)
-    aspect = np.maximum(w, h) / np.minimum(w, h)
-    inside = (x >= border) & (y >= border) & (x + w <= wid - border) & (y + h <= hgt - border)
-    keep = (
-        (area >= min_area) & (area <= max_area) & (fill >= min_fill) & (aspect <= max_aspect)
-    ) & inside
-    ids = np.nonzero(keep)[0] + 1
-    rejected = int(n - 1 - len(ids))
-    if len(ids) == 0:
+    # the gates on the few components, in plain Python (numpy calls on arrays of a
+    # handful of elements cost more than the arithmetic)
+    kept = []
+    for k, (x, y, w, h, area) in enumerate(stats[1:].tolist(), 1):
+        x, y = x + ox, y + oy
+        fill = area / (w * h)
+        aspect = max(w, h) / min(w, h)
+        inside = x >= border and y >= border and x + w <= wid - border and y + h <= hgt - border
+        ok = min_area <= area <= max_area and fill >= min_fill and aspect <= max_aspect
+        if ok and inside:
+            kept.append((k, x, y, w, h, area))
+    rejected = n - 1 - len(kept)
+    if not kept:
         return Blobs(np.zeros((0, 2)), np.zeros(0), rejected)
     # per component, on its box grown by two pixels (a loop over the few blobs, not pixels)
-    uv = np.empty((len(ids), 2))
+    uv = np.empty((len(kept), 2))
     ch, cw = img.shape
-    for a, k in enumerate(ids):
-        x0 = max(int(st[k - 1, 0]) - ox - 2, 0)
-        y0 = max(int(st[k - 1, 1]) - oy - 2, 0)
-        x1 = min(int(st[k - 1, 0]) - ox + int(st[k - 1, 2]) + 2, cw)
-        y1 = min(int(st[k - 1, 1]) - oy + int(st[k - 1, 3]) + 2, ch)
+    for a, (k, x, y, w, h, _area) in enumerate(kept):
+        x0 = max(x - ox - 2, 0)
+        y0 = max(y - oy - 2, 0)
+        x1 = min(x - ox + w + 2, cw)
+        y1 = min(y - oy + h + 2, ch)
         crop = img[y0:y1, x0:x1]
         d1 = cv2.dilate((labels[y0:y1, x0:x1] == k).view(np.uint8), _KERNEL)
         ring = (cv2.dilate(d1, _KERNEL) > d1) & (crop < threshold)
-        background = float(crop[ring].mean()) if ring.any() else 0.0
+        lit = crop[ring]
+        # mean of the unlit ring: an exact integer sum over a count (as ndarray.mean)
+        background = int(lit.sum()) / lit.size if lit.size else 0.0
         w = (crop - np.float32(background)) * d1  # d1 is 0/1
         mom = cv2.moments(np.maximum(w, 0.0, dtype=np.float32), binaryImage=False)
         uv[a] = (ox + x0 + mom["m10"] / mom["m00"], oy + y0 + mom["m01"] / mom["m00"])
-    return Blobs(uv, area[ids - 1].astype(float), rejected)
+    return Blobs(uv, np.array([float(b[5]) for b in kept]), rejected)

@@ -27,25 +27,25 @@ from fuzzyslam.streams.typestore import deserialize, normalise_typename, typesto
 
 _U64 = struct.Struct("<Q")
 _U32 = struct.Struct("<I")
-_STAMP = struct.Struct("<iI")
+_STAMP_FRAME = struct.Struct("<iII")  # header stamp sec, nanosec; frame_id length
 JOINT_STATE = "sensor_msgs/msg/JointState"
 _MSG = struct.Struct("<BQHIQQ")  # opcode, length, channel id, sequence, log time, publish time
 _MSG_INDEX_ENTRY = struct.Struct("<QQ")
 
 
-@dataclass
+@dataclass(slots=True)
 class _Stamp:
     sec: int
     nanosec: int
 
 
-@dataclass
+@dataclass(slots=True)
 class _Header:
     stamp: _Stamp
     frame_id: str
 
 
-@dataclass
+@dataclass(slots=True)
 class JointStateLite:
     """The fields of sensor_msgs/JointState the filter reads (velocity, effort skipped)."""
 
@@ -69,7 +69,7 @@ def decode_joint_state(buf: bytes | memoryview) -> JointStateLite:
     for _ in range(count):
         p += -p % 4
         n = _U32.unpack_from(buf, o + p)[0]
-        names.append(bytes(buf[o + p + 4 : o + p + 3 + n]).decode())
+        names.append(str(buf[o + p + 4 : o + p + 3 + n], "utf-8"))
         p += 4 + n
     p += -p % 4
     count = _U32.unpack_from(buf, o + p)[0]
@@ -79,7 +79,7 @@ def decode_joint_state(buf: bytes | memoryview) -> JointStateLite:
     return JointStateLite(header, names, pos)
 
 
-@dataclass
+@dataclass(slots=True)
 class ImageLite:
     """sensor_msgs/Image fields (``data`` a read-only uint8 view of the chunk, no copy)."""
 
@@ -95,9 +95,8 @@ class ImageLite:
 def _read_header(buf, o: int) -> tuple[_Header, int]:
     """std_msgs/Header at CDR offset 0 (after the 4-byte encapsulation at ``o``); returns
     the header and the next offset relative to ``o``."""
-    sec, nsec = _STAMP.unpack_from(buf, o)
-    n = _U32.unpack_from(buf, o + 8)[0]
-    frame = bytes(buf[o + 12 : o + 12 + n - 1]).decode()
+    sec, nsec, n = _STAMP_FRAME.unpack_from(buf, o)
+    frame = str(buf[o + 12 : o + 12 + n - 1], "utf-8")
     return _Header(_Stamp(sec, nsec), frame), 12 + n
 
 
@@ -119,7 +118,7 @@ def decode_image(buf: bytes | memoryview) -> ImageLite:
     return ImageLite(header, height, width, encoding, big, step, data)
 
 
-@dataclass
+@dataclass(slots=True)
 class RangeLite:
     """sensor_msgs/Range fields (the sonar rings: 16 messages per ring)."""
 
@@ -204,6 +203,12 @@ def _iterate(
     reader: LogReader, wanted: dict, chunks: list, start_ns: int = -1
 ) -> Iterator[LogMessage]:
     types = typestore().types
+    # per channel: topic, type name, decoder of little-endian CDR (or None: rosbags)
+    chan = {}
+    for cid, (topic, schema) in wanted.items():
+        typename = normalise_typename(schema)
+        if typename in types:
+            chan[cid] = (topic, typename, _DECODERS.get(typename))
     with open(reader.path, "rb") as f:
         for c in chunks:
             f.seek(c.chunk_start_offset)
@@ -242,17 +247,12 @@ def _iterate(
                     continue
                 try:
                     _op, length, cid, _seq, log_time, _pub = _MSG.unpack_from(data, off)
-                    topic, schema = wanted[cid]
-                except (KeyError, struct.error):  # a damaged message index entry
-                    reader.undecodable += 1
-                    continue
-                typename = normalise_typename(schema)
-                if typename not in types:
+                    topic, typename, fast = chan[cid]
+                except (KeyError, struct.error):  # a damaged entry, or a type not known
                     reader.undecodable += 1
                     continue
                 payload = view[off + _MSG.size : off + 9 + length]
                 try:
-                    fast = _DECODERS.get(typename)
                     if fast is not None and payload[1] == 1:  # little-endian CDR
                         msg = fast(payload)
                     else:

@@ -8,9 +8,12 @@ Events (built from a log by :mod:`fuzzyslam.slam.io`, or by a test):
 - :class:`RingEvent`: a sonar ring -> handed to every aid (heading/pose fixes) whose
   ``start_time`` has come.
 
-Aids follow the protocol :class:`Aid`. The result holds the trajectory, its
-covariance, the dead reckoning of the same increments, the lamps and one row per
-measurement update attempt.
+Aids follow the protocol :class:`Aid`. The rows that grow with the log (trajectory and
+covariance, odometry increments, update attempts, landmark snapshots) go to a
+:class:`RowSink` as they are final: by default a :class:`MemorySink` (the result then
+holds the trajectory, its covariance, the dead reckoning of the same increments and one
+row per measurement update attempt), or a streaming sink that writes them to files
+(``fuzzyslam.slam.io.StreamingOutputs``), so memory stays flat over long logs.
 """
 
 from __future__ import annotations
@@ -73,7 +76,7 @@ class Aid(Protocol):
     def write(self, outdir: Path) -> None: ...
 
 
-@dataclass
+@dataclass(slots=True)
 class UpdateRow:
     """One measurement update attempt (updates.csv)."""
 
@@ -97,9 +100,63 @@ class LampRecord:
     observations: int
 
 
+class RowSink(Protocol):
+    """Receives the rows of a run in time order, each once it is final."""
+
+    def row(self, t: float, pose: np.ndarray, cov: np.ndarray) -> None:
+        """A trajectory row: pose (3,) and covariance (6,) ``pxx pxy pxt pyy pyt ptt``."""
+
+    def odometry_start(self, t: float) -> None:
+        """Time of the start pose of the dead reckoning."""
+
+    def odometry(self, t: float, d_trans: float, d_rot: float) -> None:
+        """One odometry increment ending at ``t``."""
+
+    def update(self, row: UpdateRow) -> None:
+        """One measurement update attempt."""
+
+    def snapshot(self, t: float, lamps: np.ndarray, covs: np.ndarray) -> None:
+        """The lamps (n, 2) and their covariances (n, 2, 2) at ``t``."""
+
+
+class MemorySink:
+    """A :class:`RowSink` that keeps every row in memory (tests, short logs)."""
+
+    def __init__(self) -> None:
+        self.t: list[float] = []
+        self.x: list[np.ndarray] = []
+        self.p: list[np.ndarray] = []
+        self.odo_t: list[float] = []
+        self.odo_u: list[tuple[float, float]] = []
+        self.updates: list[UpdateRow] = []
+        self.snapshots: list[tuple[float, np.ndarray, np.ndarray]] = []
+
+    def row(self, t: float, pose: np.ndarray, cov: np.ndarray) -> None:
+        self.t.append(t)
+        self.x.append(pose)
+        self.p.append(cov)
+
+    def odometry_start(self, t: float) -> None:
+        self.odo_t.append(t)
+
+    def odometry(self, t: float, d_trans: float, d_rot: float) -> None:
+        self.odo_t.append(t)
+        self.odo_u.append((d_trans, d_rot))
+
+    def update(self, row: UpdateRow) -> None:
+        self.updates.append(row)
+
+    def snapshot(self, t: float, lamps: np.ndarray, covs: np.ndarray) -> None:
+        self.snapshots.append((t, lamps, covs))
+
+
 @dataclass
 class SlamResult:
-    """Everything ``run`` writes: trajectory (N, 3) with covariance rows (N, 6), etc."""
+    """Everything ``run`` writes: trajectory (N, 3) with covariance rows (N, 6), etc.
+
+    With a streaming sink the rows went to the sink: ``t``, ``poses``, ``cov`` then hold
+    only the last row, and ``odo_*``, ``updates``, ``snapshots`` are empty.
+    """
 
     t: np.ndarray
     poses: np.ndarray
@@ -127,6 +184,7 @@ class SlamRunner:
     aids: list = field(default_factory=list)
     mounts: np.ndarray | None = None
     snapshot_period: float | None = None  # default: params.landmarks_period
+    sink: RowSink | None = None  # default: a MemorySink
 
     def __post_init__(self) -> None:
         p = self.params
@@ -149,42 +207,48 @@ class SlamRunner:
             "aid_calls": 0,
             "out_of_order": 0,
         }
-        self._rows_t: list[float] = []
-        self._rows_x: list[np.ndarray] = []
-        self._rows_p: list[np.ndarray] = []
-        self._odo_t: list[float] = []
-        self._odo_u: list[tuple[float, float]] = []
+        if self.sink is None:
+            self.sink = MemorySink()
+        # the last trajectory row is held back until the next one: a row of the same
+        # time replaces it (e.g. odometry then a frame at one stamp)
+        self._pending: tuple[float, np.ndarray, np.ndarray] | None = None
+        self._n_rows = 0  # rows recorded (the pending one included)
         self._first_seen: list[float] = []
         self._last_seen: list[float] = []
         self._obs: list[int] = []
-        self.updates: list[UpdateRow] = []
-        self.snapshots: list[tuple[float, np.ndarray, np.ndarray]] = []
         self._last_t = -np.inf
         self._last_record = -np.inf
         self._last_snapshot = -np.inf
 
+    @property
+    def updates(self) -> list[UpdateRow]:
+        """The update attempts so far (a :class:`MemorySink` only)."""
+        return self.sink.updates  # type: ignore[union-attr]
+
+    def _update(self, row: UpdateRow) -> None:
+        self.sink.update(row)  # type: ignore[union-attr]
+
     # -- steps ----------------------------------------------------------------------------
 
     def _record(self, t: float) -> None:
-        """Append the current pose and covariance (replacing a row of the same time)."""
+        """Record the current pose and covariance (replacing a row of the same time)."""
         self.flush()
         p = self.ekf._p
         row = np.array([p[0, 0], p[0, 1], p[0, 2], p[1, 1], p[1, 2], p[2, 2]], dtype=float)
-        if self._rows_t and self._rows_t[-1] == t:
-            self._rows_x[-1] = self.ekf._x[:3].copy()
-            self._rows_p[-1] = row
-        else:
-            self._rows_t.append(t)
-            self._rows_x.append(self.ekf._x[:3].copy())
-            self._rows_p.append(row)
+        pending = self._pending
+        if pending is None or pending[0] != t:
+            if pending is not None:
+                self.sink.row(*pending)  # type: ignore[union-attr]
+            self._n_rows += 1
+        self._pending = (t, self.ekf._x[:3].copy(), row)
         self._last_record = t
-        if len(self._rows_t) % 50 == 0:
+        if self._n_rows % 50 == 0:
             self.ekf.check_covariance()  # O(n^3), every 50 rows (health.repair_covariance)
         if t - self._last_snapshot >= self.snapshot_period:
             self._snapshot(t)
 
     def _snapshot(self, t: float) -> None:
-        self.snapshots.append((t, self.ekf.lamps.copy(), self.ekf.lamp_covs()))
+        self.sink.snapshot(t, self.ekf.lamps.copy(), self.ekf.lamp_covs())  # type: ignore[union-attr]
         self._last_snapshot = t
 
     def flush(self) -> None:
@@ -196,8 +260,7 @@ class SlamRunner:
     def odometry(self, ev: Odom) -> None:
         """Odometry increment: preintegrated (applied at the next flush), and dead reckoning."""
         self.preint.add(ev.d_trans, ev.d_rot)
-        self._odo_t.append(ev.t)
-        self._odo_u.append((ev.d_trans, ev.d_rot))
+        self.sink.odometry(ev.t, ev.d_trans, ev.d_rot)  # type: ignore[union-attr]
         self.counts["odometry"] += 1
         if ev.t - self._last_record >= self.params.record_period:
             self._record(ev.t)
@@ -217,7 +280,7 @@ class SlamRunner:
             pairs, res = self._associate_update(z, r, d2)
             if pairs:
                 for a, (j, i) in enumerate(pairs):
-                    self.updates.append(
+                    self._update(
                         UpdateRow(
                             ev.t,
                             "lamp",
@@ -285,7 +348,7 @@ class SlamRunner:
                 i = int(np.argmin(d2[j]))
                 if d2[j, i] <= self.params.new_lamp_chi2:
                     # near a mapped lamp but not paired with it: a rejected update attempt
-                    self.updates.append(
+                    self._update(
                         UpdateRow(
                             t, "lamp", i, 2, float(d2_before[j, i]), False, np.full(2, np.nan)
                         )
@@ -310,9 +373,7 @@ class SlamRunner:
                 self.counts["aid_calls"] += 1
         for idx, res in self.ekf.robot_updates:
             kind = "heading" if idx == (2,) else "pose"
-            self.updates.append(
-                UpdateRow(ev.t, kind, -1, len(idx), res.nis, res.accepted, res.innovation)
-            )
+            self._update(UpdateRow(ev.t, kind, -1, len(idx), res.nis, res.accepted, res.innovation))
             self.health.observe(ev.t, res.nis, len(idx))
         self.ekf.robot_updates.clear()
 
@@ -328,15 +389,13 @@ class SlamRunner:
 
         ``t0``: time of the start pose (default: the first event's).
         """
-        first = not self._rows_t
+        first = self._n_rows == 0
         if first and t0 is not None:
-            self._odo_t.append(float(t0))
-            self._record(float(t0))
+            self._start(float(t0))
             first = False
         for ev in events:
             if first:
-                self._odo_t.append(ev.t)
-                self._record(ev.t)
+                self._start(ev.t)
                 first = False
             if ev.t < self._last_t:
                 self.counts["out_of_order"] += 1
@@ -352,20 +411,23 @@ class SlamRunner:
                 progress(ev.t)
         return self.result()
 
-    def dead_reckoning(self) -> np.ndarray:
-        """Poses (one per odometry time) integrating the same increments from the start pose."""
-        if not self._odo_t:
-            return np.zeros((0, 3))
-        u = np.asarray(self._odo_u, dtype=float).reshape(-1, 2)
-        return integrate(self.start_pose, u[:, 0], u[:, 1])
+    def _start(self, t: float) -> None:
+        """The start pose: first dead-reckoning time and first trajectory row."""
+        self.sink.odometry_start(t)  # type: ignore[union-attr]
+        self._record(t)
 
     def result(self) -> SlamResult:
+        """Finish the run (last row and snapshot to the sink) and return its result."""
         self.flush()
         ekf = self.ekf
-        if self._rows_t and self._last_t > self._rows_t[-1]:
+        if self._pending is not None and self._last_t > self._pending[0]:
             self._record(self._last_t)
         if self._last_t > -np.inf:
             self._snapshot(self._last_t)
+        last = self._pending
+        if last is not None:
+            self.sink.row(*last)  # type: ignore[union-attr]
+            self._pending = None
         covs = ekf.lamp_covs()
         lamps = [
             LampRecord(
@@ -382,15 +444,32 @@ class SlamRunner:
         counts = dict(self.counts)
         counts["tentative_expired"] = self.tentative.expired
         counts["tentative_pending"] = len(self.tentative.items)
+        sink = self.sink
+        if not isinstance(sink, MemorySink):  # streamed: only the last row is kept
+            rows = [last] if last is not None else []
+            return SlamResult(
+                np.array([r[0] for r in rows]),
+                np.array([r[1] for r in rows]).reshape(-1, 3),
+                np.array([r[2] for r in rows]).reshape(-1, 6),
+                np.zeros(0),
+                np.zeros((0, 3)),
+                lamps,
+                [],
+                counts,
+                [],
+                ekf,
+            )
+        u = np.asarray(sink.odo_u, dtype=float).reshape(-1, 2)
+        odo = integrate(self.start_pose, u[:, 0], u[:, 1]) if sink.odo_t else np.zeros((0, 3))
         return SlamResult(
-            np.asarray(self._rows_t),
-            np.asarray(self._rows_x).reshape(-1, 3),
-            np.asarray(self._rows_p).reshape(-1, 6),
-            np.asarray(self._odo_t),
-            self.dead_reckoning(),
+            np.asarray(sink.t),
+            np.asarray(sink.x).reshape(-1, 3),
+            np.asarray(sink.p).reshape(-1, 6),
+            np.asarray(sink.odo_t),
+            odo,
             lamps,
-            self.updates,
+            sink.updates,
             counts,
-            self.snapshots,
+            sink.snapshots,
             ekf,
         )

@@ -12,14 +12,15 @@ from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, check_outputs
 from fuzzyslam.progress import Progress
-from fuzzyslam.slam.io import open_inputs, write_outputs, write_summary
+from fuzzyslam.slam.io import StreamingOutputs, open_inputs, write_outputs, write_summary
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
 
 
-def make_summary(res: SlamResult, inputs, wall: float, aids: list) -> dict:
-    """The JSON summary (stdout and summary.json)."""
+def make_summary(
+    res: SlamResult, inputs, wall: float, aids: list, streamed: StreamingOutputs
+) -> dict:
+    """The JSON summary (stdout and summary.json); row statistics from ``streamed``."""
     duration = max(inputs.end - inputs.start, 0.0)
-    lamp_nis = [u.nis for u in res.updates if u.kind == "lamp" and u.accepted]
     out = {
         "command": "run",
         "log": str(inputs.reader.path),
@@ -31,13 +32,13 @@ def make_summary(res: SlamResult, inputs, wall: float, aids: list) -> dict:
         "filter_health": getattr(res, "health", {}),
         "lamps": len(res.lamps),
         "duplicates_guarded": res.counts["duplicates_guarded"],
-        "mean_nis_lamp": float(np.mean(lamp_nis)) if lamp_nis else None,
+        "mean_nis_lamp": streamed.lamp_nis.mean(),
         "mean_nis_lamp_dof": 2,
         "final_pose": [float(v) for v in res.poses[-1]] if len(res.poses) else None,
         "final_pose_sigma": (
             [float(np.sqrt(res.cov[-1][k])) for k in (0, 3, 5)] if len(res.cov) else None
         ),
-        "trajectory_rows": len(res.t),
+        "trajectory_rows": streamed.rows,
         "warnings": dict(sorted(inputs.warnings.items())),
         "truncated_log": bool(inputs.reader.truncated),
         "log_damage": inputs.reader.damage(),
@@ -55,12 +56,31 @@ def make_summary(res: SlamResult, inputs, wall: float, aids: list) -> dict:
 def run_stage(
     log: str | os.PathLike, outdir: str | os.PathLike, cfg: Config, aids: list | None = None
 ) -> dict:
-    """Run EKF-SLAM on ``log`` and write contracts.md sec. 2 files into ``outdir``."""
+    """Run EKF-SLAM on ``log`` and write contracts.md sec. 2 files into ``outdir``.
+
+    The rows are streamed into the staging directory of ``OutputDir`` as they come
+    (:class:`StreamingOutputs`: memory flat in the log length); the directory replaces
+    the outputs only when everything is written, so an error or Ctrl-C leaves nothing."""
     aids = list(aids or [])
     wall0 = time.perf_counter()
     check_outputs([log], [outdir])
     inputs = open_inputs(log, cfg, need_rings=bool(aids))
-    runner = SlamRunner(cfg.slam, inputs.start_pose, aids, inputs.mounts, cfg.slam.landmarks_period)
+    with OutputDir(outdir) as tmp, StreamingOutputs(tmp, cfg, inputs.start_pose) as streamed:
+        res = _run_filter(inputs, cfg, aids, streamed)
+        for aid in aids:
+            aid.write(tmp)
+        extra = [m for aid in aids if hasattr(aid, "messages") for m in aid.messages(cfg.topics)]
+        write_outputs(tmp, streamed, res, extra)
+        summary = make_summary(res, inputs, time.perf_counter() - wall0, aids, streamed)
+        write_summary(tmp, summary)
+    return summary
+
+
+def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs) -> SlamResult:
+    """The filter over the log's events (rows to ``sink``), its health, input checks."""
+    runner = SlamRunner(
+        cfg.slam, inputs.start_pose, aids, inputs.mounts, cfg.slam.landmarks_period, sink
+    )
     threads = cv2.getNumThreads()
     cv2.setNumThreads(1)  # frames are tiny: OpenCV's thread pool only costs here
     try:
@@ -85,11 +105,4 @@ def run_stage(
     if inputs.lamp_source == "frames" and res.counts["frames"] == 0:
         problem = inputs.first_problem or "no frames"
         raise InputError(inputs.reader.path, f"no usable camera frame ({problem})")
-    with OutputDir(outdir) as tmp:
-        for aid in aids:
-            aid.write(tmp)
-        extra = [m for aid in aids if hasattr(aid, "messages") for m in aid.messages(cfg.topics)]
-        write_outputs(tmp, res, cfg, extra)
-        summary = make_summary(res, inputs, time.perf_counter() - wall0, aids)
-        write_summary(tmp, summary)
-    return summary
+    return res

@@ -69,14 +69,14 @@ class LogWriter:
 
     def write(self, topic: str, typename: str, msg: Any, t: float) -> None:
         """Write a message with log and publish time ``t`` (seconds of log time)."""
+        self.write_cdr(topic, typename, serialize(msg, typename), t)
+
+    def write_cdr(self, topic: str, typename: str, data: bytes, t: float) -> None:
+        """Write an already CDR-serialised message of type ``typename`` (as ``write``)."""
         cid = self._channel(topic, typename)
         ns = sec_to_ns(t)
         self._writer.add_message(
-            channel_id=cid,
-            log_time=ns,
-            publish_time=ns,
-            data=serialize(msg, typename),
-            sequence=self._seq[topic],
+            channel_id=cid, log_time=ns, publish_time=ns, data=data, sequence=self._seq[topic]
         )
         self._seq[topic] += 1
         self.counts[topic] += 1
