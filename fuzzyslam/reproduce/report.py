@@ -169,7 +169,9 @@ def write_report(
         "(10 deg, unseen by odometry) until the first fixes, so the 3-degree target is read "
         "on the mean. The Hough accuracy is the error of the accepted heading fixes against "
         "the true heading. Lamp duplicates are estimated lamps left unmatched within "
-        "the matching distance of a true lamp after a one-to-one assignment.",
+        "the matching distance of a true lamp after a one-to-one assignment. "
+        "The real-time factors of the Cost rows are measured while reproduce's jobs share the "
+        "machine's cores; the isolated figures come from the benchmarks.",
         "",
         "## Per seed",
         "",
