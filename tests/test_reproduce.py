@@ -229,3 +229,21 @@ def test_paper_only_plan_is_the_paper_phases_subset():
     assert {s.key.split("/")[1] for s in paper if s.kind == "evaluate"} == {
         "eval_AB", "eval_C", "eval_D"
     }  # fmt: skip
+
+
+def test_reference_angle_rows_read_the_map_summary():
+    """Errors -0.2, 0.1, 0.05 deg: mean of |e| 0.35 / 3, largest 0.2; a seed without a map
+    summary gives None."""
+    from fuzzyslam.reproduce.table import reference_error
+
+    truth = [{"error_deg": -0.2}, {"error_deg": 0.1}, {"error_deg": 0.05}]
+    r = {"map": {"fgm": {"reference_truth": truth}}}
+    assert reference_error("mean")(r) == pytest.approx(0.35 / 3)
+    assert reference_error("max")(r) == pytest.approx(0.2)
+    assert reference_error("max")({"map": {}}) is None
+
+
+def test_no_row_text_breaks_the_markdown_table():
+    for row in ROWS:
+        for text in (row.group, row.measure, row.paper, row.target, row.unit):
+            assert "|" not in text, text

@@ -33,13 +33,11 @@ def seed_result(
     for name in evaluations(beyond):
         p = root / d / f"eval_{name}" / "metrics.json"
         evals[name] = json.loads(p.read_text(encoding="utf-8"))
-    runs = {
-        k.split("/", 1)[1]: r.summary
-        for k, r in done.items()
-        if k.startswith(f"{d}/") and r.summary and r.summary.get("command") == "run"
-    }
+    mine = {k.split("/", 1)[1]: r.summary for k, r in done.items() if k.startswith(f"{d}/")}
+    runs = {k: v for k, v in mine.items() if v and v.get("command") == "run"}
+    maps = {k: v for k, v in mine.items() if v and "reference_truth" in v}
     seconds = sum(r.seconds for k, r in done.items() if k.startswith(f"{d}/"))
-    return {"seed": seed, "eval": evals, "run": runs, "seconds": seconds}
+    return {"seed": seed, "eval": evals, "run": runs, "map": maps, "seconds": seconds}
 
 
 def reproduce(

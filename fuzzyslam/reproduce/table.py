@@ -1,7 +1,7 @@
 """experiment.md's table: the paper's figure, our target and fuzzyslam's, over seeds (pure).
 
 A seed's results are a plain dict: ``{"eval": {name: metrics.json of eval_<name>},
-"run": {name: run summary}, "seconds": wall time of the seed's steps}`` (names of
+"run": {name: run summary}, "map": {name: map summary}, "seconds": summed step times}`` (names of
 :data:`fuzzyslam.reproduce.plan.EVALUATIONS`). Each :class:`Row` extracts one number per
 seed; :func:`aggregate` gives its mean and spread and whether the target is met.
 """
@@ -80,6 +80,19 @@ def run_value(run: str, key: str):
     return get
 
 
+def reference_error(which: str):
+    """Largest |reference angle - true corridor axis| (deg) of a map, or their mean."""
+
+    def get(r: SeedResult) -> float | None:
+        errs = [_num(e.get("error_deg")) for e in dig(r, "map", "fgm", "reference_truth") or []]
+        errs = [abs(e) for e in errs if e is not None]
+        if not errs:
+            return None
+        return max(errs) if which == "max" else sum(errs) / len(errs)
+
+    return get
+
+
 def seed_seconds(r: SeedResult) -> float | None:
     return _num(r.get("seconds"))
 
@@ -126,6 +139,10 @@ ROWS: tuple[Row, ...] = (
         phase_stat("AB", "A", "nees", "mean"), ""),
     Row("A. SLAM and map building", "duplicate lamps, end of run {freeze}", "-", "0",
         duplicates("AB", "freeze"), "", _eq0, 1, True),
+    Row("A. SLAM and map building", "corridor reference angle error, mean abs.",
+        "1 deg", "<= 0.3 deg", reference_error("mean"), "deg", _le(0.3)),
+    Row("A. SLAM and map building", "corridor reference angle error, largest abs.", "-",
+        "<= 0.3 deg", reference_error("max"), "deg", _le(0.3)),
     Row("B. lamp failure, no help", "mean position error, {after}", "diverges", "-",
         phase_stat("AB", "after", "position_m", "mean", scale=CM), "cm"),
     Row("B. lamp failure, no help", "max position error, {after}", "diverges", "-",
