@@ -807,17 +807,21 @@ def test_multi_ring_bump_recovered_by_the_single_ring_watchdog():
         0.0,
         rings_flm=lambda recent, m: state["flm"],
     )
-    errs = []
+    errs, flags = [], []
     for k in range(10):
         true = compose(true, [0.1, 0.0, 0.0])
         ekf.move(0.1, np.diag([1e-6, 1e-6, (0.1 * DEG) ** 2]))
         state["flm"] = ideal_flm(true, walls)
         aid.on_ring(float(k), sonar_ring(float(k)), MOUNTS, ekf)
         errs.append(abs(wrap_angle(ekf.x[2] - true[2])))
+        flags.append(aid.pose_suspect)
     reasons = [d.reason for d in aid.decisions]
     assert reasons[:2] == ["gated", "gated"] and reasons[2] == "recovered"
     # the window restarted at the recovery: the first multi-ring fix is 4 rings later
     assert next(d.t for d in aid.decisions if d.reason == "ok") == 6.0
+    # a recovery is a leap on the watchdog's evidence: no new lamp from the pose until
+    # the first applied fix agrees with the recovered heading
+    assert all(flags[:6]) and not any(flags[6:])
     assert np.degrees(errs[-1]) < 1.0
     assert aid.summary()["recoveries"] == 1
 
@@ -892,6 +896,51 @@ def test_heading_aid_flags_suspect_pose_until_a_fix_agrees():
     ekf.x[2] = math.radians(0.3)
     aid.on_ring(2.0, ring(2.0), MOUNTS, ekf)
     assert aid.decisions[-1].reason == "ok" and not aid.pose_suspect
+
+
+def test_one_agreeing_ring_between_fixes_does_not_clear_a_suspect_pose():
+    """Multi-ring fixes: a gated ring flags the pose; a later single ring near the
+    prediction is not applied (between fixes), so the heading it would vouch for is the
+    one found wrong: the pose stays suspect until a fix that agrees is applied."""
+    p = FixParams(flm_rings=4, flm_fix_every=0)
+    wall = {"single": 0.0}
+
+    def direction(flm):
+        angle = 0.0 if flm == "multi" else wall["single"]
+        return SimpleNamespace(angle=angle, strength=3.0, ambiguous=False, sigma=0.1 * DEG)
+
+    ekf = OdoEkf([0.0, 0.0, 0.0], np.diag([1e-4, 1e-4, (0.2 * DEG) ** 2]))
+    aid = HeadingFixAid(
+        [corridor_ref(0.0)], p, lambda r, m: "single", direction, 0.0, lambda rr, m: "multi"
+    )
+    flags = []
+    # the wall seen at -10 deg: measured heading +10 deg, then one noisy ring near 0
+    for j, single_deg in enumerate([0.0, -10.0, -0.3, 0.0]):
+        wall["single"] = single_deg * DEG
+        aid.on_ring(float(j), sonar_ring(float(j)), MOUNTS, ekf)
+        flags.append(aid.pose_suspect)
+    reasons = [d.reason for d in aid.decisions]
+    assert reasons == ["between_fixes", "gated", "between_fixes", "ok"]
+    assert aid._single[-2].reason == "ok" and aid._single[-2].nis < p.suspect_chi2
+    assert flags == [False, True, True, False]
+
+
+def test_ring_without_a_fix_leaves_the_pose_unconfirmed():
+    """A ring that forms no heading fix (no wall) confirms nothing: no lamp is created
+    from the pose until a ring's fix agrees again (the camera can see a bump first)."""
+    walls = [SimpleNamespace(angle=0.0, strength=3.0, ambiguous=False), None]
+    refs = [corridor_ref(0.0, 0)]
+    ekf = ToyEkf([0.0, 0.0, 0.0], np.diag([1e-4, 1e-4, (0.5 * DEG) ** 2]))
+    state = {"wall": walls[0]}
+    aid = HeadingFixAid(refs, FixParams(flm_rings=1), lambda r, m: None, lambda f: state["wall"])
+    assert not aid.pose_suspect  # before the aid's first ring: lamp-only SLAM
+    flags = []
+    for j, w in enumerate([walls[0], walls[1], walls[0]]):
+        state["wall"] = w
+        aid.on_ring(float(j), ring(float(j)), MOUNTS, ekf)
+        flags.append(aid.pose_suspect)
+    assert [d.reason for d in aid.decisions] == ["ok", "no_wall", "ok"]
+    assert flags == [False, True, False]
 
 
 def test_pose_fix_skipped_while_filter_knows_better_than_the_map(room):

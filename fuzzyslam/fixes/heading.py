@@ -23,8 +23,11 @@ corner (measured on paper_bumps.yaml: 40 cm drift, lamps duplicated).
 Bumps [ours]: ``recover_after`` consecutive gated fixes whose innovations agree mean
 the filter, not the map, is wrong: the robot covariance is inflated (heading by v^2,
 position by (v d)^2, d the path since the last accepted fix) and the fix applied.
-While the last fix disagreed (gated, or NIS above ``suspect_chi2``) the aid flags
-``pose_suspect`` and ``run`` creates no new lamp (it would be a duplicate).
+A bump is not in the covariance, so only the heading fixes can vouch for the pose from
+which a new lamp is initialised: the aid flags ``pose_suspect`` (``run`` then creates no
+new lamp, it would be a duplicate) unless the latest ring's fix agrees with the
+prediction (NIS <= ``suspect_chi2``), and from a disagreement (gated, NIS above
+``suspect_chi2``, or a recovery) until a fix that agrees is applied (``_update_suspicion``).
 
 Multi-ring FLM [ours] (``fixes.flm_rings`` > 1, and a multi-ring FLM builder given):
 one ring's wall direction scatters by about 1.5 deg (echo noise, short arcs); the FLM of
@@ -259,6 +262,7 @@ class HeadingFixAid:
         # the last formed fix disagreed with the prediction (NIS above suspect_chi2, or
         # gated): ``run`` then creates no new lamp (it would be a duplicate)
         self.pose_suspect = False
+        self._disagreed = False  # a disagreement not yet resolved by an applied fix
         p = params
         self.rings_flm = rings_flm if p.flm_rings > 1 else None
         self.recent = RecentRings(p.flm_rings, p.flm_window_s) if self.rings_flm else None
@@ -332,13 +336,51 @@ class HeadingFixAid:
                 d = replace(d, accepted=False, reason="gated")
             else:
                 self._last_ok_xy = ekf.pose[:2]
-        # single ring: the applied decision; multi-ring: the watchdog (as in the paper path)
-        watch = d if self.recent is None or d.reason == "recovered" else single
-        if np.isfinite(watch.measured):
-            self.pose_suspect = watch.reason == "gated" or (
-                watch.reason == "ok" and watch.nis > self.params.suspect_chi2
-            )
+        self._update_suspicion(single, d)
         self.decisions.append(d)
+
+    def _agrees(self, d: HeadingDecision) -> bool:
+        """A formed fix within the gate whose NIS is at most ``suspect_chi2``."""
+        return d.reason == "ok" and d.nis <= self.params.suspect_chi2
+
+    def _disagrees(self, d: HeadingDecision) -> bool:
+        """A formed fix that is gated or whose NIS exceeds ``suspect_chi2``."""
+        return d.reason == "gated" or (d.reason == "ok" and d.nis > self.params.suspect_chi2)
+
+    def _update_suspicion(self, single: HeadingDecision, applied: HeadingDecision) -> None:
+        """``pose_suspect``: may a lamp be initialised from the current pose?
+
+        Only from a pose whose heading the sonar confirmed (module docstring, "Bumps").
+        An unseen bump is, by definition, not in the covariance, so no covariance gate
+        (association, the duplicate guard ``new_lamp_chi2``) can tell a lamp seen from a
+        wrongly turned pose from a new one; a lamp at range r initialised with a heading
+        error e lands r e away (10 deg at 1.5 m: 26 cm, outside the association gate for
+        good: a permanent duplicate). So the map grows only on positive evidence:
+
+        - a disagreement (the ring's fix gated, or NIS > ``suspect_chi2``; single-ring
+          watchdog or applied fix) holds until a fix that AGREES is APPLIED (accepted by
+          the filter with NIS <= ``suspect_chi2``). A single-ring decision between
+          multi-ring fixes is not applied, so the state it found inconsistent is
+          unchanged: one noisy ring (about 1.5 deg) near the prediction does not refute
+          the gated one (measured on paper_bumps.yaml seed 2: such a ring cleared the
+          flag 0.25 s after a bump, and three lamps were duplicated). A recovery is
+          itself a disagreement: it applies a fix the gate refused, on the evidence of
+          ``recover_after`` rings, which can be wrong (seed 5: rings in a turn triggered
+          one that turned a correct heading 9 deg, and a lamp seen next was duplicated);
+          the pose is trusted again once a later fix agrees with the recovered heading;
+        - and the latest ring must itself confirm the heading (an agreeing fix). A ring
+          that forms no fix (no wall, ambiguous wall, junction) confirms nothing, so
+          frames after it wait: the camera can see a bump one ring before the sonar does
+          (seed 2: two lamps duplicated 0.4 s after a bump whose first ring had an
+          ambiguous wall).
+
+        Before the aid's start time ``pose_suspect`` stays False (lamp-only SLAM).
+        """
+        if applied.accepted and self._agrees(applied):
+            self._disagreed = False
+        if self._disagrees(single) or self._disagrees(applied) or applied.reason == "recovered":
+            self._disagreed = True
+        self.pose_suspect = self._disagreed or not self._agrees(single)
 
     def _multi_decision(
         self, t: float, single: HeadingDecision, mounts: np.ndarray, ekf: Any

@@ -44,8 +44,9 @@ class FixParams:
     # fixes whose measurements agree within recover_spread_deg, the heading variance is
     # inflated by the squared innovation (ekf.inflate_robot) and the fix applied; 0: never
     recover_after: int = field(default=3, metadata={"min": 0})
-    # a fix with NIS above this (1 dof, 95 %: 3.84) or gated marks the pose suspect:
-    # no new lamp is created until a fix agrees again (duplicates after a bump)
+    # a fix with NIS above this (1 dof, 95 %: 3.84) or gated marks the pose suspect: no
+    # new lamp is created until an applied fix agrees again and while the latest ring
+    # confirms nothing (duplicates after a bump; HeadingFixAid._update_suspicion)
     suspect_chi2: float = field(default=3.84, metadata={"min": 0.1})
     recover_spread_deg: float = field(default=3.0, metadata={"min": 0.0, "max": 90.0})
 
