@@ -826,6 +826,74 @@ def test_multi_ring_bump_recovered_by_the_single_ring_watchdog():
     assert aid.summary()["recoveries"] == 1
 
 
+def _bump_walk(refs, noise_deg, drift_deg, xy=(0.0, 0.0), params=None):
+    """A robot at ``xy`` whose true heading was turned 10 deg (unseen: the filter and the
+    dead reckoning both keep 0.05 rad); ring j measures the true heading + noise_deg[j]
+    (None: no wall), and the filter's heading is moved by drift_deg[j] after ring j
+    (lamp updates) while the dead reckoning is not. Single-ring fixes."""
+    true_heading = 0.05 + 10 * DEG
+    ekf = OdoEkf([*xy, 0.05], np.diag([1e-4, 1e-4, (0.5 * DEG) ** 2]))
+    state = {}
+    aid = HeadingFixAid(
+        refs, params or FixParams(flm_rings=1), lambda r, m: None, lambda f: state["wall"], 0.0
+    )
+    for j, (e, dr) in enumerate(zip(noise_deg, drift_deg, strict=True)):
+        state["wall"] = (
+            None
+            if e is None
+            else SimpleNamespace(
+                angle=refs[0].angle - (true_heading + e * DEG), strength=3.0, ambiguous=False
+            )
+        )
+        aid.on_ring(0.25 * j, sonar_ring(0.25 * j), MOUNTS, ekf)  # rings at 4 Hz
+        ekf.x[2] += dr * DEG
+    return aid, ekf, true_heading
+
+
+def test_bump_recovered_from_noisy_rings_while_the_filter_heading_moves():
+    """Three gated rings whose measurements scatter by 3.2 deg (single-ring noise 1.5
+    deg), one ring without a wall among them, and the filter's heading dragged by +-2 deg
+    between them (lamp updates): their offsets from dead reckoning agree (chi-square),
+    so the bump is recovered on the third formed ring, with the rings' mean (not the
+    last ring's 1.4 deg error)."""
+    noise = [1.6, None, -1.6, 1.4, 0.0, 0.0]
+    drift = [-2.0, 0.0, 2.0, 0.0, 0.0, 0.0]
+    aid, ekf, true_heading = _bump_walk([corridor_ref(0.0)], noise, drift)
+    reasons = [d.reason for d in aid.decisions]
+    assert reasons[:4] == ["gated", "no_wall", "gated", "recovered"], reasons
+    assert aid.recoveries == 1
+    rec = aid.decisions[3]
+    assert rec.sigma == pytest.approx(FixParams().sigma_heading_deg * DEG / math.sqrt(3))
+    assert abs(np.degrees(wrap_angle(rec.measured - true_heading)) - 1.4 / 3) < 1e-6
+    assert abs(np.degrees(wrap_angle(ekf.x[2] - true_heading))) < 1.0
+    # rings that disagree among themselves (a 54-deg outlier) are no bump evidence
+    aid, _, _ = _bump_walk([corridor_ref(0.0)], [1.0, 44.0, -1.0], [0.0, 0.0, 0.0])
+    assert [d.reason for d in aid.decisions] == ["gated", "gated", "gated"]
+    # nor gated rings separated by one that agrees with the prediction
+    aid, _, _ = _bump_walk([corridor_ref(0.0)], [0.0, 0.0, -10.0, 0.0], [0.0] * 4)
+    assert [d.reason for d in aid.decisions] == ["gated", "gated", "ok", "gated"]
+    # nor rings further apart than recover_window_s
+    p = FixParams(flm_rings=1, recover_window_s=0.6)
+    aid, _, _ = _bump_walk([corridor_ref(0.0)], [0.0, None, 0.0, 0.0], [0.0] * 4, params=p)
+    assert [d.reason for d in aid.decisions] == ["gated", "no_wall", "gated", "gated"]
+
+
+@pytest.mark.parametrize("other_deg, recovers", [(70.0, False), (90.0, True)])
+def test_consistent_gated_rings_at_an_oblique_junction_do_not_recover(other_deg, recovers):
+    """At the junction of corridors 70 deg apart the FLM's wall can be consistently off
+    for several rings (a corner artefact, not a bump): no recovery from such rings,
+    however many agree. At a right-angle junction they are bump evidence."""
+    refs = [corridor_ref(0.0, 0), corridor_ref(math.radians(other_deg), 1)]
+    aid, ekf, _ = _bump_walk(refs, [0.0] * 6, [0.0] * 6)
+    reasons = [d.reason for d in aid.decisions]
+    assert all(d.oblique != recovers for d in aid.decisions)
+    assert reasons[:3] == ["gated", "gated", "recovered" if recovers else "gated"]
+    assert aid.recoveries == int(recovers)
+    assert set(reasons[3:]) == ({"ok"} if recovers else {"gated"})
+    if not recovers:
+        assert ekf.updates == 0 and aid.pose_suspect  # and no lamp from the pose meanwhile
+
+
 # --- what the fixes need from the SLAM stage ----------------------------------------------
 
 

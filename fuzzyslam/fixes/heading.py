@@ -20,9 +20,19 @@ comb; the candidate nearest the prediction wins unless another is also plausible
 ``sigma_junction_deg``. Without it a bump in a corner went uncorrected for the whole
 corner (measured on paper_bumps.yaml: 40 cm drift, lamps duplicated).
 
-Bumps [ours]: ``recover_after`` consecutive gated fixes whose innovations agree mean
-the filter, not the map, is wrong: the robot covariance is inflated (heading by v^2,
-position by (v d)^2, d the path since the last accepted fix) and the fix applied.
+Bumps [ours]: ``recover_after`` consecutive gated single-ring fixes that agree mean the
+filter, not the map, is wrong: the robot covariance is inflated (heading by v^2,
+position by (v d)^2, d the path since the last accepted fix) and the streak's fix
+applied (``HeadingFixAid._recovery_streak``). A bump is a step between the true and the
+dead-reckoning headings, so the agreement is tested on the offsets measured -
+odometry heading (a constant plus each ring's noise; the filter's own heading moves
+with the lamp updates), by a chi-square test on their weighted scatter
+(``recover_spread_p``), and the fix applied is their weighted mean added to the current
+dead-reckoning heading. Rings forming no fix (no wall, ambiguous wall, no corridor)
+neither break nor extend a streak (``recover_window_s`` bounds its span), and rings at
+oblique junctions (candidate corridors not at right angles) are no evidence: there the
+FLM's wall was measured 7-14 deg off for 3-6 rings in a row (paper_bumps.yaml, the
+corners of the 70-degree corridor, 4 of 5 seeds), which consistency cannot tell from a bump.
 A bump is not in the covariance, so only the heading fixes can vouch for the pose from
 which a new lamp is initialised: the aid flags ``pose_suspect`` (``run`` then creates no
 new lamp, it would be a duplicate) unless the latest ring's fix agrees with the
@@ -62,10 +72,12 @@ import math
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
+from functools import lru_cache
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
+from scipy.special import gammaincinv
 
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.fixes.params import FixParams
@@ -98,6 +110,11 @@ class HeadingDecision:
     strength: float
     nis: float = math.nan
     sigma: float = math.nan  # standard deviation (rad) of the measurement when formed
+    # the dead-reckoning heading at the ring (EkfSlam.odometry_pose; the filter's when
+    # absent): the bump recovery's reference for the measurements' consistency
+    odometry: float = math.nan
+    # at an oblique junction (candidate corridors not at right angles): no bump evidence
+    oblique: bool = False
 
     def row(self) -> list[str]:
         def num(v: float) -> str:
@@ -123,6 +140,39 @@ def nearest_candidate(theta0: float, predicted: float, period: float) -> tuple[f
     d = float(wrap_angle_period(theta0 - predicted, period))
     theta = float(wrap_angle(predicted + d))
     return theta, abs(d), period - abs(d)
+
+
+def _formed(d: HeadingDecision) -> bool:
+    """A ring whose single-ring fix was formed and compared with the prediction."""
+    return d.reason in ("ok", "gated", "recovered") and math.isfinite(d.measured)
+
+
+def _oblique(refs: Sequence[Reference]) -> bool:
+    """Candidate corridors whose reference angles differ by other than right angles."""
+    a0 = refs[0].angle
+    return any(
+        abs(float(wrap_angle_period(r.angle - a0, math.pi / 2))) > math.radians(1.0) for r in refs
+    )
+
+
+def _offsets(rings: Sequence[HeadingDecision]) -> np.ndarray:
+    """measured - odometry of each ring, relative to the first's (no wrap at +-pi)."""
+    u = np.array([x.measured - x.odometry for x in rings], dtype=float)
+    return np.asarray(wrap_angle(u - u[0]), dtype=float)
+
+
+def _common_offset(rings: Sequence[HeadingDecision]) -> tuple[float, float]:
+    """The rings' weighted mean offset measured - odometry (rad) and its sigma."""
+    w = 1.0 / np.array([x.sigma for x in rings], dtype=float) ** 2
+    u0 = float(rings[0].measured - rings[0].odometry)
+    mean = float(np.sum(w * _offsets(rings)) / np.sum(w))
+    return float(wrap_angle(u0 + mean)), float(1.0 / math.sqrt(float(np.sum(w))))
+
+
+@lru_cache(maxsize=64)
+def chi2_quantile(p: float, dof: int) -> float:
+    """chi2.ppf(p, dof) = 2 P^-1(dof / 2, p) (scipy.special: no scipy.stats import)."""
+    return float(2.0 * gammaincinv(dof / 2.0, p))
 
 
 def select_corridor(
@@ -289,24 +339,38 @@ class HeadingFixAid:
             self._push(t, ring, ekf)
             self._since_fix += 1
         pose = ekf.pose
+        odo = getattr(ekf, "odometry_pose", None)
+        odo_heading = float(pose[2] if odo is None else odo[2])
         period = math.pi / 2 if self.params.right_angles else math.pi
         cands, why = select_corridor(pose[:2], self.refs, period, self.params.junction_margin)
         if not cands:  # no FLM or Hough needed (junctions, open space)
-            self.decisions.append(HeadingDecision(t, -1, math.nan, pose[2], False, why, math.nan))
+            self.decisions.append(
+                HeadingDecision(
+                    t, -1, math.nan, pose[2], False, why, math.nan, odometry=odo_heading
+                )
+            )
             if self.recent is not None:
-                self._single.append(self.decisions[-1])  # breaks a gated streak, as above
+                self._single.append(self.decisions[-1])  # skipped by _recovery_streak
             return
         wall = self.wall_direction(self.flm_source(ring, mounts))
         d = decide_heading_fix(t, wall, self.refs, pose, ekf.pose_cov, self.params)
+        d = replace(d, odometry=odo_heading, oblique=why == "junction" and _oblique(cands))
         history = self._single if self.recent is not None else self.decisions
         recover = d.reason == "gated" and hasattr(ekf, "inflate_robot")
-        if recover and self._recovery_due(d, history):
+        streak = self._recovery_streak(d, history) if recover else []
+        if streak:
             # consistent gated fixes: the filter, not the map, is wrong (an unseen bump).
+            # The fix applied is the streak's: their common offset from dead reckoning
+            # (weighted mean) added to the current dead-reckoning heading, with
+            # R = 1 / sum(1 / sigma_i^2) (one ring's fix can be 3 deg off at a corner, and
+            # a heading left that far off is gated by the multi-ring fixes that follow).
             # Covariance inflation (fading memory, Simon, "Optimal state estimation",
             # sec. 7.4) makes the prediction admit the innovation v: P_tt += v^2. The
             # heading was wrong by up to |v| somewhere along the path since the last
             # accepted fix (length d), so the position is off by up to |v| d in an unknown
             # direction: P_xx, P_yy += (v d)^2, which lets the lamps re-associate.
+            offset, sigma = _common_offset(streak)
+            d = replace(d, measured=float(wrap_angle(d.odometry + offset)), sigma=sigma)
             v = float(wrap_angle(d.measured - d.predicted))
             dist = (
                 float(np.hypot(*(pose[:2] - self._last_ok_xy)))
@@ -324,7 +388,10 @@ class HeadingFixAid:
         single = d
         if self.recent is not None:
             self._single.append(d)
-            del self._single[: -max(self.params.recover_after, 1)]
+            # the watchdog's memory: what _recovery_streak may look at
+            horizon = t - self.params.recover_window_s
+            while self._single and self._single[0].t < horizon:
+                del self._single[0]
             if d.reason != "recovered":
                 d = self._multi_decision(t, d, mounts, ekf)
         if d.accepted:
@@ -426,19 +493,50 @@ class HeadingFixAid:
             if d.reason in ("ok", "recovered", "gated")
         ]
 
-    def _recovery_due(self, d: HeadingDecision, history: Sequence[HeadingDecision]) -> bool:
-        """True when this and the previous recover_after - 1 decisions of ``history`` were
-        all gated and their innovations (measured - predicted) agree within
-        recover_spread_deg."""
+    def _recovery_streak(
+        self, d: HeadingDecision, history: Sequence[HeadingDecision]
+    ) -> list[HeadingDecision]:
+        """The rings that call for a recovery at ``d`` (oldest last), or [] when none is
+        due: ``d`` and the previous ``recover_after`` - 1 bump-evidence rings of
+        ``history`` (all within ``recover_window_s``), all gated, whose measurements
+        agree with one another (module docstring, "Bumps").
+
+        Evidence rings are the formed fixes (ok, gated, recovered) outside oblique
+        junctions: a ring that forms no fix (no wall, ambiguous wall or heading, no
+        corridor) is skipped, neither breaking nor extending the streak, and so is a ring
+        at an oblique junction (its fixes can be off by a consistent 7-14 deg for several
+        rings). An ok or recovered evidence ring ends the streak.
+
+        Agreement: a bump is a step between the true and the dead-reckoning headings, so
+        over a streak of about a second the offsets u_i = measured_i - odometry_i are one
+        constant plus each ring's measurement noise (sigma_i, the decision's R), whereas
+        the innovations measured_i - predicted_i also move with the filter (lamp updates
+        drag the heading). The streak agrees when sum((u_i - u_bar)^2 / sigma_i^2), u_bar
+        the weighted mean, is within chi2(k - 1) at ``recover_spread_p``.
+        """
         k = self.params.recover_after
-        if k <= 0:
-            return False
-        last = [*history[len(history) - (k - 1) :], d] if k > 1 else [d]
+        if k <= 0 or d.oblique or not _formed(d):
+            return []
+        last = [d]
+        for x in reversed(history):
+            if len(last) >= k or x.t < d.t - self.params.recover_window_s:
+                break
+            if not _formed(x) or x.oblique:
+                continue
+            if x.reason != "gated":
+                return []
+            last.append(x)
         if len(last) < k or any(x.reason != "gated" for x in last):
-            return False
-        v = np.array([float(wrap_angle(x.measured - x.predicted)) for x in last])
-        spread = float(wrap_angle(v.max() - v.min()))
-        return abs(spread) <= math.radians(self.params.recover_spread_deg)
+            return []
+        if k == 1:
+            return last
+        u = _offsets(last)
+        w = 1.0 / np.array([x.sigma for x in last]) ** 2
+        if not (np.all(np.isfinite(u)) and np.all(np.isfinite(w))):
+            return []
+        mean = float(np.sum(w * u) / np.sum(w))
+        spread = float(np.sum(w * (u - mean) ** 2))
+        return last if spread <= chi2_quantile(self.params.recover_spread_p, k - 1) else []
 
     def summary(self) -> dict[str, Any]:
         reasons = Counter(d.reason for d in self.decisions)
