@@ -1,6 +1,6 @@
 """Benchmark of the fixes stage: cost per ring and accuracy on synthetic worlds.
 
-Run: /tmp/venv/bin/python benchmarks/bench_fixes.py [--n 40]
+Run: python benchmarks/bench_fixes.py [--n 40]
 
 Worlds, ray-cast sonar rings and clean ("ideal", laser-like) FLMs come from the
 fixes tests' helpers (tests/test_fixes.py); FLMs are built by the maps stage's

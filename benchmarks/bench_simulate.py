@@ -3,7 +3,7 @@
 Prints wall time, real-time factor, file size and peak memory (resource.getrusage),
 plus the simulation's own summary figures. Usage:
 
-    /tmp/venv/bin/python benchmarks/bench_simulate.py [CONFIG] [--seed N] [--out FILE]
+    python benchmarks/bench_simulate.py [CONFIG] [--seed N] [--out FILE]
 """
 
 from __future__ import annotations
