@@ -293,3 +293,38 @@ def test_bad_inputs_one_line_exit3_nothing_written(
     assert r.stdout == ""
     assert not out.exists()
     assert not [p for p in out.parent.iterdir() if p.name.startswith(f".{out.name}.")]
+
+
+def test_compare_side_by_side(case: dict) -> None:
+    """--compare: a second estimate (truth shifted by twice the offset) is evaluated alike;
+    its row equals its own evaluation, the main one comes first, the figure is drawn."""
+    from fuzzyslam.streams.tum import read_tum, write_tum
+
+    t, poses = read_tum(case["truth_tum"])
+    shifted = poses.copy()
+    shifted[:, :2] += 2.0 * np.asarray(OFFSET)
+    other = case["root"] / "shifted.tum"
+    write_tum(other, t, shifted)
+    out = case["root"] / "compare"
+    r = _cli("evaluate", case["log"], case["run"], "-o", out, "--compare", other)
+    assert r.returncode == 0, r.stderr
+    m = json.loads((out / "metrics.json").read_text())
+    rows = m["comparison"]
+    assert [x["label"] for x in rows] == [m["label"], "shifted"]
+    off = float(np.hypot(*OFFSET))
+    assert rows[0]["phases"]["overall"]["position_mean_m"] == pytest.approx(off, abs=1e-5)
+    assert rows[1]["phases"]["overall"]["position_mean_m"] == pytest.approx(2 * off, abs=1e-5)
+    assert rows[1]["lamps_duplicated"] is None  # a TUM file carries no lamps
+    alone = case["root"] / "shifted_alone"
+    assert _cli("evaluate", case["log"], other, "-o", alone).returncode == 0
+    a = json.loads((alone / "metrics.json").read_text())["phases"]
+    for name, b in rows[1]["phases"].items():
+        assert b["position_max_m"] == pytest.approx(a[name]["position_m"]["max"], abs=1e-12)
+        assert b["heading_mean_deg"] == pytest.approx(a[name]["heading_deg"]["mean"], abs=1e-12)
+    md = (out / "report.md").read_text()
+    assert "## Side by side" in md and "| after | shifted |" in md
+    assert (out / "compare.png").stat().st_size > 10_000 and "(compare.png)" in md
+    bad = case["root"] / "compare_bad"
+    r = _cli("evaluate", case["log"], case["run"], "-o", bad, "--compare", case["late"])
+    assert r.returncode == 3 and "does not overlap" in r.stderr and str(case["late"]) in r.stderr
+    assert len(r.stderr.strip().splitlines()) == 1 and not bad.exists()

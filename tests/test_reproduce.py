@@ -204,6 +204,15 @@ def test_quick_reproduce_table_agrees_with_the_evaluations(quick_run):
     assert ratio == pytest.approx(pc / pa)
     # the paper's phase A target, on the quick scenario too
     assert a_pos < 5.0
+    # every lamp off: pose fixes, heading fixes and none side by side in one evaluation
+    # (evaluate --compare), each row the same as the estimate's own evaluation
+    dark = json.loads((out / "seed0" / "eval_dark_pose" / "metrics.json").read_text())
+    cmp = {r["label"]: r["phases"]["after"]["position_mean_m"] for r in dark["comparison"]}
+    assert list(cmp)[1:] == ["dark_heading", "dark_none"]
+    for other in ("dark_heading", "dark_none"):
+        own = json.loads((out / "seed0" / f"eval_{other}" / "metrics.json").read_text())
+        assert cmp[other] == pytest.approx(own["phases"]["after"]["position_m"]["mean"])
+    assert "## Side by side" in (out / "seed0" / "eval_dark_pose" / "report.md").read_text()
 
 
 def test_quick_reproduce_writes_the_chain_as_commands_and_figures(quick_run):

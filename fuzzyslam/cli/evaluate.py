@@ -30,6 +30,12 @@ from fuzzyslam.cli import cli, config_option, emit
     default=None,
     help="Name of the estimate in the report (default: its file or directory name).",
 )
+@click.option(
+    "--compare",
+    multiple=True,
+    type=click.Path(path_type=str),
+    help="Another estimate (run directory or TUM file) to put side by side; repeatable.",
+)
 @config_option
 def evaluate_cmd(
     truth: str,
@@ -37,6 +43,7 @@ def evaluate_cmd(
     outdir: str,
     map_dir: str | None,
     label: str | None,
+    compare: tuple[str, ...],
     config: str | None,
 ) -> None:
     """Compare ESTIMATE with TRUTH and write a report into OUTDIR.
@@ -48,10 +55,15 @@ def evaluate_cmd(
     runs): x, y and heading errors, APE with and without Umeyama alignment (as evo), RPE per
     metre, NEES and NIS consistency, lamp errors after a one-to-one assignment (duplicated,
     missed lamps) and Hough heading-fix errors. Prints the headline figures as JSON.
+
+    With --compare, further estimates of the same truth are evaluated alike and shown side
+    by side (a table per phase and their position errors against time).
     """
     from fuzzyslam.config import load_config
     from fuzzyslam.evaluation.evaluate import run_evaluate, summary
 
     params = load_config(config).evaluation if config else None
-    res = run_evaluate(truth, estimate, outdir, params=params, map_dir=map_dir, label=label)
+    res = run_evaluate(
+        truth, estimate, outdir, params=params, map_dir=map_dir, label=label, compare=compare
+    )
     emit(summary(res))

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import csv
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -281,8 +282,14 @@ def run_evaluate(
     params: EvalParams | None = None,
     map_dir: str | os.PathLike | None = None,
     label: str | None = None,
+    compare: Sequence[str | os.PathLike] = (),
 ) -> EvaluateResult:
     """Read, evaluate, and write metrics.json, the figures and report.md into ``outdir``.
+
+    ``compare``: more estimates (run directories or TUM files) evaluated against the same
+    truth with the same parameters; ``metrics["comparison"]`` holds one row per estimate
+    (the main one first), report.md a side-by-side table and ``compare.png`` their position
+    errors against time.
 
     Every input is read and checked before anything is written; the outputs appear together
     (fileio.OutputDir), so a failure leaves ``outdir`` as it was.
@@ -290,14 +297,23 @@ def run_evaluate(
     from fuzzyslam.evaluation import figures, report
 
     params = params or EvalParams()
-    check_outputs([truth_path, estimate_path], [outdir])
+    check_outputs([truth_path, estimate_path, *compare], [outdir])
     fgm = read_fgm(map_dir) if map_dir is not None else None
     est = read_estimate(estimate_path, label)
+    others = [read_estimate(c) for c in compare]
     truth = read_truth(truth_path)
     try:
         ev = evaluate(truth, est, params)
     except SpanError as exc:
         raise InputError(estimate_path, str(exc)) from None
+    evs = [(est, ev)]
+    for path, other in zip(compare, others, strict=True):
+        try:
+            evs.append((other, evaluate(truth, other, params)))
+        except SpanError as exc:
+            raise InputError(path, str(exc)) from None
+    if others:
+        ev.metrics["comparison"] = [comparison_row(e, v) for e, v in evs]
     from fuzzyslam.evaluation.changes import change_metrics
 
     changes = change_metrics(truth_path, estimate_path, truth.t, truth.poses[:, :2])
@@ -305,10 +321,35 @@ def run_evaluate(
         ev.metrics["change_detection"] = changes
     with OutputDir(outdir) as tmp:
         figs = figures.draw_all(tmp, truth, est, ev, fgm)
+        if others:
+            figures.fig_compare(tmp / "compare.png", truth, [(e.label, v) for e, v in evs])
+            figs["compare"] = "compare.png"
         report.write_metrics(tmp / "metrics.json", ev.metrics)
         report.write_report(tmp / "report.md", ev.metrics, figs)
         files = sorted(x.name for x in tmp.iterdir())
     return EvaluateResult(ev, Path(outdir), files)
+
+
+def comparison_row(est: Estimate, ev: Evaluation) -> dict[str, Any]:
+    """One estimate's row of the side-by-side comparison: per phase, position error mean
+    and max (m), heading error mean and max (deg); lamps duplicated."""
+    phases = {
+        name: {
+            "position_mean_m": b["position_m"]["mean"],
+            "position_max_m": b["position_m"]["max"],
+            "heading_mean_deg": b["heading_deg"]["mean"],
+            "heading_max_deg": b["heading_deg"]["max"],
+        }
+        for name, b in ev.metrics["phases"].items()
+        if "position_m" in b
+    }
+    lamps = ev.metrics.get("lamps")
+    return {
+        "label": est.label,
+        "estimate": est.source,
+        "phases": phases,
+        "lamps_duplicated": lamps["duplicates"] if lamps else None,
+    }
 
 
 def summary(res: EvaluateResult) -> dict[str, Any]:

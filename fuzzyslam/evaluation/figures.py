@@ -5,7 +5,7 @@ Each ``fig_*`` function takes arrays/dataclasses and a path and writes one PNG.
 
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Mapping, Sequence
 from pathlib import Path
 
 import matplotlib
@@ -364,6 +364,25 @@ def fig4_sets(truth: Truth, est: Estimate, ev: Evaluation) -> dict[str, Array]:
     if ev.lamp_match is not None:
         return {f"{est.label}, final map": ev.lamp_match.per_true}
     return {}
+
+
+def fig_compare(path: Path, truth: Truth, runs: Sequence[tuple[str, Evaluation]]) -> None:
+    """Position error (cm, log scale) against time of several estimates of one truth, with
+    the run boundaries, the FGM freeze, lamp failures and bumps marked (``evaluate
+    --compare``)."""
+    fig, ax = plt.subplots(figsize=(10, 4.2))
+    for label, ev in runs:
+        err = np.hypot(ev.errors[:, 0], ev.errors[:, 1]) * 100.0
+        ax.plot(ev.assoc.t, np.maximum(err, 1e-3), lw=0.9, label=label)
+    ax.set_yscale("log")
+    ax.set_ylabel("position error (cm)")
+    ax.set_xlabel("time (s)")
+    ax.grid(alpha=0.3, which="both")
+    _mark_events([ax], truth)
+    ax.legend(loc="upper left", fontsize=8)
+    ax.set_title("position error against time, side by side")
+    fig.tight_layout()
+    _save(fig, path)
 
 
 def draw_all(

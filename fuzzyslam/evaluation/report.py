@@ -66,6 +66,30 @@ def phase_table(metrics: dict[str, Any]) -> str:
     return head + "\n".join(rows) + "\n"
 
 
+def comparison_table(rows: list[dict[str, Any]]) -> str:
+    """Markdown table of ``evaluate --compare``: per phase (A, after, overall; the per-run
+    blocks stay in metrics.json), one row per estimate."""
+    head = (
+        "| phase | estimate | mean pos. err (cm) | max pos. err (cm) "
+        "| heading mean / max (deg) | lamps duplicated |\n"
+        "|---|---|---|---|---|---|\n"
+    )
+    names = [n for n in rows[0]["phases"] if not n.startswith("run")]
+    out = []
+    for name in names:
+        for r in rows:
+            b = r["phases"].get(name)
+            if b is None:
+                continue
+            dup = "-" if r["lamps_duplicated"] is None else str(r["lamps_duplicated"])
+            out.append(
+                f"| {name} | {r['label']} | {_f(b['position_mean_m'], 100, 2)} "
+                f"| {_f(b['position_max_m'], 100, 2)} "
+                f"| {_f(b['heading_mean_deg'], nd=2)} / {_f(b['heading_max_deg'], nd=2)} | {dup} |"
+            )
+    return head + "\n".join(out) + "\n"
+
+
 def write_report(path: Path, metrics: dict[str, Any], figs: dict[str, str]) -> None:
     """report.md: the headline, the phase table, lamps, fixes, consistency and the figures."""
     lines = [
@@ -105,6 +129,8 @@ def write_report(path: Path, metrics: dict[str, Any], figs: dict[str, str]) -> N
             f"{lm['spurious']} spurious.",
             "",
         ]
+    if metrics.get("comparison"):
+        lines += ["## Side by side", "", comparison_table(metrics["comparison"])]
     ov = metrics["phases"]["overall"]
     if "heading_fix" in ov:
         lines += [
@@ -139,6 +165,7 @@ def write_report(path: Path, metrics: dict[str, Any], figs: dict[str, str]) -> N
         "fig3": "Fig. 3: x, y, heading errors against time",
         "fig4": "Fig. 4: per-lamp position error",
         "consistency": "NEES and NIS against time",
+        "compare": "position errors of the compared estimates against time",
     }
     lines += ["## Figures", ""]
     for key, name in figs.items():

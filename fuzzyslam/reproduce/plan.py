@@ -65,6 +65,13 @@ EVALUATIONS: dict[str, tuple[str, str, str, str]] = {
     "people_pose": ("people", "people_pose", "people_fgm", "people and boxes: pose fixes"),
 }
 
+# Estimates an evaluation puts side by side (evaluate --compare): B against C on the
+# paper log; every lamp off: pose fixes against heading fixes and against none (issue 8)
+COMPARE: dict[str, tuple[str, ...]] = {
+    "C": ("AB",),
+    "dark_pose": ("dark_heading", "dark_none"),
+}
+
 # Estimates and evaluations of the paper's own phases (A-D); the others go beyond it.
 PAPER_ONLY = ("AB", "C", "D")
 
@@ -134,7 +141,11 @@ def seed_steps(seed: int, suite: Suite, beyond: bool = True) -> list[Step]:
             "evaluate", f"{d}/{log}.mcap", f"{d}/{est}", "-o", f"{d}/eval_{name}",
             "--map", f"{d}/{map_dir}", "--label", label,
         ]  # fmt: skip
-        add(f"eval_{name}", "evaluate", argv, [f"{log}.mcap", est, map_dir], COST_EVALUATE)
+        others = COMPARE.get(name, ())
+        for other in others:
+            argv += ["--compare", f"{d}/{other}"]
+        deps = [f"{log}.mcap", est, map_dir, *others]
+        add(f"eval_{name}", "evaluate", argv, deps, COST_EVALUATE)
     return steps
 
 
