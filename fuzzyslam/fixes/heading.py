@@ -72,12 +72,10 @@ import math
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
-from functools import lru_cache
 from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
-from scipy.special import gammaincinv
 
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.fixes.params import FixParams
@@ -85,6 +83,7 @@ from fuzzyslam.fixes.references import Reference, corridors_at, corridors_near
 from fuzzyslam.maps.flm import RecentRings
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import wrap_angle, wrap_angle_period
+from fuzzyslam.slam.health import chi2_quantile
 
 HEADING_FIELDS = ("t", "corridor", "measured", "predicted", "accepted", "reason", "strength")
 
@@ -155,24 +154,17 @@ def _oblique(refs: Sequence[Reference]) -> bool:
     )
 
 
-def _offsets(rings: Sequence[HeadingDecision]) -> np.ndarray:
-    """measured - odometry of each ring, relative to the first's (no wrap at +-pi)."""
+def _streak_offset(rings: Sequence[HeadingDecision]) -> tuple[float, float, float]:
+    """The rings' common offset measured - odometry (rad; weighted mean, weights 1 /
+    sigma_i^2), its sigma 1 / sqrt(sum w_i), and the weighted scatter
+    sum w_i (u_i - mean)^2 (chi-square with len(rings) - 1 dof when they agree).
+    Offsets are taken relative to the first ring's, so no mean straddles +-pi."""
     u = np.array([x.measured - x.odometry for x in rings], dtype=float)
-    return np.asarray(wrap_angle(u - u[0]), dtype=float)
-
-
-def _common_offset(rings: Sequence[HeadingDecision]) -> tuple[float, float]:
-    """The rings' weighted mean offset measured - odometry (rad) and its sigma."""
+    rel = np.asarray(wrap_angle(u - u[0]), dtype=float)
     w = 1.0 / np.array([x.sigma for x in rings], dtype=float) ** 2
-    u0 = float(rings[0].measured - rings[0].odometry)
-    mean = float(np.sum(w * _offsets(rings)) / np.sum(w))
-    return float(wrap_angle(u0 + mean)), float(1.0 / math.sqrt(float(np.sum(w))))
-
-
-@lru_cache(maxsize=64)
-def chi2_quantile(p: float, dof: int) -> float:
-    """chi2.ppf(p, dof) = 2 P^-1(dof / 2, p) (scipy.special: no scipy.stats import)."""
-    return float(2.0 * gammaincinv(dof / 2.0, p))
+    mean = float(np.sum(w * rel) / np.sum(w))
+    scatter = float(np.sum(w * (rel - mean) ** 2))
+    return float(wrap_angle(u[0] + mean)), float(1.0 / math.sqrt(float(np.sum(w)))), scatter
 
 
 def select_corridor(
@@ -369,7 +361,7 @@ class HeadingFixAid:
             # heading was wrong by up to |v| somewhere along the path since the last
             # accepted fix (length d), so the position is off by up to |v| d in an unknown
             # direction: P_xx, P_yy += (v d)^2, which lets the lamps re-associate.
-            offset, sigma = _common_offset(streak)
+            offset, sigma, _ = _streak_offset(streak)
             d = replace(d, measured=float(wrap_angle(d.odometry + offset)), sigma=sigma)
             v = float(wrap_angle(d.measured - d.predicted))
             dist = (
@@ -515,7 +507,7 @@ class HeadingFixAid:
         the weighted mean, is within chi2(k - 1) at ``recover_spread_p``.
         """
         k = self.params.recover_after
-        if k <= 0 or d.oblique or not _formed(d):
+        if k <= 0 or d.oblique or d.reason != "gated" or not _formed(d):
             return []
         last = [d]
         for x in reversed(history):
@@ -526,17 +518,14 @@ class HeadingFixAid:
             if x.reason != "gated":
                 return []
             last.append(x)
-        if len(last) < k or any(x.reason != "gated" for x in last):
+        if len(last) < k:
             return []
         if k == 1:
             return last
-        u = _offsets(last)
-        w = 1.0 / np.array([x.sigma for x in last]) ** 2
-        if not (np.all(np.isfinite(u)) and np.all(np.isfinite(w))):
+        _, _, scatter = _streak_offset(last)
+        if not math.isfinite(scatter):
             return []
-        mean = float(np.sum(w * u) / np.sum(w))
-        spread = float(np.sum(w * (u - mean) ** 2))
-        return last if spread <= chi2_quantile(self.params.recover_spread_p, k - 1) else []
+        return last if scatter <= chi2_quantile(self.params.recover_spread_p, k - 1) else []
 
     def summary(self) -> dict[str, Any]:
         reasons = Counter(d.reason for d in self.decisions)

@@ -22,6 +22,7 @@
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 from scipy.special import gammaincinv
@@ -59,6 +60,7 @@ def solve_spd(
     raise np.linalg.LinAlgError("innovation covariance cannot be regularised")
 
 
+@lru_cache(maxsize=256)
 def chi2_quantile(p: float, dof: int) -> float:
     """chi2.ppf(p, dof) = 2 P^-1(dof/2, p) (P the regularised lower incomplete gamma);
     scipy.special, not scipy.stats, whose import costs a second and 40 MB."""
