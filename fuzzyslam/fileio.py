@@ -7,9 +7,14 @@ partial file behind and an input is never overwritten.
 from __future__ import annotations
 
 import contextlib
+import ctypes
+import errno
+import fnmatch
 import os
 import shutil
 import signal
+import stat
+import sys
 import tempfile
 import threading
 from collections.abc import Iterable, Iterator
@@ -54,9 +59,12 @@ def _same_file(a: Path, b: Path) -> bool:
 
 
 def check_outputs(
-    inputs: Iterable[str | os.PathLike], outputs: Iterable[str | os.PathLike]
+    inputs: Iterable[str | os.PathLike],
+    outputs: Iterable[str | os.PathLike],
+    kind: str = "file or directory",
 ) -> None:
-    """Raise InputError if an output path is one of the inputs or lies in a missing directory."""
+    """Raise InputError if an output path is one of the inputs, lies in a missing
+    directory, or exists and is not a ``kind`` (a device, FIFO or socket never is)."""
     ins = [Path(p) for p in inputs if p is not None]
     for inp in ins:
         _remember(inp)
@@ -70,6 +78,7 @@ def check_outputs(
         parent = out.resolve().parent
         if not parent.is_dir():
             raise InputError(out, f"output directory {parent} does not exist")
+        check_output_target(out, kind)
 
 
 def check_input_file(path: str | os.PathLike, what: str = "input") -> Path:
@@ -92,31 +101,126 @@ def _umask() -> int:
     return mask
 
 
+# Write failures that mean the output cannot be completed: one line naming the output.
+_WRITE_PROBLEMS = {
+    errno.ENOSPC: "no space left on device",
+    errno.EDQUOT: "no space left on device (disk quota exceeded)",
+    errno.EFBIG: "no space left for it: the file size limit is reached",
+    errno.EROFS: "read-only file system",
+    errno.EIO: "input/output error",
+}
+WRITE_ERRNOS = frozenset(_WRITE_PROBLEMS)
+
+
+def write_error(path: str | os.PathLike, exc: OSError, replaced: bool = False) -> InputError:
+    """The one-line error for a failed write of the output ``path`` (the user's name,
+    never a temporary one): "cannot write: no space left on device" and the like;
+    ``replaced`` says whether other outputs were already in place."""
+    problem = _WRITE_PROBLEMS.get(exc.errno or 0) or exc.strerror or type(exc).__name__
+    return InputError(
+        path, f"cannot write: {problem}" + ("" if replaced else "; nothing was replaced")
+    )
+
+
+def _is_within(name: object, root: Path) -> bool:
+    if not isinstance(name, (str, os.PathLike)):
+        return False
+    try:
+        return Path(os.fsdecode(name)).resolve().is_relative_to(root.resolve())
+    except (OSError, ValueError):
+        return False
+
+
+def _user_error(exc: BaseException, tmp: Path, dest: Path) -> BaseException | None:
+    """``exc`` re-addressed to the user's output ``dest`` if it concerns the temporary
+    ``tmp`` (a write failure, or an error naming a file inside it), else None."""
+    if isinstance(exc, InputError) and _is_within(exc.path, tmp):
+        rel = Path(exc.path).resolve().relative_to(tmp.resolve())
+        return InputError(dest / rel if rel.parts else dest, exc.problem)
+    if not isinstance(exc, OSError):
+        return None
+    if exc.filename is not None and _is_within(exc.filename, tmp):
+        rel = Path(os.fsdecode(exc.filename)).resolve().relative_to(tmp.resolve())
+        return write_error(dest / rel if rel.parts else dest, exc)
+    if exc.filename is None and exc.errno in _WRITE_PROBLEMS:
+        return write_error(dest, exc)
+    return None
+
+
+def check_output_target(path: str | os.PathLike, kind: str = "file or directory") -> None:
+    """Raise InputError unless ``path`` is absent or an existing ``kind`` ("file",
+    "directory" or "file or directory"): a device, FIFO or socket is never replaced,
+    whatever the user's privileges (os.replace as root would swap the node for a file)."""
+    p = Path(path)
+    try:
+        st = os.stat(p)
+    except FileNotFoundError:
+        return
+    except OSError as exc:
+        raise InputError(p, f"cannot use as output: {exc.strerror}") from None
+    if stat.S_ISREG(st.st_mode):
+        if kind == "directory":
+            raise InputError(p, "output directory path exists and is not a directory")
+        return
+    if stat.S_ISDIR(st.st_mode):
+        if kind == "file":
+            raise InputError(p, "output path is a directory; refusing to replace it")
+        return
+    raise InputError(
+        p, "output path exists and is not a regular file or directory (a device, FIFO or "
+        "socket); refusing to replace it"
+    )
+
+
+def _fsync_path(path: Path, directory: bool = False) -> None:
+    """Flush ``path`` (a file, or a directory's entries) to the disk."""
+    fd = os.open(path, os.O_RDONLY | (os.O_DIRECTORY if directory else 0))
+    try:
+        os.fsync(fd)
+    except OSError as exc:
+        if directory and exc.errno in (errno.EINVAL, errno.EBADF):
+            return  # some file systems cannot sync a directory
+        raise
+    finally:
+        os.close(fd)
+
+
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
 
-    On any exception (including KeyboardInterrupt) the temporary file is removed
-    and ``path`` is left as it was.
+    The temporary file is flushed to the disk (fsync) before the rename, so ``path`` is
+    either the old file or the complete new one, also after a crash. On any exception
+    (including KeyboardInterrupt) the temporary file is removed and ``path`` is left as
+    it was; a write failure (disk full, file size limit) is an InputError naming
+    ``path``. A ``path`` that is a device, FIFO, socket or directory is refused.
     """
     path = Path(path)
+    check_output_target(path, "file")
     fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
     os.close(fd)
     tmp_path = Path(tmp)
     try:
         yield tmp_path
         _refuse_inputs([path])
+        check_output_target(path, "file")
         with contextlib.suppress(OSError):  # mkstemp made it private: give it a file's usual mode
             os.chmod(tmp_path, 0o666 & ~_umask())
+        _fsync_path(tmp_path)
         os.replace(tmp_path, path)
-    except BaseException:
+        _fsync_path(path.parent if str(path.parent) else Path("."), directory=True)
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             tmp_path.unlink()
+        mapped = _user_error(exc, tmp_path, path)
+        if mapped is not None:
+            raise mapped from exc
         raise
 
 
 class OutputDir:
-    """Stage outputs in a hidden temporary directory; move them into place on success.
+    """Stage outputs in a hidden temporary directory; replace the output directory with
+    it, whole, on success.
 
     Usage::
 
@@ -124,18 +228,22 @@ class OutputDir:
             write(tmp / "trajectory.tum")
         # now outdir/trajectory.tum exists; nothing was written if the block failed
 
-    Files already in ``outdir`` that the stage does not write are kept. Each file
-    is moved with ``os.replace`` (atomic on one file system).
+    Files already in ``outdir`` that the stage does not write are kept (hard-linked into
+    the new directory), except those matching ``owns`` (names the stage may write, e.g.
+    ``heading_fixes.csv``: a stale one would mix runs). The finished directory is flushed
+    to the disk and exchanged with the old one in one atomic step (``renameat2``
+    RENAME_EXCHANGE; two renames with Ctrl-C held where that is missing), so ``outdir``
+    is always the old set of files or the new one, never a mix. A write failure is one
+    InputError naming the user's file, never the temporary name.
     """
 
-    def __init__(self, path: str | os.PathLike) -> None:
+    def __init__(self, path: str | os.PathLike, owns: Iterable[str] = ()) -> None:
         self.path = Path(path)
+        self.owns = tuple(owns)
         self.tmp: Path | None = None
-        self._created = False
 
     def __enter__(self) -> Path:
-        if self.path.exists() and not self.path.is_dir():
-            raise InputError(self.path, "output directory path exists and is not a directory")
+        check_output_target(self.path, "directory")
         parent = self.path.resolve().parent
         if not parent.is_dir():
             raise InputError(self.path, f"parent directory {parent} does not exist")
@@ -146,30 +254,114 @@ class OutputDir:
         assert self.tmp is not None
         try:
             if exc_type is None:
-                items = sorted(self.tmp.rglob("*"))
-                _refuse_inputs(self.path / i.relative_to(self.tmp) for i in items if i.is_file())
-                with _deferred_interrupts():
-                    self._move(items)
+                try:
+                    items = sorted(self.tmp.rglob("*"))
+                    dests = [self.path / i.relative_to(self.tmp) for i in items if i.is_file()]
+                    _refuse_inputs(dests)
+                    check_output_target(self.path, "directory")
+                    for d in dests:
+                        check_output_target(d, "file")
+                    self._complete()
+                    with _deferred_interrupts():
+                        self._move(items)
+                except BaseException as err:
+                    mapped = _user_error(err, self.tmp, self.path)
+                    if mapped is not None:
+                        raise mapped from err
+                    raise
+            elif exc is not None:
+                mapped = _user_error(exc, self.tmp, self.path)
+                if mapped is not None:
+                    raise mapped from exc
         finally:
             shutil.rmtree(self.tmp, ignore_errors=True)
 
-    def _move(self, items: list[Path]) -> None:
-        """A new directory: one atomic rename of the whole staging directory. An existing
-        one: file by file (each ``os.replace`` atomic), Ctrl-C deferred until done."""
+    def _complete(self) -> None:
+        """Carry the old directory's other files into the new one (hard links, or copies
+        where links are refused) and flush every file and directory to the disk."""
         assert self.tmp is not None
-        if not self.path.exists():
-            os.chmod(self.tmp, 0o777 & ~_umask())  # mkdtemp made it private
-            with contextlib.suppress(OSError):
-                os.rename(self.tmp, self.path)
-                return
-        self.path.mkdir(exist_ok=True)
-        for item in items:
-            dest = self.path / item.relative_to(self.tmp)
-            if item.is_dir():
-                dest.mkdir(parents=True, exist_ok=True)
-            else:
-                dest.parent.mkdir(parents=True, exist_ok=True)
-                os.replace(item, dest)
+        real = self.path.resolve()
+        if real.is_dir() and not _in_place_only(real):
+            for old in sorted(real.rglob("*")):
+                rel = old.relative_to(real)
+                new = self.tmp / rel
+                if new.exists() or new.is_symlink() or _owned(rel, self.owns):
+                    continue
+                if old.is_dir() and not old.is_symlink():
+                    new.mkdir(parents=True, exist_ok=True)
+                    continue
+                new.parent.mkdir(parents=True, exist_ok=True)
+                try:
+                    os.link(old, new, follow_symlinks=False)
+                except OSError:
+                    shutil.copy2(old, new, follow_symlinks=False)
+        os.chmod(self.tmp, 0o777 & ~_umask())  # mkdtemp made it private
+        for item in sorted(self.tmp.rglob("*"), reverse=True):
+            if not item.is_symlink():
+                _fsync_path(item, directory=item.is_dir())
+        _fsync_path(self.tmp, directory=True)
+
+    def _move(self, items: list[Path]) -> None:
+        """Put the staging directory in place of ``self.path``: one rename for a new
+        directory, an atomic exchange for an existing one (the old one is then removed).
+        The working directory or a mount point cannot be swapped: its files are replaced
+        one by one (Ctrl-C is held meanwhile)."""
+        assert self.tmp is not None
+        real = self.path.resolve()
+        if not real.exists():
+            os.rename(self.tmp, real)
+        elif _in_place_only(real):
+            for item in items:
+                dest = real / item.relative_to(self.tmp)
+                if item.is_dir():
+                    dest.mkdir(parents=True, exist_ok=True)
+                else:
+                    dest.parent.mkdir(parents=True, exist_ok=True)
+                    os.replace(item, dest)
+        elif not _exchange(self.tmp, real):
+            old = Path(tempfile.mkdtemp(prefix=f".{real.name}.", suffix=".old", dir=real.parent))
+            os.rmdir(old)
+            os.rename(real, old)
+            try:
+                os.rename(self.tmp, real)
+            except BaseException:
+                os.rename(old, real)
+                raise
+            shutil.rmtree(old, ignore_errors=True)
+        # after an exchange self.tmp holds the old directory: __exit__ removes it
+        _fsync_path(real.parent, directory=True)
+
+
+def _in_place_only(path: Path) -> bool:
+    """True if ``path`` must not be renamed: a mount point, or the working directory
+    or one of its parents (the shell would be left in a removed directory)."""
+    try:
+        cwd = Path.cwd().resolve()
+    except OSError:
+        return True
+    return os.path.ismount(path) or cwd == path or cwd.is_relative_to(path)
+
+
+def _owned(rel: Path, patterns: tuple[str, ...]) -> bool:
+    return any(fnmatch.fnmatch(rel.as_posix(), p) for p in patterns)
+
+
+_RENAME_EXCHANGE = 2
+
+
+def _exchange(a: Path, b: Path) -> bool:
+    """Swap the directories ``a`` and ``b`` atomically (Linux renameat2); False where
+    the call is unavailable or refused (then the caller falls back to two renames)."""
+    if sys.platform != "linux":
+        return False
+    try:
+        libc = ctypes.CDLL(None, use_errno=True)
+        fn = libc.renameat2
+    except (OSError, AttributeError):
+        return False
+    at_fdcwd = -100
+    rc = fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE)
+    return rc == 0
 
 
 @contextlib.contextmanager

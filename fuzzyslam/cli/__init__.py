@@ -25,7 +25,7 @@ from fuzzyslam.errors import (
     EXIT_TERMINATED,
     FuzzyslamError,
 )
-from fuzzyslam.fileio import guard_inputs
+from fuzzyslam.fileio import WRITE_ERRNOS, guard_inputs, write_error
 
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 
@@ -81,8 +81,16 @@ def config_option(f):
 
 
 def emit(summary: dict[str, Any]) -> None:
-    """Print the machine-readable summary (one JSON object) on stdout."""
-    click.echo(json.dumps(summary, indent=2, sort_keys=True, default=_jsonable))
+    """Print the machine-readable summary (one JSON object) on stdout; a full disk under
+    a redirected stdout is the bad-input error of that output (exit 3)."""
+    text = json.dumps(summary, indent=2, sort_keys=True, default=_jsonable)
+    try:
+        click.echo(text)
+        sys.stdout.flush()
+    except BrokenPipeError:
+        raise
+    except OSError as exc:
+        raise write_error("<stdout>", exc, replaced=True) from exc
 
 
 def _jsonable(obj: Any) -> Any:
@@ -166,7 +174,11 @@ def main(argv: list[str] | None = None) -> None:
     except OSError as exc:
         if debug:
             traceback.print_exc()
-        if exc.filename is None:
+        if exc.filename is None and exc.errno in WRITE_ERRNOS:
+            line = _one_line(str(write_error("output", exc, replaced=True)))
+            click.echo(f"fuzzyslam: error: {line}", err=True)
+            code = EXIT_INPUT
+        elif exc.filename is None:
             _internal(exc)
             code = EXIT_INTERNAL
         else:

@@ -8,20 +8,20 @@ from fuzzyslam.cli import cli, config_option, emit
 
 
 @cli.command("evaluate")
-@click.argument("truth", type=click.Path(path_type=str))
-@click.argument("estimate", type=click.Path(path_type=str))
+@click.argument("truth", type=click.Path(readable=False, path_type=str))
+@click.argument("estimate", type=click.Path(readable=False, path_type=str))
 @click.option(
     "-o",
     "--output",
     "outdir",
     required=True,
-    type=click.Path(file_okay=False, path_type=str),
+    type=click.Path(readable=False, path_type=str),
     help="Report directory (created; metrics.json, report.md, PNG figures).",
 )
 @click.option(
     "--map",
     "map_dir",
-    type=click.Path(path_type=str),
+    type=click.Path(readable=False, path_type=str),
     default=None,
     help="A 'fuzzyslam map' output directory: draw its FGM under Fig. 1.",
 )
@@ -33,7 +33,7 @@ from fuzzyslam.cli import cli, config_option, emit
 @click.option(
     "--compare",
     multiple=True,
-    type=click.Path(path_type=str),
+    type=click.Path(readable=False, path_type=str),
     help="Another estimate (run directory or TUM file) to put side by side; repeatable.",
 )
 @config_option

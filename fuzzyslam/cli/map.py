@@ -8,12 +8,12 @@ from fuzzyslam.cli import cli, config_option, emit
 
 
 @cli.command("map")
-@click.argument("log", type=click.Path(path_type=str))
+@click.argument("log", type=click.Path(readable=False, path_type=str))
 @click.option(
     "--trajectory",
     "trajectory",
     required=True,
-    type=click.Path(path_type=str),
+    type=click.Path(readable=False, path_type=str),
     help="TUM trajectory placing the sonar rings (e.g. OUTDIR/trajectory.tum from 'run').",
 )
 @click.option(
@@ -21,7 +21,7 @@ from fuzzyslam.cli import cli, config_option, emit
     "--output",
     "outdir",
     required=True,
-    type=click.Path(file_okay=False, path_type=str),
+    type=click.Path(readable=False, path_type=str),
     help="Map directory FGMDIR (created; files appear only when all are complete).",
 )
 @click.option(
@@ -43,7 +43,7 @@ from fuzzyslam.cli import cli, config_option, emit
 )
 @click.option(
     "--landmarks",
-    type=click.Path(path_type=str),
+    type=click.Path(readable=False, path_type=str),
     default=None,
     help="landmarks.yaml from 'run': draw the estimated lamps in fgm.png.",
 )

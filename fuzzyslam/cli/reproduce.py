@@ -16,7 +16,7 @@ from fuzzyslam.cli import cli, emit
     "outdir",
     default="reproduce",
     show_default=True,
-    type=click.Path(file_okay=False, path_type=Path),
+    type=click.Path(readable=False, path_type=Path),
     help="Output directory (its files appear only when every step succeeded).",
 )
 @click.option(

@@ -32,20 +32,20 @@ def _build_aids(
 
 
 @cli.command("run")
-@click.argument("log", type=click.Path(path_type=Path))
+@click.argument("log", type=click.Path(readable=False, path_type=Path))
 @click.option(
     "-o",
     "--output",
     "outdir",
     required=True,
-    type=click.Path(path_type=Path),
+    type=click.Path(readable=False, path_type=Path),
     help="Output directory (created; files in it are replaced only when the run succeeds).",
 )
 @config_option
 @click.option(
     "--map",
     "map_dir",
-    type=click.Path(path_type=Path),
+    type=click.Path(readable=False, path_type=Path),
     default=None,
     help="Frozen fuzzy map directory (from 'fuzzyslam map') for heading or pose fixes.",
 )

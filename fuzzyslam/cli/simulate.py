@@ -15,12 +15,12 @@ from fuzzyslam.fileio import check_outputs
 @cli.command("simulate")
 @click.argument("config", required=False, default=None)
 @click.option(
-    "-o", "--output", "output", required=True, type=click.Path(dir_okay=False),
+    "-o", "--output", "output", required=True, type=click.Path(readable=False),
     help="The MCAP recording to write (e.g. sensors.mcap); written atomically.",
 )  # fmt: skip
 @seed_option
 @click.option(
-    "--preview", type=click.Path(dir_okay=False), default=None,
+    "--preview", type=click.Path(readable=False), default=None,
     help="Also write a PNG of walls, lamps (lit/failed), true and dead-reckoning paths.",
 )  # fmt: skip
 def simulate(config: str | None, output: str, seed: int | None, preview: str | None) -> None:
@@ -61,7 +61,7 @@ def simulate(config: str | None, output: str, seed: int | None, preview: str | N
     cfg_name = config if config is not None else DEFAULT_CONFIG
     inputs = [cfg_name] if Path(cfg_name).is_file() else []
     outputs = [output] + ([preview] if preview else [])
-    check_outputs(inputs, outputs)
+    check_outputs(inputs, outputs, kind="file")
     if preview and Path(preview).resolve() == Path(output).resolve():
         raise InputError(preview, "the preview and the recording must be different files")
     cfg = load_config(cfg_name, seed)

@@ -319,7 +319,7 @@ def run_evaluate(
     changes = change_metrics(truth_path, estimate_path, truth.t, truth.poses[:, :2])
     if changes is not None:  # --fix pose on a log with obstacles (issue 8)
         ev.metrics["change_detection"] = changes
-    with OutputDir(outdir) as tmp:
+    with OutputDir(outdir, owns=("fig4_lamps.png", "consistency.png", "compare.png")) as tmp:
         figs = figures.draw_all(tmp, truth, est, ev, fgm)
         if others:
             figures.fig_compare(tmp / "compare.png", truth, [(e.label, v) for e, v in evs])

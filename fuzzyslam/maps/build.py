@@ -283,7 +283,7 @@ def build_map(
         "build_seconds": build_s,
         "log_damage": reader.damage(),
     }
-    with OutputDir(outdir) as tmp:
+    with OutputDir(outdir, owns=("fgm.png", "conflict.png", "hough.png")) as tmp:
         mapio.save_fgm(tmp / "fgm.npz", fgm, True, t_end, log_id)
         mapio.save_nav2(tmp / "fgm.yaml", tmp / "fgm.pgm", fgm)
         mapio.save_references(tmp / "references.yaml", [r.to_dict() for r in refs])

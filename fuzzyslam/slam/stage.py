@@ -15,6 +15,9 @@ from fuzzyslam.progress import Progress
 from fuzzyslam.slam.io import StreamingOutputs, open_inputs, write_outputs, write_summary
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
 
+# files a run writes only with some options: an old one would be mixed with a new run
+RUN_OPTIONAL_OUTPUTS = ("heading_fixes.csv", "pose_fixes.csv", "changes.csv", "changes.png")
+
 
 def make_summary(
     res: SlamResult, inputs, wall: float, aids: list, streamed: StreamingOutputs
@@ -65,7 +68,8 @@ def run_stage(
     wall0 = time.perf_counter()
     check_outputs([log], [outdir])
     inputs = open_inputs(log, cfg, need_rings=bool(aids))
-    with OutputDir(outdir) as tmp, StreamingOutputs(tmp, cfg, inputs.start_pose) as streamed:
+    staged = OutputDir(outdir, owns=RUN_OPTIONAL_OUTPUTS)
+    with staged as tmp, StreamingOutputs(tmp, cfg, inputs.start_pose) as streamed:
         res = _run_filter(inputs, cfg, aids, streamed)
         for aid in aids:
             aid.write(tmp)

@@ -1,13 +1,17 @@
 """MCAP log writer: ROS 2 profile, ros2msg schemas, CDR messages, zstd chunks.
 
-Writes to a temporary name and renames onto the target only when closed without
-error, so a failed or interrupted command leaves no partial file.
+Writes to a temporary name and renames onto the target only when the file is finished,
+closed and flushed to the disk without error (fileio.atomic_path), so a failed or
+interrupted command -- also a disk that fills up, or Ctrl-C inside ``finish`` -- leaves
+the previous file, if any, as it was.
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
+import sys
 from pathlib import Path
 from typing import Any
 
@@ -33,19 +37,25 @@ class LogWriter:
     def __init__(self, path: str | os.PathLike, chunk_size: int = 1024 * 1024) -> None:
         self.path = Path(path)
         self.chunk_size = chunk_size
-        self._atomic = atomic_path(self.path)
+        self._stack = contextlib.ExitStack()
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, tuple[int, str]] = {}
         self._seq: dict[str, int] = {}
         self.counts: dict[str, int] = {}
 
     def __enter__(self) -> LogWriter:
-        self._tmp = self._atomic.__enter__()
-        self._file = open(self._tmp, "wb")
-        self._writer = Writer(
-            self._file, chunk_size=self.chunk_size, compression=CompressionType.ZSTD
-        )
-        self._writer.start(profile="ros2", library=f"fuzzyslam {__version__}")
+        with contextlib.ExitStack() as stack:
+            self._tmp = stack.enter_context(atomic_path(self.path))
+            self._file = stack.enter_context(open(self._tmp, "wb"))
+            self._stack = stack.pop_all()
+        try:
+            self._writer = Writer(
+                self._file, chunk_size=self.chunk_size, compression=CompressionType.ZSTD
+            )
+            self._writer.start(profile="ros2", library=f"fuzzyslam {__version__}")
+        except BaseException:
+            if not self._stack.__exit__(*sys.exc_info()):
+                raise
         return self
 
     def _channel(self, topic: str, typename: str) -> int:
@@ -96,10 +106,15 @@ class LogWriter:
             log_time=ns, create_time=ns, name=name, media_type=media_type, data=data
         )
 
-    def __exit__(self, exc_type, exc, tb) -> None:
-        try:
-            if exc_type is None:
+    def __exit__(self, exc_type, exc, tb) -> bool:
+        """Finish the file, close it, then let atomic_path rename it into place; an
+        exception at any step (the block's, or one of ``finish``/``close``) goes to
+        atomic_path instead, which removes the temporary file."""
+        if exc_type is None:
+            try:
                 self._writer.finish()
-        finally:
-            self._file.close()
-            self._atomic.__exit__(exc_type, exc, tb)
+            except BaseException:
+                if not self._stack.__exit__(*sys.exc_info()):
+                    raise
+                return False
+        return bool(self._stack.__exit__(exc_type, exc, tb))

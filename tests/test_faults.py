@@ -1,0 +1,252 @@
+"""Faults injected for real (issue 14, classes 1, 2 and 7): a disk that fills up (a file
+size limit set with RLIMIT_FSIZE in a child process, or a small tmpfs when mounting is
+allowed), Ctrl-C inside the MCAP writer's ``finish``, FIFOs and sockets as outputs, and
+unreadable inputs. Every one is exit 3 (130 for Ctrl-C) with one line naming the user's
+path, and a previous output is left whole: the old file or directory, never a mix."""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import resource
+import shutil
+import socket
+import subprocess
+import sys
+import tempfile
+from collections.abc import Iterator
+from pathlib import Path
+
+import pytest
+from test_robust_logs import cli, error_lines, leftovers
+
+from fuzzyslam import errors
+
+MICRO_YAML = """\
+extends: quick.yaml
+name: micro
+scenario:
+  runs: 1
+  lap_fraction: 0.1
+"""
+ENV = {**os.environ, "FUZZYSLAM_NO_PROGRESS": "1", "MPLBACKEND": "Agg"}
+
+
+@pytest.fixture(scope="module")
+def micro(tmp_path_factory) -> tuple[Path, Path, Path]:
+    """(config, log, run directory) of a short simulated log."""
+    d = tmp_path_factory.mktemp("faults")
+    cfg = d / "micro.yaml"
+    cfg.write_text(MICRO_YAML, encoding="utf-8")
+    log = d / "micro.mcap"
+    code, _, err = cli("simulate", cfg, "-o", log)
+    assert code == 0, err
+    code, _, err = cli("run", log, "-o", d / "est", "--config", cfg)
+    assert code == 0, err
+    return cfg, log, d / "est"
+
+
+def limited(args: list[object], fsize: int, cwd: Path) -> tuple[int, str]:
+    """Run fuzzyslam ARGS in a child process whose files may not grow past ``fsize``
+    bytes (writes beyond fail with EFBIG, as on a full disk): (exit code, stderr)."""
+
+    def limit() -> None:
+        resource.setrlimit(resource.RLIMIT_FSIZE, (fsize, fsize))
+
+    p = subprocess.run(
+        [sys.executable, "-m", "fuzzyslam", *map(str, args)],
+        cwd=cwd, env=ENV, preexec_fn=limit, capture_output=True, text=True, timeout=120,
+    )  # fmt: skip
+    return p.returncode, p.stderr
+
+
+def snapshot(folder: Path) -> dict[str, bytes]:
+    return {p.name: p.read_bytes() for p in sorted(folder.iterdir())}
+
+
+def assert_one_line(err: str, named: Path | str, *words: str) -> None:
+    lines = error_lines(err)
+    assert len(lines) == 1, err
+    assert lines[0].startswith(f"fuzzyslam: error: {named}"), err
+    assert ".part" not in lines[0], err
+    for w in words:
+        assert w in lines[0], err
+
+
+@pytest.mark.parametrize("fsize", [0, 1, 4096, 60_000, 400_000])
+def test_disk_full_simulate_keeps_the_old_log(micro, tmp_path: Path, fsize: int) -> None:
+    """simulate onto an existing, complete log with the file size limit hit at several
+    points (header, first chunk, mid-file, the summary at the end): exit 3, one line
+    naming the log and "no space left", the old log byte-identical, no temporary."""
+    cfg, log, _ = micro
+    out = tmp_path / "old.mcap"
+    shutil.copyfile(log, out)
+    before = out.read_bytes()
+    assert len(before) > fsize
+    code, err = limited(["simulate", cfg, "-o", out, "--seed", "3"], fsize, tmp_path)
+    assert code == errors.EXIT_INPUT, err
+    assert_one_line(err, out, "no space left")
+    assert out.read_bytes() == before and not leftovers(tmp_path)
+
+
+@pytest.mark.parametrize("fraction", [0.0, 0.05, 0.4, 0.95])
+def test_disk_full_run_keeps_the_old_directory(micro, tmp_path: Path, fraction: float) -> None:
+    """run into an existing output directory with the limit hit while its files are
+    written (a fraction of its largest file): exit 3 naming the output (not a
+    temporary), the directory exactly as it was."""
+    cfg, log, est = micro
+    fsize = int(fraction * max(p.stat().st_size for p in est.iterdir()))
+    out = tmp_path / "est"
+    shutil.copytree(est, out)
+    (out / "trajectory.tum").write_text("0 0 0 0 0 0 0 1\n", encoding="utf-8")
+    (out / "notes.txt").write_text("mine\n", encoding="utf-8")
+    before = snapshot(out)
+    code, err = limited(["run", log, "-o", out, "--config", cfg], fsize, tmp_path)
+    assert code == errors.EXIT_INPUT, err
+    assert_one_line(err, out, "no space left")
+    assert snapshot(out) == before and not leftovers(tmp_path)
+
+
+def test_disk_full_map_and_evaluate(micro, tmp_path: Path) -> None:
+    """map and evaluate on a full disk: exit 3, one line, nothing left behind."""
+    cfg, log, est = micro
+    for args, out in (
+        (["map", log, "--trajectory", est / "trajectory.tum", "--config", cfg], tmp_path / "f"),
+        (["evaluate", log, est], tmp_path / "r"),
+    ):
+        code, err = limited([*args, "-o", out], 3000, tmp_path)
+        assert code == errors.EXIT_INPUT, err
+        assert_one_line(err, out, "no space left")
+        assert not out.exists() and not leftovers(tmp_path)
+
+
+@contextlib.contextmanager
+def small_tmpfs(size: str) -> Iterator[Path]:
+    """A tmpfs of ``size`` mounted on a fresh temporary directory (root only)."""
+    d = Path(tempfile.mkdtemp(prefix="fs-"))
+    try:
+        r = subprocess.run(
+            ["mount", "-t", "tmpfs", "-o", f"size={size}", "tmpfs", str(d)], capture_output=True
+        )
+        if r.returncode != 0:
+            pytest.skip("cannot mount a tmpfs here (not root)")
+        try:
+            yield d
+        finally:
+            subprocess.run(["umount", str(d)], check=True)
+    finally:
+        d.rmdir()
+
+
+def test_full_tmpfs_keeps_the_old_log(micro, tmp_path: Path) -> None:
+    """A real full disk: a tmpfs whose free space is smaller than the new log but larger
+    than the old one. simulate fails with exit 3 and the old log stays whole."""
+    cfg, log, _ = micro
+    with small_tmpfs("900k") as fs:
+        out = fs / "log.mcap"
+        out.write_bytes(log.read_bytes()[:300_000])  # stands for an old, smaller log
+        before = out.read_bytes()
+        code, err = limited(["simulate", cfg, "-o", out], 2**40, tmp_path)
+        assert code == errors.EXIT_INPUT, err
+        assert_one_line(err, out, "no space left on device")
+        assert out.read_bytes() == before and not leftovers(fs)
+
+
+def test_ctrl_c_inside_finish_keeps_the_old_log(micro, monkeypatch, tmp_path: Path) -> None:
+    """Ctrl-C while the MCAP writer finishes the file (summary, index): exit 130 and the
+    old log unchanged (the temporary was renamed into place before)."""
+    from mcap.writer import Writer
+
+    cfg, log, _ = micro
+    out = tmp_path / "old.mcap"
+    shutil.copyfile(log, out)
+    before = out.read_bytes()
+
+    def interrupted(self) -> None:
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(Writer, "finish", interrupted)
+    code, _, err = cli("simulate", cfg, "-o", out, "--seed", "5")
+    assert code == errors.EXIT_INTERRUPTED, err
+    assert out.read_bytes() == before and not leftovers(tmp_path)
+
+
+def special_files(folder: Path) -> dict[str, Path]:
+    fifo = folder / "fifo"
+    os.mkfifo(fifo)
+    sock = Path(tempfile.mkdtemp(prefix="s", dir="/tmp")) / "sock"  # short: AF_UNIX limit
+    s = socket.socket(socket.AF_UNIX)
+    s.bind(str(sock))
+    s.close()
+    return {"fifo": fifo, "socket": sock}
+
+
+@pytest.mark.parametrize("kind", ["fifo", "socket"])
+def test_special_files_are_never_replaced(micro, tmp_path: Path, kind: str) -> None:
+    """A FIFO or a socket as the output of every command (and as a file inside an output
+    directory): exit 3, one line naming it, and it is still the same special file."""
+    cfg, log, est = micro
+    special = special_files(tmp_path)[kind]
+    try:
+        inside = tmp_path / "est"
+        inside.mkdir()
+        os.symlink(special, inside / "trajectory.tum")  # the file run would write
+        for args, named in (
+            (["simulate", cfg, "-o", special], special),
+            (["simulate", cfg, "-o", tmp_path / "x.mcap", "--preview", special], special),
+            (["run", log, "--config", cfg, "-o", special], special),
+            (["map", log, "--trajectory", est / "trajectory.tum", "-o", special], special),
+            (["evaluate", log, est, "-o", special], special),
+            (["run", log, "--config", cfg, "-o", inside], inside / "trajectory.tum"),
+        ):
+            ino = special.stat().st_ino
+            code, out, err = cli(*args)
+            assert code == errors.EXIT_INPUT, err
+            assert_one_line(err, named, "not a regular file")
+            st = special.stat()
+            assert st.st_ino == ino and not os.path.isfile(special)
+            assert out == "" and not leftovers(tmp_path)
+        assert not (tmp_path / "x.mcap").exists()
+    finally:
+        shutil.rmtree(special.parent) if kind == "socket" else None
+
+
+def test_directory_is_replaced_whole(tmp_path: Path) -> None:
+    """OutputDir swaps the directory in one step: the stage's stale outputs (``owns``)
+    go, the user's other files stay, and a failure while moving leaves the old set."""
+    from fuzzyslam.fileio import OutputDir
+
+    out = tmp_path / "est"
+    out.mkdir()
+    (out / "trajectory.tum").write_text("old", encoding="utf-8")
+    (out / "heading_fixes.csv").write_text("old", encoding="utf-8")
+    (out / "notes.txt").write_text("mine", encoding="utf-8")
+    with OutputDir(out, owns=("heading_fixes.csv",)) as tmp:
+        (tmp / "trajectory.tum").write_text("new", encoding="utf-8")
+    assert snapshot(out) == {"notes.txt": b"mine", "trajectory.tum": b"new"}
+    assert not leftovers(tmp_path)
+
+
+def test_unreadable_log_is_one_line(micro, tmp_path: Path) -> None:
+    """A log the user may not read (run as nobody when we are root): exit 3, one line
+    naming it (click's usage text, exit 2, before)."""
+    _cfg, log, est = micro
+    if os.geteuid() != 0:
+        pytest.skip("needs root to switch to an unprivileged user")
+    tmp_path = Path(tempfile.mkdtemp(prefix="unreadable-", dir="/tmp"))  # nobody may enter
+    tmp_path.chmod(0o777)
+    bad = tmp_path / "secret.mcap"
+    shutil.copyfile(log, bad)
+    bad.chmod(0)
+    est = Path(shutil.copytree(est, tmp_path / "est"))
+    for args in (["run", bad, "-o", "o"], ["map", bad, "--trajectory", est / "trajectory.tum",
+                                          "-o", "o"], ["evaluate", bad, est, "-o", "o"]):
+        p = subprocess.run(
+            ["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups",
+             sys.executable, "-m", "fuzzyslam", *map(str, args)],
+            cwd=tmp_path, env={**ENV, "MPLCONFIGDIR": str(tmp_path)}, capture_output=True,
+            text=True, timeout=60,
+        )  # fmt: skip
+        assert p.returncode == errors.EXIT_INPUT, p.stderr
+        assert_one_line(p.stderr, bad, "not readable")
+    shutil.rmtree(tmp_path)
