@@ -2,9 +2,15 @@
 
 A config file is YAML with one section per pipeline stage. Unknown keys, wrong
 types and out-of-range values are rejected with one line naming the key and the
-file. A file may start from another with ``extends: NAME`` (a path relative to
-the file, or the name of an embedded config such as ``paper.yaml``); its keys
-are merged over the base section by section.
+file. A file may start from another with ``extends: NAME`` (a file beside the
+config or below its folder, or the name of an embedded config such as
+``paper.yaml``); its keys are merged over the base section by section.
+
+Every config is bounded before use (issue 14): the file size, the YAML's node count
+(alias bombs) and nesting depth, the ``extends`` chain, list lengths (``max_items``,
+``len``), every number finite and within its field's range (or within
+``DEFAULT_BOUND`` where the field gives none), and what the sizes will allocate
+(:func:`check_sizes`). An error quotes at most a short prefix of a value.
 
 Each stage owns the dataclass of its section (``fuzzyslam/*/params.py``); a
 field's ``metadata`` may give ``min``, ``max`` (inclusive) and ``choices``.
@@ -14,6 +20,9 @@ from __future__ import annotations
 
 import dataclasses
 import difflib
+import math
+import os
+import stat
 import types
 import typing
 from dataclasses import dataclass, field
@@ -38,6 +47,16 @@ from fuzzyslam.slam.params import SlamParams
 from fuzzyslam.streams.topics import Topics
 
 DEFAULT_CONFIG = "paper.yaml"
+
+MAX_CONFIG_BYTES = 1 << 20  # a config file larger than 1 MiB is refused unread
+MAX_EVENTS = 100_000  # YAML parser events (scalars, starts and ends of lists and mappings)
+MAX_NODES = 200_000  # YAML nodes after aliases are expanded (a billion laughs is 1e9)
+MAX_DEPTH = 32  # nesting of mappings and lists
+MAX_EXTENDS = 16  # length of an ``extends`` chain
+MAX_ITEMS = 10_000  # entries of a list, unless its field says otherwise (``max_items``)
+DEFAULT_BOUND = 1e9  # |number| where a field gives no min or max
+MAX_CAMERA_SAMPLES = 4096 * 4096  # width x height x supersample^2 rendered per frame
+MAX_DRIVE_SECONDS = 36_000.0  # robot time the simulator drives (sim.path.drive)
 
 T = TypeVar("T")
 
@@ -66,14 +85,72 @@ def embedded_names() -> list[str]:
     return sorted(p.name for p in root.iterdir() if p.name.endswith(".yaml"))
 
 
+def short(value: Any, limit: int = 40) -> str:
+    """``repr(value)`` cut to ``limit`` characters (an error quotes no more of a value);
+    containers are not walked past the limit (a shared alias bomb prints instantly)."""
+    if isinstance(value, (dict, list, tuple)):
+        kind = type(value).__name__
+        return f"a {kind} of {len(value)} item{'s' if len(value) != 1 else ''}"
+    text = repr(value[: limit + 1] if isinstance(value, str) else value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def clip(text: str, limit: int) -> str:
+    """``text`` cut to ``limit`` characters."""
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
+def _check_events(text: str, source: str, loader: Any) -> None:
+    """Scan the YAML's parser events (no objects built) and stop at the first limit:
+    too many events, or nesting deeper than MAX_DEPTH."""
+    depth = 0
+    for n, event in enumerate(yaml.parse(text, Loader=loader)):
+        if n > MAX_EVENTS:
+            raise ConfigError(source, f"too many YAML values (over {MAX_EVENTS}); refusing")
+        if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+            depth += 1
+            if depth > MAX_DEPTH:
+                raise ConfigError(source, f"YAML nested deeper than {MAX_DEPTH} levels; refusing")
+        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+            depth -= 1
+
+
+def _check_shape(data: Any, source: str) -> None:
+    """Refuse YAML whose node count (aliases expanded) or nesting depth is too large,
+    walking iteratively and stopping at the first limit reached."""
+    stack: list[tuple[Any, int]] = [(data, 0)]
+    nodes = 0
+    while stack:
+        node, depth = stack.pop()
+        nodes += 1
+        if nodes > MAX_NODES:
+            raise ConfigError(
+                source, f"too many YAML values (over {MAX_NODES}, aliases expanded); refusing"
+            )
+        if depth > MAX_DEPTH:
+            raise ConfigError(source, f"YAML nested deeper than {MAX_DEPTH} levels; refusing")
+        if isinstance(node, dict):
+            stack.extend((v, depth + 1) for v in node.values())
+            nodes += len(node)  # the keys
+        elif isinstance(node, list):
+            stack.extend((v, depth + 1) for v in node)
+
+
 def _read_yaml(text: str, source: str) -> dict[str, Any]:
+    if len(text) > MAX_CONFIG_BYTES:
+        raise ConfigError(source, f"config larger than {MAX_CONFIG_BYTES} bytes; refusing")
+    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml where available
     try:
-        data = yaml.safe_load(text)
+        _check_events(text, source, loader)
+        data = yaml.load(text, Loader=loader)  # a safe loader
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark is not None else ""
         problem = getattr(exc, "problem", None) or "syntax error"
-        raise ConfigError(source, f"malformed YAML{where}: {problem}") from None
+        raise ConfigError(source, f"malformed YAML{where}: {clip(problem, 80)}") from None
+    except RecursionError:
+        raise ConfigError(source, f"YAML nested deeper than {MAX_DEPTH} levels; refusing") from None
+    _check_shape(data, source)
     if data is None:
         data = {}
     if not isinstance(data, dict):
@@ -81,29 +158,68 @@ def _read_yaml(text: str, source: str) -> dict[str, Any]:
     return data
 
 
-def _locate(name: str, relative_to: Path | None) -> tuple[str, str]:
-    """Return (text, source label) of a config given by path or embedded name."""
-    candidates = []
-    p = Path(name)
-    if relative_to is not None and not p.is_absolute():
-        candidates.append(relative_to / p)
-    candidates.append(p)
-    for c in candidates:
-        if c.is_file():
-            try:
-                return c.read_text(encoding="utf-8"), str(c)
-            except (OSError, UnicodeDecodeError) as exc:
-                raise ConfigError(c, f"cannot read config: {exc}") from None
+def _read_text(path: Path) -> str:
+    """The text of a config file, refusing non-files and files over the size limit
+    before reading them (a FIFO or /dev/zero never blocks or fills memory)."""
+    try:
+        with open(path, "rb") as f:
+            if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
+                raise ConfigError(path, "config path is not a regular file")
+            data = f.read(MAX_CONFIG_BYTES + 1)
+    except OSError as exc:
+        raise ConfigError(path, f"cannot read config: {exc.strerror}") from None
+    if len(data) > MAX_CONFIG_BYTES:
+        raise ConfigError(path, f"config larger than {MAX_CONFIG_BYTES} bytes; refusing")
+    try:
+        return data.decode("utf-8")
+    except UnicodeDecodeError:
+        raise ConfigError(path, "cannot read config: not UTF-8 text") from None
+
+
+def _locate(name: str, relative_to: Path | None, owner: str = "") -> tuple[str, str]:
+    """Return (text, source label) of a config given by path or embedded name.
+
+    ``relative_to`` is the folder of the config that names it in ``extends``: then only
+    an embedded name or a file in that folder or below it is accepted (no absolute
+    path, no ``..`` out of it, no symlink pointing elsewhere); an embedded config
+    (``relative_to`` None after an embedded one, see ``_load_raw``) extends embedded
+    names only."""
     embedded = name if name.endswith(".yaml") else f"{name}.yaml"
+    p = Path(name)
+    if relative_to is not None:
+        c = relative_to / p
+        if p.is_absolute() or not _is_below(c, relative_to):
+            if embedded in embedded_names() and "/" not in name:
+                return _embedded_text(embedded)
+            raise ConfigError(
+                owner or name,
+                f"'extends: {clip(name, 80)}' must name an embedded config or a file beside "
+                "this config or below its folder; refusing",
+            )
+        if c.is_file() or (c.exists() and not c.is_dir()):
+            return _read_text(c), str(c)
+    elif p.exists() and not p.is_dir():
+        return _read_text(p), str(p)
     if embedded in embedded_names():
-        text = resources.files("fuzzyslam.configs").joinpath(embedded).read_text(encoding="utf-8")
-        return text, f"<embedded {embedded}>"
+        return _embedded_text(embedded)
     if p.exists():
         raise ConfigError(p, "config path is not a file")
     raise ConfigError(
-        name,
+        clip(name, 200),
         f"config not found (not a file, nor one of the embedded: {', '.join(embedded_names())})",
     )
+
+
+def _is_below(path: Path, folder: Path) -> bool:
+    try:
+        return path.resolve().is_relative_to(folder.resolve())
+    except (OSError, RuntimeError):
+        return False
+
+
+def _embedded_text(embedded: str) -> tuple[str, str]:
+    text = resources.files("fuzzyslam.configs").joinpath(embedded).read_text(encoding="utf-8")
+    return text, f"<embedded {embedded}>"
 
 
 def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
@@ -116,19 +232,43 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _load_raw(name: str, relative_to: Path | None, chain: tuple[str, ...]) -> tuple[dict, str]:
-    text, source = _locate(name, relative_to)
-    if source in chain:
-        raise ConfigError(source, "'extends' forms a cycle")
-    data = _read_yaml(text, source)
-    parent = data.pop("extends", None)
-    if parent is not None:
+def _load_raw(name: str) -> tuple[dict, str]:
+    """The merged raw mapping of config ``name`` and its ``extends`` chain (followed
+    iteratively, at most MAX_EXTENDS long, cycles refused), and the source label of the
+    first file."""
+    layers: list[dict] = []
+    chain: list[str] = []
+    relative_to: Path | None = None
+    embedded_only = False
+    while True:
+        if embedded_only:
+            embedded = name if name.endswith(".yaml") else f"{name}.yaml"
+            if embedded not in embedded_names():
+                raise ConfigError(
+                    chain[-1], f"'extends' of an embedded config: unknown {short(name)}"
+                )
+            text, source = _embedded_text(embedded)
+        else:
+            text, source = _locate(name, relative_to, chain[-1] if chain else "")
+        if source in chain:
+            raise ConfigError(source, "'extends' forms a cycle")
+        if len(chain) >= MAX_EXTENDS:
+            raise ConfigError(chain[0], f"'extends' chain longer than {MAX_EXTENDS}; refusing")
+        chain.append(source)
+        data = _read_yaml(text, source)
+        parent = data.pop("extends", None)
+        layers.append(data)
+        if parent is None:
+            break
         if not isinstance(parent, str):
             raise ConfigError(source, "'extends' must be a config name or path")
-        here = Path(source).parent if not source.startswith("<") else None
-        base, _ = _load_raw(parent, here, (*chain, source))
-        data = _merge(base, data)
-    return data, source
+        name = parent
+        embedded_only = source.startswith("<")
+        relative_to = None if embedded_only else Path(source).parent
+    merged: dict = {}
+    for data in reversed(layers):
+        merged = _merge(merged, data)
+    return merged, chain[0]
 
 
 def load_config(path: str | Path | None = None, seed: int | None = None) -> Config:
@@ -136,13 +276,39 @@ def load_config(path: str | Path | None = None, seed: int | None = None) -> Conf
 
     ``seed`` overrides the file's seed when given (the CLI's ``--seed``).
     """
-    data, source = _load_raw(str(path) if path is not None else DEFAULT_CONFIG, None, ())
+    data, source = _load_raw(str(path) if path is not None else DEFAULT_CONFIG)
     cfg = from_dict(Config, data, source)
     if seed is not None:
         if seed < 0:
             raise ConfigError(source, f"seed must be >= 0, got {seed}")
         cfg.seed = seed
+    check_sizes(cfg, source)
     return cfg
+
+
+def check_sizes(cfg: Config, source: str) -> None:
+    """Refuse configs whose sizes, within each field's range, would allocate or run
+    too much together: camera samples per frame, the simulated drive's length."""
+    cam = cfg.camera
+    samples = cam.width * cam.height * cam.supersample**2
+    if samples > MAX_CAMERA_SAMPLES:
+        raise ConfigError(
+            source,
+            f"'camera' width x height x supersample^2 = {samples} samples per frame, over "
+            f"{MAX_CAMERA_SAMPLES}; lower the size or the supersampling",
+        )
+    import numpy as np
+
+    pts = np.asarray(cfg.world.centerline, dtype=float).reshape(-1, 2)
+    loop = float(np.sum(np.hypot(*np.diff(np.vstack([pts, pts[:1]]), axis=0).T)))
+    speed = min(cfg.robot.cruise_speed, cfg.robot.max_speed)
+    drive = cfg.scenario.runs * loop * cfg.scenario.lap_fraction / speed
+    if drive > MAX_DRIVE_SECONDS:
+        raise ConfigError(
+            source,
+            f"the scenario drives about {drive:.3g} s (runs x lap x lap_fraction / "
+            f"cruise_speed), over {MAX_DRIVE_SECONDS:g} s",
+        )
 
 
 def config_to_dict(cfg: Any) -> dict[str, Any]:
@@ -167,15 +333,16 @@ def from_dict(cls: type[T], data: Any, source: str, where: str = "") -> T:
     kwargs: dict[str, Any] = {}
     for key, value in data.items():
         if key not in fields:
-            close = difflib.get_close_matches(str(key), list(fields), n=1)
+            close = difflib.get_close_matches(str(key)[:100], list(fields), n=1)
             hint = f" (did you mean '{where}{close[0]}'?)" if close else ""
-            raise ConfigError(source, f"unknown key '{where}{key}'{hint}")
+            raise ConfigError(source, f"unknown key {short(f'{where}{key}', 60)}{hint}")
         f = fields[key]
         kwargs[key] = _convert(hints[key], value, source, f"{where}{key}", f.metadata)
     try:
         return cls(**kwargs)
     except (TypeError, ValueError) as exc:
-        raise ConfigError(source, f"'{where.rstrip('.') or '<top>'}': {exc}") from None
+        what = where.rstrip(".") or "<top>"
+        raise ConfigError(source, f"'{what}': {clip(str(exc), 200)}") from None
 
 
 def _type_name(tp: Any) -> str:
@@ -195,6 +362,14 @@ def _convert(tp: Any, value: Any, source: str, key: str, meta: Any) -> Any:
     if origin in (list, tuple):
         if not isinstance(value, (list, tuple)):
             raise ConfigError(source, f"'{key}' must be a list, got {type(value).__name__}")
+        meta = dict(meta or {})
+        want, most = meta.pop("len", None), meta.pop("max_items", MAX_ITEMS)
+        if want is not None and len(value) != want:
+            raise ConfigError(source, f"'{key}' must have {want} items, got {len(value)}")
+        if len(value) > most:
+            raise ConfigError(source, f"'{key}' has {len(value)} items, more than {most}")
+        if "item_len" in meta:
+            meta["len"] = meta.pop("item_len")
         if origin is tuple and args and args[-1] is not Ellipsis:
             if len(value) != len(args):
                 raise ConfigError(source, f"'{key}' must have {len(args)} items, got {len(value)}")
@@ -214,38 +389,42 @@ def _convert(tp: Any, value: Any, source: str, key: str, meta: Any) -> Any:
         return value
     if tp is bool:
         if not isinstance(value, bool):
-            raise ConfigError(source, f"'{key}' must be true or false, got {value!r}")
+            raise ConfigError(source, f"'{key}' must be true or false, got {short(value)}")
         return value
     if tp is int:
         if isinstance(value, bool) or not isinstance(value, int):
             if isinstance(value, float) and value.is_integer():
                 value = int(value)
             else:
-                raise ConfigError(source, f"'{key}' must be an integer, got {value!r}")
+                raise ConfigError(source, f"'{key}' must be an integer, got {short(value)}")
         _check_range(value, source, key, meta)
         return value
     if tp is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
-            raise ConfigError(source, f"'{key}' must be a number, got {value!r}")
-        value = float(value)
-        if value != value:
-            raise ConfigError(source, f"'{key}' must not be NaN")
+            raise ConfigError(source, f"'{key}' must be a number, got {short(value)}")
+        try:
+            value = float(value)
+        except OverflowError:
+            raise ConfigError(source, f"'{key}' is too large: {short(value)}") from None
+        if not math.isfinite(value):
+            raise ConfigError(source, f"'{key}' must be a finite number, got {value}")
         _check_range(value, source, key, meta)
         return value
     if tp is str:
         if not isinstance(value, str):
-            raise ConfigError(source, f"'{key}' must be a string, got {value!r}")
+            raise ConfigError(source, f"'{key}' must be a string, got {short(value)}")
         choices = meta.get("choices") if meta else None
         if choices and value not in choices:
-            raise ConfigError(source, f"'{key}' must be one of {', '.join(choices)}, got {value!r}")
+            raise ConfigError(
+                source, f"'{key}' must be one of {', '.join(choices)}, got {short(value)}"
+            )
         return value
     raise ConfigError(source, f"'{key}': unsupported type {_type_name(tp)}")
 
 
 def _check_range(value: float, source: str, key: str, meta: Any) -> None:
-    if not meta:
-        return
-    lo, hi = meta.get("min"), meta.get("max")
+    meta = meta or {}
+    lo, hi = meta.get("min", -DEFAULT_BOUND), meta.get("max", DEFAULT_BOUND)
     if lo is not None and value < lo:
         raise ConfigError(source, f"'{key}' must be >= {lo}, got {value}")
     if hi is not None and value > hi:

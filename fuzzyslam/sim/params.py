@@ -15,10 +15,13 @@ class WorldParams:
     """
 
     centerline: list[list[float]] = field(
-        default_factory=lambda: [[0.0, 0.0], [10.0, 0.0], [12.5, 7.0], [0.0, 7.0]]
+        default_factory=lambda: [[0.0, 0.0], [10.0, 0.0], [12.5, 7.0], [0.0, 7.0]],
+        metadata={"min": -1e4, "max": 1e4, "item_len": 2},
     )
     corridor_width: float = field(default=2.0, metadata={"min": 1.0, "max": 10.0})
-    lamps: list[list[float]] = field(default_factory=list)
+    lamps: list[list[float]] = field(
+        default_factory=list, metadata={"min": -1e4, "max": 1e4, "item_len": 2, "max_items": 10000}
+    )
     lamp_count: int = field(default=15, metadata={"min": 0, "max": 10000})
     lamp_radius: float = field(default=0.12, metadata={"min": 0.01, "max": 1.0})
 
@@ -77,7 +80,9 @@ class CameraParams:
     rate_hz: float = field(default=5.0, metadata={"min": 0.1, "max": 100.0})
     hfov_deg: float = field(default=95.0, metadata={"min": 10.0, "max": 170.0})
     ceiling_height: float = field(default=2.5, metadata={"min": 0.2, "max": 20.0})
-    offset: list[float] = field(default_factory=lambda: [0.0, 0.0])
+    offset: list[float] = field(
+        default_factory=lambda: [0.0, 0.0], metadata={"min": -5.0, "max": 5.0, "len": 2}
+    )
     mount_height: float = field(default=0.8, metadata={"min": 0.0, "max": 5.0})
     noise_sigma: float = field(default=3.0, metadata={"min": 0.0, "max": 100.0})
     background: float = field(default=40.0, metadata={"min": 0.0, "max": 255.0})
@@ -92,7 +97,7 @@ class LampFailure:
     """Lamps (by index) that go dark from the start of a run."""
 
     run: int = field(default=5, metadata={"min": 1})
-    lamps: list[int] = field(default_factory=list)
+    lamps: list[int] = field(default_factory=list, metadata={"min": 0, "max": 10000})
 
 
 @dataclass
@@ -119,11 +124,17 @@ class Obstacle:
     kind: str = field(default="box", metadata={"choices": ["box", "disc"]})
     from_run: int = field(default=5, metadata={"min": 1})
     to_run: int = field(default=6, metadata={"min": 1})
-    centre: list[float] = field(default_factory=lambda: [0.0, 0.0])
-    size: list[float] = field(default_factory=lambda: [0.5, 0.5])
+    centre: list[float] = field(
+        default_factory=lambda: [0.0, 0.0], metadata={"min": -1e4, "max": 1e4, "len": 2}
+    )
+    size: list[float] = field(
+        default_factory=lambda: [0.5, 0.5], metadata={"min": 0.01, "max": 100.0, "len": 2}
+    )
     angle_deg: float = field(default=0.0, metadata={"min": -360.0, "max": 360.0})
     radius: float = field(default=0.25, metadata={"min": 0.01, "max": 5.0})
-    path: list[list[float]] = field(default_factory=list)
+    path: list[list[float]] = field(
+        default_factory=list, metadata={"min": -1e4, "max": 1e4, "item_len": 2}
+    )
     speed: float = field(default=0.5, metadata={"min": 0.0, "max": 10.0})
 
 
@@ -138,7 +149,7 @@ class ScenarioParams:
     """
 
     runs: int = field(default=6, metadata={"min": 1, "max": 1000})
-    start_offset: float = field(default=5.0, metadata={"min": 0.0})
+    start_offset: float = field(default=5.0, metadata={"min": 0.0, "max": 1e6})
     lap_fraction: float = field(default=1.0, metadata={"min": 0.01, "max": 1.0})
     lamp_failures: list[LampFailure] = field(default_factory=list)
     bumps: list[Bump] = field(default_factory=list)

@@ -21,11 +21,18 @@ class SlamParams:
     # simulated encoders measured against ground truth on quick.yaml (translation 2.5e-6
     # m^2/m, heading 6.1e-5 rad^2/m); a3 covers the 1 % wheel-base error on turns
     # (0.0016 rad of systematic error between two frames in a turn).
-    alpha: list[float] = field(default_factory=lambda: [1e-4, 1e-4, 1e-3, 1e-4, 3e-6, 6.5e-5])
+    alpha: list[float] = field(
+        default_factory=lambda: [1e-4, 1e-4, 1e-3, 1e-4, 3e-6, 6.5e-5],
+        metadata={"min": 0.0, "max": 100.0, "len": 6},
+    )
     use_encoders: bool = True
     # start pose (x, y, theta) when the log carries none, and its standard deviation
-    start_pose: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
-    start_sigma: list[float] = field(default_factory=lambda: [1e-3, 1e-3, 1e-3])
+    start_pose: list[float] = field(
+        default_factory=lambda: [0.0, 0.0, 0.0], metadata={"min": -1e6, "max": 1e6, "len": 3}
+    )
+    start_sigma: list[float] = field(
+        default_factory=lambda: [1e-3, 1e-3, 1e-3], metadata={"min": 1e-9, "max": 1e3, "len": 3}
+    )
     # lamp detector
     threshold: int = field(default=200, metadata={"min": 1, "max": 255})
     min_area: int = field(default=4, metadata={"min": 1})

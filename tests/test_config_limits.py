@@ -1,0 +1,83 @@
+"""Configs that hung or exhausted memory (issue 14, class 5): every one is exit 3 with
+one short line naming the config, in well under a second."""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import pytest
+from test_robust_logs import cli, error_lines
+
+from fuzzyslam.errors import EXIT_INPUT
+
+BOMB = "a: &a [x, x, x, x, x, x, x, x, x, x]\n" + "".join(
+    f"{c}: &{c} [*{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}, *{p}]\n"
+    for p, c in zip("abcdefgh", "bcdefghi", strict=True)
+)  # 10^9 leaves
+
+Q = "extends: quick.yaml\n"
+BAD = {
+    "alias bomb": BOMB + "extends: quick.yaml\n",
+    "alias bomb in a value": BOMB.replace("i: &i", "scenario:\n  runs: &i"),
+    "huge value quoted": "extends: quick.yaml\nscenario: {runs: '" + "9" * 900_000 + "'}\n",
+    "huge file": "extends: quick.yaml\n# " + "x" * 2_000_000 + "\n",
+    "inf start offset": "extends: quick.yaml\nscenario: {start_offset: .inf}\n",
+    "nan start offset": "extends: quick.yaml\nscenario: {start_offset: .nan}\n",
+    "huge start offset": "extends: quick.yaml\nscenario: {start_offset: 1.0e300}\n",
+    "inf centreline": Q + "world: {centerline: [[0, 0], [10, 0], [.inf, 7], [0, 7]]}\n",
+    "huge centreline": Q + "world: {centerline: [[0, 0], [1e9, 0], [1e9, 7], [0, 7]]}\n",
+    "centreline of 3-vectors": Q + "world: {centerline: [[0, 0, 1], [10, 0, 1], [5, 7, 1]]}\n",
+    "lamps 10^5": "extends: quick.yaml\nworld:\n  lamps: [" + "[1, 1], " * 100_000 + "]\n",
+    "integer overflow": "extends: quick.yaml\nscenario: {start_offset: " + "9" * 400 + "}\n",
+    "camera 16 GiB": "extends: quick.yaml\ncamera: {width: 4096, height: 4096, supersample: 16}\n",
+    "endless drive": "extends: quick.yaml\nrobot: {cruise_speed: 0.01, max_speed: 0.01}\n"
+    "scenario: {runs: 1000}\n",
+    "nested brackets": "extends: quick.yaml\nx: " + "[" * 1200 + "]" * 1200 + "\n",
+    "nested mappings": "extends: quick.yaml\nx: " + "{a: " * 1200 + "1" + "}" * 1200 + "\n",
+    "alpha too short": "extends: quick.yaml\nslam: {alpha: [1e-4, 1e-4]}\n",
+    "alpha negative": "extends: quick.yaml\nslam: {alpha: [1e-4, 1e-4, -1e-3, 1e-4, 3e-6, 6e-5]}\n",
+    "start sigma zero": "extends: quick.yaml\nslam: {start_sigma: [0, 0, 0]}\n",
+    "extends outside": "extends: ../outside.yaml\n",
+    "extends absolute": "extends: /etc/hostname\n",
+}
+
+
+@pytest.mark.parametrize("kind", sorted(BAD))
+def test_bad_config_is_refused_fast(kind: str, tmp_path: Path) -> None:
+    d = tmp_path / "cfg"
+    d.mkdir()
+    (tmp_path / "outside.yaml").write_text("name: outside\n", encoding="utf-8")
+    cfg = d / "bad.yaml"
+    cfg.write_text(BAD[kind], encoding="utf-8")
+    t0 = time.perf_counter()
+    code, out, err = cli("simulate", cfg, "-o", tmp_path / "x.mcap")
+    took = time.perf_counter() - t0
+    lines = error_lines(err)
+    assert code == EXIT_INPUT, err[:500]
+    assert len(lines) == 1 and lines[0].startswith(f"fuzzyslam: error: {cfg}: "), err[:500]
+    assert len(lines[0]) < 300 + len(str(cfg)), lines[0][:500]
+    assert took < 1.0, f"{kind}: {took:.2f} s"
+    assert out == "" and not (tmp_path / "x.mcap").exists()
+
+
+def test_long_extends_chain_is_refused(tmp_path: Path) -> None:
+    """1200 configs each extending the next: refused at the chain limit, fast."""
+    for i in range(1200):
+        (tmp_path / f"c{i}.yaml").write_text(f"extends: c{i + 1}.yaml\n", encoding="utf-8")
+    (tmp_path / "c1200.yaml").write_text("extends: quick.yaml\n", encoding="utf-8")
+    t0 = time.perf_counter()
+    code, _, err = cli("simulate", tmp_path / "c0.yaml", "-o", tmp_path / "x.mcap")
+    assert code == EXIT_INPUT and "'extends' chain longer" in err, err[:500]
+    assert time.perf_counter() - t0 < 1.0
+
+
+def test_extends_below_and_embedded_still_work(tmp_path: Path) -> None:
+    """What stays allowed: a file in a folder below the config, and embedded names."""
+    from fuzzyslam.config import load_config
+
+    (tmp_path / "base").mkdir()
+    (tmp_path / "base" / "b.yaml").write_text("extends: quick.yaml\nname: b\n", encoding="utf-8")
+    (tmp_path / "top.yaml").write_text("extends: base/b.yaml\nseed: 7\n", encoding="utf-8")
+    cfg = load_config(tmp_path / "top.yaml")
+    assert (cfg.name, cfg.seed, cfg.scenario.runs) == ("b", 7, load_config("quick").scenario.runs)
