@@ -250,3 +250,102 @@ def test_unreadable_log_is_one_line(micro, tmp_path: Path) -> None:
         assert p.returncode == errors.EXIT_INPUT, p.stderr
         assert_one_line(p.stderr, bad, "not readable")
     shutil.rmtree(tmp_path)
+
+
+# -- damaged maps (class 6) ---------------------------------------------------------------
+
+
+@pytest.fixture(scope="module")
+def micro_map(micro, tmp_path_factory) -> Path:
+    cfg, log, est = micro
+    out = tmp_path_factory.mktemp("micro_map") / "fgm"
+    code, _, err = cli(
+        "map", log, "--trajectory", est / "trajectory.tum", "--config", cfg, "-o", out,
+        "--no-figures", "--until", "10",
+    )  # fmt: skip
+    assert code == 0, err
+    return out
+
+
+def damaged(src: Path, dst: Path, **changes: object) -> Path:
+    """A copy of the map directory ``src`` with fgm.npz's entries replaced."""
+    import numpy as np
+
+    shutil.copytree(src, dst)
+    with np.load(src / "fgm.npz", allow_pickle=False) as z:
+        entries = {k: z[k] for k in z.files}
+    entries.update({k: np.asarray(v) for k, v in changes.items()})
+    with open(dst / "fgm.npz", "wb") as f:
+        np.savez_compressed(f, **entries)
+    return dst
+
+
+DAMAGE = {
+    "resolution 0": {"resolution": 0.0},
+    "resolution negative": {"resolution": -0.1},
+    "resolution nan": {"resolution": float("nan")},
+    "resolution 1e-9": {"resolution": 1e-9},
+    "origin nan": {"origin": [float("nan"), 0.0]},
+    "origin inf": {"origin": [0.0, float("inf")]},
+    "shape huge": {"shape": [10**9, 10**9]},
+    "shape negative": {"shape": [-5, 10]},
+    "freeze time nan": {"freeze_time": float("nan")},
+}
+
+
+@pytest.mark.parametrize("kind", sorted(DAMAGE))
+def test_damaged_map_is_refused(micro, micro_map, tmp_path: Path, kind: str) -> None:
+    """run --map (pose and heading fixes) and evaluate --map on an fgm.npz with a bad
+    resolution, origin, shape or freeze time: exit 3 naming fgm.npz, in a second."""
+    import time
+
+    cfg, log, est = micro
+    bad = damaged(micro_map, tmp_path / "bad", **DAMAGE[kind])
+    for args in (
+        ["run", log, "--config", cfg, "--map", bad, "--fix", "pose", "-o", tmp_path / "o"],
+        ["run", log, "--config", cfg, "--map", bad, "--fix", "heading", "-o", tmp_path / "o"],
+        ["evaluate", log, est, "--map", bad, "-o", tmp_path / "r"],
+    ):
+        t0 = time.perf_counter()
+        code, out, err = cli(*args)
+        assert code == errors.EXIT_INPUT, err
+        assert_one_line(err, bad / "fgm.npz")
+        assert time.perf_counter() - t0 < 5.0 and out == ""
+        assert not (tmp_path / "o").exists() and not (tmp_path / "r").exists()
+
+
+@pytest.mark.parametrize("until", ["nan", "inf"])
+def test_map_until_not_finite_is_refused(micro, tmp_path: Path, until: str) -> None:
+    """map --until nan/inf wrote a map that run --map then refused: now a usage error
+    and no map."""
+    cfg, log, est = micro
+    code, _, err = cli(
+        "map", log, "--trajectory", est / "trajectory.tum", "--config", cfg, "--until", until,
+        "-o", tmp_path / "fgm", "--no-figures",
+    )  # fmt: skip
+    assert code == errors.EXIT_USAGE and "--until" in err
+    assert not (tmp_path / "fgm").exists()
+
+
+def test_unusable_map_is_not_written(tmp_path: Path) -> None:
+    """save_fgm validates what it writes: a NaN freeze time on a frozen map, a zero
+    resolution, NaN masses are refused and no file appears."""
+    import numpy as np
+
+    from fuzzyslam.errors import InputError
+    from fuzzyslam.maps.grid import BeliefMap, Grid
+    from fuzzyslam.maps.mapio import load_fgm, save_fgm
+
+    good = BeliefMap.vacuous(Grid((0.0, 0.0), 0.1, (4, 5)))
+    save_fgm(tmp_path / "ok.npz", good, True, 3.0, "x")
+    assert load_fgm(tmp_path / "ok.npz").freeze_time == 3.0
+    nan_mass = good.copy()
+    nan_mass.m_o[1, 1] = np.nan
+    for bm, t in (
+        (good, float("nan")),
+        (BeliefMap.vacuous(Grid((0.0, 0.0), 0.0, (4, 5))), 1.0),
+        (nan_mass, 1.0),
+    ):
+        with pytest.raises(InputError, match="unusable map"):
+            save_fgm(tmp_path / "bad.npz", bm, True, t, "x")
+        assert not (tmp_path / "bad.npz").exists()

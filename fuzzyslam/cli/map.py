@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import math
+
 import click
 
 from fuzzyslam.cli import cli, config_option, emit
@@ -90,6 +92,8 @@ def map_cmd(
     from fuzzyslam.config import load_config
     from fuzzyslam.maps.build import MapOptions, build_map
 
+    if until is not None and not math.isfinite(until):
+        raise click.BadParameter(f"must be a finite log time, got {until}", param_hint="--until")
     if until is not None and until_run is not None:
         raise click.UsageError("give at most one of --until-run and --until")
     cfg = load_config(config)

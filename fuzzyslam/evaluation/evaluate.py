@@ -28,7 +28,7 @@ from fuzzyslam.evaluation.core import (
 )
 from fuzzyslam.evaluation.params import EvalParams
 from fuzzyslam.fileio import OutputDir, check_input_file, check_outputs
-from fuzzyslam.maps.grid import BeliefMap, Grid
+from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.progress import Progress
 from fuzzyslam.streams.logmeta import read_scenario, read_world
 from fuzzyslam.streams.messages import pose_of
@@ -249,20 +249,12 @@ def read_estimate(path: str | os.PathLike, label: str | None = None) -> Estimate
 
 
 def read_fgm(mapdir: str | os.PathLike) -> BeliefMap:
-    """The FGM of a ``fuzzyslam map`` output directory (fgm.npz), for drawing under Fig. 1."""
+    """The FGM of a ``fuzzyslam map`` output directory (fgm.npz), for drawing under Fig. 1
+    (read and validated by ``maps.mapio.load_fgm``, the one reader of map files)."""
+    from fuzzyslam.maps.mapio import load_fgm
+
     p = Path(mapdir)
-    f = p / "fgm.npz" if p.is_dir() else p
-    check_input_file(f, "map")
-    try:
-        with np.load(f) as z:
-            grid = Grid(
-                origin=(float(z["origin"][0]), float(z["origin"][1])),
-                resolution=float(z["resolution"]),
-                shape=(int(z["shape"][0]), int(z["shape"][1])),
-            )
-            return BeliefMap(grid, z["m_e"], z["m_o"], z["m_t"], z["m_c"])
-    except (OSError, KeyError, ValueError) as exc:
-        raise InputError(f, f"not a fuzzyslam FGM (fgm.npz): {exc}") from None
+    return load_fgm(p / "fgm.npz" if p.is_dir() else p).map
 
 
 # --- the whole stage ----------------------------------------------------------------------

@@ -12,6 +12,7 @@ from __future__ import annotations
 import hashlib
 import json
 import os
+import zipfile
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -27,6 +28,11 @@ OCCUPIED_THRESH = 0.65
 FREE_THRESH = 0.196
 PGM_OCCUPIED, PGM_FREE, PGM_UNKNOWN = 0, 254, 205
 NPZ_KEYS = ("m_e", "m_o", "m_t", "m_c", "origin", "resolution", "shape", "frozen", "freeze_time")
+MASSES = ("m_e", "m_o", "m_t", "m_c")
+# what a map may be: cells of 1 mm to 10 m, an origin within 1000 km, at most 10^8 cells
+MIN_RESOLUTION, MAX_RESOLUTION = 1e-3, 10.0
+MAX_COORDINATE = 1e6
+MAX_CELLS = 100_000_000
 
 
 @dataclass
@@ -49,10 +55,51 @@ def log_identity(world: dict[str, Any] | None, fallback: str = "") -> str:
     return "log-" + hashlib.sha256(fallback.encode()).hexdigest()[:16]
 
 
+def grid_problem(origin: Any, resolution: Any, shape: Any) -> str | None:
+    """Why a map's geometry is unusable (None if it is fine): resolution finite within
+    [MIN_RESOLUTION, MAX_RESOLUTION], origin two finite numbers within MAX_COORDINATE,
+    shape two positive integers of at most MAX_CELLS cells together."""
+    res = np.asarray(resolution, dtype=float)
+    org = np.asarray(origin, dtype=float)
+    shp = np.asarray(shape)
+    if res.shape != () or not np.isfinite(res) or not MIN_RESOLUTION <= res <= MAX_RESOLUTION:
+        return f"resolution must be a finite number of metres in [{MIN_RESOLUTION:g}, " \
+            f"{MAX_RESOLUTION:g}], got {np.array2string(res.ravel()[:2])}"
+    if org.shape != (2,) or not np.all(np.isfinite(org)) or np.any(np.abs(org) > MAX_COORDINATE):
+        return f"origin must be two finite coordinates within {MAX_COORDINATE:g} m"
+    if shp.shape != (2,) or shp.dtype.kind not in "iu" or np.any(shp < 1):
+        return "shape must be two positive integers"
+    if int(shp[0]) * int(shp[1]) > MAX_CELLS:
+        return f"{int(shp[0])} x {int(shp[1])} cells, more than {MAX_CELLS}"
+    return None
+
+
+def fgm_problem(bm: BeliefMap, frozen: bool, freeze_time: float) -> str | None:
+    """Why a map is unusable (None if it is fine): its geometry, masses that are not
+    finite numbers in [0, 1], a frozen map without a finite freeze time."""
+    g = bm.grid
+    problem = grid_problem(g.origin, g.resolution, g.shape)
+    if problem:
+        return problem
+    for name in MASSES:
+        a = getattr(bm, name)
+        if a.shape != tuple(g.shape):
+            return f"mass arrays do not match the grid shape {tuple(g.shape)}"
+        if not np.all(np.isfinite(a)) or a.min(initial=0.0) < -1e-3 or a.max(initial=0.0) > 1.001:
+            return f"{name} must hold finite masses in [0, 1]"
+    if frozen and not np.isfinite(freeze_time):
+        return "the frozen map has no finite freeze_time"
+    return None
+
+
 def save_fgm(
     path: str | os.PathLike, bm: BeliefMap, frozen: bool, freeze_time: float, log_id: str
 ) -> None:
-    """Write fgm.npz (masses float32 (ny, nx), grid geometry, freeze state, log_id)."""
+    """Write fgm.npz (masses float32 (ny, nx), grid geometry, freeze state, log_id);
+    a map that ``load_fgm`` would refuse is not written (InputError naming ``path``)."""
+    problem = fgm_problem(bm, frozen, freeze_time)
+    if problem:
+        raise InputError(path, f"refusing to write an unusable map: {problem}")
     with atomic_path(path) as tmp, open(tmp, "wb") as f:
         np.savez_compressed(
             f,
@@ -77,9 +124,15 @@ def load_fgm(path: str | os.PathLike) -> FgmFile:
             missing = [k for k in NPZ_KEYS if k not in z.files]
             if missing:
                 raise InputError(p, f"not an FGM file: missing {', '.join(missing)}")
+            problem = grid_problem(z["origin"], z["resolution"], z["shape"])
+            if problem:
+                raise InputError(p, f"damaged map: {problem}")
             shape = tuple(int(v) for v in z["shape"])
             grid = Grid(tuple(float(v) for v in z["origin"]), float(z["resolution"]), shape)
-            arrs = [np.asarray(z[k], dtype=np.float32) for k in ("m_e", "m_o", "m_t", "m_c")]
+            for k in MASSES:  # the declared array shapes, before anything is allocated
+                if _npz_member_shape(p, k) != shape:
+                    raise InputError(p, f"mass arrays do not match the grid shape {shape}")
+            arrs = [np.asarray(z[k], dtype=np.float32) for k in MASSES]
             frozen = bool(z["frozen"])
             freeze_time = float(z["freeze_time"])
             log_id = str(z["log_id"]) if "log_id" in z.files else ""
@@ -87,9 +140,24 @@ def load_fgm(path: str | os.PathLike) -> FgmFile:
         raise
     except Exception as exc:  # zip/npy format errors
         raise InputError(p, f"not a readable .npz map ({type(exc).__name__})") from None
-    if len(shape) != 2 or any(a.shape != shape for a in arrs):
-        raise InputError(p, f"mass arrays do not match the grid shape {shape}")
-    return FgmFile(BeliefMap(grid, *arrs), frozen, freeze_time, log_id)
+    bm = BeliefMap(grid, *arrs)
+    problem = fgm_problem(bm, frozen, freeze_time)
+    if problem:
+        raise InputError(p, f"damaged map: {problem}")
+    return FgmFile(bm, frozen, freeze_time, log_id)
+
+
+def _npz_member_shape(path: Path, key: str) -> tuple[int, ...] | None:
+    """The shape an .npz member's header declares (read without loading the array)."""
+    with zipfile.ZipFile(path) as zf, zf.open(f"{key}.npy") as f:
+        version = np.lib.format.read_magic(f)
+        if version == (1, 0):
+            shape, _, _ = np.lib.format.read_array_header_1_0(f)
+        elif version == (2, 0):
+            shape, _, _ = np.lib.format.read_array_header_2_0(f)
+        else:
+            return None
+    return tuple(int(v) for v in shape)
 
 
 def occupancy_image(bm: BeliefMap, unknown_t: float = 0.9) -> np.ndarray:
