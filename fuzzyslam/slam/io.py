@@ -12,8 +12,14 @@ Input streams (topic names from the config's ``topics`` section):
   /tf_static, else the nominal ring).
 
 Glitches are counted in ``warnings`` (never silently used): frames of another
-encoding, NaN odometry, header stamps out of order, joint states without the
-wheel joints. Event times are header stamps.
+encoding or of another size than the CameraInfo's, NaN odometry, odometry increments
+faster than the robot can move (``implausible_odometry``: wheel speeds over
+``ODOM_SPEED_MARGIN`` times ``robot.max_speed`` plus the turn at
+``robot.max_turn_rate``), header stamps out of order, joint states without the wheel
+joints. A CameraInfo that no pinhole ceiling camera can have (a focal length that is
+not finite and positive, fx and fy more than 1 % apart, a field of view outside
+[1, 179] degrees, a principal point off the image) is a bad input. Event times are
+header stamps.
 """
 
 from __future__ import annotations
@@ -48,6 +54,9 @@ from fuzzyslam.streams.writer import LogWriter
 
 CAMERA_FRAME = "ceiling_camera"
 ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
+ODOM_SPEED_MARGIN = 3.0  # increments over this many times the robot's top speed: rejected
+ODOM_SLACK_S = 0.2  # s of top speed always allowed (stamp jitter, a first message)
+ODOM_REANCHOR = 5  # after this many rejections in a row, restart from the latest reading
 
 
 @dataclass
@@ -71,6 +80,7 @@ class LogInputs:
     gap_seconds: float = 0.0
     _names: list = field(default_factory=list)
     _idx: list = field(default_factory=list)
+    _rejected_in_row: int = 0
     _cov_cache: tuple | None = None
 
     def warn(self, key: str, problem: str = "") -> None:
@@ -133,13 +143,37 @@ class LogInputs:
         if len(pos) <= max(idx):
             self.warn("nan_odometry", f"missing wheel angle at t={t:.3f} s")
             return None, prev
-        cur = (float(pos[idx[0]]), float(pos[idx[1]]))
+        cur = (float(pos[idx[0]]), float(pos[idx[1]]), t)
         if not (math.isfinite(cur[0]) and math.isfinite(cur[1])):
             self.warn("nan_odometry", f"NaN wheel angle at t={t:.3f} s")
             return None, prev
         if prev is None:
             return None, cur
-        return Odom(t, *self._wheel_odometry(cur[0] - prev[0], cur[1] - prev[1])), cur
+        d_trans, d_rot = self._wheel_odometry(cur[0] - prev[0], cur[1] - prev[1])
+        if not self._plausible(t - prev[2], d_trans, d_rot):
+            return self._reject(t, prev, cur)
+        self._rejected_in_row = 0
+        return Odom(t, d_trans, d_rot), cur
+
+    def _plausible(self, dt: float, d_trans: float, d_rot: float) -> bool:
+        """An increment the robot can drive in ``dt``: |d_trans| and |d_rot| within
+        ODOM_SPEED_MARGIN times robot.max_speed and robot.max_turn_rate (the physical
+        bound; a wheel angle of +1e6 rad is a glitch, not motion)."""
+        r = self.cfg.robot
+        span = ODOM_SPEED_MARGIN * (max(dt, 0.0) + ODOM_SLACK_S)
+        return abs(d_trans) <= r.max_speed * span and abs(d_rot) <= r.max_turn_rate * span
+
+    def _reject(self, t: float, prev, cur):
+        """Count an implausible increment and drop it (the previous reading stays the
+        reference); after ODOM_REANCHOR in a row the counter was reset or replaced, so
+        the latest reading becomes the reference (that motion is lost, and counted)."""
+        self.warn("implausible_odometry", f"{self.odom_topic}: implausible jump at t={t:.3f} s")
+        self._rejected_in_row += 1
+        if self._rejected_in_row >= ODOM_REANCHOR:
+            self._rejected_in_row = 0
+            self.warn("odometry_reanchored", f"{self.odom_topic}: restarted at t={t:.3f} s")
+            return None, cur
+        return None, prev
 
     def _wheel_odometry(self, d_left: float, d_right: float) -> tuple[float, float]:
         """``robot.wheel_increments_to_odometry`` on two floats (the hot path, 20 Hz):
@@ -153,10 +187,13 @@ class LogInputs:
             self.warn("nan_odometry", f"NaN odometry pose at t={t:.3f} s")
             return None, prev
         if prev is None:
-            return None, pose
-        rel = between(prev, pose)
+            return None, (pose, t)
+        rel = between(prev[0], pose)
         d_trans = float(np.copysign(np.hypot(rel[0], rel[1]), rel[0]))
-        return Odom(t, d_trans, float(rel[2])), pose
+        if not self._plausible(t - prev[1], d_trans, float(rel[2])):
+            return self._reject(t, prev, (pose, t))
+        self._rejected_in_row = 0
+        return Odom(t, d_trans, float(rel[2])), (pose, t)
 
     def _measurement_cov(self, m: int, sigma: float) -> np.ndarray:
         """(m, 2, 2) covariances sigma^2 I of m detections (the last block kept: the
@@ -172,6 +209,14 @@ class LogInputs:
         except ValueError as exc:
             self.warn("bad_frames", f"{self.lamp_topic} at t={t:.3f} s: {exc}")
             return None
+        assert self.camera is not None
+        if img.shape[:2] != (self.camera.height_px, self.camera.width):
+            self.warn(
+                "bad_frames",
+                f"{self.lamp_topic} at t={t:.3f} s: {img.shape[1]}x{img.shape[0]} frame, the "
+                f"CameraInfo says {self.camera.width}x{self.camera.height_px}",
+            )
+            return None
         p = self.cfg.slam
         blobs = detect_lamps(
             img, p.threshold, p.min_area, p.max_area, p.min_fill, p.max_aspect, p.border
@@ -180,7 +225,6 @@ class LogInputs:
             self.warnings["blobs_rejected"] = (
                 self.warnings.get("blobs_rejected", 0) + blobs.rejected
             )
-        assert self.camera is not None
         z = self.camera.unproject(blobs.uv)
         return Frame(t, z, self._measurement_cov(len(z), self.camera.metric_sigma(p.pixel_sigma)))
 
@@ -199,6 +243,30 @@ class LogInputs:
         msgs = stream if stream is not None else self.reader.messages(list(topics))
         for ring in group_rings(msgs, topics, self.cfg.sonar.count, stats=self.ring_stats):
             yield RingEvent(ring.t, ring)
+
+
+def camera_info_problem(info) -> str | None:
+    """Why a CameraInfo cannot be a pinhole ceiling camera (None if it can): a size
+    that is not positive, focal lengths fx, fy that are not finite and positive or
+    differ by more than 1 % (square pixels are assumed), a horizontal field of view
+    outside [1, 179] degrees, a principal point that is not finite or is off the image."""
+    w, h = int(info.width), int(info.height)
+    if not (0 < w <= 100_000 and 0 < h <= 100_000):
+        return f"image size {w}x{h} is not a camera's"
+    k = np.asarray(info.k, dtype=float).ravel()
+    if k.shape != (9,) or not np.all(np.isfinite(k)):
+        return "the camera matrix K must be nine finite numbers"
+    fx, fy, cx, cy = k[0], k[4], k[2], k[5]
+    if not (fx > 0 and fy > 0):
+        return f"focal lengths must be > 0 (fx = {fx:.6g}, fy = {fy:.6g})"
+    if abs(fx - fy) > 0.01 * max(fx, fy):
+        return f"fx = {fx:.6g} and fy = {fy:.6g} differ (square pixels are assumed)"
+    hfov = 2.0 * math.degrees(math.atan(w / (2.0 * fx)))
+    if not 1.0 <= hfov <= 179.0:
+        return f"focal length {fx:.6g} px gives a {hfov:.3g}-degree field of view"
+    if not (-0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5):
+        return f"principal point ({cx:.6g}, {cy:.6g}) is off the {w}x{h} image"
+    return None
 
 
 def _first(reader: LogReader, topic: str):
@@ -234,9 +302,10 @@ def open_inputs(path: str | os.PathLike, cfg: Config, need_rings: bool = False) 
                 tf = M.planar_transforms(m.msg)
                 if CAMERA_FRAME in tf:
                     offset = tuple(tf[CAMERA_FRAME][1][:2])
+        problem = camera_info_problem(info)
+        if problem:
+            raise InputError(reader.path, f"{tp.camera_info}: {problem}")
         camera = CeilingCamera.from_camera_info(info, cfg.camera.ceiling_height, offset)
-        if not camera.f > 0:
-            raise InputError(reader.path, f"{tp.camera_info}: focal length must be > 0")
     elif reader.has(tp.detections):
         lamp_topic, lamp_source = tp.detections, "detections"
     else:

@@ -9,10 +9,13 @@ reads NaN. Glitches are made explicit and counted, never silently used:
 - ranges at or beyond max_range are "no echo" and stay as max_range (``no_echo``);
 - ranges below min_range become NaN (``invalid``);
 - a reading whose max_range is not a positive finite number becomes NaN (``invalid``);
+- a reading whose max_range is beyond what an ultrasonic sensor can measure
+  (``MAX_PLAUSIBLE_RANGE``) becomes NaN (``invalid`` and ``implausible``);
 - a second reading of the same sonar at the same stamp is dropped (``duplicates``);
 - a reading stamped more than ``tolerance`` before the latest one is dropped
   (``out_of_order``);
-- a non-finite or negative field of view is replaced by the last valid one (``bad_fov``).
+- a field of view that is not finite, not positive or wider than a half-plane
+  (``MAX_PLAUSIBLE_FOV``) is replaced by the last valid one (``bad_fov``).
 """
 
 from __future__ import annotations
@@ -24,6 +27,9 @@ import numpy as np
 
 from fuzzyslam.streams.messages import planar_transforms, stamp_to_sec
 from fuzzyslam.streams.reader import LogMessage
+
+MAX_PLAUSIBLE_RANGE = 100.0  # m: no ultrasonic ranger reaches this far
+MAX_PLAUSIBLE_FOV = np.pi  # rad: a cone wider than a half-plane is not a sonar beam
 
 
 @dataclass
@@ -47,6 +53,7 @@ class RingStats:
     extra: dict[str, int] = field(default_factory=dict)
     duplicates: int = 0
     bad_fov: int = 0
+    implausible: int = 0
 
     def as_dict(self) -> dict[str, int]:
         """The counts, for a stage's JSON summary."""
@@ -59,6 +66,7 @@ class RingStats:
             "out_of_order": self.out_of_order,
             "duplicates": self.duplicates,
             "bad_fov": self.bad_fov,
+            "implausible": self.implausible,
             **self.extra,
         }
 
@@ -112,11 +120,16 @@ def group_rings(
         hi = float(m.msg.max_range)
         lo = float(m.msg.min_range)
         f = float(m.msg.field_of_view)
-        if np.isfinite(f) and f > 0:
+        if np.isfinite(f) and 0 < f <= MAX_PLAUSIBLE_FOV:
             fov = f
         else:
             st.bad_fov += 1
-        if not (np.isfinite(hi) and hi > 0):
+        if hi > MAX_PLAUSIBLE_RANGE:
+            st.invalid += 1  # finite but beyond any sonar: a corrupt reading
+            st.implausible += 1
+            rmax[i] = np.nan
+            ranges[i] = np.nan
+        elif not (np.isfinite(hi) and hi > 0):
             st.invalid += 1  # no usable max range: the reading cannot be interpreted
             rmax[i] = np.nan
             ranges[i] = np.nan
