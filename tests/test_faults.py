@@ -349,3 +349,46 @@ def test_unusable_map_is_not_written(tmp_path: Path) -> None:
         with pytest.raises(InputError, match="unusable map"):
             save_fgm(tmp_path / "bad.npz", bm, True, t, "x")
         assert not (tmp_path / "bad.npz").exists()
+
+
+# -- evaluate says what its numbers do not cover (class 4) -------------------------------
+
+
+def test_evaluate_reports_partial_truth_and_log_damage(micro, tmp_path: Path) -> None:
+    """A truth covering 30 % of the estimate, and a truth log with a corrupt chunk:
+    evaluate still runs (exit 0) but its summary carries the coverage, log_damage and a
+    warning for each (it evaluated the 30 % without a word before)."""
+    import json
+
+    from mcap.reader import make_reader
+
+    _cfg, log, est = micro
+    rows = (est / "trajectory.tum").read_text(encoding="utf-8").splitlines()
+    data = [r for r in rows if r and not r.startswith("#")]
+    cut = tmp_path / "truth30.tum"
+    cut.write_text("\n".join(data[: int(0.3 * len(data))]) + "\n", encoding="utf-8")
+    code, out, err = cli("evaluate", cut, est, "-o", tmp_path / "r1")
+    assert code == 0, err
+    s = json.loads(out)
+    assert 0.25 < s["truth_coverage"] < 0.35
+    assert any("covers only" in w for w in s["warnings"])
+    assert "covers only" in (tmp_path / "r1" / "report.md").read_text(encoding="utf-8")
+
+    code, out, err = cli("evaluate", log, est, "-o", tmp_path / "r0")
+    assert code == 0, err
+    s = json.loads(out)
+    assert s["warnings"] == [] and s["truth_coverage"] > 0.99
+    assert s["log_damage"]["damaged_records"] == 0
+
+    bad = tmp_path / "corrupt.mcap"
+    shutil.copyfile(log, bad)
+    with open(log, "rb") as f:
+        offsets = sorted(c.chunk_start_offset for c in make_reader(f).get_summary().chunk_indexes)
+    with open(bad, "r+b") as f:
+        f.seek(offsets[len(offsets) // 2] + 200)
+        f.write(b"\xff" * 64)
+    code, out, err = cli("evaluate", bad, est, "-o", tmp_path / "r2")
+    assert code == 0, err
+    s = json.loads(out)
+    assert s["log_damage"]["damaged_records"] >= 1
+    assert any("damaged" in w for w in s["warnings"])

@@ -26,6 +26,7 @@ class Truth:
     scenario: Scenario | None = None
     freeze_run: int | None = None
     source: str = ""
+    log_damage: dict[str, Any] | None = None  # of the log the truth was read from
 
 
 @dataclass
@@ -234,10 +235,49 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams) -> Evaluation:
                 "position_m": M.stats(np.hypot(oe[:, 0], oe[:, 1])).to_dict(),
                 "heading_deg": M.stats(oe[:, 2]).scaled(180.0 / np.pi).to_dict(),
             }
+    metrics["truth_coverage"] = truth_coverage(truth, est, len(assoc))
+    metrics["log_damage"] = truth.log_damage
+    metrics["warnings"] = evaluation_warnings(metrics)
     metrics["headline"] = headline(metrics)
     return Evaluation(
         metrics, assoc, err, sigma, nees_v, phases, lamp_match, by_run, fix_t, fix_err
     )
+
+
+def truth_coverage(truth: Truth, est: Estimate, compared: int) -> dict[str, Any]:
+    """How much of the estimate the truth covers: the estimate's samples compared (those
+    with a truth pose within max_dt_s) over all of them, and both time spans."""
+    n = int(est.t.size)
+    return {
+        "fraction": round(compared / n, 6) if n else 0.0,
+        "compared_samples": int(compared),
+        "estimate_samples": n,
+        "estimate_span_s": [float(est.t[0]), float(est.t[-1])] if n else None,
+        "truth_span_s": [float(truth.t[0]), float(truth.t[-1])],
+    }
+
+
+COVERAGE_WARN = 0.99  # below this fraction of the estimate compared, the summary says so
+
+
+def evaluation_warnings(metrics: dict[str, Any]) -> list[str]:
+    """What the numbers do not cover, in words: a truth covering only part of the
+    estimate, a damaged truth log."""
+    out = []
+    cov = metrics["truth_coverage"]
+    if cov["fraction"] < COVERAGE_WARN:
+        t0, t1 = cov["truth_span_s"]
+        out.append(
+            f"the truth covers only {100 * cov['fraction']:.1f} % of the estimate's samples "
+            f"({t0:.1f}-{t1:.1f} s); the rest is not evaluated"
+        )
+    dmg = metrics.get("log_damage")
+    if dmg and (dmg.get("truncated") or dmg.get("lost_bytes") or dmg.get("damaged_records")):
+        out.append(
+            f"the truth log is damaged ({dmg.get('lost_bytes', 0)} bytes lost); ground truth "
+            "is missing where it was"
+        )
+    return out
 
 
 def headline(metrics: dict[str, Any]) -> dict[str, Any]:
@@ -249,6 +289,9 @@ def headline(metrics: dict[str, Any]) -> dict[str, Any]:
         "ape_rmse_m": ov["ape_m"]["raw"]["rmse"],
         "ape_aligned_rmse_m": ov["ape_m"]["aligned"]["rmse"],
         "rpe_m_per_m": ov["rpe"]["trans_m_per_m"]["mean"],
+        "truth_coverage": metrics["truth_coverage"]["fraction"],
+        "log_damage": metrics["log_damage"],
+        "warnings": metrics["warnings"],
     }
     if "A" in metrics["phases"] and "position_m" in metrics["phases"]["A"]:
         h["phase_A_position_mean_m"] = metrics["phases"]["A"]["position_m"]["mean"]

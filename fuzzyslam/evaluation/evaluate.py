@@ -108,7 +108,9 @@ def read_truth(path: str | os.PathLike) -> Truth:
     if scenario is not None:
         fr = scenario.config.get("fgm", {}).get("freeze_run")
         freeze = int(fr) if fr is not None else None
-    return Truth(t[order], np.asarray(ps)[order], world, scenario, freeze, str(path))
+    return Truth(
+        t[order], np.asarray(ps)[order], world, scenario, freeze, str(path), reader.damage()
+    )
 
 
 # --- estimate -----------------------------------------------------------------------------

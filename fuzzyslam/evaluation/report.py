@@ -100,6 +100,7 @@ def write_report(path: Path, metrics: dict[str, Any], figs: dict[str, str]) -> N
         f"- compared samples: {metrics['samples']} over "
         f"{metrics['span_s'][0]:.1f}-{metrics['span_s'][1]:.1f} s "
         f"(truth interpolated at estimate times, max gap {metrics['params']['max_dt_s']} s)",
+        *(f"- **warning**: {w}" for w in metrics.get("warnings", [])),
         "",
         "## Pose errors by phase",
         "",
