@@ -260,3 +260,23 @@ def test_embedded_variants_load():
     bumps = load_config("paper_bumps").scenario.bumps
     assert sorted(b.run for b in bumps) == [1, 2, 3, 4, 5, 6]
     assert all(abs(b.angle_deg) == 10.0 for b in bumps)
+
+
+@pytest.mark.slow
+def test_sample_is_what_its_documented_command_makes(tmp_path: Path) -> None:
+    """data/README.md's command regenerates data/sample.mcap and sample.png byte for
+    byte (the embedded config metadata was stale before)."""
+    import re
+
+    from test_robust_logs import cli
+
+    root = Path(__file__).resolve().parents[1]
+    readme = (root / "data" / "README.md").read_text(encoding="utf-8")
+    command = re.search(r"^\s+fuzzyslam (simulate .*)$", readme, re.MULTILINE)
+    assert command is not None, "data/README.md no longer shows the simulate command"
+    args = command.group(1).replace("data/", f"{tmp_path}/").split()
+    code, _, err = cli(*args)
+    assert code == 0, err
+    for name in ("sample.mcap", "sample.png"):
+        fresh, committed = (tmp_path / name).read_bytes(), (root / "data" / name).read_bytes()
+        assert fresh == committed, f"regenerate data/{name} with data/README.md's command"
