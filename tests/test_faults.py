@@ -392,3 +392,19 @@ def test_evaluate_reports_partial_truth_and_log_damage(micro, tmp_path: Path) ->
     s = json.loads(out)
     assert s["log_damage"]["damaged_records"] >= 1
     assert any("damaged" in w for w in s["warnings"])
+
+
+def test_working_directory_as_output_is_filled_in_place(tmp_path: Path, monkeypatch) -> None:
+    """The working directory cannot be swapped (the shell would be left in a removed
+    directory): its files are replaced one by one, and it stays the same directory."""
+    from fuzzyslam.fileio import OutputDir
+
+    out = tmp_path / "here"
+    out.mkdir()
+    (out / "a.txt").write_text("old", encoding="utf-8")
+    ino = out.stat().st_ino
+    monkeypatch.chdir(out)
+    with OutputDir(".") as tmp:
+        (tmp / "a.txt").write_text("new", encoding="utf-8")
+    assert out.stat().st_ino == ino and Path.cwd().resolve() == out.resolve()
+    assert snapshot(out) == {"a.txt": b"new"} and not leftovers(tmp_path)
