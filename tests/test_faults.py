@@ -408,3 +408,24 @@ def test_working_directory_as_output_is_filled_in_place(tmp_path: Path, monkeypa
         (tmp / "a.txt").write_text("new", encoding="utf-8")
     assert out.stat().st_ino == ino and Path.cwd().resolve() == out.resolve()
     assert snapshot(out) == {"a.txt": b"new"} and not leftovers(tmp_path)
+
+
+def test_map_of_a_path_too_large_is_refused(micro, tmp_path: Path) -> None:
+    """A trajectory jumping 1e7 m away would make a map of 10^9 cells (23 GB before):
+    exit 3 naming the trajectory, at once."""
+    import time
+
+    import numpy as np
+
+    cfg, log, _ = micro
+    t = np.arange(0.0, 40.0, 0.05)
+    x = np.where(t > 3.0, 1e7, 0.0)
+    tum = tmp_path / "far.tum"
+    zero = np.zeros_like(t)
+    np.savetxt(tum, np.column_stack([t, x, zero, zero, zero, zero, zero, zero + 1]), fmt="%.6f")
+    t0 = time.perf_counter()
+    code, _, err = cli("map", log, "--trajectory", tum, "--config", cfg, "-o", tmp_path / "f",
+                       "--no-figures")
+    assert code == errors.EXIT_INPUT, err
+    assert_one_line(err, tum, "cells")
+    assert time.perf_counter() - t0 < 10.0 and not (tmp_path / "f").exists()

@@ -225,7 +225,10 @@ def build_map(
     if not ok.all():
         times, ranges, rmax = times[ok], ranges[ok], rmax[ok]
     poses = interpolate_poses(times, t_traj, p_traj)
-    builder = FgmBuilder.for_path(poses[:, :2], params)
+    try:
+        builder = FgmBuilder.for_path(poses[:, :2], params)
+    except ValueError as exc:  # a path too long for a map (or not finite)
+        raise InputError(traj_path, str(exc)) from None
     t_build = time.perf_counter()
     batch = 64
     with Progress(len(times), "map: fusing sonar rings") as bar:

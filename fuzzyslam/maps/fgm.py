@@ -17,7 +17,7 @@ from __future__ import annotations
 import numpy as np
 
 from fuzzyslam.maps.evidence import rings_evidence
-from fuzzyslam.maps.grid import BeliefMap, Grid
+from fuzzyslam.maps.grid import MAX_CELLS, BeliefMap, Grid
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.tbm import Masses, clip_masses, conjunctive, discount, forgetting_factor
 
@@ -33,6 +33,13 @@ def grid_for_path(xy: np.ndarray, params: MapParams) -> Grid:
         raise ValueError("the path is empty or not finite")
     lo = xy.min(0) - params.margin
     hi = xy.max(0) + params.margin
+    cells = float(np.prod(np.ceil((hi - lo) / params.resolution) + 1.0))
+    if cells > MAX_CELLS:
+        span = hi - lo
+        raise ValueError(
+            f"the path spans {span[0]:.3g} x {span[1]:.3g} m: {cells:.3g} cells of "
+            f"{params.resolution} m, more than {MAX_CELLS}"
+        )
     return Grid.covering(lo[0], lo[1], hi[0], hi[1], params.resolution)
 
 

@@ -15,6 +15,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+MAX_CELLS = 100_000_000  # cells a map may have (4 float32 masses each: 1.6 GB)
+
 
 @dataclass(frozen=True)
 class Grid:

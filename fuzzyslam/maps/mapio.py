@@ -22,17 +22,16 @@ import yaml
 
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import atomic_path, check_input_file
-from fuzzyslam.maps.grid import BeliefMap, Grid
+from fuzzyslam.maps.grid import MAX_CELLS, BeliefMap, Grid
 
 OCCUPIED_THRESH = 0.65
 FREE_THRESH = 0.196
 PGM_OCCUPIED, PGM_FREE, PGM_UNKNOWN = 0, 254, 205
 NPZ_KEYS = ("m_e", "m_o", "m_t", "m_c", "origin", "resolution", "shape", "frozen", "freeze_time")
 MASSES = ("m_e", "m_o", "m_t", "m_c")
-# what a map may be: cells of 1 mm to 10 m, an origin within 1000 km, at most 10^8 cells
+# what a map may be: cells of 1 mm to 10 m, an origin within 1000 km, at most MAX_CELLS
 MIN_RESOLUTION, MAX_RESOLUTION = 1e-3, 10.0
 MAX_COORDINATE = 1e6
-MAX_CELLS = 100_000_000
 
 
 @dataclass
