@@ -429,3 +429,23 @@ def test_map_of_a_path_too_large_is_refused(micro, tmp_path: Path) -> None:
     assert code == errors.EXIT_INPUT, err
     assert_one_line(err, tum, "cells")
     assert time.perf_counter() - t0 < 10.0 and not (tmp_path / "f").exists()
+
+
+def test_log_and_preview_are_replaced_together(micro, tmp_path: Path) -> None:
+    """simulate --preview on a disk with room for the new log but not for the preview:
+    exit 3 naming the preview, and the old log is kept (not a new log beside an old
+    preview)."""
+    cfg, log, _ = micro
+    code, _, err = cli("simulate", cfg, "-o", tmp_path / "n.mcap", "--preview", tmp_path / "n.png")
+    assert code == 0, err
+    png = (tmp_path / "n.png").stat().st_size
+    need = log.stat().st_size + 8192  # the new log and the small old files, in pages
+    with small_tmpfs(f"{(need + png // 2) // 4096 * 4}k") as fs:
+        out, prev = fs / "log.mcap", fs / "log.png"
+        out.write_bytes(b"old log")
+        prev.write_bytes(b"old png")
+        code, err = limited(["simulate", cfg, "-o", out, "--preview", prev], 2**40, tmp_path)
+        assert code == errors.EXIT_INPUT, err
+        assert_one_line(err, prev, "no space left")
+        assert out.read_bytes() == b"old log" and prev.read_bytes() == b"old png"
+        assert not leftovers(fs)

@@ -9,7 +9,7 @@ import click
 from fuzzyslam.cli import cli, emit, seed_option
 from fuzzyslam.config import DEFAULT_CONFIG, load_config
 from fuzzyslam.errors import InputError
-from fuzzyslam.fileio import check_outputs
+from fuzzyslam.fileio import atomic_path, check_outputs
 
 
 @cli.command("simulate")
@@ -65,10 +65,16 @@ def simulate(config: str | None, output: str, seed: int | None, preview: str | N
     if preview and Path(preview).resolve() == Path(output).resolve():
         raise InputError(preview, "the preview and the recording must be different files")
     cfg = load_config(cfg_name, seed)
-    summary, plan = simulate_to_mcap(cfg, output, source=cfg_name)
-    if preview:
-        from fuzzyslam.sim.preview import save_preview
+    if not preview:
+        summary, _ = simulate_to_mcap(cfg, output, source=cfg_name)
+        emit(summary)
+        return
+    from fuzzyslam.sim.preview import save_preview
 
+    # both files complete before either is renamed into place: never a new log beside an
+    # old preview (the preview is renamed first, the log right after)
+    with atomic_path(output) as staged:
+        summary, plan = simulate_to_mcap(cfg, staged, source=cfg_name)
         save_preview(plan, preview, title=f"{cfg.name}, seed {cfg.seed}")
-        summary["preview"] = preview
+    summary["file"], summary["preview"] = str(Path(output)), preview
     emit(summary)
