@@ -449,3 +449,13 @@ def test_log_and_preview_are_replaced_together(micro, tmp_path: Path) -> None:
         assert_one_line(err, prev, "no space left")
         assert out.read_bytes() == b"old log" and prev.read_bytes() == b"old png"
         assert not leftovers(fs)
+
+
+def test_map_without_references_names_its_file(micro, micro_map, tmp_path: Path) -> None:
+    """Heading fixes from a map with no corridor references: the error names the map's
+    references.yaml, not a bare "references.yaml"."""
+    cfg, log, _ = micro
+    code, _, err = cli("run", log, "--config", cfg, "--map", micro_map, "--fix", "heading",
+                       "-o", tmp_path / "o")
+    assert code == errors.EXIT_INPUT, err
+    assert_one_line(err, micro_map / "references.yaml", "no corridor references")

@@ -79,6 +79,8 @@ def load_frozen_map(
     refs: list[Reference] = []
     if need_references or refs_path.exists():
         refs = references_from_dicts(load_references(refs_path), str(refs_path))
+    if need_references and not refs:
+        raise InputError(refs_path, "no corridor references: heading fixes need some")
     return FrozenMap(m, f.freeze_time, f.log_id, refs)
 
 
