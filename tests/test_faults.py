@@ -314,7 +314,7 @@ def test_damaged_map_is_refused(micro, micro_map, tmp_path: Path, kind: str) -> 
         assert not (tmp_path / "o").exists() and not (tmp_path / "r").exists()
 
 
-@pytest.mark.parametrize("until", ["nan", "inf"])
+@pytest.mark.parametrize("until", ["nan", "inf", "-inf", "1e300", "-1"])
 def test_map_until_not_finite_is_refused(micro, tmp_path: Path, until: str) -> None:
     """map --until nan/inf wrote a map that run --map then refused: now a usage error
     and no map."""
@@ -325,6 +325,16 @@ def test_map_until_not_finite_is_refused(micro, tmp_path: Path, until: str) -> N
     )  # fmt: skip
     assert code == errors.EXIT_USAGE and "--until" in err
     assert not (tmp_path / "fgm").exists()
+
+
+@pytest.mark.parametrize("when", ["nan", "inf", "1e300", "-1"])
+def test_fix_from_not_finite_is_a_usage_error(micro, micro_map, tmp_path: Path, when: str):
+    """run --fix-from nan/inf/1e300 crashed (exit 1, converting to an integer)."""
+    cfg, log, _ = micro
+    code, _, err = cli("run", log, "--config", cfg, "--map", micro_map, "--fix", "pose",
+                       "--fix-from", when, "-o", tmp_path / "o")
+    assert code == errors.EXIT_USAGE and "--fix-from" in err, err
+    assert not (tmp_path / "o").exists()
 
 
 def test_unusable_map_is_not_written(tmp_path: Path) -> None:

@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import contextlib
 import json
+import math
 import os
 import signal
 import sys
@@ -59,6 +60,29 @@ def cli(debug: bool) -> None:
       130  interrupted (Ctrl-C); 143 terminated (SIGTERM): no partial outputs
     """
     guard_inputs(True)
+
+
+MAX_LOG_TIME_S = 1e10  # s: a log time beyond this (epoch time of year 2286) is not one
+
+
+class LogTime(click.ParamType):
+    """A log time in seconds: a finite number in [0, MAX_LOG_TIME_S] (nan, inf and 1e300
+    are usage errors, exit 2, not crashes further on)."""
+
+    name = "SECONDS"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> float:
+        try:
+            t = float(value)
+        except (TypeError, ValueError):
+            self.fail(f"{value!r} is not a number of seconds", param, ctx)
+        if not (math.isfinite(t) and 0.0 <= t <= MAX_LOG_TIME_S):
+            self.fail(f"must be a finite log time in [0, {MAX_LOG_TIME_S:g}] s, got {value}",
+                      param, ctx)
+        return t
+
+
+LOG_TIME = LogTime()
 
 
 def seed_option(f):

@@ -2,11 +2,9 @@
 
 from __future__ import annotations
 
-import math
-
 import click
 
-from fuzzyslam.cli import cli, config_option, emit
+from fuzzyslam.cli import LOG_TIME, cli, config_option, emit
 
 
 @cli.command("map")
@@ -34,7 +32,7 @@ from fuzzyslam.cli import cli, config_option, emit
 )
 @click.option(
     "--until",
-    type=click.FloatRange(min=0.0),
+    type=LOG_TIME,
     default=None,
     help="Freeze the map at this log time (s) instead of at the end of a run.",
 )
@@ -92,8 +90,6 @@ def map_cmd(
     from fuzzyslam.config import load_config
     from fuzzyslam.maps.build import MapOptions, build_map
 
-    if until is not None and not math.isfinite(until):
-        raise click.BadParameter(f"must be a finite log time, got {until}", param_hint="--until")
     if until is not None and until_run is not None:
         raise click.UsageError("give at most one of --until-run and --until")
     cfg = load_config(config)

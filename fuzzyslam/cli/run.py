@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from fuzzyslam.cli import cli, config_option, emit, seed_option
+from fuzzyslam.cli import LOG_TIME, cli, config_option, emit, seed_option
 from fuzzyslam.config import load_config
 
 
@@ -58,7 +58,7 @@ def _build_aids(
 )
 @click.option(
     "--fix-from",
-    type=float,
+    type=LOG_TIME,
     default=None,
     metavar="SECONDS",
     help="Log time (s) from which the fixes are applied. Default: the map's freeze time "
