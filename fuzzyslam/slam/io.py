@@ -35,10 +35,11 @@ from fuzzyslam.camera import CeilingCamera
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.robot import WHEEL_NAMES, sonar_mounts
-from fuzzyslam.se2 import between, wrap_angle, yaw_to_quaternion
+from fuzzyslam.se2 import wrap_angle, yaw_to_quaternion
 from fuzzyslam.slam.detect import detect_lamps
 from fuzzyslam.slam.fastread import indexed_messages
 from fuzzyslam.slam.runner import Event, Frame, Odom, RingEvent, SlamResult, UpdateRow
+from fuzzyslam.stamps import TIME_FORMAT, format_time
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.logmeta import read_scenario
 from fuzzyslam.streams.reader import LogReader
@@ -148,15 +149,22 @@ class LogInputs:
         return 0.5 * r * (d_left + d_right), r * (d_right - d_left) / b
 
     def _odom_pose(self, t: float, msg, prev):
-        pose = M.pose_of(msg.pose.pose)
-        if not np.all(np.isfinite(pose)):
+        """An Odometry pose as the increment (d_trans, d_rot) from the previous one: the
+        relative pose rel = prev^-1 (+) pose (``se2.between``) written on floats (the hot
+        path, up to 100 Hz), d_trans = sign(rel_x) |rel_xy|, d_rot = rel_theta."""
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+        pose = (float(p.x), float(p.y), yaw)
+        if not all(math.isfinite(v) for v in pose):
             self.warn("nan_odometry", f"NaN odometry pose at t={t:.3f} s")
             return None, prev
         if prev is None:
             return None, pose
-        rel = between(prev, pose)
-        d_trans = float(np.copysign(np.hypot(rel[0], rel[1]), rel[0]))
-        return Odom(t, d_trans, float(rel[2])), pose
+        dx, dy = pose[0] - prev[0], pose[1] - prev[1]
+        c, s = math.cos(prev[2]), math.sin(prev[2])
+        rx = c * dx + s * dy
+        d_rot = math.remainder(yaw - prev[2], math.tau)
+        return Odom(t, math.copysign(math.hypot(dx, dy), rx), d_rot), pose
 
     def _measurement_cov(self, m: int, sigma: float) -> np.ndarray:
         """(m, 2, 2) covariances sigma^2 I of m detections (the last block kept: the
@@ -190,7 +198,7 @@ class LogInputs:
         if not np.all(ok):
             self.warn("nan_detections", f"NaN detection at t={t:.3f} s")
             z = z[ok]
-        return Frame(t, z, self._measurement_cov(len(z), self.cfg.slam.detection_sigma))
+        return Frame(t, z, self.cfg.slam.detection_cov(z))
 
     def _ring_events(self, start: float | None = None) -> Iterator[Event]:
         topics = {self.cfg.topics.sonar(i): i for i in range(self.cfg.sonar.count)}
@@ -288,10 +296,11 @@ def _num(v: float) -> str:
 
 
 def _fmt_rows(a: np.ndarray) -> str:
-    """CSV rows of a finite float array (N, k), 9 significant digits (vectorised)."""
+    """CSV rows of a finite float array (N, k): the time column (first) in
+    ``stamps.TIME_FORMAT``, the others to 9 significant digits."""
     if len(a) == 0:
         return ""
-    fmt = ",".join(["%.9g"] * a.shape[1])
+    fmt = ",".join([TIME_FORMAT] + ["%.9g"] * (a.shape[1] - 1))
     return "\n".join(fmt % tuple(r) for r in a.tolist()) + "\n"
 
 
@@ -386,7 +395,7 @@ def _pose_cdr_block(t: np.ndarray, poses: np.ndarray, cov: np.ndarray, frame: st
 def _update_fields(u: UpdateRow) -> list:
     """The updates.csv fields of one update attempt (unused innovation components empty)."""
     return [
-        _num(u.t),
+        format_time(u.t),
         u.kind,
         u.id,
         u.dof,
