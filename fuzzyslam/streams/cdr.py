@@ -161,6 +161,8 @@ class Image:
 @dataclass(slots=True)
 class Range:
     __msgtype__: ClassVar[str] = "sensor_msgs/msg/Range"
+    ULTRASOUND: ClassVar[int] = 0
+    INFRARED: ClassVar[int] = 1
     header: Header
     radiation_type: int
     field_of_view: float
