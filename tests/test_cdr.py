@@ -21,6 +21,8 @@ from fuzzyslam.streams.typestore import deserialize, msgtype, serialize, typesto
 F64 = st.floats(allow_nan=False, width=64)
 F32 = st.floats(allow_nan=False, width=32)
 TEXT = st.text(alphabet=st.characters(min_codepoint=32, max_codepoint=0x24F), max_size=11)
+# frame ids of every length modulo 8 (every alignment of the fields after them)
+FRAMES = st.one_of(TEXT, st.integers(0, 16).map(lambda k: "f" * k))
 
 
 def header(sec, nsec, frame):
@@ -29,7 +31,7 @@ def header(sec, nsec, frame):
     )
 
 
-HEADERS = st.builds(header, st.integers(-(2**31), 2**31 - 1), st.integers(0, 2**32 - 1), TEXT)
+HEADERS = st.builds(header, st.integers(-(2**31), 2**31 - 1), st.integers(0, 2**32 - 1), FRAMES)
 
 
 def f64_array(max_size=9):

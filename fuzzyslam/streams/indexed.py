@@ -263,7 +263,7 @@ def _index_entries(
     size = len(data)
     for t, o in _ENTRY.iter_unpack(body):
         if o + _MSG.size > size:
-            return None
+            return 9 + length
         op, rlen, ch, seq, log_time, _pub = _MSG.unpack_from(data, o)
         if op != OP_MESSAGE or ch != cid or log_time != t or rlen < 22 or o + 9 + rlen > size:
             return 9 + length
