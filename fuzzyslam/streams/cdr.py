@@ -35,7 +35,7 @@ _STAMP_FRAME = struct.Struct("<iII")  # header.stamp sec, nanosec; frame_id leng
 _F64X7 = struct.Struct("<7d")
 _F64X6 = struct.Struct("<6d")
 _F32X4 = struct.Struct("<4f")
-_F32X7 = struct.Struct("<7f")
+_F32X7_U32 = struct.Struct("<7fI")
 _U32X3 = struct.Struct("<III")
 _U32X2 = struct.Struct("<II")
 
@@ -87,10 +87,64 @@ class Pose:
     orientation: Quaternion
 
 
-@dataclass(slots=True)
-class PoseWithCovariance:
-    pose: Pose
-    covariance: np.ndarray  # (36,) float64, row-major 6x6
+class _Deferred:
+    """Fields decoded on first access from a bytes copy of their part of the payload
+    (what a consumer seldom reads, e.g. odometry covariances, costs nothing until read).
+    A field holds its value, or a ``(raw bytes, offset)`` tuple not decoded yet."""
+
+    __slots__ = ()
+    _fields: ClassVar[tuple[str, ...]] = ()
+
+    def __repr__(self) -> str:
+        args = ", ".join(f"{k}={getattr(self, k)!r}" for k in self._fields)
+        return f"{type(self).__name__}({args})"
+
+    def __eq__(self, other: object) -> bool:
+        if type(other) is not type(self):
+            return NotImplemented
+        return all(_equal(getattr(self, k), getattr(other, k)) for k in self._fields)
+
+    __hash__ = None  # type: ignore[assignment]  # mutable, as the dataclasses
+
+
+def _equal(a, b) -> bool:
+    if isinstance(a, np.ndarray):
+        return isinstance(b, np.ndarray) and np.array_equal(a, b)
+    return bool(a == b)
+
+
+def _covariance_field(name: str) -> property:
+    def get(self) -> np.ndarray:
+        v = getattr(self, name)
+        if type(v) is tuple:
+            v = np.frombuffer(v[0], _F8, 36, v[1]).copy()
+            setattr(self, name, v)
+        return v
+
+    def set_(self, value) -> None:
+        setattr(self, name, value)
+
+    return property(get, set_, doc="(36,) float64, row-major 6x6 (decoded on first access)")
+
+
+class PoseWithCovariance(_Deferred):
+    __slots__ = ("_covariance", "pose")
+    _fields = ("pose", "covariance")
+    covariance = _covariance_field("_covariance")
+
+    def __init__(self, pose: Pose, covariance) -> None:
+        self.pose = pose
+        self._covariance = covariance
+
+
+class TwistWithCovariance(_Deferred):
+    __slots__ = ("_covariance", "twist")
+    _fields = ("twist", "covariance")
+    covariance = _covariance_field("_covariance")
+
+    def __init__(self, twist: Twist, covariance) -> None:
+        self.twist = twist
+        self._covariance = covariance
 
 
 @dataclass(slots=True)
@@ -99,19 +153,34 @@ class Twist:
     angular: Vector3
 
 
-@dataclass(slots=True)
-class TwistWithCovariance:
-    twist: Twist
-    covariance: np.ndarray  # (36,) float64
+class Odometry(_Deferred):
+    """nav_msgs/Odometry (``twist`` and the covariances decoded on first access)."""
 
-
-@dataclass(slots=True)
-class Odometry:
     __msgtype__: ClassVar[str] = "nav_msgs/msg/Odometry"
-    header: Header
-    child_frame_id: str
-    pose: PoseWithCovariance
-    twist: TwistWithCovariance
+    __slots__ = ("_twist", "child_frame_id", "header", "pose")
+    _fields = ("header", "child_frame_id", "pose", "twist")
+
+    def __init__(self, header: Header, child_frame_id: str, pose: PoseWithCovariance, twist):
+        self.header = header
+        self.child_frame_id = child_frame_id
+        self.pose = pose
+        self._twist = twist
+
+    @property
+    def twist(self) -> TwistWithCovariance:
+        v = self._twist
+        if type(v) is tuple:
+            raw, at = v
+            t = _F64X6.unpack_from(raw, at)
+            v = TwistWithCovariance(
+                Twist(Vector3(t[0], t[1], t[2]), Vector3(t[3], t[4], t[5])), (raw, at + 48)
+            )
+            self._twist = v
+        return v
+
+    @twist.setter
+    def twist(self, value: TwistWithCovariance) -> None:
+        self._twist = value
 
 
 @dataclass(slots=True)
@@ -185,36 +254,36 @@ def _string(buf, a: int) -> tuple[str, int]:
     return str(buf[a + 4 : end - 1], "utf-8"), end
 
 
-def _check_head(buf) -> None:
-    if len(buf) < 16 or buf[0] != 0 or buf[1] != 1:
-        raise CdrError("not a little-endian CDR payload (or shorter than a header)")
-
-
 def _header(buf) -> tuple[Header, int]:
     """std_msgs/Header right after the encapsulation; the offset after it."""
-    _check_head(buf)
-    sec, nsec, n = _STAMP_FRAME.unpack_from(buf, 4)
+    sec, nsec, n = _STAMP_FRAME.unpack_from(buf, 4)  # struct.error if too short
     end = 16 + n
-    if n < 1 or end > len(buf) or buf[end - 1] != 0:
-        raise CdrError(f"bad header frame_id of length {n} in {len(buf)} bytes")
-    return Header(Time(sec, nsec), str(buf[16 : end - 1], "utf-8")), end
+    if buf[1] != 1 or buf[0] or n < 1 or end > len(buf) or buf[end - 1]:
+        raise CdrError(f"not little-endian CDR or a bad frame_id (length {n}, {len(buf)} bytes)")
+    return Header(Time(sec, nsec), str(buf[16 : end - 1], "utf-8") if n > 1 else ""), end
 
 
-def _array(buf, a: int, dtype: str, size: int, count: int) -> np.ndarray:
-    """``count`` elements of ``dtype`` at ``a`` (a copy)."""
-    if count < 0 or a + size * count > len(buf):
-        raise CdrError(f"array of {count} x {size} bytes at offset {a} past {len(buf)} bytes")
-    return np.frombuffer(buf, dtype=dtype, count=count, offset=a).copy()
+_F8 = np.dtype("<f8")
+_F4 = np.dtype("<f4")
+_EMPTY = {_F8: np.zeros(0, _F8), _F4: np.zeros(0, _F4)}  # shared: read-only
+for _e in _EMPTY.values():
+    _e.flags.writeable = False
 
 
-def _sequence(buf, a: int, dtype: str, size: int) -> tuple[np.ndarray, int]:
-    """A primitive sequence at ``a`` (4-aligned): count, then elements aligned to ``size``
-    when there are any. Returns the array (a copy) and the offset after it."""
+def _sequence(buf, a: int, dtype: np.dtype) -> tuple[np.ndarray, int]:
+    """A primitive sequence at ``a`` (4-aligned): count, then elements aligned to their
+    size when there are any. Returns the array (a copy; a shared read-only array when
+    empty) and the offset after it."""
     (count,) = _U32.unpack_from(buf, a)
     a += 4
-    if count:
-        a += (4 - a) % size
-    return _array(buf, a, dtype, size, count), a + size * count
+    if not count:
+        return _EMPTY[dtype], a
+    size = dtype.itemsize
+    a += (4 - a) % size
+    end = a + size * count
+    if end > len(buf):
+        raise CdrError(f"array of {count} x {size} bytes at offset {a} past {len(buf)} bytes")
+    return np.frombuffer(buf, dtype, count, a).copy(), end
 
 
 def _end(buf, a: int) -> None:
@@ -239,13 +308,11 @@ def decode_odometry(buf: bytes | memoryview) -> Odometry:
     a += (4 - a) % 8
     if a + 85 * 8 > len(buf):
         raise CdrError(f"Odometry of {len(buf)} bytes is truncated")
+    if len(buf) - a - 680 > 3:
+        raise CdrError(f"payload of {len(buf)} bytes, message ends at {a + 680}")
     pose = _pose(_F64X7.unpack_from(buf, a))
-    cov = np.frombuffer(buf, "<f8", 36, a + 56).copy()
-    v = _F64X6.unpack_from(buf, a + 344)
-    tcov = np.frombuffer(buf, "<f8", 36, a + 392).copy()
-    _end(buf, a + 680)
-    twist = Twist(Vector3(v[0], v[1], v[2]), Vector3(v[3], v[4], v[5]))
-    return Odometry(header, child, PoseWithCovariance(pose, cov), TwistWithCovariance(twist, tcov))
+    raw = bytes(buf[a + 56 : a + 680])  # covariances and twist, decoded when read
+    return Odometry(header, child, PoseWithCovariance(pose, (raw, 0)), (raw, 288))
 
 
 def decode_pose_array(buf: bytes | memoryview) -> PoseArray:
@@ -258,10 +325,16 @@ def decode_pose_array(buf: bytes | memoryview) -> PoseArray:
         _end(buf, a)
         return PoseArray(header, [])
     a += (4 - a) % 8
-    if a + 56 * count > len(buf):
-        raise CdrError(f"PoseArray of {count} poses past {len(buf)} bytes")
-    _end(buf, a + 56 * count)
-    return PoseArray(header, [_pose(v) for v in _F64X7.iter_unpack(buf[a : a + 56 * count])])
+    end = a + 56 * count
+    if end > len(buf) or len(buf) - end > 3:
+        raise CdrError(f"PoseArray of {count} poses in {len(buf)} bytes")
+    return PoseArray(
+        header,
+        [
+            Pose(Point(x, y, z), Quaternion(qx, qy, qz, qw))
+            for x, y, z, qx, qy, qz, qw in _F64X7.iter_unpack(buf[a:end])
+        ],
+    )
 
 
 def decode_laser_scan(buf: bytes | memoryview) -> LaserScan:
@@ -269,9 +342,13 @@ def decode_laser_scan(buf: bytes | memoryview) -> LaserScan:
     intensities (float32 sequences)."""
     header, a = _header(buf)
     a += (4 - a) % 4
-    f = _F32X7.unpack_from(buf, a)
-    ranges, a = _sequence(buf, a + 28, "<f4", 4)
-    intensities, a = _sequence(buf, a, "<f4", 4)
+    *f, n = _F32X7_U32.unpack_from(buf, a)
+    a += 32
+    end = a + 4 * n
+    if end + 4 > len(buf):
+        raise CdrError(f"LaserScan of {n} ranges past {len(buf)} bytes")
+    ranges = np.frombuffer(buf, _F4, n, a).copy() if n else _EMPTY[_F4]
+    intensities, a = _sequence(buf, end, _F4)
     _end(buf, a)
     return LaserScan(header, *f, ranges, intensities)
 
@@ -291,11 +368,11 @@ def decode_joint_state(buf: bytes | memoryview) -> JointState:
         s, a = _string(buf, a)
         names.append(s)
     a += (4 - a) % 4
-    position, a = _sequence(buf, a, "<f8", 8)
+    position, a = _sequence(buf, a, _F8)
     a += (4 - a) % 4
-    velocity, a = _sequence(buf, a, "<f8", 8)
+    velocity, a = _sequence(buf, a, _F8)
     a += (4 - a) % 4
-    effort, a = _sequence(buf, a, "<f8", 8)
+    effort, a = _sequence(buf, a, _F8)
     _end(buf, a)
     return JointState(header, names, position, velocity, effort)
 
@@ -331,7 +408,8 @@ def decode_range(buf: bytes | memoryview) -> Range:
     a += 1
     a += (4 - a) % 4
     fov, lo, hi, r = _F32X4.unpack_from(buf, a)
-    _end(buf, a + 16)
+    if len(buf) - a - 16 > 3:
+        raise CdrError(f"payload of {len(buf)} bytes, message ends at {a + 16}")
     return Range(header, kind, fov, lo, hi, r)
 
 

@@ -142,7 +142,7 @@ def _groups(chunks: list[ChunkRef]) -> Iterator[list[ChunkRef]]:
     group: list[ChunkRef] = []
     end = -1
     for c in sorted(chunks, key=lambda c: (c.start, c.offset)):
-        if group and c.start > end:
+        if group and c.start >= end:  # a chunk may start at the time the last one ends
             yield group
             group = []
         group.append(c)
@@ -163,14 +163,16 @@ def _decompress(data: bytes, compression: str, size: int) -> bytes:
     return lz4.frame.decompress(data)
 
 
-RawMessage = tuple[int, int, int, memoryview]  # channel id, sequence, log time ns, payload
+RawMessage = tuple[int, int, int, memoryview]  # log time ns, channel id, sequence, payload
+_HEAD = _MSG.size  # a Message record's bytes before its payload
 
 
 def indexed_messages(
     f: BinaryIO, summary: Summary, wanted: set[int], start_ns: int, dmg: Damage
-) -> Iterator[RawMessage]:
+) -> Iterator[list[RawMessage]]:
     """Raw messages of the channels ``wanted`` logged at or after ``start_ns``, in log-time
-    order. Raises :class:`IndexMismatch` at a chunk that does not match its index."""
+    order (ties in file order), in batches (a chunk, or chunks whose time ranges overlap).
+    Raises :class:`IndexMismatch` at a chunk that does not match its index."""
     chunks = [
         c
         for c in summary.chunks
@@ -178,20 +180,25 @@ def indexed_messages(
     ]
     resume = len(MCAP_MAGIC)  # end of the last chunk read whole: a record boundary
     for group in _groups(chunks):
-        found: list[tuple[int, int, int, int, int, memoryview]] = []
+        batches = []
         for k, c in enumerate(group):
             data = _chunk_data(f, c, resume, dmg)
             if data is None:
                 continue
-            entries = _entries(f, c, data, wanted, summary.data_end, dmg)
             view = memoryview(data)
-            for t, off, cid, seq, length in entries:
-                if t >= start_ns:
-                    found.append((t, k, off, cid, seq, view[off + _MSG.size : off + 9 + length]))
-        if len(group) > 1:
+            batches.append(
+                [
+                    (t, k, off, cid, seq, view[off + _HEAD : off + 9 + length])
+                    for t, off, cid, seq, length in _entries(
+                        f, c, data, wanted, summary.data_end, dmg
+                    )
+                    if t >= start_ns
+                ]
+            )
+        found = [e for b in batches for e in b]
+        if len(batches) > 1:
             found.sort(key=lambda e: e[:3])
-        for t, _k, _off, cid, seq, payload in found:
-            yield cid, seq, t, payload
+        yield [(t, cid, seq, payload) for t, _k, _off, cid, seq, payload in found]
         resume = max(c.offset + c.length for c in group)
 
 

@@ -74,7 +74,7 @@ class LogReader:
         self.start = 0.0
         self.end = 0.0
         self._damage = Damage()
-        self._decoders: dict[str, Callable[[Any], Any]] = {}
+        self._decoders: dict[str, Callable[[Any], Any] | None] = {}
         s = self._summary
         if s is None:
             self._scan_stream()
@@ -185,18 +185,29 @@ class LogReader:
             for cid, (topic, schema) in s.channels.items()
             if wanted is None or topic in wanted
         }
+        fns = {
+            cid: (topic, typename, self._decoder(typename))
+            for cid, (topic, typename) in chans.items()
+        }
         last_ns, seen = -1, set()
+        dmg = self._damage
         with open(self.path, "rb") as f:
             try:
-                for cid, seq, t_ns, payload in indexed_messages(
-                    f, s, set(chans), start_ns, self._damage
-                ):
-                    if t_ns != last_ns:
-                        last_ns, seen = t_ns, set()
-                    seen.add((cid, seq))
-                    out = self._decode(*chans[cid], t_ns, payload)
-                    if out is not None:
-                        yield out
+                for batch in indexed_messages(f, s, set(chans), start_ns, dmg):
+                    for t_ns, cid, seq, payload in batch:
+                        if t_ns != last_ns:
+                            last_ns, seen = t_ns, set()
+                        seen.add((cid, seq))
+                        topic, typename, fn = fns[cid]
+                        if fn is None:
+                            dmg.undecodable += 1
+                            continue
+                        try:
+                            msg = fn(payload)
+                        except Exception:  # truncated or inconsistent payload
+                            dmg.undecodable += 1
+                            continue
+                        yield LogMessage(topic, t_ns / 1e9, typename, msg, t_ns)
                 return
             except IndexMismatch as exc:
                 mismatch = exc
@@ -249,13 +260,18 @@ class LogReader:
                     if out is not None:
                         yield out
 
+    def _decoder(self, typename: str) -> Callable[[Any], Any] | None:
+        """The payload decoder of a type (None: a type the typestore does not know)."""
+        if typename not in self._decoders:
+            known = typename in typestore().types
+            self._decoders[typename] = decoder(typename) if known else None
+        return self._decoders[typename]
+
     def _decode(self, topic: str, typename: str, t_ns: int, payload: Any) -> LogMessage | None:
-        fn = self._decoders.get(typename)
+        fn = self._decoder(typename)
         if fn is None:
-            if typename not in typestore().types:
-                self._damage.undecodable += 1
-                return None
-            fn = self._decoders[typename] = decoder(typename)
+            self._damage.undecodable += 1
+            return None
         try:
             msg = fn(payload)
         except Exception:  # truncated or inconsistent payload (CdrError, rosbags' errors)
