@@ -160,7 +160,8 @@ def bench_run(log: Path, base_rev: str) -> None:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
-    ap.add_argument("--real", type=Path, default=ROOT.parent.parent / "shared" / "data" / "real")
+    real = [p / "shared" / "data" / "real" for p in (ROOT.parent, ROOT.parent.parent)]
+    ap.add_argument("--real", type=Path, default=next((p for p in real if p.is_dir()), real[0]))
     ap.add_argument("--base", default=None, help="revision to compare `run` against")
     ap.add_argument("--no-run", action="store_true", help="skip the `run` comparison")
     ap.add_argument("--log", type=Path, default=None, help="paper log (else simulated)")

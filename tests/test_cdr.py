@@ -8,6 +8,7 @@ bytes must be rosbags' bytes. Truncated or inconsistent payloads raise."""
 from __future__ import annotations
 
 import struct
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -221,3 +222,39 @@ def _default(typename: str):
         M.IMAGE: lambda: msgtype(M.IMAGE)(h, 1, 2, "mono8", 0, 2, np.ones(2, np.uint8)),
         M.RANGE: lambda: msgtype(M.RANGE)(h, 1, 0.5, 0.25, 5.0, 2.0),
     }[typename]()
+
+
+# the real logs beside the checkout (../shared), or beside its parent for a worktree
+REAL = next(
+    (
+        p / "shared" / "data" / "real"
+        for p in Path(__file__).resolve().parents[1:4]
+        if (p / "shared" / "data" / "real").is_dir()
+    ),
+    Path("/nonexistent"),
+)
+
+
+@pytest.mark.parametrize("name", ["mrclam6-robot2", "carmen-fr079"])
+def test_real_logs_read_as_mcap_and_rosbags_read_them(name) -> None:
+    """On a real log (skipped when absent): the first 3000 messages of every topic read by
+    LogReader equal those of the mcap library + rosbags, with Unix-time stamps kept to
+    the nanosecond (``t_ns``)."""
+    from mcap.reader import make_reader
+
+    from fuzzyslam.streams.reader import LogReader
+
+    log = REAL / name / "log.mcap"
+    if not log.exists():
+        pytest.skip(f"{log} absent")
+    got = [m for m, _ in zip(LogReader(log).messages(), range(3000), strict=False)]
+    with open(log, "rb") as f:
+        it = make_reader(f).iter_messages(log_time_order=True)
+        ref = [
+            (c.topic, m.log_time, deserialize(m.data, s.name))
+            for (s, c, m), _ in zip(it, got, strict=False)
+        ]
+    assert [(m.topic, m.t_ns) for m in got] == [(t, ns) for t, ns, _ in ref]
+    assert got[0].t_ns > 10**18 and got[0].t == got[0].t_ns / 1e9  # Unix time, exact ns
+    for m, (_, _, msg) in zip(got, ref, strict=True):
+        same(msg, m.msg)

@@ -18,8 +18,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
-from typing import Any
+from typing import Any, NamedTuple
 
 from mcap.records import Attachment, Channel, Message, Metadata, Schema
 
@@ -39,9 +38,10 @@ from fuzzyslam.streams.typestore import normalise_typename, typestore
 __all__ = ["MCAP_MAGIC", "LogMessage", "LogReader"]
 
 
-@dataclass(frozen=True, slots=True)
-class LogMessage:
-    """One decoded message: topic, log time (s, and exact ns), ROS type name, message."""
+class LogMessage(NamedTuple):
+    """One decoded message: topic, log time (s, and exact ns), ROS type name, message.
+
+    (Immutable; a named tuple, which costs a third of a frozen dataclass to make.)"""
 
     topic: str
     t: float
