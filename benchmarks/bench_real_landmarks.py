@@ -62,7 +62,7 @@ def main() -> None:
                   f"{h['lamps_true_within_0.5_m']:5d} {h['lamps_left_over']:4d} "
                   f"{h['nees_mean']:6.2f} "
                   f"{'' if over is None else f'{over * (cov[-1, 0] - cov[0, 0]):.0f}':>10s} "
-                  f"{str(s['filter_health']['diverged']):>8s} {s['real_time_factor']:6.1f}")
+                  f"{s['filter_health']['diverged']!s:>8s} {s['real_time_factor']:6.1f}")
 
 
 if __name__ == "__main__":

@@ -42,7 +42,7 @@ def make_summary(
         ),
         "trajectory_rows": streamed.rows,
         "warnings": dict(sorted(inputs.warnings.items())),
-        "truncated_log": bool(inputs.reader.truncated),
+        "truncated_log": inputs.reader.damage()["truncated"],
         "log_damage": inputs.reader.damage(),
         "wall_time_s": round(wall, 3),
         "real_time_factor": round(duration / wall, 1) if wall > 0 else None,
