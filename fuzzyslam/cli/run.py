@@ -64,8 +64,16 @@ def _build_aids(
     help="Log time (s) from which the fixes are applied. Default: the map's freeze time "
     "(e.g. 0 to use a map frozen on another log of the same world from the start).",
 )
+@click.option(
+    "--adapt-noise",
+    is_flag=True,
+    help="Estimate the detection noise from the log's innovations in a first pass and run "
+    "again with it (logs with PoseArray detections; not with --map).",
+)
 @seed_option
-def run_command(log: Path, outdir: Path, config: str | None, map_dir, fix, fix_from, seed) -> None:
+def run_command(
+    log: Path, outdir: Path, config: str | None, map_dir, fix, fix_from, adapt_noise, seed
+) -> None:
     """EKF-SLAM on ceiling lamps over the recorded LOG (MCAP), written into OUTDIR.
 
     \b
@@ -86,4 +94,6 @@ def run_command(log: Path, outdir: Path, config: str | None, map_dir, fix, fix_f
 
     cfg = load_config(config, seed)
     aids = _build_aids(map_dir, fix, cfg, log, fix_from)
-    emit(run_stage(log, outdir, cfg, aids))
+    if adapt_noise and aids:
+        raise click.UsageError("--adapt-noise cannot be combined with heading or pose fixes")
+    emit(run_stage(log, outdir, cfg, aids, adapt_noise=adapt_noise))

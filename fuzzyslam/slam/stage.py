@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import copy
 import os
 import time
 
@@ -11,8 +12,9 @@ import numpy as np
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, check_outputs
-from fuzzyslam.progress import Progress
+from fuzzyslam.progress import Progress, note
 from fuzzyslam.slam.io import StreamingOutputs, open_inputs, write_outputs, write_summary
+from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
 
 # files a run writes only with some options: an old one would be mixed with a new run
@@ -32,7 +34,7 @@ def make_summary(
         "start_pose": [float(v) for v in inputs.start_pose],
         "log_duration_s": round(duration, 3),
         "counts": res.counts,
-        "filter_health": getattr(res, "health", {}),
+        "filter_health": res.health,
         "lamps": len(res.lamps),
         "duplicates_guarded": res.counts["duplicates_guarded"],
         "mean_nis_lamp": streamed.lamp_nis.mean(),
@@ -43,13 +45,16 @@ def make_summary(
         ),
         "trajectory_rows": streamed.rows,
         "warnings": dict(sorted(inputs.warnings.items())),
-        "truncated_log": bool(inputs.reader.truncated),
+        "truncated_log": inputs.reader.damage()["truncated"],
         "log_damage": inputs.reader.damage(),
         "wall_time_s": round(wall, 3),
         "real_time_factor": round(duration / wall, 1) if wall > 0 else None,
     }
     if inputs.first_problem:
         out["first_warning"] = inputs.first_problem
+    est = res.noise_estimate
+    if inputs.lamp_source == "detections":
+        out["noise_estimate"] = est.as_dict() if est is not None else None
     if aids:
         out["aids"] = {type(a).__name__: a.summary() for a in aids}
         out["rings"] = inputs.ring_stats.as_dict()
@@ -57,13 +62,70 @@ def make_summary(
 
 
 def run_stage(
-    log: str | os.PathLike, outdir: str | os.PathLike, cfg: Config, aids: list | None = None
+    log: str | os.PathLike,
+    outdir: str | os.PathLike,
+    cfg: Config,
+    aids: list | None = None,
+    adapt_noise: bool = False,
 ) -> dict:
     """Run EKF-SLAM on ``log`` and write contracts.md sec. 2 files into ``outdir``.
 
     The rows are streamed into the staging directory of ``OutputDir`` as they come
     (:class:`StreamingOutputs`: memory flat in the log length); the directory replaces
-    the outputs only when everything is written, so an error or Ctrl-C leaves nothing."""
+    the outputs only when everything is written, so an error or Ctrl-C leaves nothing.
+
+    ``adapt_noise``: a first pass estimates the detection noise from the innovations
+    (``slam.noise``); the outputs come from a second pass with that noise (the summary's
+    ``noise_adapted`` gives it). Without it, a configured noise that the innovations
+    contradict is told on stderr in one line (which keys to change, to what)."""
+    if adapt_noise:
+        if aids:
+            raise ValueError("adapt_noise: the aids of a first pass cannot be reused")
+        first = _run_once(log, outdir, cfg, [], _quiet=True)
+        est = first.get("noise_estimate")
+        if est:
+            cfg = copy.deepcopy(cfg)
+            for key in (
+                "detection_sigma_range",
+                "detection_sigma_range_per_m",
+                "detection_sigma_bearing_deg",
+            ):
+                if est[key] is not None:  # None: not measurable (slam.noise)
+                    setattr(cfg.slam, key, float(est[key]))
+        summary = _run_once(log, outdir, cfg, [], _quiet=True)
+        summary["noise_adapted"] = est
+        _tell(summary)
+        return summary
+    return _run_once(log, outdir, cfg, aids, _quiet=False)
+
+
+def _tell(summary: dict, cfg: Config | None = None) -> None:
+    """The one-line notes on stderr: the filter in trouble, the noise to change."""
+    health = summary.get("filter_health", {})
+    if health.get("diverged"):
+        note(
+            f"filter_health: the filter looks inconsistent from t = {health['diverged_at']:.3f} s "
+            "(NIS or association windows out of bounds; see the summary's filter_health): "
+            "do not trust this estimate"
+        )
+    est = summary.get("noise_estimate")
+    if cfg is not None and est:
+        line = suggestion(
+            DetectionNoiseEstimate(
+                est["samples"],
+                est["detection_sigma_range"],
+                est["detection_sigma_range_per_m"],
+                est["detection_sigma_bearing_deg"],
+            ),
+            cfg.slam,
+        )
+        if line:
+            note(line)
+
+
+def _run_once(
+    log: str | os.PathLike, outdir: str | os.PathLike, cfg: Config, aids: list, _quiet: bool
+) -> dict:
     aids = list(aids or [])
     wall0 = time.perf_counter()
     check_outputs([log], [outdir])
@@ -77,6 +139,8 @@ def run_stage(
         write_outputs(tmp, streamed, res, extra)
         summary = make_summary(res, inputs, time.perf_counter() - wall0, aids, streamed)
         write_summary(tmp, summary)
+    if not _quiet:
+        _tell(summary, cfg)
     return summary
 
 
@@ -99,6 +163,7 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs) -> Slam
     finally:
         cv2.setNumThreads(threads)
     res.ekf.check_covariance()
+    res.noise_estimate = runner.noise.estimate()
     res.health = {  # numerical guards and the divergence test (slam/health.py)
         **res.ekf.guards,
         **runner.health.summary(),

@@ -33,6 +33,13 @@ def write_tum(path: str | os.PathLike, t: np.ndarray, poses: np.ndarray) -> None
 
 def read_tum(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     """Read a TUM file: times (N,) and planar poses (N, 3) (yaw from the quaternion)."""
+    t, poses, _planar = read_tum_planar(path)
+    return t, poses
+
+
+def read_tum_planar(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, bool]:
+    """:func:`read_tum` and whether the file is planar (z = 0 and a yaw-only quaternion,
+    within 1 mm and 1e-3); a 3-D trajectory is read as its projection on the plane."""
     p = check_input_file(path, "trajectory")
     rows = []
     try:
@@ -60,4 +67,6 @@ def read_tum(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
     if np.any(np.diff(t) < 0):
         raise InputError(p, "timestamps are not in increasing order")
     yaw = np.asarray(quaternion_to_yaw(a[:, 4:8])).reshape(-1)
-    return t, np.column_stack([a[:, 1], a[:, 2], yaw])
+    q = a[:, 4:8] / np.linalg.norm(a[:, 4:8], axis=1, keepdims=True)
+    planar = bool(np.all(np.abs(a[:, 3]) <= 1e-3) and np.all(np.abs(q[:, :2]) <= 1e-3))
+    return t, np.column_stack([a[:, 1], a[:, 2], yaw]), planar
