@@ -1,3 +1,17 @@
-from fuzzyslam.cli import main
+"""``python -m fuzzyslam``: the CLI. A Ctrl-C while its modules are still loading exits
+as one later does (130, one line), not as an uncaught KeyboardInterrupt."""
 
-main()
+import sys
+
+try:
+    from fuzzyslam.cli import main
+    from fuzzyslam.errors import EXIT_INTERRUPTED
+except KeyboardInterrupt:
+    sys.stderr.write("fuzzyslam: interrupted; no partial outputs were kept\n")
+    sys.exit(130)
+
+try:
+    main()
+except KeyboardInterrupt:  # between main's own handlers and its exit
+    sys.stderr.write("fuzzyslam: interrupted; no partial outputs were kept\n")
+    sys.exit(EXIT_INTERRUPTED)
