@@ -1,6 +1,6 @@
 """Fault-injection benchmark (issue 14): random variants of each failure class, counted.
 
-    python benchmarks/bench_faults.py [--variants 4] [--seed 0] [--classes 1,2,4,5,6,7]
+    python benchmarks/bench_faults.py [--variants 4] [--seed 0] [--classes 1,2,3,4,5,6,7]
                                       [--workdir DIR] [--keep]
 
 Each trial runs one ``fuzzyslam`` command in a child process (30 s timeout) on a short
@@ -25,9 +25,13 @@ simulated log, with a fault injected for real, and checks what the CLI promises:
 7. exit codes: an unreadable log (as an unprivileged user, root only), junk logs of
    random bytes. Expected: exit 3, one line naming the file.
 
-Class 3 (corrupt MCAP structure) is benchmarked with the fast reader's rewrite
-(branch h-streams), not here. Prints, per class, the counts: tried, wrong exit code,
-output lost or mixed, hang > 30 s, silent wrong result; exits 1 if any is not 0.
+3. corrupt structure: a random bit flipped in a chunk's header fields, a chunk index's
+   chunk offset moved by +-64 KiB, a message index whose length is not a multiple of 16.
+   Expected: ``run`` exits 0 or 3, never 1; with exit 0, a result that differs from the
+   clean run's must come with ``log_damage`` saying so.
+
+Prints, per class, the counts: tried, wrong exit code, output lost or mixed, hang > 30 s,
+silent wrong result; exits 1 if any is not 0.
 """
 
 from __future__ import annotations
@@ -40,6 +44,7 @@ import resource
 import shutil
 import signal
 import socket
+import struct
 import subprocess
 import sys
 import tempfile
@@ -252,6 +257,54 @@ class Bench:
         if node.name == "sock":
             shutil.rmtree(node.parent)
 
+    # -- class 3: corrupt MCAP structure ----------------------------------------------------
+
+    def records(self) -> list[tuple[int, int, int]]:
+        """(opcode, offset, content length) of the micro log's records, walked from the
+        magic to the footer."""
+        data = self.log.read_bytes()
+        out, pos = [], 8
+        while pos + 9 <= len(data) - 8:
+            op, length = data[pos], struct.unpack_from("<Q", data, pos + 1)[0]
+            out.append((op, pos, length))
+            if op == 0x02:  # footer
+                break
+            pos += 9 + length
+        return out
+
+    def class3(self, c: Counts) -> None:
+        d = self.trial_dir()
+        data = bytearray(self.log.read_bytes())
+        recs = self.records()
+        kind = self.rng.choice(["chunk header", "chunk index offset", "message index length"])
+        if kind == "chunk header":
+            _, off, _ = self.rng.choice([r for r in recs if r[0] == 0x06])
+            byte = off + 1 + self.rng.randrange(0, 8 + 8 + 8 + 8 + 4 + 4)  # length .. compression
+            data[byte] ^= 1 << self.rng.randrange(8)
+        elif kind == "chunk index offset":
+            _, off, _ = self.rng.choice([r for r in recs if r[0] == 0x08])
+            field_ = off + 9 + 16  # message_start_time, message_end_time, chunk_start_offset
+            value = struct.unpack_from("<Q", data, field_)[0] + self.rng.choice([-1, 1]) * 65536
+            struct.pack_into("<Q", data, field_, max(value, 0))
+        else:
+            _, off, _ = self.rng.choice([r for r in recs if r[0] == 0x07])
+            field_ = off + 9 + 2  # channel_id, then the byte length of the entries
+            value = struct.unpack_from("<I", data, field_)[0]
+            struct.pack_into("<I", data, field_, value + self.rng.choice([1, 8, 15]))
+        log = d / "corrupt.mcap"
+        log.write_bytes(bytes(data))
+        r = fuzzyslam(["run", log, "-o", d / "est", "--config", self.cfg], d)
+        right = True
+        if r.code == 0:
+            s = json.loads(r.stdout)
+            dmg = s.get("log_damage", {})
+            damaged = any(dmg.get(k) for k in ("truncated", "lost_bytes", "damaged_records",
+                                                "undecodable"))
+            same = s["counts"] == self.run_summary["counts"]
+            right = same or damaged
+        ok_code = r.code in (0, 3)
+        self.judge(c, r, r.code if ok_code else 3, ok_code, True, kind, right)
+
     # -- class 4: implausible sensor values ---------------------------------------------------
 
     def class4(self, c: Counts) -> None:
@@ -443,7 +496,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("--variants", type=int, default=4, help="random variants per class")
     ap.add_argument("--seed", type=int, default=0)
-    ap.add_argument("--classes", default="1,2,4,5,6,7")
+    ap.add_argument("--classes", default="1,2,3,4,5,6,7")
     ap.add_argument("--workdir", type=Path, default=None)
     ap.add_argument("--keep", action="store_true", help="keep the work directory")
     a = ap.parse_args()
