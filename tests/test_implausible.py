@@ -155,3 +155,30 @@ def test_implausible_sonar_readings_are_counted(tiny, tmp_path: Path) -> None:
     assert s["implausible"] == far.hits
     assert s["bad_fov"] == clean["bad_fov"] + wide.hits
     assert s["readings"] == clean["readings"]
+
+
+@pytest.mark.parametrize("which", ["first", "middle"])
+def test_map_reports_a_corrupt_chunk(tiny, tmp_path: Path, which: str) -> None:
+    """A chunk with 8 flipped bytes: map runs on the rest and its summary says what was
+    lost (log_damage), with fewer rings than the clean log (not silently missing)."""
+    import shutil
+
+    from mcap.reader import make_reader
+
+    with open(tiny.log, "rb") as f:
+        chunks = sorted(
+            (c.chunk_start_offset, c.chunk_length)
+            for c in make_reader(f).get_summary().chunk_indexes
+        )
+    assert len(chunks) >= 3
+    start, length = chunks[0] if which == "first" else chunks[len(chunks) // 2]
+    log = tmp_path / "corrupt.mcap"
+    shutil.copyfile(tiny.log, log)
+    with open(log, "r+b") as f:
+        f.seek(start + length // 2)
+        raw = f.read(8)
+        f.seek(start + length // 2)
+        f.write(bytes(b ^ 0xFF for b in raw))
+    s = map_json(tiny, log, tmp_path / "fgm")
+    assert s["log_damage"]["damaged_records"] >= 1 and s["log_damage"]["lost_bytes"] > 0
+    assert s["sonar_stats"]["rings"] < tiny.map["sonar_stats"]["rings"]
