@@ -21,6 +21,7 @@ import zlib
 from dataclasses import dataclass
 from pathlib import Path
 
+import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
@@ -126,23 +127,35 @@ def base(tmp_path_factory) -> Base:
     return Base(d, log, data, chunks, d / "est", d / "fgm", run, json.loads(out))
 
 
-def run_both(base: Base, data: bytes, td: Path) -> tuple[dict | None, dict | None]:
-    """``run`` and ``run --map`` on ``data``: their summaries (None: exit 3, one line)."""
+def run_all(base: Base, data: bytes, td: Path) -> tuple[dict | None, ...]:
+    """``run``, ``run --map`` and ``map`` (on the intact run's trajectory) on ``data``:
+    their summaries (None: exit 3 with one line), outputs in ``td``."""
     log = td / "bad.mcap"
     log.write_bytes(data)
     out = []
-    for extra in ([], ["--map", base.fgm]):
-        est = td / f"est{len(extra)}"
-        code, stdout, stderr = cli("run", log, "-o", est, *extra)
+    commands = {
+        "est0": ["run", log, "-o", td / "est0"],
+        "est2": ["run", log, "-o", td / "est2", "--map", base.fgm],
+        "fgm": ["map", log, "--trajectory", base.est / "trajectory.tum", "-o", td / "fgm"],
+    }
+    for name, args in commands.items():
+        code, stdout, stderr = cli(*args, *(["--no-figures"] if name == "fgm" else []))
         lines = [ln for ln in stderr.splitlines() if ln.strip()]
         assert code in (0, 3), stderr  # never 1 (an internal error)
         if code == 3:
             assert len(lines) == 1 and str(log) in lines[0], stderr
-            assert not est.exists()
+            assert not (td / name).exists()
             out.append(None)
         else:
             out.append(json.loads(stdout))
-    return out[0], out[1]
+    return out[0], out[1], out[2]
+
+
+def same_map(a: Path, b: Path) -> None:
+    with np.load(a / "fgm.npz") as x, np.load(b / "fgm.npz") as y:
+        assert sorted(x.files) == sorted(y.files)
+        for k in x.files:
+            assert np.array_equal(x[k], y[k]), k
 
 
 def same_outputs(a: Path, b: Path) -> None:
@@ -173,8 +186,8 @@ def test_bit_flip_in_a_chunk_header_length(base: Base, field: str, bit: int) -> 
         bit %= 8 * width
     data[at + bit // 8] ^= 1 << (bit % 8)
     with tempfile.TemporaryDirectory() as td:
-        run, run_map = run_both(base, bytes(data), Path(td))
-        for s in (run, run_map):
+        run, run_map, fgm = run_all(base, bytes(data), Path(td))
+        for s in (run, run_map, fgm):
             assert s is not None  # most of the log is intact
             dmg = s["log_damage"]
             assert dmg["damaged_records"] >= 1
@@ -200,14 +213,15 @@ def test_chunk_index_offset_off_by_64k(base: Base, crc: bool) -> None:
     if crc:
         fix_summary_crc(data)
     with tempfile.TemporaryDirectory() as td:
-        run, run_map = run_both(base, bytes(data), Path(td))
-        for s in (run, run_map):
+        run, run_map, fgm = run_all(base, bytes(data), Path(td))
+        for s in (run, run_map, fgm):
             assert s is not None
             assert s["log_damage"]["truncated"] == (not crc)
             if crc:
                 assert s["log_damage"]["damaged_records"] == 1
         same_outputs(base.est, Path(td) / "est0")
         same_outputs(base.dir / "est_map", Path(td) / "est2")
+        same_map(base.fgm, Path(td) / "fgm")
 
 
 @pytest.mark.slow
@@ -223,12 +237,14 @@ def test_message_index_length_not_a_multiple_of_16(base: Base, extra: int) -> No
     length, _ch, n = struct.unpack_from("<QHI", data, at + 1)
     struct.pack_into("<QHI", data, at + 1, length + extra, cid, n + extra)
     with tempfile.TemporaryDirectory() as td:
-        run, run_map = run_both(base, bytes(data), Path(td))
+        run, run_map, fgm = run_all(base, bytes(data), Path(td))
         for s in (run, run_map):
             assert s is not None and s["log_damage"]["damaged_records"] == 1
             assert not s["log_damage"]["truncated"]
+        assert fgm["log_damage"]["damaged_records"] == 0  # map reads no joint states
         same_outputs(base.est, Path(td) / "est0")
         same_outputs(base.dir / "est_map", Path(td) / "est2")
+        same_map(base.fgm, Path(td) / "fgm")
 
 
 def index_region(base: Base) -> list[tuple[int, int]]:
@@ -298,6 +314,6 @@ def test_random_flips_in_the_index_region_never_exit_1(base: Base) -> None:
     @given(flips(base))
     def check(case) -> None:
         with tempfile.TemporaryDirectory() as td:
-            run_both(base, damaged(base, *case), Path(td))
+            run_all(base, damaged(base, *case), Path(td))
 
     check()
