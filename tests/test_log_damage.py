@@ -28,6 +28,7 @@ from hypothesis import strategies as st
 
 from fuzzyslam.cli import main
 from fuzzyslam.streams.reader import LogReader
+from fuzzyslam.streams.typestore import deserialize
 
 SAMPLE = Path(__file__).resolve().parents[1] / "data" / "sample.mcap"
 FOOTER_TAIL = 8 + 29  # footer record (opcode, length, 2 x u64, crc) + magic
@@ -317,3 +318,58 @@ def test_random_flips_in_the_index_region_never_exit_1(base: Base) -> None:
             run_all(base, damaged(base, *case), Path(td))
 
     check()
+
+
+@pytest.mark.parametrize(
+    "variant", ["no-chunking", "no-message-index", "no-chunk-index", "lz4", "no-compression"]
+)
+def test_files_written_without_some_indexes_are_read_whole(tmp_path: Path, variant: str) -> None:
+    """Valid MCAP written by the mcap library without chunks, Message Indexes or Chunk
+    Indexes, or with other compressions: every message read, in log-time order, no
+    damage (the index is an optimisation, never a requirement)."""
+    from mcap.reader import make_reader
+    from mcap.writer import CompressionType, IndexType, Writer
+
+    src: list = []
+    with open(SAMPLE, "rb") as f:
+        for schema, channel, m in make_reader(f).iter_messages(log_time_order=True):
+            src.append((schema, channel, m))
+            if len(src) == 3000:
+                break
+    kw: dict = {"chunk_size": 64 * 1024}
+    if variant == "no-chunking":
+        kw["use_chunking"] = False
+    elif variant == "no-message-index":
+        kw["index_types"] = IndexType.ALL & ~IndexType.MESSAGE
+    elif variant == "no-chunk-index":
+        kw["index_types"] = IndexType.ALL & ~IndexType.CHUNK
+    else:
+        kw["compression"] = CompressionType.LZ4 if variant == "lz4" else CompressionType.NONE
+    log = tmp_path / "variant.mcap"
+    with open(log, "wb") as f:
+        w = Writer(f, **kw)
+        w.start(profile="ros2", library="test")
+        schemas: dict = {}
+        channels: dict = {}
+        for schema, channel, m in src:
+            if schema.name not in schemas:
+                schemas[schema.name] = w.register_schema(schema.name, schema.encoding, schema.data)
+            if channel.topic not in channels:
+                channels[channel.topic] = w.register_channel(
+                    channel.topic, channel.message_encoding, schemas[schema.name]
+                )
+            w.add_message(channels[channel.topic], m.log_time, m.data, m.publish_time, m.sequence)
+        w.finish()
+    r = LogReader(log)
+    got = [(m.topic, m.t_ns) for m in r.messages()]
+    assert got == [(c.topic, m.log_time) for _s, c, m in src]
+    t0 = src[1500][2].log_time
+    sonar = [m.msg.range for m in r.messages(["/sonar/s03"], start=t0 / 1e9)]
+    ref = [
+        deserialize(m.data, s.name).range
+        for s, c, m in src
+        if c.topic == "/sonar/s03" and m.log_time >= t0
+    ]
+    assert len(ref) > 10 and np.array_equal(sonar, ref, equal_nan=True)
+    d = r.damage()
+    assert d["damaged_records"] == d["lost_bytes"] == d["undecodable"] == 0
