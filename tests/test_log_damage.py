@@ -410,3 +410,38 @@ def test_files_written_without_some_indexes_are_read_whole(tmp_path: Path, varia
     assert len(ref) > 10 and np.array_equal(sonar, ref, equal_nan=True)
     d = r.damage()
     assert d["damaged_records"] == d["lost_bytes"] == d["undecodable"] == 0
+
+
+def test_chunks_overlapping_in_time_are_merged_in_log_time_order(tmp_path: Path) -> None:
+    """A file whose chunks overlap in time (messages written out of time order, as a
+    recorder flushing two buffers may): the messages still come in log-time order, as
+    the mcap library's log-time-ordered reader gives them."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+
+    from fuzzyslam.streams import messages as M
+    from fuzzyslam.streams.typestore import msgdef, serialize
+
+    log = tmp_path / "overlap.mcap"
+    with open(log, "wb") as f:
+        w = Writer(f, chunk_size=2048)
+        w.start(profile="ros2", library="test")
+        sid = w.register_schema(M.RANGE, "ros2msg", msgdef(M.RANGE).encode())
+        ca = w.register_channel("/sonar/s00", "cdr", sid)
+        cb = w.register_channel("/sonar/s01", "cdr", sid)
+        for cid, times in ((ca, range(0, 400, 2)), (cb, range(101, 501, 2))):
+            for seq, k in enumerate(times):
+                data = serialize(M.range_msg(k / 100, "s", k / 100, 0.4, 0.1, 5.0), M.RANGE)
+                w.add_message(cid, k * 10_000_000, data, k * 10_000_000, seq)
+        w.finish()
+    with open(log, "rb") as f:
+        ref = [
+            (c.topic, m.log_time) for _s, c, m in make_reader(f).iter_messages(log_time_order=True)
+        ]
+    assert [m.t_ns for m in ref and []] == [] and ref != sorted(ref, key=lambda x: x[0])
+    r = LogReader(log)
+    got = [(m.topic, m.t_ns) for m in r.messages()]
+    assert got == ref and [t for _, t in got] == sorted(t for _, t in got)
+    assert next(m.msg.range for m in r.messages(["/sonar/s01"], start=2.0)) == np.float32(2.01)
+    d = r.damage()
+    assert d["damaged_records"] == d["lost_bytes"] == 0
