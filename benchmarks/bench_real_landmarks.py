@@ -55,7 +55,7 @@ def main() -> None:
                           log / "landmarks_truth.yaml", "-o", ev)
             m = json.loads((ev / "metrics.json").read_text())
             dr = m["odometry"]["position_m"]
-            cov = np.loadtxt(run / "covariance.csv", delimiter=",", skiprows=1)
+            cov = np.loadtxt(run / "covariance.csv", delimiter=",", skiprows=1, ndmin=2)
             nees_t = m["phases"]["overall"]["nees"]
             over = nees_t.get("frac_above_100", None)
             print(f"{log.name:16s} {h['ape_aligned_rmse_m']:6.3f} {dr['rmse']:6.3f} "

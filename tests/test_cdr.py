@@ -96,33 +96,33 @@ def odometry(draw):
     )
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(odometry())
 def test_odometry(msg) -> None:
     roundtrip(msg, M.ODOMETRY)
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(HEADERS, st.lists(POSES, max_size=4))
 def test_pose_array(h, poses) -> None:
     roundtrip(msgtype(M.POSE_ARRAY)(header=h, poses=poses), M.POSE_ARRAY)
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(HEADERS, st.lists(F32, min_size=7, max_size=7), f32_array(), f32_array())
 def test_laser_scan(h, f, ranges, intensities) -> None:
     msg = msgtype("sensor_msgs/msg/LaserScan")(h, *f, ranges, intensities)
     roundtrip(msg, "sensor_msgs/msg/LaserScan")
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(HEADERS, st.lists(TEXT, max_size=4), f64_array(), f64_array(), f64_array())
 def test_joint_state(h, names, pos, vel, eff) -> None:
     msg = msgtype(M.JOINT_STATE)(header=h, name=names, position=pos, velocity=vel, effort=eff)
     roundtrip(msg, M.JOINT_STATE)
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(
     HEADERS,
     st.integers(0, 2**32 - 1),
@@ -145,7 +145,7 @@ def test_image(h, height, width, encoding, big, step, data) -> None:
     roundtrip(msg, M.IMAGE)
 
 
-@settings(max_examples=150, deadline=None)
+@settings(max_examples=80, deadline=None)
 @given(HEADERS, st.integers(0, 255), st.lists(F32, min_size=4, max_size=4))
 def test_range(h, kind, f) -> None:
     msg = msgtype(M.RANGE)(h, kind, *f)
@@ -235,6 +235,7 @@ REAL = next(
 )
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", ["mrclam6-robot2", "carmen-fr079"])
 def test_real_logs_read_as_mcap_and_rosbags_read_them(name) -> None:
     """On a real log (skipped when absent): the first 3000 messages of every topic read by

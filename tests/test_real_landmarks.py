@@ -326,3 +326,20 @@ def test_evaluate_aligns_a_real_run_and_scores_its_landmarks(tmp_path):
     assert h["lamps_left_over"] == 0 and h["lamp_error_mean_m"] < 1e-6
     used = np.loadtxt(tmp_path / "ev" / "truth.tum")
     assert np.allclose(used[:, 1:3], truth[:, :2], atol=1e-6)
+
+
+def test_orphan_landmarks_flag_a_map_that_forgets_itself():
+    """Landmarks seen in only a few frames, born one after another: flagged from the birth
+    at which they are more than 5 and more than 30 % of the map; a map whose landmarks
+    are re-observed is not."""
+    from fuzzyslam.slam.health import orphan_landmarks
+
+    born = np.arange(20.0)
+    healthy = np.full(20, 50)
+    healthy[[3, 9]] = 4  # two landmarks glimpsed once: allowed
+    assert orphan_landmarks(born, healthy) == (2, None)
+    forgetful = np.full(20, 50)
+    forgetful[10:] = 3  # from t = 10 every new landmark is abandoned
+    n, at = orphan_landmarks(born, forgetful)
+    # orphans 1..10 over 11..20 landmarks: > 5 and > 30 % first at the 6th orphan (t = 15)
+    assert n == 10 and at == 15.0

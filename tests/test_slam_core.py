@@ -369,3 +369,17 @@ def test_inline_wheel_odometry_equals_robot_model():
         ours = LogInputs._wheel_odometry(inputs, dl, dr)
         ref = wheel_increments_to_odometry(dl, dr, cfg.robot.wheel_radius, cfg.robot.wheel_base)
         assert np.allclose(ours, ref, rtol=1e-14, atol=0)
+
+
+def test_joint_table_equals_joint_nis():
+    """The JCBB table's sliced joint NIS equals the direct stacked computation."""
+    from fuzzyslam.slam.association import JointTable, candidates, joint_nis
+
+    rng = np.random.default_rng(11)
+    ekf = make_filter(rng, 6)
+    z = ekf.predict_lamps([0, 1, 2, 4])[0].reshape(4, 2) + rng.normal(0, 0.05, (4, 2))
+    r = np.repeat((np.eye(2) * 0.05**2)[None], 4, axis=0)
+    cands = candidates(ekf.individual_compatibility(z, r), 1e6)  # every pair
+    table = JointTable(ekf, z, r, cands)
+    for pairs in ([(0, 0)], [(0, 0), (1, 1)], [(0, 2), (2, 0), (3, 4)], [(1, 5), (3, 3)]):
+        assert table.nis(pairs) == pytest.approx(joint_nis(ekf, pairs, z, r), rel=1e-9)

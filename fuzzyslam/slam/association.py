@@ -59,6 +59,41 @@ def joint_nis(ekf: EkfSlam, pairs: list[tuple[int, int]], z: np.ndarray, r: np.n
     return float(v @ np.linalg.solve(s, v))
 
 
+class JointTable:
+    """The stacked innovation v and covariance S of every individually compatible
+    (detection, lamp) pair of a frame, computed once, so that the joint NIS of any
+    hypothesis (a set of pairs with distinct detections and lamps) is a slice of them:
+
+        v_H = (v_p)_{p in H},  S_H = (S_all)_{H, H},  NIS_H = v_H^T S_H^-1 v_H
+
+    (S_all = H_all P H_all^T + R_all with R_all block-diagonal per pair: pairs of one
+    hypothesis have distinct detections, whose noises are independent, so the slice is
+    exactly the joint S of :func:`joint_nis`). One prediction per frame instead of one
+    per node of the JCBB search.
+    """
+
+    def __init__(self, ekf: EkfSlam, z: np.ndarray, r: np.ndarray, cands: list[list[int]]):
+        self.index = {
+            (j, i): k for k, (j, i) in enumerate((j, i) for j, c in enumerate(cands) for i in c)
+        }
+        pairs = list(self.index)
+        if not pairs:
+            self.v = np.zeros(0)
+            self.s = np.zeros((0, 0))
+            return
+        det = [j for j, _ in pairs]
+        h, cols, hc = ekf.predict_lamps([i for _, i in pairs])
+        self.v = z[det].reshape(-1) - h
+        self.s = ekf.innovation_cov(cols, hc, block_diag_cov(r[det]))
+
+    def nis(self, pairs: list[tuple[int, int]]) -> float:
+        """Joint NIS of ``pairs`` (all in the table)."""
+        k = np.array([self.index[p] for p in pairs])
+        rows = np.column_stack([2 * k, 2 * k + 1]).reshape(-1)
+        v = self.v[rows]
+        return float(v @ np.linalg.solve(self.s[np.ix_(rows, rows)], v))
+
+
 def candidates(d2: np.ndarray, gate_chi2: float) -> list[list[int]]:
     """Per detection, the individually compatible lamps, nearest first."""
     return [
@@ -113,6 +148,7 @@ def jcbb(
         not pairs or joint_nis(ekf, pairs, z, r) <= joint_threshold(gate_chi2, 2 * len(pairs))
     ):
         return Association(pairs)
+    table = JointTable(ekf, z, r, cands)
     hyps: list[tuple[list[tuple[int, int]], float]] = []  # (pairs, nis) with the best count
     best_n, best_nis = 0, np.inf
 
@@ -134,7 +170,7 @@ def jcbb(
             if i in used:
                 continue
             trial = [*pairs, (j, i)]
-            jn = joint_nis(ekf, trial, z, r)
+            jn = table.nis(trial)
             if jn <= joint_threshold(gate_chi2, 2 * len(trial)):
                 used.add(i)
                 recurse(j + 1, trial, used, jn)

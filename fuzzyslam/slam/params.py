@@ -65,10 +65,6 @@ class SlamParams:
     # log-likelihood ratio: 4 = alternatives at least e^-2 = 14 % as likely); 0: off
     ambiguity_margin: float = field(default=4.0, metadata={"min": 0.0, "max": 100.0})
     tentative_hits: int = field(default=3, metadata={"min": 1})
-    # a landmark is born only from detections whose own noise (largest standard deviation
-    # of R, m) is below this: a far, noisy sighting of a cluster of landmarks would
-    # otherwise found one landmark for several and pull them together
-    birth_max_sigma: float = field(default=1.0, metadata={"min": 0.001, "max": 100.0})
     tentative_radius: float = field(default=0.3, metadata={"min": 0.01, "max": 10.0})
     tentative_timeout: float = field(default=2.0, metadata={"min": 0.0})
     # outputs: trajectory rows at least this far apart (s) between camera updates

@@ -212,7 +212,6 @@ class SlamRunner:
             "lamps_deferred": 0,
             "duplicates_guarded": 0,
             "ambiguous": 0,
-            "births_refused_uncertain": 0,
             "rings": 0,
             "aid_calls": 0,
             "out_of_order": 0,
@@ -394,10 +393,6 @@ class SlamRunner:
                     continue
             world, jr, jz = lamp_init(pose, z[j])
             cov = jr @ prr @ jr.T + jz @ r[j] @ jz.T
-            if np.linalg.eigvalsh(r[j])[-1] > self.params.birth_max_sigma**2:
-                # too uncertain to tell one landmark from a neighbour: no birth from it
-                self.counts["births_refused_uncertain"] += 1
-                continue
             if self.tentative.observe(t, world, tentative_taken, cov):
                 ekf.add_lamp(z[j], r[j])
                 self.health.observe_birth(t, prr)

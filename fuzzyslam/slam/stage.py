@@ -13,6 +13,7 @@ from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, check_outputs
 from fuzzyslam.progress import Progress, note
+from fuzzyslam.slam.health import orphan_landmarks
 from fuzzyslam.slam.io import StreamingOutputs, open_inputs, write_outputs, write_summary
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
@@ -105,8 +106,8 @@ def _tell(summary: dict, cfg: Config | None = None) -> None:
     if health.get("diverged"):
         note(
             f"filter_health: the filter looks inconsistent from t = {health['diverged_at']:.3f} s "
-            "(NIS or association windows out of bounds; see the summary's filter_health): "
-            "do not trust this estimate"
+            f"({', '.join(health.get('reasons', [])) or 'NIS or association windows'}; see "
+            "the summary's filter_health): do not trust this estimate"
         )
     est = summary.get("noise_estimate")
     if cfg is not None and est:
@@ -164,11 +165,21 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs) -> Slam
         cv2.setNumThreads(threads)
     res.ekf.check_covariance()
     res.noise_estimate = runner.noise.estimate()
-    res.health = {  # numerical guards and the divergence test (slam/health.py)
+    res.health = {  # numerical guards and the divergence tests (slam/health.py)
         **res.ekf.guards,
         **runner.health.summary(),
         "odometry_gap_s": round(inputs.gap_seconds, 3),
     }
+    orphans, orphans_at = orphan_landmarks(
+        np.array([lm.first_seen for lm in res.lamps]),
+        np.array([lm.observations for lm in res.lamps]),
+    )
+    res.health["orphan_landmarks"] = orphans
+    if orphans_at is not None:
+        res.health["reasons"].append("orphan_landmarks")
+        at = res.health["diverged_at"]
+        res.health["diverged_at"] = orphans_at if at is None else min(at, orphans_at)
+        res.health["diverged"] = True
     if res.counts["odometry"] == 0:
         raise InputError(inputs.reader.path, f"no usable odometry on {inputs.odom_topic}")
     if inputs.lamp_source == "frames" and res.counts["frames"] == 0:

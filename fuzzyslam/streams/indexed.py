@@ -175,8 +175,9 @@ def indexed_messages(
     Raises :class:`IndexMismatch` at a chunk that does not match its index."""
     chunks = [
         c
-        for c in summary.chunks
-        if c.end >= start_ns and any(cid in wanted for cid in c.message_indexes)
+        for c in summary.chunks  # a chunk without Message Indexes may hold any channel
+        if c.end >= start_ns
+        and (not c.message_indexes or any(cid in wanted for cid in c.message_indexes))
     ]
     resume = len(MCAP_MAGIC)  # end of the last chunk read whole: a record boundary
     for group in _groups(chunks):
@@ -238,6 +239,8 @@ def _entries(
 ) -> list[tuple[int, int, int, int, int]]:
     """(log time, offset, channel id, sequence, length) of the wanted messages of a chunk,
     from its Message Index records, or from a scan of its records if one is damaged."""
+    if not c.message_indexes:  # written without Message Indexes: scan the records
+        return _scan(data, wanted)
     out: list[tuple[int, int, int, int, int]] = []
     for cid, off in c.message_indexes.items():
         if cid not in wanted:

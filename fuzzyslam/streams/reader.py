@@ -185,6 +185,12 @@ class LogReader:
             for cid, (topic, schema) in s.channels.items()
             if wanted is None or topic in wanted
         }
+        if not s.chunks:  # messages outside chunks (a file written without chunking)
+            sync = chunk_offsets(s)
+            yield from self._walk_messages(
+                wanted, start_ns, self._damage, chans, data_end=s.data_end, sync=sync
+            )
+            return
         fns = {
             cid: (topic, typename, self._decoder(typename))
             for cid, (topic, typename) in chans.items()
