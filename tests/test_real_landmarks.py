@@ -114,16 +114,19 @@ def _circle_run(params: SlamParams, true_sr, true_sb_deg, seed=0, laps=2):
     return runner
 
 
+def _small_odometry_noise(**detection) -> SlamParams:
+    """Filter parameters with small odometry noise and the given detection noise."""
+    p = SlamParams(**detection)
+    p.trans_var_per_m = p.trans_var_per_rad = p.rot_var_per_rad = p.rot_var_per_m = 1e-4
+    return p
+
+
 def test_noise_estimate_recovers_the_detection_noise():
     """Covariance matching on a real EkfSlam: the estimate finds the simulated noise."""
-    p = SlamParams(
+    p = _small_odometry_noise(
         detection_sigma_range=0.02,
         detection_sigma_range_per_m=0.04,
         detection_sigma_bearing_deg=1.0,
-        trans_var_per_m=1e-4,
-        trans_var_per_rad=1e-4,
-        rot_var_per_rad=1e-4,
-        rot_var_per_m=1e-4,
     )
     runner = _circle_run(p, lambda r: 0.02 + 0.04 * r, 1.0)
     est = runner.noise.estimate()
@@ -136,15 +139,11 @@ def test_noise_estimate_recovers_the_detection_noise():
 
 def test_noise_estimate_tells_an_underestimated_noise():
     """Detections twice as noisy as configured: the one-line suggestion names the keys."""
-    p = SlamParams(
+    p = _small_odometry_noise(
         detection_sigma_range=0.01,
         detection_sigma_range_per_m=0.02,
         detection_sigma_bearing_deg=0.5,
         gate_chi2=30.0,
-        trans_var_per_m=1e-4,
-        trans_var_per_rad=1e-4,
-        rot_var_per_rad=1e-4,
-        rot_var_per_m=1e-4,
     )
     runner = _circle_run(p, lambda r: 0.02 + 0.04 * r, 1.0, seed=1)
     est = runner.noise.estimate()
