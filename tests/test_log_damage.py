@@ -260,6 +260,7 @@ def damaged(base: Base, flip: list[tuple[int, int]], crc: bool) -> bytes:
     return bytes(data)
 
 
+@pytest.mark.slow
 def test_random_flips_in_the_index_region_never_break_the_reader(base: Base) -> None:
     """The reader on random byte flips in the indexes and summary (with the summary
     CRC stale or recomputed): only InputError, and the messages are a subset of the
