@@ -13,7 +13,7 @@ zero in simulation; a real camera's image should be rectified first).
 
 ``unproject`` returns points in ``base_link`` (the lens offset added back), so the
 filter's measurement model is simply z = R(theta)^T (l - p) for a lamp at world l
-seen from pose (p, theta) (models.md sec. 3 with the offset folded in).
+seen from pose (p, theta) (docs/models.md sec. 3 with the offset folded in).
 """
 
 from __future__ import annotations

@@ -20,6 +20,8 @@ from fuzzyslam.streams.messages import MARKER_ARRAY, ODOMETRY, marker, marker_ar
 from fuzzyslam.streams.tum import write_tum
 from fuzzyslam.streams.writer import LogWriter
 
+pytestmark = pytest.mark.slow  # end to end: simulate, run and evaluate per fixture
+
 OFFSET = np.array([0.03, -0.04])  # the estimate's constant position error (m)
 SIGMA_XY, SIGMA_TH = 0.05, 0.02  # its stated standard deviations
 LAMPS = [[1.0, 0.0], [3.0, 0.0], [4.0, 1.5], [2.0, 3.0], [0.0, 1.5]]

@@ -25,6 +25,8 @@ from fuzzyslam.streams.logmeta import read_scenario
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.tum import read_tum
 
+pytestmark = pytest.mark.slow  # end to end: simulated logs, runs and maps per fixture
+
 _register()
 
 ALL_LAMPS = list(range(15))

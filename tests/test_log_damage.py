@@ -287,6 +287,7 @@ def damaged(base: Base, flip: list[tuple[int, int]], crc: bool) -> bytes:
     return bytes(data)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     "where",
     [

@@ -53,6 +53,7 @@ def built_map(one_run_log, tmp_path_factory):
     return out
 
 
+@pytest.mark.slow
 def test_map_writes_every_output(built_map):
     out = built_map
     for name in (
@@ -80,6 +81,7 @@ def test_map_writes_every_output(built_map):
     assert occupied.any() and np.all(m.pignistic_occupied()[occupied] > 0.65)
 
 
+@pytest.mark.slow
 def test_map_references_match_true_corridors(built_map):
     summary = json.loads((built_map / "summary.json").read_text())
     refs = load_references(built_map / "references.yaml")
@@ -106,6 +108,7 @@ def test_help(capsys):
         assert opt in out
 
 
+@pytest.mark.slow
 def test_trajectory_not_covering_the_rings(one_run_log, tmp_path, capsys):
     log, tum = one_run_log
     t, p = read_tum(tum)
@@ -137,6 +140,7 @@ def test_trajectory_not_covering_the_rings(one_run_log, tmp_path, capsys):
     assert (out / "fgm.npz").is_file()
 
 
+@pytest.mark.slow
 def test_unreadable_trajectory(one_run_log, tmp_path, capsys):
     log, _ = one_run_log
     bad = tmp_path / "bad.tum"
@@ -147,6 +151,7 @@ def test_unreadable_trajectory(one_run_log, tmp_path, capsys):
     assert not out.exists()
 
 
+@pytest.mark.slow
 def test_missing_sonar_stream(one_run_log, tmp_path, capsys):
     log, tum = one_run_log
     cfg = tmp_path / "nosonar.yaml"

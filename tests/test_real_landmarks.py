@@ -269,6 +269,7 @@ def test_real_excerpt_regression(excerpt_run, tmp_path):
     assert (rep / "truth.tum").is_file()
 
 
+@pytest.mark.slow
 def test_evaluate_aligns_a_real_run_and_scores_its_landmarks(tmp_path):
     """An estimate that is the truth moved by a rigid motion, landmarks moved alike:
     after --landmarks-truth every error vanishes and every landmark is found; a 3-D truth

@@ -16,6 +16,8 @@ from fuzzyslam.reproduce.execute import StepFailed, execute
 from fuzzyslam.reproduce.plan import EVALUATIONS, FULL, QUICK, Step, build_plan, critical_path
 from fuzzyslam.reproduce.table import ROWS, Row, aggregate, phase_stat, run_labels
 
+pytestmark = pytest.mark.slow  # end to end: the quick reproduce fixture runs every stage
+
 
 def cli(*args: object, cwd: Path | None = None) -> subprocess.CompletedProcess:
     return subprocess.run(

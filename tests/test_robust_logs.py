@@ -240,6 +240,7 @@ def test_damaged_chunk_with_intact_index_is_skipped_and_counted(tiny: Tiny, tmp_
     assert 0 < m["rings_used"] < tiny.map["rings_used"]
 
 
+@pytest.mark.slow
 @given(frac=st.floats(0.0, 1.0))
 @example(frac=0.0)
 @example(frac=0.001)
@@ -278,6 +279,7 @@ def test_truncated_log_runs_with_every_complete_message(tiny: Tiny, frac: float)
         assert sorted(p.name for p in out.iterdir()) == sorted(p.name for p in tiny.est.iterdir())
 
 
+@pytest.mark.slow
 @given(frac=st.floats(0.05, 1.0))
 @settings(max_examples=8, deadline=None)
 def test_truncated_log_maps_with_every_complete_ring(tiny: Tiny, frac: float) -> None:

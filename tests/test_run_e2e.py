@@ -51,6 +51,7 @@ def truth(log: Path) -> np.ndarray:
     return np.array(rows)
 
 
+@pytest.mark.slow
 def test_quick_accuracy_and_no_duplicate(quick_log, quick_run):
     out, summary = quick_run
     t, est = read_tum(out / "trajectory.tum")
@@ -72,6 +73,7 @@ def test_quick_accuracy_and_no_duplicate(quick_log, quick_run):
     assert 0.5 < summary["mean_nis_lamp"] < 3.0
 
 
+@pytest.mark.slow
 def test_output_files_follow_the_contract(quick_run):
     out, summary = quick_run
     for name in (
@@ -124,6 +126,7 @@ class CheckingAid:
         (outdir / "aid.txt").write_text(str(self.calls))
 
 
+@pytest.mark.slow
 def test_covariance_spd_through_a_whole_run_and_aid_protocol(quick_log, tmp_path):
     from fuzzyslam.slam.stage import run_stage
 
@@ -234,6 +237,7 @@ def test_wrong_image_encoding_is_a_clear_error(tmp_path):
     assert not (tmp_path / "out").exists()
 
 
+@pytest.mark.slow
 def test_reader_equals_mcap_and_rosbags(quick_log):
     """LogReader's indexed backend and fast decoders against a second implementation,
     the mcap library's reader (log-time order) and rosbags' deserializer: the same
@@ -284,6 +288,7 @@ def _mcap_messages(path: Path) -> dict:
     return out
 
 
+@pytest.mark.slow
 def test_streamed_outputs_equal_the_in_memory_path(quick_log, tmp_path, monkeypatch):
     """`run` streams its rows to files in small blocks (7 rows, 5 odometry increments
     here, so that many block boundaries are crossed); a second implementation keeps
@@ -320,6 +325,7 @@ def test_streamed_outputs_equal_the_in_memory_path(quick_log, tmp_path, monkeypa
     assert summary["mean_nis_lamp"] == pytest.approx(res.mean_nis("lamp"), rel=1e-12)
 
 
+@pytest.mark.slow
 def test_interrupted_mid_run_leaves_nothing(quick_log, tmp_path, monkeypatch):
     """Ctrl-C in the middle of the filter, after rows were streamed into the staging
     directory: no output directory, no temporary file or directory left."""

@@ -129,6 +129,7 @@ def test_metadata_first_and_consistent(tiny):
     assert np.allclose(pose_of(od.msg.pose.pose), scen.start_pose)
 
 
+@pytest.mark.slow
 def test_same_seed_same_bytes_other_seed_differs(tiny, tmp_path):
     cfg = tiny["cfg"]
     a, b = tmp_path / "a.mcap", tmp_path / "b.mcap"

@@ -66,7 +66,7 @@ def reproduce_command(
 
     \b
     Writes into OUTDIR:
-      report.md      experiment.md's table (paper, target, fuzzyslam: mean and
+      report.md      docs/experiment.md's table (paper, target, fuzzyslam: mean and
                      spread over seeds), per-seed values and the figures
       results.json   the same table, machine-readable
       summary.png    position error against time (phases A-C; all lamps off)

@@ -1,7 +1,7 @@
 """The thin edge of the fixes stage: load a frozen map directory and make ``run``'s aids.
 
 ``make_aids(fgm_dir, mode, cfg, start_time)`` is all ``fuzzyslam run --map`` needs:
-it loads ``fgm.npz`` and ``references.yaml`` (contracts.md sec. 3) with the maps stage's
+it loads ``fgm.npz`` and ``references.yaml`` (docs/contracts.md sec. 3) with the maps stage's
 ``mapio``, refuses a map that
 is missing, malformed or was never frozen (one-line :class:`InputError`), and returns
 the plug-ins for the chosen mode, sharing one FLM per ring:

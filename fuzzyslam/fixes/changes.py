@@ -1,4 +1,4 @@
-"""Change detection: new obstacles where the FLM contradicts the frozen FGM (models.md sec. 10).
+"""Change detection: new obstacles where the FLM contradicts the FGM (docs/models.md sec. 10).
 
 The paper (sec. 4) suggests the map "could be used to detect unusual obstacles or people
 walking down the corridors". Placed with the estimated pose, each FLM cell meets the

@@ -1,4 +1,4 @@
-"""Heading fixes from the frozen FGM: the paper's contribution (models.md sec. 9; paper sec. 4).
+"""Heading fixes from the frozen FGM: the paper's contribution (docs/models.md sec. 9; its sec. 4).
 
 A wall of world direction ``t_ref`` (the reference angle of the corridor the robot is
 in, from the FGM) is seen in the robot frame at ``t_local = t_ref - theta`` (the Hough
@@ -468,7 +468,7 @@ class HeadingFixAid:
         )
 
     def update_rows(self) -> list[dict[str, Any]]:
-        """The EKF update attempts, as rows of run's updates.csv (contracts.md sec. 2):
+        """The EKF update attempts, as rows of run's updates.csv (docs/contracts.md sec. 2):
         fixes that reached the filter (accepted, recovered, or refused by its NIS gate)."""
         return [
             {

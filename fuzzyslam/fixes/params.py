@@ -1,4 +1,4 @@
-"""Parameters of heading and pose fixes from the frozen fuzzy map (models.md sec. 9-10)."""
+"""Parameters of heading and pose fixes from the frozen fuzzy map (docs/models.md sec. 9-10)."""
 
 from __future__ import annotations
 
@@ -11,7 +11,7 @@ class FixParams:
 
     mode: str = field(default="heading", metadata={"choices": ["none", "heading", "pose"]})
 
-    # --- heading fixes (models.md sec. 9) ---
+    # --- heading fixes (docs/models.md sec. 9) ---
     # R = sigma^2 of one heading measurement: the scatter of FLM-vs-reference headings.
     # Measured against the simulator's truth on paper.yaml (runs 5-6, seed 0, 594 fixes in
     # corridors): mean -0.01 deg, std 1.49 deg, errors of successive rings uncorrelated
@@ -91,7 +91,7 @@ class FixParams:
     # sigma is at least 0.35 deg, above 0.7 for 10 % of the windows, whose errors are larger)
     flm_fit_sigma: bool = True
 
-    # --- full-pose fixes (models.md sec. 10) ---
+    # --- full-pose fixes (docs/models.md sec. 10) ---
     # also apply the Hough heading fixes in pose mode (the match leaves the heading free)
     pose_with_heading: bool = True
     pose_gate_chi2: float = field(default=11.34, metadata={"min": 0.1})  # 3 dof, 99 %
@@ -140,7 +140,7 @@ class FixParams:
     # match every n-th ring (amortises the cost)
     pose_every: int = field(default=1, metadata={"min": 1})
 
-    # --- change detection (models.md sec. 10) ---
+    # --- change detection (docs/models.md sec. 10) ---
     detect_changes: bool = True
     # conflict m_O(FLM) * m_E(FGM) above which a cell contradicts the map
     change_min_conflict: float = field(default=0.15, metadata={"min": 0.0, "max": 1.0})

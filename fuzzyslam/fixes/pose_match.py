@@ -1,4 +1,4 @@
-"""Full-pose fixes: correlative matching of the FLM against the frozen FGM (models.md sec. 10).
+"""Full-pose fixes: correlative matching of the FLM against the frozen FGM (docs/models.md sec. 10).
 
 Beyond the paper (its "future work"). Following E. Olson, "Real-time correlative scan
 matching", ICRA 2009, and K. Konolige, K. Chou, "Markov localization using
@@ -386,7 +386,7 @@ class PoseFixAid:
         )
 
     def update_rows(self) -> list[dict[str, Any]]:
-        """The EKF update attempts, as rows of run's updates.csv (contracts.md sec. 2)."""
+        """The EKF update attempts, as rows of run's updates.csv (docs/contracts.md sec. 2)."""
         return [
             {
                 "t": d.t,

@@ -1,6 +1,6 @@
 """Corridor references of a frozen FGM: reference angle (mod pi) and region, as plain data.
 
-``references.yaml`` (contracts.md sec. 3) holds ``{references: [{id, name, angle,
+``references.yaml`` (docs/contracts.md sec. 3) holds ``{references: [{id, name, angle,
 angle_deg, strength, region}]}`` where ``region`` is a polygon ``[[x, y], ...]`` or a
 bounding box (``[xmin, ymin, xmax, ymax]`` or ``{bbox: [...]}``). This module turns
 those dicts into :class:`Reference` objects and answers "which corridors contain this

@@ -1,4 +1,4 @@
-"""The map stage's edge: log + trajectory in, FGMDIR out (contracts.md sec. 3).
+"""The map stage's edge: log + trajectory in, FGMDIR out (docs/contracts.md sec. 3).
 
 Reads the log's sonar rings and mounts, places each ring at the trajectory's pose at
 the ring's time (linear in x, y; heading interpolated on the circle), builds the FGM up

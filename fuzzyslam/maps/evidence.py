@@ -1,4 +1,4 @@
-"""Per-reading sonar evidence on grid cells (models.md sec. 5), vectorised over a whole ring.
+"""Per-reading sonar evidence on grid cells (docs/models.md sec. 5), vectorised over a whole ring.
 
 For a reading of range r from a sensor with cone half-angle w, a cell at range rho and
 bearing phi from the sensor receives (Oriolo, Ulivi & Vendittelli, "Real-time map

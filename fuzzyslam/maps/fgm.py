@@ -1,6 +1,6 @@
 """The fuzzy global map (FGM): sonar rings placed along a trajectory, fused per cell.
 
-Per ring (models.md sec. 6; the paper's sec. 3):
+Per ring (docs/models.md sec. 6; the paper's sec. 3):
 
 1. the ring's evidence on the cells of its cones (:func:`evidence.ring_evidence`);
 2. forgetting: each touched cell's stored masses are discounted with reliability

@@ -24,7 +24,7 @@ from fuzzyslam.streams.logmeta import World
 
 
 def read_landmarks(path: Path) -> np.ndarray:
-    """(N, 2) estimated lamps of a landmarks.yaml (contracts.md sec. 2)."""
+    """(N, 2) estimated lamps of a landmarks.yaml (docs/contracts.md sec. 2)."""
     p = check_input_file(path, "landmarks")
     try:
         data = yaml.safe_load(p.read_text(encoding="utf-8"))

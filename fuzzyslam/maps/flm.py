@@ -1,7 +1,7 @@
 """The fuzzy local map (FLM): one sonar ring on a small grid in the robot frame.
 
 41 x 41 cells of 10 cm centred on the robot (base_link), from a single ring, with no
-odometry dependency (the paper's sec. 3, models.md sec. 7). The evidence and its
+odometry dependency (the paper's sec. 3, docs/models.md sec. 7). The evidence and its
 combination are the FGM's own (:func:`fuzzyslam.maps.evidence.ring_evidence`): combining
 a ring into the vacuous map is the identity, so the FLM holds the ring's combined masses.
 

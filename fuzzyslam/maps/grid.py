@@ -6,7 +6,7 @@ so row 0 is at the origin's y (as in nav2's OccupancyGrid; flip rows for a pictu
 
 A :class:`BeliefMap` holds, per cell, the masses of Smets' transferable belief
 model on the frame {E (empty), O (occupied)}: m(E), m(O), m(Theta) (don't know)
-and m(emptyset) (conflict), which always sum to 1 (models.md sec. 6).
+and m(emptyset) (conflict), which always sum to 1 (docs/models.md sec. 6).
 """
 
 from __future__ import annotations

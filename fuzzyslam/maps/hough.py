@@ -1,7 +1,7 @@
 """Dominant wall directions by Hough transform on an image of wall evidence.
 
 Line model r = x cos t + y sin t (t the normal's angle in [0, pi)); a wall's DIRECTION
-is t - pi/2, reported mod pi in [0, pi) like ``Corridor.axis`` (models.md sec. 8-9).
+is t - pi/2, reported mod pi in [0, pi) like ``Corridor.axis`` (docs/models.md sec. 8-9).
 Parallel walls share t, so a corridor gives one direction with two rho peaks; a junction
 gives two directions.
 
@@ -265,7 +265,7 @@ def map_wall_direction(
 
 
 def flm_wall_direction(flm: BeliefMap, params: MapParams | None = None) -> WallDirection:
-    """Wall direction of an FLM in the robot frame (for heading fixes, models.md sec. 9).
+    """Wall direction of an FLM in the robot frame (for heading fixes, docs/models.md sec. 9).
 
     With the corridor's reference angle t_ref, the heading measurement is
     theta = t_ref - angle, reduced mod pi to the value nearest the prediction. Skip the

@@ -1,4 +1,4 @@
-"""Map files (contracts.md sec. 3): fgm.npz, nav2 map_server fgm.yaml + fgm.pgm,
+"""Map files (docs/contracts.md sec. 3): fgm.npz, nav2 map_server fgm.yaml + fgm.pgm,
 references.yaml. Every file is written to a temporary name and renamed when complete.
 
 nav2 map_server (``nav2_map_server``, map_io): with ``negate: 0`` a pixel p in 0..255

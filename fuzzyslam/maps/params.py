@@ -1,6 +1,6 @@
-"""Parameters of the fuzzy global and local maps (models.md sec. 5-8).
+"""Parameters of the fuzzy global and local maps (docs/models.md sec. 5-8).
 
-Sonar evidence constants (models.md sec. 5, Oriolo, Ulivi & Vendittelli 1997) and why:
+Sonar evidence constants (docs/models.md sec. 5, Oriolo, Ulivi & Vendittelli 1997) and why:
 
 - ``k_occupied`` = 0.6, ``k_empty`` = 0.4: one reading is weak evidence (k < 1), so a
   cell needs several agreeing readings to become certain; k_O + k_E <= 1 keeps the
@@ -44,7 +44,7 @@ Sonar evidence constants (models.md sec. 5, Oriolo, Ulivi & Vendittelli 1997) an
   odometry (``build_flm_rings``): 0.35 / 0.44 deg. ``tangent_tolerance`` = 6 cm: outlier
   cut on the range residual (about 5 sigma of 1 % noise + 1-inch quantisation at 1 m;
   3 cm gave 1.48, 9 cm 1.38 deg); ``tangent_max_incidence_deg`` = 20: a wall farther
-  than this outside the cone does not echo (the critical angle, models.md sec. 11);
+  than this outside the cone does not echo (the critical angle, docs/models.md sec. 11);
   ``tangent_max_shift_deg`` = 10: a fit that moves farther from the Hough peak is
   refused (the Hough angle is kept, flagged ambiguous); ``tangent_max_sigma_deg`` = 3:
   a fit less certain than this flags the ring ambiguous (2 deg flagged 12 % of good
@@ -55,7 +55,7 @@ Sonar evidence constants (models.md sec. 5, Oriolo, Ulivi & Vendittelli 1997) an
   4 %; mid-corridor rings unaffected).
 - ``segment_end_trim`` = 0.5 m: corridor regions stop short of the junctions, whose
   cells carry the next corridor's walls.
-- ``forgetting_gamma``: alpha = 1 - gamma * m(conflict) (models.md sec. 6).
+- ``forgetting_gamma``: alpha = 1 - gamma * m(conflict) (docs/models.md sec. 6).
 """
 
 from __future__ import annotations
@@ -71,7 +71,7 @@ class MapParams:
     margin: float = field(default=2.0, metadata={"min": 0.0, "max": 20.0})
     flm_cells: int = field(default=41, metadata={"min": 5, "max": 1001})
     freeze_run: int = field(default=4, metadata={"min": 1})
-    # --- per-reading evidence (models.md sec. 5) ---
+    # --- per-reading evidence (docs/models.md sec. 5) ---
     k_occupied: float = field(default=0.6, metadata={"min": 0.0, "max": 1.0})
     k_empty: float = field(default=0.4, metadata={"min": 0.0, "max": 1.0})
     range_tolerance: float = field(default=0.10, metadata={"min": 0.01, "max": 2.0})
@@ -81,11 +81,11 @@ class MapParams:
     empty_reach: float = field(default=0.9, metadata={"min": 0.0, "max": 1000.0})
     no_echo_empty: float = field(default=0.05, metadata={"min": 0.0, "max": 1.0})
     no_echo_reach: float = field(default=0.6, metadata={"min": 0.0, "max": 50.0})
-    # --- combination (models.md sec. 6) ---
+    # --- combination (docs/models.md sec. 6) ---
     forgetting_gamma: float = field(default=1.0, metadata={"min": 0.0, "max": 1.0})
     # --- trajectory interpolation ---
     max_pose_gap: float = field(default=1.0, metadata={"min": 0.01, "max": 100.0})
-    # --- Hough and references (models.md sec. 8-9) ---
+    # --- Hough and references (docs/models.md sec. 8-9) ---
     wall_threshold: float = field(default=0.3, metadata={"min": 0.0, "max": 1.0})
     flm_wall_threshold: float = field(default=0.02, metadata={"min": 0.0, "max": 1.0})
     hough_theta_step_deg: float = field(default=0.5, metadata={"min": 0.05, "max": 5.0})

@@ -1,4 +1,4 @@
-"""Corridor reference angles from the frozen FGM (models.md sec. 8; the paper's sec. 4).
+"""Corridor reference angles from the frozen FGM (docs/models.md sec. 8; the paper's sec. 4).
 
 The paper cut the FGM into corridor segments by hand. Here the segments come from the
 path the map was built along (the robot drives the corridors' centre lines):

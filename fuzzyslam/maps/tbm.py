@@ -54,7 +54,7 @@ def discount(m: Masses, alpha: np.ndarray | float) -> Masses:
 
 
 def forgetting_factor(conflict: np.ndarray, gamma: float) -> np.ndarray:
-    """alpha = 1 - gamma * m(emptyset) (models.md sec. 6, following the paper's sec. 3).
+    """alpha = 1 - gamma * m(emptyset) (docs/models.md sec. 6, following the paper's sec. 3).
 
     A cell whose stored evidence is contradicted (large conflict mass, e.g. because the
     poses that placed it were wrong) keeps only a fraction of it before the next

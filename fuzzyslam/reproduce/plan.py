@@ -2,7 +2,7 @@
 
 Each :class:`Step` is one ``fuzzyslam`` command line with paths relative to the
 reproduce output directory, the steps it needs first, and an expected cost (for
-scheduling and progress). Per seed the graph is, in experiment.md's terms::
+scheduling and progress). Per seed the graph is, in docs/experiment.md's terms::
 
     paper.mcap  --run-->        AB       (phases A and B: lamps only, no help)
                 --map(AB)-->    fgm      (FGM frozen at the end of the freeze run)

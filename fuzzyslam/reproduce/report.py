@@ -38,7 +38,7 @@ def met_text(a: Aggregate) -> str:
 
 
 def results_table(aggs: list[Aggregate], labels: dict[str, str]) -> str:
-    """experiment.md's table: paper, target and fuzzyslam side by side."""
+    """docs/experiment.md's table: paper, target and fuzzyslam side by side."""
     lines = [
         "| phase | measure | paper | target | fuzzyslam | target met (seeds) |",
         "|---|---|---|---|---|---|",

@@ -1,4 +1,4 @@
-"""experiment.md's table: the paper's figure, our target and fuzzyslam's, over seeds (pure).
+"""docs/experiment.md's table: the paper's figure, our target and fuzzyslam's, over seeds (pure).
 
 A seed's results are a plain dict: ``{"eval": {name: metrics.json of eval_<name>},
 "run": {name: run summary}, "map": {name: map summary}, "seconds": summed step times}`` (names of

@@ -53,7 +53,7 @@ class RobotParams:
 
 @dataclass
 class SonarParams:
-    """Ring of Polaroid-like sonars (models.md sec. 11)."""
+    """Ring of Polaroid-like sonars (docs/models.md sec. 11)."""
 
     count: int = field(default=16, metadata={"min": 1, "max": 64})
     rate_hz: float = field(default=4.0, metadata={"min": 0.1, "max": 100.0})

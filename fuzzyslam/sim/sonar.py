@@ -1,6 +1,6 @@
 """Sonar ring physics: cone ray casting with specular reflection (pure, vectorised).
 
-Model (models.md sec. 11; Moravec 1990; Leonard & Durrant-Whyte, "Directed Sonar
+Model (docs/models.md sec. 11; Moravec 1990; Leonard & Durrant-Whyte, "Directed Sonar
 Sensing for Mobile Robot Navigation", 1992, ch. 2):
 
 - each sensor casts ``rays_per_cone`` rays evenly across its cone (+-fov/2);

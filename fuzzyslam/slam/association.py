@@ -1,4 +1,4 @@
-"""Data association of lamp detections with unknown correspondences (models.md sec. 4).
+"""Data association of lamp detections with unknown correspondences (docs/models.md sec. 4).
 
 - Individual compatibility: squared Mahalanobis distance D2_ij of detection j to
   lamp i against a chi-square gate with 2 dof (``EkfSlam.individual_compatibility``).

@@ -1,6 +1,6 @@
 """Ceiling-lamp detection in an upward camera frame (OpenCV).
 
-Algorithm (models.md sec. 3; standard blob detection, as in Panzieri et al.'s
+Algorithm (docs/models.md sec. 3; standard blob detection, as in Panzieri et al.'s
 ceiling-lamp localisation):
 
 1. threshold: lamps saturate the image, pixels >= ``threshold`` are lamp pixels;

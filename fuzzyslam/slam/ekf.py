@@ -1,7 +1,7 @@
 """Augmented-state EKF-SLAM with point landmarks (ceiling lamps) in the plane.
 
 State ``x = (x, y, theta, l1x, l1y, ..., lnx, lny)`` and covariance ``P``
-(models.md sec. 4; Thrun, Burgard, Fox, Probabilistic Robotics (2005), ch. 10;
+(docs/models.md sec. 4; Thrun, Burgard, Fox, Probabilistic Robotics (2005), ch. 10;
 the paper sec. 2). Costs: ``predict`` O(n) (robot block and robot-map rows only),
 ``update_*`` O(n^2) (one rank-2k correction of P), ``add_lamp`` O(n).
 
@@ -59,7 +59,7 @@ def motion_jacobians(pose: np.ndarray, d_trans: float, d_rot: float) -> tuple[np
 
 
 def lamp_measurement(pose: np.ndarray, lamp: np.ndarray) -> tuple[np.ndarray, ...]:
-    """Predicted lamp position in the robot frame and its Jacobians (models.md sec. 3).
+    """Predicted lamp position in the robot frame and its Jacobians (docs/models.md sec. 3).
 
     h = R(theta)^T (l - p);  dh/dp = -R^T;  dh/dl = R^T;  dh/dtheta = (h_y, -h_x).
     Returns (h (2,), H_r (2, 3), H_l (2, 2)).

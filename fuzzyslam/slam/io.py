@@ -467,7 +467,7 @@ class ExactSum:
 
 
 class StreamingOutputs:
-    """A ``RowSink`` (slam/runner.py) writing the files of contracts.md sec. 2 into the
+    """A ``RowSink`` (slam/runner.py) writing the files of docs/contracts.md sec. 2 into the
     staging directory ``tmp`` as the rows come, in blocks, so memory stays flat over long
     logs. The files are the same bytes as :func:`write_result` on the whole result, but
     estimates.mcap, whose /slam/pose and /slam/landmarks messages are interleaved in
@@ -621,7 +621,7 @@ class StreamingOutputs:
 
 
 def write_outputs(tmp: Path, out: StreamingOutputs, res: SlamResult, extra=()) -> None:
-    """Complete the streamed files of contracts.md sec. 2 (but summary.json and the fix
+    """Complete the streamed files of docs/contracts.md sec. 2 (but summary.json and the fix
     files) in the staging directory ``tmp`` (:meth:`StreamingOutputs.finish`)."""
     assert out.tmp == Path(tmp)
     out.finish(res, extra)
@@ -634,7 +634,7 @@ def write_summary(tmp: Path, summary: dict) -> None:
 
 
 def write_result(tmp: Path, res: SlamResult, cfg: Config, extra=()) -> None:
-    """The files of contracts.md sec. 2 but summary.json and the fix files, into ``tmp``,
+    """The files of docs/contracts.md sec. 2 but summary.json and the fix files, into ``tmp``,
     from a whole in-memory result (``SlamRunner.run`` with its default ``MemorySink``).
     ``run`` streams the same files instead (:class:`StreamingOutputs`).
 

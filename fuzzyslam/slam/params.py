@@ -9,7 +9,7 @@ import numpy as np
 
 @dataclass
 class SlamParams:
-    """EKF-SLAM on ceiling lamps (models.md sec. 2-4).
+    """EKF-SLAM on ceiling lamps (docs/models.md sec. 2-4).
 
     Odometry noise of an increment (dt, dr) (the odometry motion model of Probabilistic
     Robotics, sec. 5.4, with the variances linear in the motion, i.e. a random walk per

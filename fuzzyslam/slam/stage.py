@@ -69,7 +69,7 @@ def run_stage(
     aids: list | None = None,
     adapt_noise: bool = False,
 ) -> dict:
-    """Run EKF-SLAM on ``log`` and write contracts.md sec. 2 files into ``outdir``.
+    """Run EKF-SLAM on ``log`` and write docs/contracts.md sec. 2 files into ``outdir``.
 
     The rows are streamed into the staging directory of ``OutputDir`` as they come
     (:class:`StreamingOutputs`: memory flat in the log length); the directory replaces
