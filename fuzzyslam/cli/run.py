@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import click
@@ -29,6 +30,19 @@ def _build_aids(
     return make_aids(
         map_dir, mode, cfg, fix_from, expect_log_id=log_identity(world_dict, Path(log).name)
     )
+
+
+def _parse_pose(_ctx, _param, value: str | None) -> tuple[float, float, float] | None:
+    """``X,Y,THETA`` as three finite floats."""
+    if value is None:
+        return None
+    try:
+        x, y, th = (float(v) for v in value.split(","))
+    except ValueError:
+        raise click.BadParameter(f"expected X,Y,THETA (three numbers), got {value!r}") from None
+    if not all(map(math.isfinite, (x, y, th))):
+        raise click.BadParameter(f"expected three finite numbers, got {value!r}")
+    return x, y, th
 
 
 @cli.command("run")
@@ -64,16 +78,34 @@ def _build_aids(
     help="Log time (s) from which the fixes are applied. Default: the map's freeze time "
     "(e.g. 0 to use a map frozen on another log of the same world from the start).",
 )
+@click.option(
+    "--ranges",
+    type=click.Choice(["sonar", "scan"]),
+    default=None,
+    help="Range sensor of the fixes: the sonar ring or the laser scan (topics.scan). "
+    "Default: the config's ranges.source (auto: the sonar ring when the log has one).",
+)
+@click.option(
+    "--start-pose",
+    callback=_parse_pose,
+    default=None,
+    metavar="X,Y,THETA",
+    help="Start pose (m, m, rad). Default: the log's scenario, else slam.start_pose, else "
+    "the first odometry pose (nav_msgs/Odometry).",
+)
 @seed_option
-def run_command(log: Path, outdir: Path, config: str | None, map_dir, fix, fix_from, seed) -> None:
+def run_command(
+    log: Path, outdir: Path, config: str | None, map_dir, fix, fix_from, ranges, start_pose, seed
+) -> None:
     """EKF-SLAM on ceiling lamps over the recorded LOG (MCAP), written into OUTDIR.
 
     \b
     Reads odometry (wheel encoders on topics.joint_states, or topics.odom when the log
     has no encoders or slam.use_encoders is false) and lamps (mono8 frames on
     topics.image with topics.camera_info, or PoseArray detections on
-    topics.detections), and runs the augmented-state EKF with JCBB data association,
-    tentative lamps and a guard against duplicate lamps.
+    topics.detections; a log with neither runs on odometry and the map's fixes), and
+    runs the augmented-state EKF with JCBB data association, tentative lamps and a
+    guard against duplicate lamps.
 
     \b
     Writes trajectory.tum, odometry.tum (dead reckoning), covariance.csv,
@@ -86,4 +118,4 @@ def run_command(log: Path, outdir: Path, config: str | None, map_dir, fix, fix_f
 
     cfg = load_config(config, seed)
     aids = _build_aids(map_dir, fix, cfg, log, fix_from)
-    emit(run_stage(log, outdir, cfg, aids))
+    emit(run_stage(log, outdir, cfg, aids, ranges, start_pose))

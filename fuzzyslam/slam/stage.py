@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import os
+import sys
 import time
 
 import cv2
@@ -50,21 +51,39 @@ def make_summary(
     if aids:
         out["aids"] = {type(a).__name__: a.summary() for a in aids}
         out["rings"] = inputs.ring_stats.as_dict()
+        if inputs.ranges is not None:
+            out["range_sensor"] = inputs.ranges.describe()
     return out
 
 
 def run_stage(
-    log: str | os.PathLike, outdir: str | os.PathLike, cfg: Config, aids: list | None = None
+    log: str | os.PathLike,
+    outdir: str | os.PathLike,
+    cfg: Config,
+    aids: list | None = None,
+    ranges: str | None = None,
+    start_pose: tuple[float, float, float] | None = None,
 ) -> dict:
     """Run EKF-SLAM on ``log`` and write contracts.md sec. 2 files into ``outdir``.
 
     The rows are streamed into the staging directory of ``OutputDir`` as they come
     (:class:`StreamingOutputs`: memory flat in the log length); the directory replaces
-    the outputs only when everything is written, so an error or Ctrl-C leaves nothing."""
+    the outputs only when everything is written, so an error or Ctrl-C leaves nothing.
+
+    ``ranges`` (sonar|scan) chooses the aids' range sensor, ``start_pose`` overrides the
+    start pose (slam/io.py). A log without lamps and without aids is dead reckoning: a
+    one-line note on stderr says so."""
     aids = list(aids or [])
     wall0 = time.perf_counter()
     check_outputs([log], [outdir])
-    inputs = open_inputs(log, cfg, need_rings=bool(aids))
+    inputs = open_inputs(log, cfg, bool(aids), ranges, start_pose)
+    if inputs.lamp_source == "none" and not aids:
+        print(
+            f"fuzzyslam: note: {log}: no lamps (topics.image {cfg.topics.image}, "
+            f"topics.detections {cfg.topics.detections}) and no map: the estimate is dead "
+            "reckoning (give --map FGMDIR --fix pose|heading)",
+            file=sys.stderr,
+        )
     with OutputDir(outdir) as tmp, StreamingOutputs(tmp, cfg, inputs.start_pose) as streamed:
         res = _run_filter(inputs, cfg, aids, streamed)
         for aid in aids:
