@@ -102,6 +102,10 @@ def first_plausible_pose(
 
 
 def plausible_mask(t: np.ndarray, poses: np.ndarray, gate: OdomGate | None = None) -> np.ndarray:
-    """(N,) bool: the poses the gate keeps (first, accepted, reset), the others refused."""
+    """(N,) bool: the poses the gate keeps (accepted or reset), starting from the first
+    confirmed pose (:func:`first_plausible_pose`); the others refused."""
     gate = gate if gate is not None else OdomGate()
+    first = first_plausible_pose(t, poses, gate)
+    if first is not None:
+        gate.prime(*first)
     return np.array([gate.step(float(ti), p) != "jump" for ti, p in zip(t, poses, strict=True)])
