@@ -346,3 +346,34 @@ def _laser_direction(log: Path, truth: Path, near: float) -> float:
 def test_excerpt_is_small_and_named():
     assert (EXCERPT / "log.mcap").stat().st_size < 1_000_000
     assert "Radish" in (EXCERPT / "README.md").read_text()
+
+
+@pytest.mark.slow
+def test_hough_figure_is_a_grid_for_many_corridors(tmp_path, capsys):
+    """hough.png of a building with 17 corridors: rows of at most HOUGH_COLUMNS panels,
+    not a strip 17 panels wide."""
+    import cv2
+
+    from fuzzyslam.maps import figures
+    from fuzzyslam.maps.mapio import load_fgm
+    from fuzzyslam.maps.references import extract_references
+
+    log, truth = EXCERPT / "log.mcap", EXCERPT / "truth.tum"
+    cfg = load_config("real_building_scan.yaml")
+    fgm_dir = tmp_path / "fgm"
+    code, _, err = run_cli(
+        ["map", str(log), "--trajectory", str(truth), "--config", "real_building_scan.yaml",
+         "--no-figures", "-o", str(fgm_dir)],
+        capsys,
+    )  # fmt: skip
+    assert code == 0, err
+    fgm = load_fgm(fgm_dir / "fgm.npz").map
+    _t, poses = read_tum(truth)
+    refs = extract_references(fgm, poses[:, :2], cfg.fgm)
+    assert refs
+    many = (refs * 17)[:17]
+    path = tmp_path / "hough.png"
+    figures.fig_hough(path, fgm, many, None, None, cfg.fgm)
+    h, w = cv2.imread(str(path)).shape[:2]
+    cols, rows = figures.HOUGH_COLUMNS, -(-17 // figures.HOUGH_COLUMNS)
+    assert w <= 3.6 * cols * 110 + 1 and h >= 2 * rows * 3.0 * 110
