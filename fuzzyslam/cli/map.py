@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from fuzzyslam.cli import cli, config_option, emit
+from fuzzyslam.cli import cli, config_option, emit, ranges_option
 
 
 @cli.command("map")
@@ -48,13 +48,7 @@ from fuzzyslam.cli import cli, config_option, emit
     help="landmarks.yaml from 'run': draw the estimated lamps in fgm.png.",
 )
 @click.option("--no-figures", is_flag=True, help="Do not draw the PNG figures.")
-@click.option(
-    "--ranges",
-    type=click.Choice(["sonar", "scan"]),
-    default=None,
-    help="Range sensor: the sonar ring (topics.sonar_prefix) or the laser scan (topics.scan). "
-    "Default: the config's ranges.source (auto: the sonar ring when the log has one).",
-)
+@ranges_option
 @click.option(
     "--sort",
     is_flag=True,

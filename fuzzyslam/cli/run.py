@@ -7,7 +7,7 @@ from pathlib import Path
 
 import click
 
-from fuzzyslam.cli import cli, config_option, emit, seed_option
+from fuzzyslam.cli import cli, config_option, emit, ranges_option, seed_option
 from fuzzyslam.config import load_config
 
 
@@ -78,13 +78,7 @@ def _parse_pose(_ctx, _param, value: str | None) -> tuple[float, float, float] |
     help="Log time (s) from which the fixes are applied. Default: the map's freeze time "
     "(e.g. 0 to use a map frozen on another log of the same world from the start).",
 )
-@click.option(
-    "--ranges",
-    type=click.Choice(["sonar", "scan"]),
-    default=None,
-    help="Range sensor of the fixes: the sonar ring or the laser scan (topics.scan). "
-    "Default: the config's ranges.source (auto: the sonar ring when the log has one).",
-)
+@ranges_option
 @click.option(
     "--start-pose",
     callback=_parse_pose,
