@@ -29,6 +29,9 @@ For each building and each range sensor (``--ranges``, with the embedded config
   wall time of the command, reading included). Targets: pose mean <= 0.3 m, max <= 1.0 m;
   heading mean <= 1 deg; pose >= 100x real time.
 
+With ``--figures DIR``: ``DIR/<building>_<ranges>.png``, the FGM with the true and the
+localised (pose fixes) paths.
+
 Timings share the machine with whatever else runs: compare side by side.
 """
 
@@ -155,7 +158,34 @@ def errors(traj: Path, truth: Path) -> dict:
     }
 
 
-def bench_building(name: str, d: Path, ranges: list[str], out: Path) -> list[dict]:
+def figure(path: Path, fgm, truth: Path, traj: Path, title: str) -> None:
+    """The FGM (BetP(occupied)) with the true path and the localised one (PNG)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    _, p_tr, _ = clean_truth(truth)
+    _, est = read_tum(traj)
+    fig, ax = plt.subplots(figsize=(8, 6))
+    ax.imshow(
+        1.0 - fgm.pignistic_occupied(), origin="lower", extent=fgm.grid.extent, cmap="gray",
+        vmin=0, vmax=1,
+    )  # fmt: skip
+    ax.plot(p_tr[:, 0], p_tr[:, 1], "-", color="tab:green", lw=0.8, label="truth")
+    ax.plot(est[:, 0], est[:, 1], "-", color="tab:blue", lw=0.6, label="localised (pose fixes)")
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
+    ax.set_title(title, fontsize=9)
+    ax.legend(loc="upper right", fontsize=8)
+    fig.savefig(path, format="png", dpi=80)
+    plt.close(fig)
+
+
+def bench_building(
+    name: str, d: Path, ranges: list[str], out: Path, figures: Path | None = None
+) -> list[dict]:
     log, truth = d / "log.mcap", d / "truth.tum"
     laser_all = laser_wall_direction(log, truth)
     rows = []
@@ -196,6 +226,14 @@ def bench_building(name: str, d: Path, ranges: list[str], out: Path) -> list[dic
                 "real_time_factor": round(s["log_duration_s"] / s["_wall"], 1),
                 "real_time_factor_in_process": s["real_time_factor"],
             }
+        if figures is not None:
+            p = row["pose"]
+            traj = out / name / f"pose_{rs}" / "trajectory.tum"
+            figure(
+                figures / f"{name}_{rs}.png", fgm, truth, traj,
+                f"{name}, FGM from --ranges {rs}; localised from /odom with pose fixes: "
+                f"mean {p['position_mean_m']:.2f} m, max {p['position_max_m']:.2f} m",
+            )  # fmt: skip
         print(json.dumps(row), flush=True)
         rows.append(row)
     return rows
@@ -207,6 +245,9 @@ def main() -> None:
     ap.add_argument("--buildings", nargs="*", default=None)
     ap.add_argument("--ranges", nargs="*", default=["scan", "sonar"])
     ap.add_argument("--out", type=Path, default=None, help="keep the outputs here")
+    ap.add_argument(
+        "--figures", type=Path, default=None, help="write BUILDING_RANGES.png (FGM and paths) here"
+    )
     a = ap.parse_args()
     names = a.buildings or sorted(
         p.name for p in a.data.iterdir() if (p / "truth.tum").is_file() and _has_scan(p)
@@ -214,7 +255,7 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         out = a.out or Path(tmp)
         for name in names:
-            bench_building(name, a.data / name, a.ranges, out)
+            bench_building(name, a.data / name, a.ranges, out, a.figures)
 
 
 def _default_data() -> Path:
