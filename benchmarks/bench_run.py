@@ -57,7 +57,7 @@ def bench_log(log: Path) -> None:
 
 
 def filled_filter(n: int, rng: np.random.Generator) -> EkfSlam:
-    ekf = EkfSlam([0.0, 0.0, 0.0], np.eye(3) * 1e-4, load_config("paper").slam.alpha, n)
+    ekf = EkfSlam([0.0, 0.0, 0.0], np.eye(3) * 1e-4, load_config("paper").slam.odometry_noise, n)
     for _ in range(n):
         ekf.add_lamp(rng.uniform(-3, 3, 2), np.eye(2) * 1e-4)
         ekf.predict(0.01, 0.001)

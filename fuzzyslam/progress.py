@@ -59,3 +59,8 @@ def iterate(items: Iterable[T], length: int, label: str) -> Iterator[T]:
         for i, item in enumerate(items):
             yield item
             bar.update_to(i + 1)
+
+
+def note(text: str) -> None:
+    """One line on stderr for the user (always shown: a warning is not progress)."""
+    click.echo(f"fuzzyslam: note: {' '.join(text.split())}", err=True)

@@ -903,11 +903,11 @@ def test_ekf_odometry_pose_is_dead_reckoning_untouched_by_updates():
     from fuzzyslam.slam.ekf import EkfSlam, Preintegrator
 
     start = np.array([1.0, 2.0, 0.3])
-    ekf = EkfSlam(start, np.diag([1e-4, 1e-4, 1e-4]), [1e-3] * 6)
+    ekf = EkfSlam(start, np.diag([1e-4, 1e-4, 1e-4]), [1e-3] * 4)
     u = [(0.05, 0.01)] * 10 + [(0.04, -0.02)] * 7
     for d_trans, d_rot in u[:10]:
         ekf.predict(d_trans, d_rot)
-    pre = Preintegrator([1e-3] * 6)
+    pre = Preintegrator([1e-3] * 4)
     for d_trans, d_rot in u[10:]:
         pre.add(d_trans, d_rot)
     ekf.update_robot([0.2], [[1e-4]], [2])  # a heading fix moves the estimate ...
@@ -920,7 +920,7 @@ def test_ekf_odometry_pose_is_dead_reckoning_untouched_by_updates():
 def test_ekf_inflate_robot_adds_q_to_robot_block_only():
     from fuzzyslam.slam.ekf import EkfSlam
 
-    ekf = EkfSlam([0.0, 0.0, 0.1], np.diag([1e-4, 2e-4, 1e-5]), [1e-4] * 6)
+    ekf = EkfSlam([0.0, 0.0, 0.1], np.diag([1e-4, 2e-4, 1e-5]), [1e-4] * 4)
     ekf.add_lamp([1.0, 0.5], np.eye(2) * 1e-3)
     before = ekf.P.copy()
     q = np.array([[0.01, 0.002, 0.0], [0.002, 0.02, 0.0], [0.0, 0.0, 0.03]])

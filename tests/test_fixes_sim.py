@@ -186,20 +186,3 @@ def test_change_detection_finds_the_simulated_box_and_person(dark_case):
     # the detections are on /slam/changes in estimates.mcap too, one marker each
     msgs = list(LogReader(tmp / "pose" / "estimates.mcap").messages(["/slam/changes"]))
     assert sum(len(m.msg.markers) for m in msgs) == len(det)
-
-
-def test_fast_range_decoder_matches_rosbags(dark_case):
-    """run reads the sonar rings with fastread's CDR decoder: same fields as rosbags'."""
-    from fuzzyslam.slam.fastread import indexed_messages
-
-    reader = LogReader(dark_case[0])
-    slow = list(reader.messages(["/sonar/s05"]))[:300]
-    fast = [m for m, _ in zip(indexed_messages(reader, ["/sonar/s05"]), range(300), strict=False)]
-    assert len(fast) == len(slow) == 300
-    for a, b in zip(slow, fast, strict=True):
-        assert (a.t, a.msg.header.stamp.sec, a.msg.header.stamp.nanosec) == (
-            b.t, b.msg.header.stamp.sec, b.msg.header.stamp.nanosec
-        )  # fmt: skip
-        assert a.msg.header.frame_id == b.msg.header.frame_id
-        fields = ("radiation_type", "field_of_view", "min_range", "max_range", "range")
-        assert all(getattr(a.msg, f) == getattr(b.msg, f) for f in fields)

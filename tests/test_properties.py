@@ -199,7 +199,7 @@ def test_grouped_combination_equals_a_fold(ms, data) -> None:
 
 # -- EKF covariance -----------------------------------------------------------------------
 
-ALPHA = (0.01, 0.001, 0.005, 0.001, 1e-4, 1e-4)
+ALPHA = (0.01, 0.001, 0.005, 0.001)  # k_tt, k_tr, k_rr, k_rt
 
 
 def assert_spd(p: np.ndarray) -> None:

@@ -14,7 +14,7 @@ from hypothesis.extra.numpy import arrays
 from fuzzyslam.slam.ekf import EkfSlam
 from fuzzyslam.slam.health import DivergenceMonitor, is_spd, repair_covariance, solve_spd
 
-ALPHA = (0.01, 0.001, 0.005, 0.001, 1e-4, 1e-4)
+ALPHA = (0.01, 0.001, 0.005, 0.001)  # k_tt, k_tr, k_rr, k_rt
 
 
 @settings(max_examples=100, deadline=None)

@@ -194,8 +194,9 @@ def test_reader_reads_a_cut_log_as_far_as_it_is_intact(tiny: Tiny) -> None:
             r = LogReader(cut)
             msgs = [(m.topic, m.t) for m in r.messages()]
             assert msgs == full[: len(msgs)]
-            assert r.truncated and 0 <= r.lost_bytes <= off
-            got.append((off, len(msgs), r.salvaged_messages))
+            d = r.damage()
+            assert d["truncated"] and 0 <= d["lost_bytes"] <= off
+            got.append((off, len(msgs), d["salvaged_messages"]))
     # inside a chunk: some of its messages were salvaged, more with a later cut
     assert got[0][2] > 0 and got[1][1] > got[0][1] > 0
     # at a chunk start nothing is salvaged and nothing after the previous chunk is lost
@@ -214,8 +215,9 @@ def test_damaged_chunk_in_the_middle_is_skipped_and_counted(tiny: Tiny, tmp_path
     r = LogReader(bad)
     msgs = [(m.topic, m.t) for m in r.messages()]
     full = [(m.topic, m.t) for m in LogReader(tiny.small_chunks).messages()]
-    assert r.truncated and r.damaged_records == 1
-    assert r.lost_bytes == chunks[4].chunk_length  # the cut fell in the summary section
+    d = r.damage()
+    assert d["truncated"] and d["damaged_records"] == 1
+    assert d["lost_bytes"] == chunks[4].chunk_length  # the cut fell in the summary section
     assert 0 < len(msgs) < len(full) and set(msgs) <= set(full)
     assert msgs[-1] == full[-1]  # read to the end past the damaged chunk
 

@@ -20,7 +20,7 @@ from fuzzyslam.slam.ekf import (
 from fuzzyslam.slam.params import SlamParams
 from fuzzyslam.slam.runner import Frame, Odom, SlamRunner
 
-ALPHA = SlamParams().alpha
+ALPHA = SlamParams().odometry_noise
 
 
 def numeric_jacobian(f, x, eps=1e-6, wrap=()):
@@ -166,10 +166,10 @@ def test_jcbb_keeps_two_close_lamps_apart():
     assert np.all(d2 <= 9.21), "both detections must gate with both lamps for this test"
     # nearest neighbour alone could pair detection 1 with lamp 0 after moving; here
     # each detection is nearest to its own lamp but both are individually compatible
-    pairs = jcbb(ekf, z, rr, d2, 9.21)
+    pairs = jcbb(ekf, z, rr, d2, 9.21).pairs
     assert sorted(pairs) == [(0, 0), (1, 1)]
     # swapped order in the frame: still each to its own lamp
-    pairs = jcbb(ekf, z[::-1].copy(), rr, ekf.individual_compatibility(z[::-1], rr), 9.21)
+    pairs = jcbb(ekf, z[::-1].copy(), rr, ekf.individual_compatibility(z[::-1], rr), 9.21).pairs
     assert sorted(pairs) == [(0, 1), (1, 0)]
 
 
@@ -185,7 +185,7 @@ def test_jcbb_rejects_jointly_incompatible_pair():
     rr = np.array([r, r])
     d2 = ekf.individual_compatibility(z, rr)
     assert np.all(np.diag(d2) <= 9.21)
-    pairs = jcbb(ekf, z, rr, d2, 9.21)
+    pairs = jcbb(ekf, z, rr, d2, 9.21).pairs
     assert len(pairs) == 1
     assert joint_threshold(9.21, 2) == pytest.approx(9.21, rel=1e-3)
 
@@ -204,10 +204,11 @@ def test_tentative_lamps_promote_after_hits_and_expire():
 # -- a small synthetic SLAM run (measurement generator only; no robot simulator) -------------
 
 
-def synthetic_run(seed, lamps, laps=2, sigma=0.01, alpha=ALPHA):
+def synthetic_run(seed, lamps, laps=2, sigma=0.01, noise=ALPHA):
     """Robot on a circle of radius 2 m; odometry noise drawn from the filter's own model."""
     rng = np.random.default_rng(seed)
-    p = SlamParams(alpha=list(alpha), tentative_hits=3)
+    p = SlamParams(tentative_hits=3)
+    p.trans_var_per_m, p.trans_var_per_rad, p.rot_var_per_rad, p.rot_var_per_m = noise
     runner = SlamRunner(p, np.array([2.0, 0.0, np.pi / 2]))
     truth = np.array([2.0, 0.0, np.pi / 2])
     steps = int(laps * 2 * np.pi * 2.0 / 0.015)
@@ -216,7 +217,7 @@ def synthetic_run(seed, lamps, laps=2, sigma=0.01, alpha=ALPHA):
     for k in range(steps):
         dt, dr = 0.015, 0.015 / 2.0
         truth = motion_step(truth, dt, dr)
-        m = motion_noise(dt, dr, alpha)
+        m = motion_noise(dt, dr, noise)
         noisy = rng.multivariate_normal([dt, dr], m)
         t = 0.05 * (k + 1)
         runner.odometry(Odom(t, *noisy))

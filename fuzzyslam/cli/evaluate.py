@@ -36,6 +36,20 @@ from fuzzyslam.cli import cli, config_option, emit
     type=click.Path(path_type=str),
     help="Another estimate (run directory or TUM file) to put side by side; repeatable.",
 )
+@click.option(
+    "--landmarks-truth",
+    type=click.Path(path_type=str),
+    default=None,
+    help="YAML of the true landmarks (landmarks: [{id, x, y}, ...]) for a real log: scored "
+    "after the rigid 2-D alignment of the trajectory (implies --align).",
+)
+@click.option(
+    "--align",
+    is_flag=True,
+    help="Move the estimate onto the truth with one rigid 2-D motion (Umeyama, as evo's "
+    "--align) before every error, NEES and landmark metric: for real logs, whose map frame "
+    "is the robot's start.",
+)
 @config_option
 def evaluate_cmd(
     truth: str,
@@ -44,6 +58,8 @@ def evaluate_cmd(
     map_dir: str | None,
     label: str | None,
     compare: tuple[str, ...],
+    landmarks_truth: str | None,
+    align: bool,
     config: str | None,
 ) -> None:
     """Compare ESTIMATE with TRUTH and write a report into OUTDIR.
@@ -56,6 +72,10 @@ def evaluate_cmd(
     metre, NEES and NIS consistency, lamp errors after a one-to-one assignment (duplicated,
     missed lamps) and Hough heading-fix errors. Prints the headline figures as JSON.
 
+    A real log's truth is usually a TUM file from a motion-capture system; its map frame
+    differs by a rigid motion: pass --align (or --landmarks-truth FILE, which implies it).
+    The truth used is written as OUTDIR/truth.tum (for evo).
+
     With --compare, further estimates of the same truth are evaluated alike and shown side
     by side (a table per phase and their position errors against time).
     """
@@ -64,6 +84,14 @@ def evaluate_cmd(
 
     params = load_config(config).evaluation if config else None
     res = run_evaluate(
-        truth, estimate, outdir, params=params, map_dir=map_dir, label=label, compare=compare
+        truth,
+        estimate,
+        outdir,
+        params=params,
+        map_dir=map_dir,
+        label=label,
+        compare=compare,
+        landmarks_truth=landmarks_truth,
+        align=align,
     )
     emit(summary(res))

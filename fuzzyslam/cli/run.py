@@ -87,9 +87,24 @@ def _parse_pose(_ctx, _param, value: str | None) -> tuple[float, float, float] |
     help="Start pose (m, m, rad). Default: the log's scenario, else slam.start_pose, else "
     "the first odometry pose (nav_msgs/Odometry).",
 )
+@click.option(
+    "--adapt-noise",
+    is_flag=True,
+    help="Estimate the detection noise from the log's innovations in a first pass and run "
+    "again with it (logs with PoseArray detections; not with --map).",
+)
 @seed_option
 def run_command(
-    log: Path, outdir: Path, config: str | None, map_dir, fix, fix_from, ranges, start_pose, seed
+    log: Path,
+    outdir: Path,
+    config: str | None,
+    map_dir,
+    fix,
+    fix_from,
+    ranges,
+    start_pose,
+    adapt_noise,
+    seed,
 ) -> None:
     """EKF-SLAM on ceiling lamps over the recorded LOG (MCAP), written into OUTDIR.
 
@@ -112,4 +127,10 @@ def run_command(
 
     cfg = load_config(config, seed)
     aids = _build_aids(map_dir, fix, cfg, log, fix_from)
-    emit(run_stage(log, outdir, cfg, aids, ranges, start_pose))
+    if adapt_noise and aids:
+        raise click.UsageError("--adapt-noise cannot be combined with heading or pose fixes")
+    emit(
+        run_stage(
+            log, outdir, cfg, aids, adapt_noise=adapt_noise, ranges=ranges, start_pose=start_pose
+        )
+    )

@@ -2,13 +2,14 @@
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
 from numpy.typing import NDArray
 
 from fuzzyslam.evaluation import metrics as M
+from fuzzyslam.evaluation.align import umeyama
 from fuzzyslam.evaluation.params import EvalParams
 from fuzzyslam.se2 import wrap_angle
 from fuzzyslam.streams.logmeta import Scenario, World
@@ -26,6 +27,15 @@ class Truth:
     scenario: Scenario | None = None
     freeze_run: int | None = None
     source: str = ""
+    # true landmark positions (K, 2) when not in a world (e.g. --landmarks-truth)
+    landmarks: Array | None = None
+
+    @property
+    def landmark_array(self) -> Array | None:
+        """The true landmarks: the simulated world's lamps, else ``landmarks``."""
+        if self.world is not None:
+            return self.world.lamp_array
+        return self.landmarks
 
 
 @dataclass
@@ -162,11 +172,46 @@ def _phase_block(
     return out
 
 
-def evaluate(truth: Truth, est: Estimate, params: EvalParams) -> Evaluation:
+def align_estimate(est: Estimate, truth: Truth, params: EvalParams) -> tuple[Estimate, dict]:
+    """The estimate moved onto the truth by one rigid 2-D motion (Umeyama, as evo's
+    ``--align``), found from the positions paired in time: poses, dead reckoning and
+    landmarks are mapped by it, covariances rotated (C' = A C A^T, A = diag(R, 1)).
+    For real logs, whose map frame is the robot's start and not the truth's frame."""
+    assoc = M.associate(est.t, est.poses, truth.t, truth.poses, params.max_dt_s)
+    if len(assoc) < 2:
+        return est, {}
+    s = umeyama(assoc.est[:, :2], assoc.truth[:, :2])
+    a = np.eye(3)
+    a[:2, :2] = s.rotation
+    out = replace(
+        est,
+        poses=s.apply_poses(est.poses),
+        cov=a @ est.cov @ a.T if est.cov is not None else None,
+        landmarks=s.apply(est.landmarks) if est.landmarks is not None else None,
+        odometry=(est.odometry[0], s.apply_poses(est.odometry[1]))
+        if est.odometry is not None
+        else None,
+        landmark_history=[(t, s.apply(lm)) for t, lm in est.landmark_history],
+    )
+    info = {
+        "tx_m": float(s.translation[0]),
+        "ty_m": float(s.translation[1]),
+        "theta_deg": float(np.degrees(s.angle)),
+    }
+    return out, info
+
+
+def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = False) -> Evaluation:
     """Compute every metric of ``est`` against ``truth``, overall, per run and per phase.
 
-    Raises SpanError when fewer than two estimate samples overlap the truth in time.
+    ``align``: first move the estimate onto the truth with one rigid 2-D motion
+    (:func:`align_estimate`), so that errors, NEES and landmarks are taken in the truth's
+    frame up to that motion. Raises SpanError when fewer than two estimate samples overlap
+    the truth in time.
     """
+    alignment = None
+    if align:
+        est, alignment = align_estimate(est, truth, params)
     assoc = M.associate(est.t, est.poses, truth.t, truth.poses, params.max_dt_s)
     if len(assoc) < 2:
         raise SpanError(
@@ -204,12 +249,18 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams) -> Evaluation:
             for ph in phases
         },
     }
+    if alignment is not None:
+        metrics["aligned_to_truth"] = alignment
     lamp_match = None
-    if est.landmarks is not None and truth.world is not None:
-        lamp_match = M.match_lamps(est.landmarks, truth.world.lamp_array, params.lamp_max_dist_m)
+    true_lm = truth.landmark_array
+    if est.landmarks is not None and true_lm is not None:
+        lamp_match = M.match_lamps(est.landmarks, true_lm, params.lamp_max_dist_m)
         metrics["lamps"] = lamp_match.summary()
         metrics["lamps"]["estimated"] = int(est.landmarks.shape[0])
-        metrics["lamps"]["true"] = int(truth.world.lamp_array.shape[0])
+        metrics["lamps"]["true"] = int(true_lm.shape[0])
+        metrics["lamps"]["left_over"] = len(lamp_match.duplicates) + len(lamp_match.spurious)
+        for d in (0.3, 0.5):  # true landmarks with an estimate this near (not one to one)
+            metrics["lamps"][f"true_within_{d:g}_m"] = M.found_within(est.landmarks, true_lm, d)
     by_run: dict[int, M.LampMatch] = {}
     if est.landmark_history and truth.world is not None:
         snap_t = np.array([t for t, _ in est.landmark_history])
@@ -259,6 +310,8 @@ def headline(metrics: dict[str, Any]) -> dict[str, Any]:
         h["nees_in_band"] = ov["nees"]["in_band"]
     if "lamps" in metrics:
         lm = metrics["lamps"]
+        h["lamps_true_within_0.5_m"] = lm["true_within_0.5_m"]
+        h["lamps_left_over"] = lm["left_over"]
         h["lamp_error_mean_m"] = lm["error_m"]["mean"]
         h["lamps_duplicated"] = lm["duplicates"]
         h["lamps_missed"] = lm["missed"]

@@ -29,12 +29,12 @@ from fuzzyslam.evaluation.core import (
 from fuzzyslam.evaluation.params import EvalParams
 from fuzzyslam.fileio import OutputDir, check_input_file, check_outputs
 from fuzzyslam.maps.grid import BeliefMap, Grid
-from fuzzyslam.progress import Progress
+from fuzzyslam.progress import Progress, note
 from fuzzyslam.streams.logmeta import read_scenario, read_world
 from fuzzyslam.streams.messages import pose_of
 from fuzzyslam.streams.reader import MCAP_MAGIC, LogReader
 from fuzzyslam.streams.topics import Topics
-from fuzzyslam.streams.tum import read_tum
+from fuzzyslam.streams.tum import format_tum, read_tum, read_tum_planar
 
 KIND_MCAP = "mcap"
 KIND_TUM = "tum"
@@ -82,7 +82,9 @@ def read_truth(path: str | os.PathLike) -> Truth:
     """Ground truth from a simulated log (with world, scenario, freeze run) or a TUM file."""
     kind = detect_kind(path)
     if kind == KIND_TUM:
-        t, poses = read_tum(path)
+        t, poses, planar = read_tum_planar(path)
+        if not planar:
+            note(f"{path}: a 3-D trajectory: evaluated in the plane (z, roll and pitch ignored)")
         return Truth(t, poses, source=str(path))
     if kind != KIND_MCAP:
         raise InputError(path, "TRUTH must be a simulated MCAP log or a TUM file, not a directory")
@@ -283,6 +285,8 @@ def run_evaluate(
     map_dir: str | os.PathLike | None = None,
     label: str | None = None,
     compare: Sequence[str | os.PathLike] = (),
+    landmarks_truth: str | os.PathLike | None = None,
+    align: bool = False,
 ) -> EvaluateResult:
     """Read, evaluate, and write metrics.json, the figures and report.md into ``outdir``.
 
@@ -291,25 +295,35 @@ def run_evaluate(
     (the main one first), report.md a side-by-side table and ``compare.png`` their position
     errors against time.
 
+    ``landmarks_truth``: a YAML of true landmarks (``landmarks: [{id, x, y}, ...]``, the
+    layout of landmarks.yaml) for a truth without a world (a real log); the estimate is
+    then aligned onto the truth (``align``: one rigid 2-D motion, core.align_estimate)
+    before every metric, as the map frame of a real run is its start, not the truth's.
+
     Every input is read and checked before anything is written; the outputs appear together
-    (fileio.OutputDir), so a failure leaves ``outdir`` as it was.
+    (fileio.OutputDir), so a failure leaves ``outdir`` as it was. ``truth.tum`` in
+    ``outdir`` is the truth that was used (for evo).
     """
     from fuzzyslam.evaluation import figures, report
 
     params = params or EvalParams()
-    check_outputs([truth_path, estimate_path, *compare], [outdir])
+    extra_inputs = [landmarks_truth] if landmarks_truth is not None else []
+    check_outputs([truth_path, estimate_path, *compare, *extra_inputs], [outdir])
     fgm = read_fgm(map_dir) if map_dir is not None else None
     est = read_estimate(estimate_path, label)
     others = [read_estimate(c) for c in compare]
     truth = read_truth(truth_path)
+    if landmarks_truth is not None:
+        truth.landmarks, _ = read_landmarks(Path(landmarks_truth))
+        align = True
     try:
-        ev = evaluate(truth, est, params)
+        ev = evaluate(truth, est, params, align=align)
     except SpanError as exc:
         raise InputError(estimate_path, str(exc)) from None
     evs = [(est, ev)]
     for path, other in zip(compare, others, strict=True):
         try:
-            evs.append((other, evaluate(truth, other, params)))
+            evs.append((other, evaluate(truth, other, params, align=align)))
         except SpanError as exc:
             raise InputError(path, str(exc)) from None
     if others:
@@ -324,6 +338,7 @@ def run_evaluate(
         if others:
             figures.fig_compare(tmp / "compare.png", truth, [(e.label, v) for e, v in evs])
             figs["compare"] = "compare.png"
+        (tmp / "truth.tum").write_text(format_tum(truth.t, truth.poses), encoding="utf-8")
         report.write_metrics(tmp / "metrics.json", ev.metrics)
         report.write_report(tmp / "report.md", ev.metrics, figs)
         files = sorted(x.name for x in tmp.iterdir())

@@ -297,6 +297,7 @@ class Consistency:
     band_hi: float
     in_band: bool
     frac_within_95: float
+    frac_above_100: float = float("nan")  # share of samples above 100: a filter in trouble
 
     def to_dict(self) -> dict[str, Any]:
         return asdict(self)
@@ -307,7 +308,8 @@ def consistency(values: ArrayLike, dof: int) -> Consistency:
 
     The mean of n samples of chi2(dof) times n is chi2(dof n): the filter is consistent at 95 %
     when mean lies in chi2.ppf([0.025, 0.975], dof n) / n (Bar-Shalom et al. 2001, sec. 5.4).
-    frac_within_95 is the share of single samples inside chi2.ppf([0.025, 0.975], dof).
+    frac_within_95 is the share of single samples inside chi2.ppf([0.025, 0.975], dof);
+    frac_above_100 the share above 100 (for 3 dof, a 10-sigma error: overconfidence).
     """
     v = np.asarray(values, dtype=float).reshape(-1)
     v = v[np.isfinite(v)]
@@ -317,7 +319,8 @@ def consistency(values: ArrayLike, dof: int) -> Consistency:
     m = float(v.mean())
     slo, shi = chi2.ppf([0.025, 0.975], dof)
     frac = float(np.mean((v >= slo) & (v <= shi)))
-    return Consistency(dof, int(v.size), m, lo, hi, bool(lo <= m <= hi), frac)
+    above = float(np.mean(v > 100.0))
+    return Consistency(dof, int(v.size), m, lo, hi, bool(lo <= m <= hi), frac, above)
 
 
 # --- lamps --------------------------------------------------------------------------------
@@ -354,6 +357,16 @@ class LampMatch:
             "duplicate_ids": list(self.duplicates),
             "missed_ids": list(self.missed),
         }
+
+
+def found_within(est_xy: ArrayLike, true_xy: ArrayLike, dist: float) -> int:
+    """How many true landmarks have an estimate within ``dist`` (not one to one)."""
+    e = np.asarray(est_xy, dtype=float).reshape(-1, 2)
+    t = np.asarray(true_xy, dtype=float).reshape(-1, 2)
+    if e.shape[0] == 0 or t.shape[0] == 0:
+        return 0
+    d = np.hypot(e[:, None, 0] - t[None, :, 0], e[:, None, 1] - t[None, :, 1])
+    return int((d.min(axis=0) <= dist).sum())
 
 
 def match_lamps(est_xy: ArrayLike, true_xy: ArrayLike, max_dist: float) -> LampMatch:

@@ -33,6 +33,7 @@ from fuzzyslam.fileio import atomic_path
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import transform_points
+from fuzzyslam.stamps import format_time
 
 CHANGE_FIELDS = ("t", "x", "y", "size", "cells")
 
@@ -50,7 +51,7 @@ class Change:
 
     def row(self) -> list[str]:
         return [
-            f"{self.t:.6f}",
+            format_time(self.t),
             f"{self.x:.4f}",
             f"{self.y:.4f}",
             f"{self.size:.3f}",

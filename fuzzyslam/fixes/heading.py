@@ -84,6 +84,7 @@ from fuzzyslam.maps.flm import RecentRings
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import wrap_angle, wrap_angle_period
 from fuzzyslam.slam.health import chi2_quantile
+from fuzzyslam.stamps import format_time
 
 HEADING_FIELDS = ("t", "corridor", "measured", "predicted", "accepted", "reason", "strength")
 
@@ -120,7 +121,7 @@ class HeadingDecision:
             return "" if not np.isfinite(v) else f"{v:.9g}"
 
         return [
-            f"{self.t:.6f}",
+            format_time(self.t),
             str(self.corridor),
             num(self.measured),
             num(self.predicted),

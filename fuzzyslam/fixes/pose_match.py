@@ -79,6 +79,7 @@ from fuzzyslam.fileio import atomic_path
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import wrap_angle
+from fuzzyslam.stamps import format_time
 
 UNCONSTRAINED_VAR = 1.0e4  # variance given to a direction the scan does not constrain
 
@@ -324,7 +325,7 @@ class PoseDecision:
         d = np.diag(self.cov)
         vals = [*self.pose, *d]
         return [
-            f"{self.t:.6f}",
+            format_time(self.t),
             str(int(self.accepted)),
             self.reason,
             *[num(float(v)) for v in vals],

@@ -77,12 +77,34 @@ def unique_hypothesis(cands: list[list[int]]) -> list[tuple[int, int]] | None:
     return None
 
 
+@dataclass
+class Association:
+    """The outcome of JCBB on one frame: the pairings to apply, and the detections whose
+    pairing is ambiguous (another hypothesis with as many pairings fits nearly as well)."""
+
+    pairs: list[tuple[int, int]]
+    ambiguous: list[int] = field(default_factory=list)
+
+
 def jcbb(
-    ekf: EkfSlam, z: np.ndarray, r: np.ndarray, d2: np.ndarray, gate_chi2: float
-) -> list[tuple[int, int]]:
+    ekf: EkfSlam,
+    z: np.ndarray,
+    r: np.ndarray,
+    d2: np.ndarray,
+    gate_chi2: float,
+    ambiguity_margin: float = 0.0,
+) -> Association:
     """Joint-compatibility branch and bound: the best list of (detection, lamp) pairs.
 
-    ``d2`` (m, n) are the individual squared Mahalanobis distances.
+    ``d2`` (m, n) are the individual squared Mahalanobis distances. The best hypothesis
+    has the most jointly compatible pairings, then the smallest joint NIS (Neira and
+    Tardos 2001). With ``ambiguity_margin`` > 0 [ours]: every hypothesis with as many
+    pairings and a joint NIS within the margin of the best is an alternative, and only
+    the pairings common to all of them are returned; the detections paired differently
+    by some alternative are ``ambiguous`` (neither applied nor new landmarks). The margin
+    is a log-likelihood ratio: an alternative within it is at least exp(-margin / 2) as
+    likely as the best, so choosing between them is a guess (e.g. landmarks closer
+    together than the detection noise, seen from afar).
     """
     m = len(z)
     cands = candidates(d2, gate_chi2)
@@ -90,19 +112,23 @@ def jcbb(
     if pairs is not None and (
         not pairs or joint_nis(ekf, pairs, z, r) <= joint_threshold(gate_chi2, 2 * len(pairs))
     ):
-        return pairs
-    best: list[tuple[int, int]] = []
-    best_nis = np.inf
+        return Association(pairs)
+    hyps: list[tuple[list[tuple[int, int]], float]] = []  # (pairs, nis) with the best count
+    best_n, best_nis = 0, np.inf
 
     def recurse(j: int, pairs: list[tuple[int, int]], used: set[int], nis: float) -> None:
-        nonlocal best, best_nis
+        nonlocal best_n, best_nis
         if j == m:
-            if len(pairs) > len(best) or (len(pairs) == len(best) and nis < best_nis):
-                best, best_nis = list(pairs), nis
+            if len(pairs) > best_n:
+                best_n, best_nis = len(pairs), nis
+                hyps.clear()
+            if len(pairs) == best_n:
+                best_nis = min(best_nis, nis)
+                hyps.append((list(pairs), nis))
             return
-        # bound: even pairing every remaining detection cannot beat the best
+        # bound: even pairing every remaining detection cannot reach the best count
         remaining = sum(1 for jj in range(j, m) if cands[jj])
-        if len(pairs) + remaining < len(best):
+        if len(pairs) + remaining < best_n:
             return
         for i in cands[j]:
             if i in used:
@@ -113,11 +139,20 @@ def jcbb(
                 used.add(i)
                 recurse(j + 1, trial, used, jn)
                 used.discard(i)
-        if len(pairs) + remaining - (1 if cands[j] else 0) >= len(best):
+        if len(pairs) + remaining - (1 if cands[j] else 0) >= best_n:
             recurse(j + 1, pairs, used, nis)
 
     recurse(0, [], set(), 0.0)
-    return best
+    if not hyps or best_n == 0:
+        return Association([])
+    best = min(hyps, key=lambda h: h[1])[0]
+    if ambiguity_margin <= 0:
+        return Association(best)
+    alts = [set(h) for h, nis in hyps if nis <= best_nis + ambiguity_margin]
+    common = set.intersection(*alts)
+    keep = [pr for pr in best if pr in common]
+    ambiguous = sorted({j for alt in alts for j, _ in alt} - {j for j, _ in keep})
+    return Association(keep, ambiguous)
 
 
 @dataclass
@@ -128,6 +163,7 @@ class Tentative:
     hits: int
     first_t: float
     last_t: float
+    cov: np.ndarray | None = None  # world covariance (2, 2) of the latest sighting
 
 
 @dataclass
@@ -137,6 +173,7 @@ class TentativeLamps:
     hits: int = 3
     radius: float = 0.3
     timeout: float = 2.0
+    gate_chi2: float = 9.21
     items: list[Tentative] = field(default_factory=list)
     expired: int = 0
 
@@ -146,27 +183,52 @@ class TentativeLamps:
         self.expired += len(self.items) - len(keep)
         self.items = keep
 
-    def observe(self, t: float, world: np.ndarray, taken: set[int]) -> bool:
+    def observe(
+        self, t: float, world: np.ndarray, taken: set[int], cov: np.ndarray | None = None
+    ) -> bool:
         """Add a sighting at world point ``world``; True when it promotes a candidate.
 
         ``taken`` holds candidates already sighted in this frame (one sighting per frame).
+        A sighting joins the nearest candidate within ``radius``; with ``cov`` (the
+        sighting's world covariance, (2, 2)) also only one whose squared Mahalanobis
+        distance (w - c)^T (C_w + C_c)^-1 (w - c) is within ``gate_chi2``, so that
+        landmarks closer together than ``radius`` but far apart in units of the
+        detection noise keep their own candidates.
         """
         world = np.asarray(world, dtype=float)
-        best, best_d = -1, self.radius
-        for a, c in enumerate(self.items):
-            d = float(np.hypot(*(c.pos - world)))
-            if a not in taken and d <= best_d:
+        best, best_d = -1, np.inf
+        for a, c in enumerate(self.items):  # a handful of candidates at a time
+            if a in taken:
+                continue
+            diff = c.pos - world
+            d = float(np.hypot(*diff))
+            if d > self.radius:
+                continue
+            if cov is not None and c.cov is not None:
+                s = cov + c.cov
+                det = s[0, 0] * s[1, 1] - s[0, 1] * s[1, 0]
+                m2 = (
+                    s[1, 1] * diff[0] ** 2
+                    - 2 * s[0, 1] * diff[0] * diff[1]
+                    + s[0, 0] * diff[1] ** 2
+                ) / det
+                if not m2 <= self.gate_chi2:
+                    continue
+                d = m2
+            if d < best_d:
                 best, best_d = a, d
         if best < 0:
             if self.hits <= 1:
                 return True
-            self.items.append(Tentative(world.copy(), 1, t, t))
+            self.items.append(Tentative(world.copy(), 1, t, t, cov))
             taken.add(len(self.items) - 1)
             return False
         c = self.items[best]
         c.pos = c.pos + (world - c.pos) / (c.hits + 1)
         c.hits += 1
         c.last_t = t
+        if cov is not None:
+            c.cov = cov
         taken.add(best)
         if c.hits >= self.hits:
             del self.items[best]

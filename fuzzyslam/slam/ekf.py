@@ -28,13 +28,20 @@ class UpdateResult:
     accepted: bool
     nis: float
     innovation: np.ndarray
+    s: np.ndarray | None = None  # innovation covariance S = H P H^T + R (prior)
 
 
-def motion_noise(d_trans: float, d_rot: float, alpha) -> np.ndarray:
-    """Covariance M of the odometry increment (d_trans, d_rot) (SlamParams docstring)."""
-    a1, a2, a3, a4, a5, a6 = alpha
-    dt2, dr2, adt = d_trans * d_trans, d_rot * d_rot, abs(d_trans)
-    return np.diag([a1 * dt2 + a2 * dr2 + a5 * adt, a3 * dr2 + a4 * dt2 + a6 * adt])
+def motion_noise(d_trans: float, d_rot: float, noise) -> np.ndarray:
+    """Covariance M of the odometry increment (d_trans, d_rot): a random walk per metre
+    of travel and per radian of turn (``SlamParams`` docstring), so that the covariance
+    of a motion does not depend on how many increments it is split into:
+
+        M = diag(k_tt |dt| + k_tr |dr|,  k_rr |dr| + k_rt |dt|),
+        noise = (k_tt [m^2/m], k_tr [m^2/rad], k_rr [rad^2/rad], k_rt [rad^2/m]).
+    """
+    k_tt, k_tr, k_rr, k_rt = noise
+    adt, adr = abs(d_trans), abs(d_rot)
+    return np.diag([k_tt * adt + k_tr * adr, k_rr * adr + k_rt * adt])
 
 
 def motion_jacobians(pose: np.ndarray, d_trans: float, d_rot: float) -> tuple[np.ndarray, ...]:
@@ -76,6 +83,15 @@ def lamp_init(pose: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, ...]:
     return pose[:2] + d, jr, r
 
 
+def odometry_noise_tuple(noise) -> tuple[float, float, float, float]:
+    """The four random-walk coefficients (k_tt, k_tr, k_rr, k_rt) of :func:`motion_noise`,
+    checked: finite and non-negative."""
+    k = tuple(float(a) for a in noise)
+    if len(k) != 4 or not all(math.isfinite(a) and a >= 0.0 for a in k):
+        raise ValueError(f"odometry noise needs 4 finite coefficients >= 0, got {noise!r}")
+    return k  # type: ignore[return-value]
+
+
 _BLOCK = 256
 
 
@@ -105,8 +121,8 @@ class Preintegrator:
     G_u the motion Jacobian at the origin. Plain floats: it runs at the odometry rate.
     """
 
-    def __init__(self, alpha) -> None:
-        self.alpha = tuple(float(a) for a in alpha)
+    def __init__(self, noise) -> None:
+        self.noise = odometry_noise_tuple(noise)
         self.reset()
 
     def reset(self) -> None:
@@ -116,10 +132,10 @@ class Preintegrator:
 
     def add(self, d_trans: float, d_rot: float) -> None:
         """Compose one increment (the matrix products written out on the 6 unique entries)."""
-        a1, a2, a3, a4, a5, a6 = self.alpha
-        dt2, dr2, adt = d_trans * d_trans, d_rot * d_rot, abs(d_trans)
-        mt = a1 * dt2 + a2 * dr2 + a5 * adt
-        mr = a3 * dr2 + a4 * dt2 + a6 * adt
+        k_tt, k_tr, k_rr, k_rt = self.noise
+        adt, adr = abs(d_trans), abs(d_rot)
+        mt = k_tt * adt + k_tr * adr  # motion_noise, written out
+        mr = k_rr * adr + k_rt * adt
         h = 0.5 * d_rot
         mx, my = d_trans * math.cos(h), d_trans * math.sin(h)
         c, s = math.cos(self.dth), math.sin(self.dth)
@@ -164,16 +180,14 @@ class Preintegrator:
 class EkfSlam:
     """EKF-SLAM state and covariance with O(n) prediction and Joseph-form updates."""
 
-    def __init__(self, pose, pose_cov, alpha, capacity: int = 16) -> None:
+    def __init__(self, pose, pose_cov, noise, capacity: int = 16) -> None:
         cap = 3 + 2 * max(int(capacity), 1)
         self._x = np.zeros(cap)
         self._p = np.zeros((cap, cap))
         self._x[:3] = np.asarray(pose, dtype=float)
         self._x[2] = wrap_angle(self._x[2])
         self._p[:3, :3] = np.asarray(pose_cov, dtype=float)
-        self.alpha = tuple(float(a) for a in alpha)
-        if len(self.alpha) != 6:
-            raise ValueError("alpha must have 6 coefficients")
+        self.noise = odometry_noise_tuple(noise)
         self.dim = 3
         # (idx, UpdateResult) of every update_robot call, drained by the runner (updates.csv)
         self.robot_updates: list[tuple[tuple[int, ...], UpdateResult]] = []
@@ -234,7 +248,7 @@ class EkfSlam:
         """
         pose = self._x[:3]
         gx, gu = motion_jacobians(pose, d_trans, d_rot)
-        m = motion_noise(d_trans, d_rot, self.alpha)
+        m = motion_noise(d_trans, d_rot, self.noise)
         self._x[:3] = motion_step(pose, d_trans, d_rot)
         self.odometry_pose = motion_step(self.odometry_pose, d_trans, d_rot)
         n = self.dim
@@ -281,7 +295,13 @@ class EkfSlam:
 
     # -- updates ------------------------------------------------------------------------
 
-    def _correct(self, cols: np.ndarray, hc: np.ndarray, v: np.ndarray, r: np.ndarray) -> None:
+    def _correct(
+        self,
+        cols: np.ndarray,
+        hc: np.ndarray,
+        v: np.ndarray,
+        r: np.ndarray,
+    ) -> None:
         """Kalman correction with H nonzero only on columns ``cols`` (H[:, cols] = hc).
 
         K = P H^T S^-1,  x' = x + K v,
@@ -365,9 +385,9 @@ class EkfSlam:
         s = self.innovation_cov(cols, hc, r)
         nis = self._nis(s, v)
         if gate_chi2 is not None and not nis <= gate_chi2:
-            return UpdateResult(False, nis, v)
+            return UpdateResult(False, nis, v, s)
         self._correct(cols, hc, v, r)
-        return UpdateResult(True, nis, v)
+        return UpdateResult(True, nis, v, s)
 
     def update_lamp(self, i: int, z, r, gate_chi2: float | None = None) -> UpdateResult:
         """Update with one lamp ``i`` seen at robot-frame point z (2,), covariance r (2, 2)."""

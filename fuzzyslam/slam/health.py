@@ -139,6 +139,8 @@ class DivergenceMonitor:
     _det: int = 0
     _ok: int = 0
     _ta: float = 0.0
+    births: int = 0
+    births_untrusted: int = 0
 
     def observe(self, t: float, nis: float, dof: int) -> None:
         """One update's NIS (``dof`` its degrees of freedom)."""
@@ -167,6 +169,19 @@ class DivergenceMonitor:
             self._streak(t, self.assoc.close(self._ta, t, bad))
             self._det, self._ok = 0, 0
 
+    @property
+    def untrusted(self) -> bool:
+        """The latest closed window of either test was out of bounds."""
+        return self.nis.streak > 0 or self.assoc.streak > 0
+
+    def observe_birth(self, t: float, pose_cov: np.ndarray) -> None:
+        """A landmark initialised at ``t`` (from a pose of covariance ``pose_cov``); counted
+        as untrusted when the latest window of either test is out of bounds: its position
+        inherits an error the filter does not admit (a future duplicate)."""
+        self.births += 1
+        if self.untrusted:
+            self.births_untrusted += 1
+
     def _streak(self, t: float, streak: int) -> None:
         if streak >= self.patience and self.diverged_at is None:
             self.diverged_at = t
@@ -191,6 +206,8 @@ class DivergenceMonitor:
             "nis_worst_window_ratio": round(self.worst_ratio, 3),
             "association_windows": self.assoc.windows,
             "association_windows_out_of_bounds": self.assoc.out_of_bounds,
+            "landmark_births": self.births,
+            "landmark_births_untrusted": self.births_untrusted,
             "diverged": self.diverged,
             "diverged_at": self.diverged_at,
             "out_of_bounds_spans": [[round(a, 3), round(b, 3)] for a, b in spans[:5]],

@@ -43,12 +43,13 @@ from fuzzyslam.camera import CeilingCamera
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.robot import WHEEL_NAMES
-from fuzzyslam.se2 import between, wrap_angle, yaw_to_quaternion
+from fuzzyslam.se2 import wrap_angle
 from fuzzyslam.slam.detect import detect_lamps
-from fuzzyslam.slam.fastread import indexed_messages
 from fuzzyslam.slam.odom_gate import OdomGate, first_plausible_pose
 from fuzzyslam.slam.runner import Event, Frame, Odom, RingEvent, SlamResult, UpdateRow
+from fuzzyslam.stamps import TIME_FORMAT, format_time
 from fuzzyslam.streams import messages as M
+from fuzzyslam.streams.cdr import encode_pose_with_covariance_block
 from fuzzyslam.streams.logmeta import read_scenario
 from fuzzyslam.streams.ranges import RangeSensor, open_ranges
 from fuzzyslam.streams.reader import LogReader
@@ -106,8 +107,7 @@ class LogInputs:
         last_t = {self.odom_topic: -np.inf, self.lamp_topic: -np.inf}
         prev = None
         topics = [self.odom_topic, self.lamp_topic] if self.lamp_topic else [self.odom_topic]
-        stream = indexed_messages(self.reader, topics)
-        for m in stream if stream is not None else self.reader.messages(topics):
+        for m in self.reader.messages(topics):
             t = M.stamp_to_sec(m.msg.header.stamp)
             if t < last_t[m.topic]:
                 self.warn("out_of_order", f"{m.topic}: header stamp {t:.3f} s goes back in time")
@@ -160,8 +160,13 @@ class LogInputs:
         return 0.5 * r * (d_left + d_right), r * (d_right - d_left) / b
 
     def _odom_pose(self, t: float, msg, prev):
-        pose = M.pose_of(msg.pose.pose)
-        if not np.all(np.isfinite(pose)):
+        """An Odometry pose as the increment (d_trans, d_rot) from the previous one: the
+        relative pose rel = prev^-1 (+) pose (``se2.between``) written on floats (the hot
+        path, up to 100 Hz), d_trans = sign(rel_x) |rel_xy|, d_rot = rel_theta."""
+        p, q = msg.pose.pose.position, msg.pose.pose.orientation
+        yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
+        pose = (float(p.x), float(p.y), yaw)
+        if not all(math.isfinite(v) for v in pose):
             self.warn("nan_odometry", f"NaN odometry pose at t={t:.3f} s")
             return None, prev
         status = self._gate.step(t, pose)
@@ -172,9 +177,11 @@ class LogInputs:
             self.warn("odometry_jumps_kept", f"odometry jump at t={t:.3f} s kept as motion")
         if prev is None:
             return None, pose
-        rel = between(prev, pose)
-        d_trans = float(np.copysign(np.hypot(rel[0], rel[1]), rel[0]))
-        return Odom(t, d_trans, float(rel[2])), pose
+        dx, dy = pose[0] - prev[0], pose[1] - prev[1]
+        c, s = math.cos(prev[2]), math.sin(prev[2])
+        rx = c * dx + s * dy
+        d_rot = math.remainder(yaw - prev[2], math.tau)
+        return Odom(t, math.copysign(math.hypot(dx, dy), rx), d_rot), pose
 
     def _measurement_cov(self, m: int, sigma: float) -> np.ndarray:
         """(m, 2, 2) covariances sigma^2 I of m detections (the last block kept: the
@@ -208,21 +215,17 @@ class LogInputs:
         if not np.all(ok):
             self.warn("nan_detections", f"NaN detection at t={t:.3f} s")
             z = z[ok]
-        return Frame(t, z, self._measurement_cov(len(z), self.cfg.slam.detection_sigma))
+        return Frame(t, z, self.cfg.slam.detection_cov(z))
 
     def _ring_events(self, start: float | None = None) -> Iterator[Event]:
         assert self.ranges is not None
-        topics = self.ranges.topics
-        # the fast path, as for odometry (rings before ``start`` are not even read)
-        stream = indexed_messages(self.reader, topics, start)
-        msgs = stream if stream is not None else self.reader.messages(topics)
+        msgs = self.reader.messages(self.ranges.topics, start)  # rings before ``start`` not read
         for ring in self.ranges.rings(msgs, self.ring_stats):
             yield RingEvent(ring.t, ring)
 
 
 def _first(reader: LogReader, topic: str):
-    stream = indexed_messages(reader, [topic])
-    for m in stream if stream is not None else reader.messages([topic]):
+    for m in reader.messages([topic]):
         return m.msg
     return None
 
@@ -295,9 +298,8 @@ def _first_odometry_pose(
 ) -> np.ndarray:
     """The first confirmed odometry pose (slam/odom_gate.py ``first_plausible_pose``, from
     the first 100 messages), ``gate`` primed with it; ``default`` when there is none."""
-    stream = indexed_messages(reader, [topic])
     t, poses = [], []
-    for m in stream if stream is not None else reader.messages([topic]):
+    for m in reader.messages([topic]):
         p = M.pose_of(m.msg.pose.pose)
         if np.all(np.isfinite(p)):
             t.append(M.stamp_to_sec(m.msg.header.stamp))
@@ -345,10 +347,11 @@ def _num(v: float) -> str:
 
 
 def _fmt_rows(a: np.ndarray) -> str:
-    """CSV rows of a finite float array (N, k), 9 significant digits (vectorised)."""
+    """CSV rows of a finite float array (N, k): the time column (first) in
+    ``stamps.TIME_FORMAT``, the others to 9 significant digits."""
     if len(a) == 0:
         return ""
-    fmt = ",".join(["%.9g"] * a.shape[1])
+    fmt = ",".join([TIME_FORMAT] + ["%.9g"] * (a.shape[1] - 1))
     return "\n".join(fmt % tuple(r) for r in a.tolist()) + "\n"
 
 
@@ -399,51 +402,10 @@ def _pose_message(t: float, pose: np.ndarray, c: np.ndarray):
     return M.pose_with_covariance(t, "map", pose, cov3)
 
 
-def _pose_cdr_block(t: np.ndarray, poses: np.ndarray, cov: np.ndarray, frame: str) -> list:
-    """Little-endian CDR of PoseWithCovarianceStamped for N rows at once (what
-    ``_pose_message`` + ``typestore.serialize`` give, ~10x faster).
-
-    Layout (OMG CDR, alignment counted after the 4-byte encapsulation header):
-    header.stamp sec i32, nanosec u32; frame_id u32 length (with NUL) + bytes + NUL;
-    padding to 8; position x y z, orientation x y z w, covariance[36] float64 (the 3x3
-    pose covariance embedded at rows/columns x, y, yaw as ``messages.cov3_to_cov6``).
-    """
-    name = frame.encode() + b"\0"
-    pad = -(12 + len(name)) % 8
-    dt = np.dtype(
-        [
-            ("encaps", "V4"),
-            ("sec", "<i4"),
-            ("nsec", "<u4"),
-            ("flen", "<u4"),
-            ("frame", f"V{len(name) + pad}"),
-            ("pose", "<f8", (7,)),
-            ("cov", "<f8", (36,)),
-        ]
-    )
-    n = len(t)
-    a = np.zeros(n, dtype=dt)
-    a["encaps"] = b"\x00\x01\x00\x00"
-    ns = [round(v * 1e9) for v in np.asarray(t, dtype=float).tolist()]  # messages.stamp
-    a["sec"] = [v // 1_000_000_000 for v in ns]
-    a["nsec"] = [v % 1_000_000_000 for v in ns]
-    a["flen"] = len(name)
-    a["frame"] = name + b"\0" * pad
-    a["pose"][:, :2] = poses[:, :2]
-    a["pose"][:, 3:] = yaw_to_quaternion(poses[:, 2])
-    c6 = a["cov"].reshape(n, 6, 6)
-    c6[:, [0, 0, 0, 1, 1, 1, 5, 5, 5], [0, 1, 5, 0, 1, 5, 0, 1, 5]] = cov[
-        :, [0, 1, 2, 1, 3, 4, 2, 4, 5]
-    ]
-    raw = a.tobytes()
-    size = dt.itemsize
-    return [raw[k * size : (k + 1) * size] for k in range(n)]
-
-
 def _update_fields(u: UpdateRow) -> list:
     """The updates.csv fields of one update attempt (unused innovation components empty)."""
     return [
-        _num(u.t),
+        format_time(u.t),
         u.kind,
         u.id,
         u.dof,
@@ -592,7 +554,7 @@ class StreamingOutputs:
         t = np.array([r[0] for r in self._rows], dtype=float)
         poses = np.array([r[1] for r in self._rows], dtype=float).reshape(-1, 3)
         cov = np.array([r[2] for r in self._rows], dtype=float).reshape(-1, 6)
-        cdr = iter(_pose_cdr_block(t, poses, cov, "map"))
+        cdr = iter(encode_pose_with_covariance_block(t, poses, cov, "map"))
         for lamps, tm, a, b in self._messages:  # in the order they came
             if lamps:
                 self._mcap.write(tp.slam_landmarks, M.MARKER_ARRAY, _lamp_markers(tm, a, b), tm)

@@ -4,24 +4,36 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 
+import numpy as np
+
 
 @dataclass
 class SlamParams:
     """EKF-SLAM on ceiling lamps (models.md sec. 2-4).
 
-    Odometry noise per increment (Probabilistic Robotics, sec. 5.4, plus a
-    random-walk term per metre that makes the model independent of the odometry
-    rate, [ours]):
+    Odometry noise of an increment (dt, dr) (the odometry motion model of Probabilistic
+    Robotics, sec. 5.4, with the variances linear in the motion, i.e. a random walk per
+    metre of travel and per radian of turn, so that the covariance of a motion does not
+    depend on the odometry's message rate)::
 
-        var_trans = a1 dt^2 + a2 dr^2 + a5 |dt|
-        var_rot   = a3 dr^2 + a4 dt^2 + a6 |dt|
+        var_trans = trans_var_per_m |dt| + trans_var_per_rad |dr|
+        var_rot   = rot_var_per_rad |dr| + rot_var_per_m |dt|
+
+    Detections given as points (PoseArray) are range-bearing measurements::
+
+        sigma_r = detection_sigma_range + detection_sigma_range_per_m * r
+        sigma_b = detection_sigma_bearing_deg
+        R = J diag(sigma_r^2, sigma_b^2) J^T,  J = d(x, y) / d(r, b)
     """
 
-    # odometry motion model: a1..a6 of the docstring. a5, a6 are the random walks of the
-    # simulated encoders measured against ground truth on quick.yaml (translation 2.5e-6
-    # m^2/m, heading 6.1e-5 rad^2/m); a3 covers the 1 % wheel-base error on turns
-    # (0.0016 rad of systematic error between two frames in a turn).
-    alpha: list[float] = field(default_factory=lambda: [1e-4, 1e-4, 1e-3, 1e-4, 3e-6, 6.5e-5])
+    # odometry random walks (docstring). Simulator values: the encoders' random walks
+    # measured against ground truth on quick.yaml (translation 2.5e-6 m^2/m, heading
+    # 6.1e-5 rad^2/m) plus what covers the 1 % wheel-base error on turns (3e-5 rad^2/rad:
+    # 1.6 mrad of systematic error between two frames of a turn)
+    trans_var_per_m: float = field(default=4.5e-6, metadata={"min": 0.0, "max": 1.0})
+    trans_var_per_rad: float = field(default=3e-6, metadata={"min": 0.0, "max": 1.0})
+    rot_var_per_rad: float = field(default=3e-5, metadata={"min": 0.0, "max": 1.0})
+    rot_var_per_m: float = field(default=6.65e-5, metadata={"min": 0.0, "max": 1.0})
     use_encoders: bool = True
     # start pose (x, y, theta) when the log carries none, and its standard deviation
     start_pose: list[float] = field(default_factory=lambda: [0.0, 0.0, 0.0])
@@ -36,15 +48,49 @@ class SlamParams:
     # centroid standard deviation (px): measured 0.007 px on simulated frames against the
     # true projections; 0.02 leaves room for what the simulator does not model
     pixel_sigma: float = field(default=0.02, metadata={"min": 0.001, "max": 100.0})
-    # standard deviation (m) of a detection given as a PoseArray point (logs without frames)
-    detection_sigma: float = field(default=0.02, metadata={"min": 1e-4, "max": 10.0})
+    # noise of a detection given as a PoseArray point (logs without frames; docstring):
+    # range sigma (m) at zero range, its growth per metre of range, bearing sigma (deg)
+    detection_sigma_range: float = field(default=0.02, metadata={"min": 1e-4, "max": 10.0})
+    detection_sigma_range_per_m: float = field(default=0.0, metadata={"min": 0.0, "max": 1.0})
+    detection_sigma_bearing_deg: float = field(default=0.6, metadata={"min": 1e-3, "max": 45.0})
     # data association
     gate_chi2: float = field(default=9.21, metadata={"min": 0.1})
     new_lamp_chi2: float = field(default=40.0, metadata={"min": 0.1})
+    # JCBB alternatives: a hypothesis with as many pairings whose joint NIS is within this
+    # margin of the best makes the pairings it changes ambiguous (not applied; a
+    # log-likelihood ratio: 4 = alternatives at least e^-2 = 14 % as likely); 0: off
+    ambiguity_margin: float = field(default=4.0, metadata={"min": 0.0, "max": 100.0})
     tentative_hits: int = field(default=3, metadata={"min": 1})
+    # a landmark is born only from detections whose own noise (largest standard deviation
+    # of R, m) is below this: a far, noisy sighting of a cluster of landmarks would
+    # otherwise found one landmark for several and pull them together
+    birth_max_sigma: float = field(default=1.0, metadata={"min": 0.001, "max": 100.0})
     tentative_radius: float = field(default=0.3, metadata={"min": 0.01, "max": 10.0})
     tentative_timeout: float = field(default=2.0, metadata={"min": 0.0})
     # outputs: trajectory rows at least this far apart (s) between camera updates
     record_period: float = field(default=0.2, metadata={"min": 0.0})
     # /slam/landmarks MarkerArray period in estimates.mcap (s)
     landmarks_period: float = field(default=10.0, metadata={"min": 0.01})
+
+    @property
+    def odometry_noise(self) -> tuple[float, float, float, float]:
+        """(k_tt, k_tr, k_rr, k_rt) of ``ekf.motion_noise``."""
+        return (
+            self.trans_var_per_m,
+            self.trans_var_per_rad,
+            self.rot_var_per_rad,
+            self.rot_var_per_m,
+        )
+
+    def detection_cov(self, z: np.ndarray) -> np.ndarray:
+        """(m, 2, 2) covariances of detections z (m, 2) in the robot frame (docstring):
+        R = J diag(sigma_r^2, sigma_b^2) J^T with J = [[cos b, -r sin b], [sin b, r cos b]],
+        i.e. sigma_r^2 along the line of sight and (r sigma_b)^2 across it."""
+        z = np.asarray(z, dtype=float).reshape(-1, 2)
+        r = np.hypot(z[:, 0], z[:, 1])
+        with np.errstate(invalid="ignore", divide="ignore"):
+            u = np.where(r[:, None] > 0, z / r[:, None], np.array([1.0, 0.0]))
+        sr = self.detection_sigma_range + self.detection_sigma_range_per_m * r
+        st = r * np.deg2rad(self.detection_sigma_bearing_deg)
+        along = u[:, :, None] * u[:, None, :]
+        return sr[:, None, None] ** 2 * along + st[:, None, None] ** 2 * (np.eye(2) - along)

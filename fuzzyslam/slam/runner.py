@@ -26,8 +26,8 @@ from typing import Protocol
 import numpy as np
 
 from fuzzyslam.robot import integrate
-from fuzzyslam.se2 import rot
 from fuzzyslam.slam.association import (
+    Association,
     TentativeLamps,
     block_diag_cov,
     candidates,
@@ -35,8 +35,9 @@ from fuzzyslam.slam.association import (
     joint_threshold,
     unique_hypothesis,
 )
-from fuzzyslam.slam.ekf import EkfSlam, Preintegrator
+from fuzzyslam.slam.ekf import EkfSlam, Preintegrator, lamp_init
 from fuzzyslam.slam.health import DivergenceMonitor
+from fuzzyslam.slam.noise import DetectionNoiseEstimate, DetectionNoiseEstimator
 from fuzzyslam.slam.params import SlamParams
 from fuzzyslam.streams.sonar import Ring
 
@@ -168,6 +169,10 @@ class SlamResult:
     counts: dict[str, int]
     snapshots: list[tuple[float, np.ndarray, np.ndarray]]
     ekf: EkfSlam
+    # set by the run stage: numerical guards and the divergence test (slam/health.py),
+    # and the detection noise the innovations imply (slam/noise.py)
+    health: dict = field(default_factory=dict)
+    noise_estimate: DetectionNoiseEstimate | None = None
 
     def mean_nis(self, kind: str = "lamp") -> float:
         """Mean NIS of the accepted updates of ``kind`` (expected value: their dof)."""
@@ -191,10 +196,13 @@ class SlamRunner:
         if self.snapshot_period is None:
             self.snapshot_period = p.landmarks_period
         self.start_pose = np.asarray(self.start_pose, dtype=float)
-        self.ekf = EkfSlam(self.start_pose, np.diag(np.square(p.start_sigma)), p.alpha)
-        self.preint = Preintegrator(p.alpha)
+        self.ekf = EkfSlam(self.start_pose, np.diag(np.square(p.start_sigma)), p.odometry_noise)
+        self.preint = Preintegrator(p.odometry_noise)
         self.health = DivergenceMonitor()  # NIS and association-rate windows (health.py)
-        self.tentative = TentativeLamps(p.tentative_hits, p.tentative_radius, p.tentative_timeout)
+        self.noise = DetectionNoiseEstimator()  # the detection noise the innovations imply
+        self.tentative = TentativeLamps(
+            p.tentative_hits, p.tentative_radius, p.tentative_timeout, p.gate_chi2
+        )
         self.counts: dict[str, int] = {
             "odometry": 0,
             "frames": 0,
@@ -203,6 +211,8 @@ class SlamRunner:
             "lamps_created": 0,
             "lamps_deferred": 0,
             "duplicates_guarded": 0,
+            "ambiguous": 0,
+            "births_refused_uncertain": 0,
             "rings": 0,
             "aid_calls": 0,
             "out_of_order": 0,
@@ -266,7 +276,13 @@ class SlamRunner:
             self._record(ev.t)
 
     def frame(self, ev: Frame) -> None:
-        """Associate the frame's detections, update, then manage new lamps."""
+        """Associate the frame's detections, update, then manage new lamps.
+
+        A detection takes part in at most one of: an update (paired by JCBB), nothing
+        (ambiguous: another hypothesis fits nearly as well, ``slam.ambiguity_margin``),
+        a rejected attempt (near a mapped lamp that no other detection of the frame
+        explains: the duplicate guard), or a tentative lamp.
+        """
         ekf = self.ekf
         self.flush()
         self.counts["frames"] += 1
@@ -277,7 +293,8 @@ class SlamRunner:
         self.tentative.expire(ev.t)
         if m:
             d2 = ekf.individual_compatibility(z, r)
-            pairs, res = self._associate_update(z, r, d2)
+            assoc, res = self._associate_update(z, r, d2)
+            pairs = assoc.pairs
             if pairs:
                 for a, (j, i) in enumerate(pairs):
                     self._update(
@@ -293,19 +310,27 @@ class SlamRunner:
                     )
                     self._last_seen[i] = ev.t
                     self._obs[i] += 1
+                    self.noise.add(
+                        z[j],
+                        res.innovation[2 * a : 2 * a + 2],
+                        res.s[2 * a : 2 * a + 2, 2 * a : 2 * a + 2],
+                        r[j],
+                    )
                 self.counts["associated"] += len(pairs)
                 for j, i in pairs:
                     self.health.observe(ev.t, float(d2[j, i]), 2)
+            self.counts["ambiguous"] += len(assoc.ambiguous)
             if m and ekf.n_lamps:
-                self.health.observe_frame(ev.t, m, len(pairs))
-            paired = {j for j, _ in pairs}
-            rest = [j for j in range(m) if j not in paired]
+                self.health.observe_frame(ev.t, m, len(pairs) + len(assoc.ambiguous))
+            used = {j for j, _ in pairs} | set(assoc.ambiguous)
+            rest = [j for j in range(m) if j not in used]
             if rest and any(getattr(a, "pose_suspect", False) for a in self.aids):
                 # an aid finds the pose inconsistent with the map (e.g. an unseen bump):
                 # a lamp initialised from it would be a duplicate; wait
                 self.counts["lamps_deferred"] += len(rest)
             elif rest:
-                self._new_lamps(ev.t, z[rest], r[rest], d2[rest])
+                taken = {i for _, i in pairs}
+                self._new_lamps(ev.t, z[rest], r[rest], d2[rest], taken)
         self._record(ev.t)
 
     def _associate_update(self, z: np.ndarray, r: np.ndarray, d2: np.ndarray):
@@ -313,15 +338,16 @@ class SlamRunner:
 
         Fast path: when the hypothesis is unique (``unique_hypothesis``) the update's own
         joint NIS test is the joint compatibility test; JCBB runs only otherwise.
+        Returns (Association, UpdateResult or None).
         """
         ekf = self.ekf
         gate = self.params.gate_chi2
         if ekf.n_lamps == 0:
-            return [], None
+            return Association([]), None
         pairs = unique_hypothesis(candidates(d2, gate))
         if pairs is not None:
             if not pairs:
-                return [], None
+                return Association([]), None
             det = [j for j, _ in pairs]
             res = ekf.update_lamps(
                 [i for _, i in pairs],
@@ -330,19 +356,30 @@ class SlamRunner:
                 gate_chi2=joint_threshold(gate, 2 * len(pairs)),
             )
             if res.accepted:
-                return pairs, res
-        pairs = jcbb(ekf, z, r, d2, gate)
-        if not pairs:
-            return [], None
-        det = [j for j, _ in pairs]
-        res = ekf.update_lamps([i for _, i in pairs], z[det], block_diag_cov(r[det]))
-        return pairs, res
+                return Association(pairs), res
+        assoc = jcbb(ekf, z, r, d2, gate, self.params.ambiguity_margin)
+        if not assoc.pairs:
+            return assoc, None
+        det = [j for j, _ in assoc.pairs]
+        res = ekf.update_lamps([i for _, i in assoc.pairs], z[det], block_diag_cov(r[det]))
+        return assoc, res
 
-    def _new_lamps(self, t: float, z: np.ndarray, r: np.ndarray, d2_before: np.ndarray) -> None:
-        """Unpaired detections: guard against duplicates, then tentative lamps."""
+    def _new_lamps(
+        self, t: float, z: np.ndarray, r: np.ndarray, d2_before: np.ndarray, taken: set[int]
+    ) -> None:
+        """Unpaired detections: guard against duplicates, then tentative lamps.
+
+        The guard refuses a detection within ``new_lamp_chi2`` (squared Mahalanobis) of
+        a mapped lamp, except of lamps that another detection of the same frame explains
+        (``taken``): one frame does not see one landmark twice (mutual exclusion), so a
+        second detection there is a second landmark, however close.
+        """
         ekf = self.ekf
         d2 = ekf.individual_compatibility(z, r)
-        taken: set[int] = set()
+        if taken and d2.shape[1]:
+            d2[:, sorted(taken)] = np.inf
+        pose, prr = ekf.pose, ekf.pose_cov
+        tentative_taken: set[int] = set()
         for j in range(len(z)):
             if d2.shape[1]:
                 i = int(np.argmin(d2[j]))
@@ -355,9 +392,15 @@ class SlamRunner:
                     )
                     self.counts["duplicates_guarded"] += 1
                     continue
-            world = ekf.x[:2] + rot(ekf.x[2]) @ z[j]
-            if self.tentative.observe(t, world, taken):
+            world, jr, jz = lamp_init(pose, z[j])
+            cov = jr @ prr @ jr.T + jz @ r[j] @ jz.T
+            if np.linalg.eigvalsh(r[j])[-1] > self.params.birth_max_sigma**2:
+                # too uncertain to tell one landmark from a neighbour: no birth from it
+                self.counts["births_refused_uncertain"] += 1
+                continue
+            if self.tentative.observe(t, world, tentative_taken, cov):
                 ekf.add_lamp(z[j], r[j])
+                self.health.observe_birth(t, prr)
                 self._first_seen.append(t)
                 self._last_seen.append(t)
                 self._obs.append(1)

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
+import copy
 import os
-import sys
 import time
 
 import cv2
@@ -12,8 +12,9 @@ import numpy as np
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, check_outputs
-from fuzzyslam.progress import Progress
+from fuzzyslam.progress import Progress, note
 from fuzzyslam.slam.io import StreamingOutputs, open_inputs, write_outputs, write_summary
+from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
 
 
@@ -30,7 +31,7 @@ def make_summary(
         "start_pose": [float(v) for v in inputs.start_pose],
         "log_duration_s": round(duration, 3),
         "counts": res.counts,
-        "filter_health": getattr(res, "health", {}),
+        "filter_health": res.health,
         "lamps": len(res.lamps),
         "duplicates_guarded": res.counts["duplicates_guarded"],
         "mean_nis_lamp": streamed.lamp_nis.mean(),
@@ -41,13 +42,16 @@ def make_summary(
         ),
         "trajectory_rows": streamed.rows,
         "warnings": dict(sorted(inputs.warnings.items())),
-        "truncated_log": bool(inputs.reader.truncated),
+        "truncated_log": inputs.reader.damage()["truncated"],
         "log_damage": inputs.reader.damage(),
         "wall_time_s": round(wall, 3),
         "real_time_factor": round(duration / wall, 1) if wall > 0 else None,
     }
     if inputs.first_problem:
         out["first_warning"] = inputs.first_problem
+    est = res.noise_estimate
+    if inputs.lamp_source == "detections":
+        out["noise_estimate"] = est.as_dict() if est is not None else None
     if aids:
         out["aids"] = {type(a).__name__: a.summary() for a in aids}
         out["rings"] = inputs.ring_stats.as_dict()
@@ -61,6 +65,7 @@ def run_stage(
     outdir: str | os.PathLike,
     cfg: Config,
     aids: list | None = None,
+    adapt_noise: bool = False,
     ranges: str | None = None,
     start_pose: tuple[float, float, float] | None = None,
 ) -> dict:
@@ -70,19 +75,77 @@ def run_stage(
     (:class:`StreamingOutputs`: memory flat in the log length); the directory replaces
     the outputs only when everything is written, so an error or Ctrl-C leaves nothing.
 
+    ``adapt_noise``: a first pass estimates the detection noise from the innovations
+    (``slam.noise``); the outputs come from a second pass with that noise (the summary's
+    ``noise_adapted`` gives it). Without it, a configured noise that the innovations
+    contradict is told on stderr in one line (which keys to change, to what).
+
     ``ranges`` (sonar|scan) chooses the aids' range sensor, ``start_pose`` overrides the
     start pose (slam/io.py). A log without lamps and without aids is dead reckoning: a
     one-line note on stderr says so."""
+    if adapt_noise:
+        if aids:
+            raise ValueError("adapt_noise: the aids of a first pass cannot be reused")
+        first = _run_once(log, outdir, cfg, [], True, ranges, start_pose)
+        est = first.get("noise_estimate")
+        if est:
+            cfg = copy.deepcopy(cfg)
+            for key in (
+                "detection_sigma_range",
+                "detection_sigma_range_per_m",
+                "detection_sigma_bearing_deg",
+            ):
+                if est[key] is not None:  # None: not measurable (slam.noise)
+                    setattr(cfg.slam, key, float(est[key]))
+        summary = _run_once(log, outdir, cfg, [], True, ranges, start_pose)
+        summary["noise_adapted"] = est
+        _tell(summary)
+        return summary
+    return _run_once(log, outdir, cfg, aids, False, ranges, start_pose)
+
+
+def _tell(summary: dict, cfg: Config | None = None) -> None:
+    """The one-line notes on stderr: the filter in trouble, the noise to change."""
+    health = summary.get("filter_health", {})
+    if health.get("diverged"):
+        note(
+            f"filter_health: the filter looks inconsistent from t = {health['diverged_at']:.3f} s "
+            "(NIS or association windows out of bounds; see the summary's filter_health): "
+            "do not trust this estimate"
+        )
+    est = summary.get("noise_estimate")
+    if cfg is not None and est:
+        line = suggestion(
+            DetectionNoiseEstimate(
+                est["samples"],
+                est["detection_sigma_range"],
+                est["detection_sigma_range_per_m"],
+                est["detection_sigma_bearing_deg"],
+            ),
+            cfg.slam,
+        )
+        if line:
+            note(line)
+
+
+def _run_once(
+    log: str | os.PathLike,
+    outdir: str | os.PathLike,
+    cfg: Config,
+    aids: list,
+    _quiet: bool,
+    ranges: str | None = None,
+    start_pose: tuple[float, float, float] | None = None,
+) -> dict:
     aids = list(aids or [])
     wall0 = time.perf_counter()
     check_outputs([log], [outdir])
     inputs = open_inputs(log, cfg, bool(aids), ranges, start_pose)
-    if inputs.lamp_source == "none" and not aids:
-        print(
-            f"fuzzyslam: note: {log}: no lamps (topics.image {cfg.topics.image}, "
+    if inputs.lamp_source == "none" and not aids and not _quiet:
+        note(
+            f"{log}: no lamps (topics.image {cfg.topics.image}, "
             f"topics.detections {cfg.topics.detections}) and no map: the estimate is dead "
-            "reckoning (give --map FGMDIR --fix pose|heading)",
-            file=sys.stderr,
+            "reckoning (give --map FGMDIR --fix pose|heading)"
         )
     with OutputDir(outdir) as tmp, StreamingOutputs(tmp, cfg, inputs.start_pose) as streamed:
         res = _run_filter(inputs, cfg, aids, streamed)
@@ -92,6 +155,8 @@ def run_stage(
         write_outputs(tmp, streamed, res, extra)
         summary = make_summary(res, inputs, time.perf_counter() - wall0, aids, streamed)
         write_summary(tmp, summary)
+    if not _quiet:
+        _tell(summary, cfg)
     return summary
 
 
@@ -114,6 +179,7 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs) -> Slam
     finally:
         cv2.setNumThreads(threads)
     res.ekf.check_covariance()
+    res.noise_estimate = runner.noise.estimate()
     res.health = {  # numerical guards and the divergence test (slam/health.py)
         **res.ekf.guards,
         **runner.health.summary(),

@@ -40,6 +40,14 @@ def read_tum(path: str | os.PathLike, sort: bool = False, report: bool = False):
     ``report`` a third value is returned: ``{"out_of_order": lines that went back in
     time, "repeats_dropped": lines dropped}`` (zeros when nothing was sorted).
     """
+    t, poses, _planar, fixes = read_tum_planar(path, sort, report=True)
+    return (t, poses, fixes) if report else (t, poses)
+
+
+def read_tum_planar(path: str | os.PathLike, sort: bool = False, report: bool = False):
+    """:func:`read_tum` and whether the file is planar (z = 0 and a yaw-only quaternion,
+    within 1 mm and 1e-3); a 3-D trajectory is read as its projection on the plane.
+    With ``report``, the sorting counts of :func:`read_tum` come fourth."""
     p = check_input_file(path, "trajectory")
     rows, linenos = [], []
     try:
@@ -85,5 +93,7 @@ def read_tum(path: str | os.PathLike, sort: bool = False, report: bool = False):
         a = a[keep]
         t = a[:, 0]
     yaw = np.asarray(quaternion_to_yaw(a[:, 4:8])).reshape(-1)
+    q = a[:, 4:8] / np.linalg.norm(a[:, 4:8], axis=1, keepdims=True)
+    planar = bool(np.all(np.abs(a[:, 3]) <= 1e-3) and np.all(np.abs(q[:, :2]) <= 1e-3))
     poses = np.column_stack([a[:, 1], a[:, 2], yaw])
-    return (t, poses, fixes) if report else (t, poses)
+    return (t, poses, planar, fixes) if report else (t, poses, planar)

@@ -1,0 +1,69 @@
+"""Real landmark logs: EKF-SLAM with ``--config real_detections.yaml`` and nothing else.
+
+    python benchmarks/bench_real_landmarks.py [DATA_DIR] [--adapt-noise]
+
+DATA_DIR holds one folder per log with ``log.mcap``, ``truth.tum`` and
+``landmarks_truth.yaml`` (default: ../shared/data/real beside the repository, the UTIAS
+MRCLAM logs; skipped when absent). For each log it runs ``fuzzyslam run`` and
+``fuzzyslam evaluate --landmarks-truth`` and prints: APE RMSE after a rigid 2-D alignment
+(SLAM and dead reckoning), true landmarks with an estimate within 0.5 m, estimates left
+over after the one-to-one matching, NEES mean (3 dof, against the aligned truth),
+time with NEES above 100, what filter_health says, and the real-time factor.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import subprocess
+import sys
+import tempfile
+from pathlib import Path
+
+import numpy as np
+
+
+def fuzzyslam(*args) -> dict:
+    res = subprocess.run(
+        [sys.executable, "-m", "fuzzyslam", *map(str, args)], capture_output=True, text=True
+    )
+    if res.returncode != 0:
+        raise SystemExit(f"fuzzyslam {' '.join(map(str, args))}: {res.stderr.strip()}")
+    return json.loads(res.stdout)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    default = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+    ap.add_argument("data", nargs="?", default=str(default))
+    ap.add_argument("--adapt-noise", action="store_true")
+    a = ap.parse_args()
+    logs = sorted(p for p in Path(a.data).glob("*") if (p / "landmarks_truth.yaml").is_file())
+    if not logs:
+        print(f"no landmark logs under {a.data}: skipped")
+        return
+    print(f"{'log':16s} {'APE m':>6s} {'DR m':>6s} {'found':>5s} {'left':>4s} {'NEES':>6s} "
+          f"{'NEES>100 s':>10s} {'diverged':>8s} {'RTF':>6s}")
+    with tempfile.TemporaryDirectory() as tmp:
+        for log in logs:
+            run = Path(tmp) / log.name
+            extra = ["--adapt-noise"] if a.adapt_noise else []
+            s = fuzzyslam("run", log / "log.mcap", "--config", "real_detections.yaml",
+                          "-o", run, *extra)
+            ev = Path(tmp) / f"{log.name}_ev"
+            h = fuzzyslam("evaluate", log / "truth.tum", run, "--landmarks-truth",
+                          log / "landmarks_truth.yaml", "-o", ev)
+            m = json.loads((ev / "metrics.json").read_text())
+            dr = m["odometry"]["position_m"]
+            cov = np.loadtxt(run / "covariance.csv", delimiter=",", skiprows=1, ndmin=2)
+            nees_t = m["phases"]["overall"]["nees"]
+            over = nees_t.get("frac_above_100", None)
+            print(f"{log.name:16s} {h['ape_aligned_rmse_m']:6.3f} {dr['rmse']:6.3f} "
+                  f"{h['lamps_true_within_0.5_m']:5d} {h['lamps_left_over']:4d} "
+                  f"{h['nees_mean']:6.2f} "
+                  f"{'' if over is None else f'{over * (cov[-1, 0] - cov[0, 0]):.0f}':>10s} "
+                  f"{s['filter_health']['diverged']!s:>8s} {s['real_time_factor']:6.1f}")
+
+
+if __name__ == "__main__":
+    main()

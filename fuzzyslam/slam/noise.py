@@ -1,0 +1,125 @@
+"""The detection noise a log's innovations imply (covariance matching).
+
+For a consistent filter the innovation v = z - h(x) of an accepted update has covariance
+S = H P H^T + R, so R = E[v v^T] - H P H^T (Mehra, "On the identification of variances
+and adaptive Kalman filtering", IEEE T-AC 15(2), 1970; Mohamed and Schwarz, "Adaptive
+Kalman filtering for INS/GPS", J. Geodesy 73, 1999). Each accepted detection is split
+along its line of sight u = z / |z| and across it n:
+
+    sigma_r^2(r) ~ mean over detections near range r of (u.v)^2 - u^T (S - R) u
+    sigma_b^2    ~ mean of ((n.v)^2 - n^T (S - R) n) / r^2
+
+and the range part is fitted with the model of ``SlamParams.detection_cov``,
+sigma_r = a + b r, over range bins (weighted least squares on the bins' sigmas).
+Gated-out detections are not in the sample, so a heavy-tailed sensor's estimate is low
+by what the gate removes (at 99 % a few percent of the variance). Where the innovations
+are smaller than the state's own uncertainty predicts (mean of v^2 - H P H^T not above
+zero: a conservative filter), they say nothing of R: that part is not estimated (None).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+MIN_SAMPLES = 200  # fewer accepted detections give no estimate
+RANGE_BINS = 5
+
+
+@dataclass
+class DetectionNoiseEstimate:
+    """Estimated range-bearing noise: sigma_r = range_m + range_per_m * r, bearing (deg)."""
+
+    samples: int
+    range_m: float | None
+    range_per_m: float | None
+    bearing_deg: float | None
+
+    def as_dict(self) -> dict[str, float | int | None]:
+        def rnd(v: float | None, k: int) -> float | None:
+            return None if v is None else round(v, k)
+
+        return {
+            "samples": self.samples,
+            "detection_sigma_range": rnd(self.range_m, 4),
+            "detection_sigma_range_per_m": rnd(self.range_per_m, 4),
+            "detection_sigma_bearing_deg": rnd(self.bearing_deg, 3),
+        }
+
+
+@dataclass
+class DetectionNoiseEstimator:
+    """Collects accepted detections' innovations (module docstring)."""
+
+    _rows: list[tuple[float, float, float]] = field(default_factory=list)
+
+    def add(self, z: np.ndarray, v: np.ndarray, s: np.ndarray, r: np.ndarray) -> None:
+        """One accepted detection: z (2,) robot frame, innovation v (2,), its S and R (2, 2)."""
+        rng = math.hypot(float(z[0]), float(z[1]))
+        if rng <= 0:
+            return
+        u = np.asarray(z, dtype=float) / rng
+        n = np.array([-u[1], u[0]])
+        hph = np.asarray(s, dtype=float) - np.asarray(r, dtype=float)
+        vr, vt = float(u @ v), float(n @ v)
+        self._rows.append((rng, vr * vr - float(u @ hph @ u), (vt * vt - float(n @ hph @ n))))
+
+    def __len__(self) -> int:
+        return len(self._rows)
+
+    def estimate(self) -> DetectionNoiseEstimate | None:
+        """The estimate, or None with fewer than ``MIN_SAMPLES`` detections."""
+        if len(self._rows) < MIN_SAMPLES:
+            return None
+        a = np.array(self._rows)
+        rng, er, et = a[:, 0], a[:, 1], a[:, 2]
+        edges = np.quantile(rng, np.linspace(0.0, 1.0, RANGE_BINS + 1))
+        idx = np.clip(np.searchsorted(edges, rng, side="right") - 1, 0, RANGE_BINS - 1)
+        counts = np.bincount(idx, minlength=RANGE_BINS)
+        var = np.bincount(idx, er, RANGE_BINS) / np.maximum(counts, 1)
+        ok = (counts > 0) & (var > 0)
+        a0 = b = None
+        if ok.sum() >= 2:
+            r_mid = np.bincount(idx, rng, RANGE_BINS)[ok] / counts[ok]
+            sig = np.sqrt(var[ok])
+            w = counts[ok].astype(float)
+            design = np.column_stack([np.ones_like(r_mid), r_mid]) * np.sqrt(w)[:, None]
+            coef = np.linalg.lstsq(design, sig * np.sqrt(w), rcond=None)[0]
+            b = max(float(coef[1]), 0.0)
+            a0 = float(coef[0]) if b == coef[1] else float(np.average(sig - b * r_mid, weights=w))
+            a0 = max(a0, 1e-3)
+        vb = float(np.mean(et / rng**2))
+        bearing = math.degrees(math.sqrt(vb)) if vb > 0 else None
+        return DetectionNoiseEstimate(len(a), a0, b, bearing)
+
+
+def suggestion(est: DetectionNoiseEstimate, params, tolerance: float = 0.3) -> str:
+    """One line telling which ``slam`` keys to change and to what, or "" when the
+    configured noise is not below the estimate by more than ``tolerance`` (relative) at
+    typical ranges. Only an underestimated noise is told: it makes the filter overconfident
+    (wrong associations, duplicates), while a configured noise above the estimate of the
+    accepted detections is the margin that keeps heavy-tailed outliers out."""
+    keys = []
+    now_b = params.detection_sigma_bearing_deg
+    if est.bearing_deg is not None and est.bearing_deg > (1 + tolerance) * now_b:
+        keys.append(f"slam.detection_sigma_bearing_deg: {est.bearing_deg:.3g} (now {now_b:.3g})")
+    if est.range_m is not None and est.range_per_m is not None:
+        for r_ref in (1.0, 4.0):  # compare the range model where detections usually are
+            now = params.detection_sigma_range + params.detection_sigma_range_per_m * r_ref
+            if est.range_m + est.range_per_m * r_ref > (1 + tolerance) * now:
+                keys.append(
+                    f"slam.detection_sigma_range: {est.range_m:.3g} "
+                    f"(now {params.detection_sigma_range:.3g}), "
+                    f"slam.detection_sigma_range_per_m: {est.range_per_m:.3g} "
+                    f"(now {params.detection_sigma_range_per_m:.3g})"
+                )
+                break
+    if not keys:
+        return ""
+    return (
+        "the innovations say the detections are noisier than configured: set "
+        + ", ".join(keys)
+        + " (or rerun with --adapt-noise)"
+    )

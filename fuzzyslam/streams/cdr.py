@@ -1,0 +1,313 @@
+"""Little-endian CDR decoders of the frequent ROS 2 messages, and one block encoder.
+
+The decoders read the few types a log is mostly made of (wheel encoders, frames, sonar,
+odometry, landmark detections, laser scans) 2-4x faster than rosbags' generic
+deserializer (benchmarks/bench_read.py) and return the light message classes of
+``streams/cdr_messages.py``, whose attribute names are the rosbags messages' names
+(``header.stamp.sec``, ``pose.pose.position.x``, ...), so code reading either cannot
+tell them apart. Arrays are numpy arrays of the rosbags dtypes: copies, except
+``Image.data`` (a read-only view of the payload) and empty sequences (one shared
+read-only empty array).
+
+Layout (OMG CDR, the encoding of ROS 2 ``cdr`` messages): a 4-byte encapsulation
+header (``00 01 00 00`` for little-endian CDR), then the fields in order, each primitive
+aligned to its size counted from the end of that header; a string is a u32 length
+(with the terminating NUL), its bytes and the NUL; a sequence is a u32 count then the
+elements (a primitive sequence is aligned to its element size only when not empty);
+a fixed array has no count. A payload that is truncated or inconsistent (a length past
+the end, a string without its NUL, bytes left over) raises :class:`CdrError`.
+"""
+
+from __future__ import annotations
+
+import struct
+from collections.abc import Callable
+from typing import Any
+
+import numpy as np
+
+from fuzzyslam.se2 import yaw_to_quaternion
+from fuzzyslam.streams.cdr_messages import (
+    F8,
+    Header,
+    Image,
+    JointState,
+    LaserScan,
+    Odometry,
+    Point,
+    Pose,
+    PoseArray,
+    PoseWithCovariance,
+    Quaternion,
+    Range,
+    Time,
+)
+from fuzzyslam.streams.typestore import deserialize
+
+_U32 = struct.Struct("<I")
+_STAMP_FRAME = struct.Struct("<iII")  # header.stamp sec, nanosec; frame_id length
+_F64X7 = struct.Struct("<7d")
+_F32X4 = struct.Struct("<4f")
+_F32X7_U32 = struct.Struct("<7fI")
+_U32X2 = struct.Struct("<II")
+
+
+class CdrError(ValueError):
+    """A CDR payload that is truncated or inconsistent."""
+
+
+# -- readers of the parts ----------------------------------------------------------------
+# Positions ``a`` below are absolute offsets in the payload; CDR alignment counts from
+# offset 4 (after the encapsulation header), so "align a to k" is a += (4 - a) % k.
+
+
+def _string(buf, a: int) -> tuple[str, int]:
+    """A CDR string at ``a`` (4-aligned) and the offset after it."""
+    (n,) = _U32.unpack_from(buf, a)
+    end = a + 4 + n
+    if n < 1 or end > len(buf) or buf[end - 1] != 0:
+        raise CdrError(f"bad string of length {n} at offset {a} of {len(buf)} bytes")
+    return str(buf[a + 4 : end - 1], "utf-8"), end
+
+
+def _header(buf) -> tuple[Header, int]:
+    """std_msgs/Header right after the encapsulation; the offset after it."""
+    sec, nsec, n = _STAMP_FRAME.unpack_from(buf, 4)  # struct.error if too short
+    end = 16 + n
+    if buf[1] != 1 or buf[0] or n < 1 or end > len(buf) or buf[end - 1]:
+        raise CdrError(f"not little-endian CDR or a bad frame_id (length {n}, {len(buf)} bytes)")
+    return Header(Time(sec, nsec), str(buf[16 : end - 1], "utf-8") if n > 1 else ""), end
+
+
+_F8 = F8
+_F4 = np.dtype("<f4")
+_EMPTY = {_F8: np.zeros(0, _F8), _F4: np.zeros(0, _F4)}  # shared: read-only
+for _e in _EMPTY.values():
+    _e.flags.writeable = False
+
+
+def _sequence(buf, a: int, dtype: np.dtype) -> tuple[np.ndarray, int]:
+    """A primitive sequence at ``a`` (4-aligned): count, then elements aligned to their
+    size when there are any. Returns the array (a copy; a shared read-only array when
+    empty) and the offset after it."""
+    (count,) = _U32.unpack_from(buf, a)
+    a += 4
+    if not count:
+        return _EMPTY[dtype], a
+    size = dtype.itemsize
+    a += (4 - a) % size
+    end = a + size * count
+    if end > len(buf):
+        raise CdrError(f"array of {count} x {size} bytes at offset {a} past {len(buf)} bytes")
+    return np.frombuffer(buf, dtype, count, a).copy(), end
+
+
+def _end(buf, a: int) -> None:
+    """The payload must end at ``a`` (up to 3 bytes of padding, as rosbags allows)."""
+    if a > len(buf) or len(buf) - a > 3:
+        raise CdrError(f"payload of {len(buf)} bytes, message ends at {a}")
+
+
+def _pose(v) -> Pose:
+    return Pose(Point(v[0], v[1], v[2]), Quaternion(v[3], v[4], v[5], v[6]))
+
+
+# -- decoders ------------------------------------------------------------------------------
+
+
+def decode_odometry(buf: bytes | memoryview) -> Odometry:
+    """nav_msgs/Odometry: header, child_frame_id, pose (7 f64 + covariance[36]), twist
+    (6 f64 + covariance[36]); the 85 float64 follow the string, aligned to 8."""
+    header, a = _header(buf)
+    a += (4 - a) % 4
+    child, a = _string(buf, a)
+    a += (4 - a) % 8
+    if a + 85 * 8 > len(buf):
+        raise CdrError(f"Odometry of {len(buf)} bytes is truncated")
+    if len(buf) - a - 680 > 3:
+        raise CdrError(f"payload of {len(buf)} bytes, message ends at {a + 680}")
+    pose = _pose(_F64X7.unpack_from(buf, a))
+    raw = bytes(buf[a + 56 : a + 680])  # covariances and twist, decoded when read
+    return Odometry(header, child, PoseWithCovariance(pose, (raw, 0)), (raw, 288))
+
+
+def decode_pose_array(buf: bytes | memoryview) -> PoseArray:
+    """geometry_msgs/PoseArray: header, sequence of Pose (7 float64 each, aligned to 8)."""
+    header, a = _header(buf)
+    a += (4 - a) % 4
+    (count,) = _U32.unpack_from(buf, a)
+    a += 4
+    if not count:
+        _end(buf, a)
+        return PoseArray(header, [])
+    a += (4 - a) % 8
+    end = a + 56 * count
+    if end > len(buf) or len(buf) - end > 3:
+        raise CdrError(f"PoseArray of {count} poses in {len(buf)} bytes")
+    return PoseArray(
+        header,
+        [
+            Pose(Point(x, y, z), Quaternion(qx, qy, qz, qw))
+            for x, y, z, qx, qy, qz, qw in _F64X7.iter_unpack(buf[a:end])
+        ],
+    )
+
+
+def decode_laser_scan(buf: bytes | memoryview) -> LaserScan:
+    """sensor_msgs/LaserScan: header, 7 float32 (angles, times, range limits), ranges and
+    intensities (float32 sequences)."""
+    header, a = _header(buf)
+    a += (4 - a) % 4
+    *f, n = _F32X7_U32.unpack_from(buf, a)
+    a += 32
+    end = a + 4 * n
+    if end + 4 > len(buf):
+        raise CdrError(f"LaserScan of {n} ranges past {len(buf)} bytes")
+    ranges = np.frombuffer(buf, _F4, n, a).copy() if n else _EMPTY[_F4]
+    intensities, a = _sequence(buf, end, _F4)
+    _end(buf, a)
+    return LaserScan(header, *f, ranges, intensities)
+
+
+def decode_joint_state(buf: bytes | memoryview) -> JointState:
+    """sensor_msgs/JointState: header, name (sequence of strings), position, velocity and
+    effort (float64 sequences)."""
+    header, a = _header(buf)
+    a += (4 - a) % 4
+    (count,) = _U32.unpack_from(buf, a)
+    a += 4
+    if count > len(buf) // 5:
+        raise CdrError(f"JointState with {count} names in {len(buf)} bytes")
+    names = []
+    for _ in range(count):
+        a += (4 - a) % 4
+        s, a = _string(buf, a)
+        names.append(s)
+    a += (4 - a) % 4
+    position, a = _sequence(buf, a, _F8)
+    a += (4 - a) % 4
+    velocity, a = _sequence(buf, a, _F8)
+    a += (4 - a) % 4
+    effort, a = _sequence(buf, a, _F8)
+    _end(buf, a)
+    return JointState(header, names, position, velocity, effort)
+
+
+def decode_image(buf: bytes | memoryview) -> Image:
+    """sensor_msgs/Image: header, height, width, encoding, is_bigendian (u8), step, data
+    (uint8 sequence, returned as a view of ``buf``)."""
+    header, a = _header(buf)
+    a += (4 - a) % 4
+    height, width = _U32X2.unpack_from(buf, a)
+    encoding, a = _string(buf, a + 8)
+    if a >= len(buf):
+        raise CdrError(f"Image of {len(buf)} bytes is truncated")
+    big = buf[a]
+    a += 1
+    a += (4 - a) % 4
+    step, count = _U32X2.unpack_from(buf, a)
+    a += 8
+    if a + count > len(buf):
+        raise CdrError(f"Image data of {count} bytes past {len(buf)} bytes")
+    _end(buf, a + count)
+    data = np.frombuffer(buf, dtype=np.uint8, count=count, offset=a)
+    return Image(header, height, width, encoding, big, step, data)
+
+
+def decode_range(buf: bytes | memoryview) -> Range:
+    """sensor_msgs/Range: header, radiation_type (u8), then four float32 aligned to 4:
+    field_of_view, min_range, max_range, range."""
+    header, a = _header(buf)
+    if a >= len(buf):
+        raise CdrError(f"Range of {len(buf)} bytes is truncated")
+    kind = buf[a]
+    a += 1
+    a += (4 - a) % 4
+    fov, lo, hi, r = _F32X4.unpack_from(buf, a)
+    if len(buf) - a - 16 > 3:
+        raise CdrError(f"payload of {len(buf)} bytes, message ends at {a + 16}")
+    return Range(header, kind, fov, lo, hi, r)
+
+
+DECODERS: dict[str, Callable[[Any], Any]] = {
+    "nav_msgs/msg/Odometry": decode_odometry,
+    "geometry_msgs/msg/PoseArray": decode_pose_array,
+    "sensor_msgs/msg/LaserScan": decode_laser_scan,
+    "sensor_msgs/msg/JointState": decode_joint_state,
+    "sensor_msgs/msg/Image": decode_image,
+    "sensor_msgs/msg/Range": decode_range,
+}
+
+
+def decoder(typename: str) -> Callable[[Any], Any]:
+    """The decoder of a (normalised) type name: a fast one for little-endian payloads of
+    the types in ``DECODERS``, rosbags for the rest (big-endian, other types).
+
+    The decoder raises an exception (``CdrError``, ``struct.error``, rosbags' errors) on a
+    payload it cannot read."""
+    fast = DECODERS.get(typename)
+    if fast is None:
+        return lambda buf: deserialize(buf, typename)
+
+    def decode(buf):
+        if buf[1] == 1 and buf[0] == 0:
+            return fast(buf)
+        return deserialize(buf, typename)
+
+    return decode
+
+
+# -- encoder -------------------------------------------------------------------------------
+
+
+def encode_pose_with_covariance_block(
+    t: np.ndarray, poses: np.ndarray, cov: np.ndarray, frame: str
+) -> list[bytes]:
+    """Little-endian CDR of geometry_msgs/PoseWithCovarianceStamped for N rows at once
+    (the bytes ``typestore.serialize_cdr`` gives for ``messages.pose_with_covariance``,
+    ~10x faster).
+
+    Parameters
+    ----------
+    t : (N,) stamps, s (rounded to ns as ``messages.stamp``)
+    poses : (N, 3) x, y, theta (theta as a yaw quaternion)
+    cov : (N, 6) covariance rows ``pxx pxy pxt pyy pyt ptt``, embedded at rows/columns
+        x, y, yaw of the 6x6 (``messages.cov3_to_cov6``)
+    frame : header.frame_id
+
+    Returns
+    -------
+    N payloads. Layout: header.stamp sec i32, nanosec u32; frame_id u32 length (with
+    NUL) + bytes + NUL; padding to 8; position x y z, orientation x y z w,
+    covariance[36] float64.
+    """
+    name = frame.encode() + b"\0"
+    pad = -(12 + len(name)) % 8
+    dt = np.dtype(
+        [
+            ("encaps", "V4"),
+            ("sec", "<i4"),
+            ("nsec", "<u4"),
+            ("flen", "<u4"),
+            ("frame", f"V{len(name) + pad}"),
+            ("pose", "<f8", (7,)),
+            ("cov", "<f8", (36,)),
+        ]
+    )
+    n = len(t)
+    a = np.zeros(n, dtype=dt)
+    a["encaps"] = b"\x00\x01\x00\x00"
+    ns = [round(v * 1e9) for v in np.asarray(t, dtype=float).tolist()]  # messages.stamp
+    a["sec"] = [v // 1_000_000_000 for v in ns]
+    a["nsec"] = [v % 1_000_000_000 for v in ns]
+    a["flen"] = len(name)
+    a["frame"] = name + b"\0" * pad
+    a["pose"][:, :2] = poses[:, :2]
+    a["pose"][:, 3:] = yaw_to_quaternion(poses[:, 2])
+    c6 = a["cov"].reshape(n, 6, 6)
+    c6[:, [0, 0, 0, 1, 1, 1, 5, 5, 5], [0, 1, 5, 0, 1, 5, 0, 1, 5]] = cov[
+        :, [0, 1, 2, 1, 3, 4, 2, 4, 5]
+    ]
+    raw = a.tobytes()
+    size = dt.itemsize
+    return [raw[k * size : (k + 1) * size] for k in range(n)]

@@ -1,0 +1,303 @@
+"""Corrupt MCAP structure (issue 14, class 3): every structural field is bounds-checked.
+
+Real faults are injected into a copy of the committed sample log (data/sample.mcap): a
+bit flip in a chunk header's length fields, a Chunk Index offset off by 64 KiB, a
+Message Index whose length is not a multiple of 16, random byte flips in the summary
+and index region. ``run`` and ``run --map`` (sonar rings read through the same reader)
+must exit 0 with ``log_damage`` counting the damage, or 3 with one line, never 1.
+Where the damage loses no message (a wrong index over intact data), the outputs must be
+the undamaged run's.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import io
+import json
+import shutil
+import struct
+import tempfile
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import pytest
+from hypothesis import HealthCheck, given, settings
+from hypothesis import strategies as st
+
+from fuzzyslam.cli import main
+from fuzzyslam.streams.reader import LogReader
+
+SAMPLE = Path(__file__).resolve().parents[1] / "data" / "sample.mcap"
+FOOTER_TAIL = 8 + 29  # footer record (opcode, length, 2 x u64, crc) + magic
+OP_CHUNK_INDEX = 0x08
+
+
+def cli(*args) -> tuple[int, str, str]:
+    out, err = io.StringIO(), io.StringIO()
+    code = 0
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            main([str(a) for a in args])
+        except SystemExit as exc:
+            code = int(exc.code or 0)
+    return code, out.getvalue(), err.getvalue()
+
+
+# -- the file's structure, parsed independently of fuzzyslam (MCAP spec) ---------------------
+
+
+@dataclass
+class ChunkAt:
+    offset: int  # of the Chunk record
+    length: int
+    index_record: int  # offset of its Chunk Index record in the summary
+    message_indexes: dict[int, int]  # channel id -> offset of its Message Index record
+
+
+def summary_start(data: bytes) -> int:
+    return struct.unpack_from("<Q", data, len(data) - FOOTER_TAIL + 9)[0]
+
+
+def fix_summary_crc(data: bytearray) -> None:
+    """Recompute the footer's summary CRC (a writer that wrote a wrong index)."""
+    s, foot = summary_start(data), len(data) - FOOTER_TAIL
+    crc = zlib.crc32(bytes(data[foot : foot + 25]), zlib.crc32(bytes(data[s:foot])))
+    struct.pack_into("<I", data, foot + 25, crc)
+
+
+def chunks_of(data: bytes) -> list[ChunkAt]:
+    """Chunks in file order, from the Chunk Index records of the summary."""
+    pos, end = summary_start(data), len(data) - FOOTER_TAIL
+    out = []
+    while pos < end:
+        op, length = struct.unpack_from("<BQ", data, pos)
+        if op == OP_CHUNK_INDEX:
+            _t0, _t1, off, clen, map_len = struct.unpack_from("<QQQQI", data, pos + 9)
+            idx = {}
+            for k in range(map_len // 10):
+                cid, moff = struct.unpack_from("<HQ", data, pos + 9 + 36 + 10 * k)
+                idx[cid] = moff
+            out.append(ChunkAt(off, clen, pos, idx))
+        pos += 9 + length
+    return sorted(out, key=lambda c: c.offset)
+
+
+def channel_id(path: Path, topic: str) -> int:
+    from mcap.reader import SeekingReader
+
+    with open(path, "rb") as f:
+        summary = SeekingReader(f).get_summary()
+    return next(cid for cid, ch in summary.channels.items() if ch.topic == topic)
+
+
+# -- fixtures ------------------------------------------------------------------------------
+
+
+@dataclass
+class Base:
+    dir: Path
+    log: Path
+    data: bytes
+    chunks: list[ChunkAt]
+    est: Path
+    fgm: Path
+    run: dict
+    run_map: dict
+
+
+@pytest.fixture(scope="module")
+def base(tmp_path_factory) -> Base:
+    d = tmp_path_factory.mktemp("damage")
+    log = d / "sample.mcap"
+    shutil.copyfile(SAMPLE, log)
+    code, out, err = cli("run", log, "-o", d / "est")
+    assert code == 0, err
+    run = json.loads(out)
+    code, _, err = cli(
+        "map", log, "--trajectory", d / "est" / "trajectory.tum", "-o", d / "fgm", "--no-figures"
+    )
+    assert code == 0, err
+    code, out, err = cli("run", log, "-o", d / "est_map", "--map", d / "fgm")
+    assert code == 0, err
+    data = log.read_bytes()
+    chunks = chunks_of(data)
+    assert len(chunks) >= 4
+    return Base(d, log, data, chunks, d / "est", d / "fgm", run, json.loads(out))
+
+
+def run_both(base: Base, data: bytes, td: Path) -> tuple[dict | None, dict | None]:
+    """``run`` and ``run --map`` on ``data``: their summaries (None: exit 3, one line)."""
+    log = td / "bad.mcap"
+    log.write_bytes(data)
+    out = []
+    for extra in ([], ["--map", base.fgm]):
+        est = td / f"est{len(extra)}"
+        code, stdout, stderr = cli("run", log, "-o", est, *extra)
+        lines = [ln for ln in stderr.splitlines() if ln.strip()]
+        assert code in (0, 3), stderr  # never 1 (an internal error)
+        if code == 3:
+            assert len(lines) == 1 and str(log) in lines[0], stderr
+            assert not est.exists()
+            out.append(None)
+        else:
+            out.append(json.loads(stdout))
+    return out[0], out[1]
+
+
+def same_outputs(a: Path, b: Path) -> None:
+    for name in ("trajectory.tum", "landmarks.yaml", "updates.csv"):
+        assert (a / name).read_bytes() == (b / name).read_bytes(), name
+
+
+# -- the faults of issue 14 ----------------------------------------------------------------
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("field", ["record", "compression", "records"])
+@pytest.mark.parametrize("bit", [0, 5, 17, 43])
+def test_bit_flip_in_a_chunk_header_length(base: Base, field: str, bit: int) -> None:
+    """A flipped bit in a chunk's record length, compression-string length or records
+    length: counted; the chunk is lost (or read whole by the record walk when only its
+    records length is wrong), every other chunk is read; never exit 1."""
+    c = base.chunks[len(base.chunks) // 2]
+    clen = struct.unpack_from("<I", base.data, c.offset + 9 + 28)[0]
+    at = {
+        "record": c.offset + 1,
+        "compression": c.offset + 9 + 28,
+        "records": c.offset + 9 + 32 + clen,
+    }[field]
+    width = 4 if field == "compression" else 8
+    data = bytearray(base.data)
+    if bit >= 8 * width:
+        bit %= 8 * width
+    data[at + bit // 8] ^= 1 << (bit % 8)
+    with tempfile.TemporaryDirectory() as td:
+        run, run_map = run_both(base, bytes(data), Path(td))
+        for s in (run, run_map):
+            assert s is not None  # most of the log is intact
+            dmg = s["log_damage"]
+            assert dmg["damaged_records"] >= 1
+            assert not dmg["truncated"]  # the summary is intact: read through it
+        if run["log_damage"]["lost_bytes"] == 0:  # the record walk still read the chunk
+            same_outputs(base.est, Path(td) / "est0")
+        else:
+            assert run["log_damage"]["lost_bytes"] >= c.length // 2
+            assert 0 < run["counts"]["frames"] < base.run["counts"]["frames"]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("crc", [True, False], ids=["crc-fixed", "crc-stale"])
+def test_chunk_index_offset_off_by_64k(base: Base, crc: bool) -> None:
+    """A Chunk Index whose chunk offset is 64 KiB off. With the summary CRC recomputed
+    (a writer that wrote a wrong index), the index does not match the file: counted,
+    and the record walk from the last good chunk reads every message, so the outputs
+    are the undamaged run's. With a stale CRC the summary is not used at all."""
+    c = base.chunks[len(base.chunks) // 2]
+    data = bytearray(base.data)
+    at = c.index_record + 9 + 16
+    struct.pack_into("<Q", data, at, struct.unpack_from("<Q", data, at)[0] + 65536)
+    if crc:
+        fix_summary_crc(data)
+    with tempfile.TemporaryDirectory() as td:
+        run, run_map = run_both(base, bytes(data), Path(td))
+        for s in (run, run_map):
+            assert s is not None
+            assert s["log_damage"]["truncated"] == (not crc)
+            if crc:
+                assert s["log_damage"]["damaged_records"] == 1
+        same_outputs(base.est, Path(td) / "est0")
+        same_outputs(base.dir / "est_map", Path(td) / "est2")
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("extra", [8, 3, -7])
+def test_message_index_length_not_a_multiple_of_16(base: Base, extra: int) -> None:
+    """The /joint_states Message Index of one chunk with an entries length that is not a
+    multiple of 16 (record length to match): counted, the chunk's records are scanned
+    instead, nothing is lost (the outputs are the undamaged run's)."""
+    cid = channel_id(base.log, "/joint_states")
+    c = base.chunks[len(base.chunks) // 2]
+    at = c.message_indexes[cid]
+    data = bytearray(base.data)
+    length, _ch, n = struct.unpack_from("<QHI", data, at + 1)
+    struct.pack_into("<QHI", data, at + 1, length + extra, cid, n + extra)
+    with tempfile.TemporaryDirectory() as td:
+        run, run_map = run_both(base, bytes(data), Path(td))
+        for s in (run, run_map):
+            assert s is not None and s["log_damage"]["damaged_records"] == 1
+            assert not s["log_damage"]["truncated"]
+        same_outputs(base.est, Path(td) / "est0")
+        same_outputs(base.dir / "est_map", Path(td) / "est2")
+
+
+def index_region(base: Base) -> list[tuple[int, int]]:
+    """(start, end) byte ranges of the Message Index records and the summary section."""
+    spans = []
+    for c in base.chunks:
+        for off in c.message_indexes.values():
+            spans.append((off, off + 9 + struct.unpack_from("<Q", base.data, off + 1)[0]))
+    spans.append((summary_start(base.data), len(base.data)))
+    return spans
+
+
+@st.composite
+def flips(draw, base: Base):
+    spans = index_region(base)
+    out = []
+    for _ in range(draw(st.integers(1, 4))):
+        a, b = draw(st.sampled_from(spans))
+        out.append((draw(st.integers(a, b - 1)), draw(st.integers(1, 255))))
+    return out, draw(st.booleans())
+
+
+def damaged(base: Base, flip: list[tuple[int, int]], crc: bool) -> bytes:
+    data = bytearray(base.data)
+    for at, x in flip:
+        data[at] ^= x
+    if crc:
+        fix_summary_crc(data)
+    return bytes(data)
+
+
+def test_random_flips_in_the_index_region_never_break_the_reader(base: Base) -> None:
+    """The reader on random byte flips in the indexes and summary (with the summary
+    CRC stale or recomputed): only InputError, and the messages are a subset of the
+    intact log's, none twice, each topic in log-time order."""
+    topics = ["/joint_states", "/ceiling_camera/image_raw", "/sonar/s00", "/sonar/s09"]
+    intact = [(m.topic, m.t_ns) for m in LogReader(base.log).messages(topics)]
+    full = set(intact)
+    assert len(full) == len(intact)
+
+    @settings(max_examples=60, deadline=None)
+    @given(flips(base))
+    def check(case) -> None:
+        with tempfile.TemporaryDirectory() as td:
+            log = Path(td) / "bad.mcap"
+            log.write_bytes(damaged(base, *case))
+            r = LogReader(log)
+            a = [(m.topic, m.t_ns) for m in r.messages(topics)]
+            b = [(m.topic, m.t_ns) for m in r.messages(topics[2:], start=r.start + 30)]
+        for got in (a, b):
+            assert set(got) <= full and len(set(got)) == len(got)
+            for tp in topics:
+                ts = [t for topic, t in got if topic == tp]
+                assert ts == sorted(ts)
+        assert all(t >= round((r.start + 30) * 1e9) for _, t in b)
+        assert all(v >= 0 for v in r.damage().values())
+
+    check()
+
+
+@pytest.mark.slow
+def test_random_flips_in_the_index_region_never_exit_1(base: Base) -> None:
+    """``run`` and ``run --map`` on random byte flips in the indexes and summary: exit 0
+    (with the damage counted when the data read differs) or 3 with one line."""
+
+    @settings(max_examples=12, deadline=None, suppress_health_check=[HealthCheck.too_slow])
+    @given(flips(base))
+    def check(case) -> None:
+        with tempfile.TemporaryDirectory() as td:
+            run_both(base, damaged(base, *case), Path(td))
+
+    check()
