@@ -377,3 +377,34 @@ def test_hough_figure_is_a_grid_for_many_corridors(tmp_path, capsys):
     h, w = cv2.imread(str(path)).shape[:2]
     cols, rows = figures.HOUGH_COLUMNS, -(-17 // figures.HOUGH_COLUMNS)
     assert w <= 3.6 * cols * 110 + 1 and h >= 2 * rows * 3.0 * 110
+
+
+@pytest.mark.slow
+def test_map_refuses_unsorted_trajectory_and_sorts_it_on_request(tmp_path, capsys):
+    """A real trajectory with two lines swapped and one repeated: ``map`` names the first
+    offending line (exit 3, no output); ``map --sort`` builds the same map as from the
+    sorted file and counts what it did."""
+    log, truth = EXCERPT / "log.mcap", EXCERPT / "truth.tum"
+    lines = truth.read_text().splitlines()
+    body = [i for i, ln in enumerate(lines) if ln and not ln.startswith("#")]
+    a, b = body[40], body[41]
+    messy = list(lines)
+    messy[a], messy[b] = lines[b], lines[a]
+    messy.insert(body[80] + 1, lines[body[80]])  # a repeated stamp
+    bad = tmp_path / "messy.tum"
+    bad.write_text("\n".join(messy) + "\n")
+    args = ["map", str(log), "--config", "real_building_scan.yaml", "--no-figures"]
+    code, _, err = run_cli([*args, "--trajectory", str(bad), "-o", str(tmp_path / "m0")], capsys)
+    assert code == 3 and f"messy.tum: line {b + 1}:" in err and "--sort" in err
+    assert not (tmp_path / "m0").exists()
+    code, s, err = run_cli(
+        [*args, "--sort", "--trajectory", str(bad), "-o", str(tmp_path / "m1")], capsys
+    )
+    assert code == 0, err
+    assert s["trajectory_repeats_dropped"] == {"out_of_order": 1, "repeats_dropped": 1}
+    code, _, err = run_cli([*args, "--trajectory", str(truth), "-o", str(tmp_path / "m2")], capsys)
+    assert code == 0, err
+    from fuzzyslam.maps.mapio import load_fgm
+
+    m1, m2 = load_fgm(tmp_path / "m1" / "fgm.npz").map, load_fgm(tmp_path / "m2" / "fgm.npz").map
+    assert np.array_equal(m1.m_o, m2.m_o) and np.array_equal(m1.m_e, m2.m_e)
