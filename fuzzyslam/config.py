@@ -44,6 +44,7 @@ from fuzzyslam.sim.params import (
     WorldParams,
 )
 from fuzzyslam.slam.params import SlamParams
+from fuzzyslam.streams.ranges import RangeParams
 from fuzzyslam.streams.topics import Topics
 
 DEFAULT_CONFIG = "paper.yaml"
@@ -71,6 +72,7 @@ class Config:
     world: WorldParams = field(default_factory=WorldParams)
     robot: RobotParams = field(default_factory=RobotParams)
     sonar: SonarParams = field(default_factory=SonarParams)
+    ranges: RangeParams = field(default_factory=RangeParams)
     camera: CameraParams = field(default_factory=CameraParams)
     scenario: ScenarioParams = field(default_factory=ScenarioParams)
     slam: SlamParams = field(default_factory=SlamParams)

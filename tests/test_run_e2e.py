@@ -216,17 +216,28 @@ def test_not_mcap_is_one_line_exit_3_nothing_left(tmp_path):
     assert sorted(p.name for p in tmp_path.iterdir()) == ["bad.mcap"]
 
 
-def test_missing_stream_names_topics_and_config_key(tmp_path):
+def test_log_without_lamps_is_dead_reckoning_with_a_note(tmp_path):
+    """No camera and no detections (issue 13): the filter runs on odometry alone, from the
+    first odometry pose, and one line on stderr names the lamp topics and config keys."""
     log = tmp_path / "odom_only.mcap"
+    poses = np.array(
+        [[1.0 + 0.1 * k * np.cos(0.5), 2.0 + 0.1 * k * np.sin(0.5), 0.5] for k in range(5)]
+    )
     with LogWriter(log) as w:
         for k in range(5):
             w.write(
-                "/odom", M.ODOMETRY, M.odometry(k * 0.1, "odom", "base_link", np.zeros(3)), k * 0.1
+                "/odom", M.ODOMETRY, M.odometry(k * 0.1, "odom", "base_link", poses[k]), k * 0.1
             )
     code, err = run_main(["run", str(log), "-o", str(tmp_path / "out")])
-    assert code == 3
-    assert "/ceiling_camera/image_raw" in err and "/ceiling_camera/detections" in err
-    assert "topics.image" in err and not (tmp_path / "out").exists()
+    assert code == 0
+    note = [ln for ln in err.splitlines() if "note" in ln]
+    assert len(note) == 1 and "dead reckoning" in note[0]
+    assert "/ceiling_camera/image_raw" in note[0] and "topics.detections" in note[0]
+    from fuzzyslam.streams.tum import read_tum
+
+    _t, est = read_tum(tmp_path / "out" / "odometry.tum")
+    assert np.allclose(est[0], poses[0])  # the first odometry pose (no scenario)
+    assert np.allclose(est[-1], poses[-1])  # straight motion: dead reckoning is exact
 
 
 def test_wrong_image_encoding_is_a_clear_error(tmp_path):

@@ -104,6 +104,18 @@ def config_option(f):
     )(f)
 
 
+def ranges_option(f):
+    """``--ranges sonar|scan``: the range sensor of the maps and fixes (issue 13)."""
+    return click.option(
+        "--ranges",
+        type=click.Choice(["sonar", "scan"]),
+        default=None,
+        help="Range sensor: the sonar ring (topics.sonar_prefix) or the laser scan "
+        "(topics.scan). Default: the config's ranges.source (auto: the sonar ring when "
+        "the log has one, else the scan).",
+    )(f)
+
+
 def emit(summary: dict[str, Any]) -> None:
     """Print the machine-readable summary (one JSON object) on stdout; a full disk under
     a redirected stdout is the bad-input error of that output (exit 3)."""

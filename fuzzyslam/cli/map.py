@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from fuzzyslam.cli import LOG_TIME, cli, config_option, emit
+from fuzzyslam.cli import LOG_TIME, cli, config_option, emit, ranges_option
 
 
 @cli.command("map")
@@ -48,6 +48,13 @@ from fuzzyslam.cli import LOG_TIME, cli, config_option, emit
     help="landmarks.yaml from 'run': draw the estimated lamps in fgm.png.",
 )
 @click.option("--no-figures", is_flag=True, help="Do not draw the PNG figures.")
+@ranges_option
+@click.option(
+    "--sort",
+    is_flag=True,
+    help="Sort the trajectory's poses by time and drop repeated stamps (counted in the "
+    "summary) instead of failing on the first one out of order.",
+)
 @config_option
 def map_cmd(
     log: str,
@@ -58,9 +65,11 @@ def map_cmd(
     skip_uncovered: bool,
     landmarks: str | None,
     no_figures: bool,
+    ranges: str | None,
+    sort: bool,
     config: str | None,
 ) -> None:
-    """Build the fuzzy global map (FGM) of LOG's sonar rings placed along a trajectory.
+    """Build the fuzzy global map (FGM) of LOG's sonar rings or laser scans along a trajectory.
 
     Each reading gives evidence on the cells of its cone (occupied near the arc, empty
     inside, weighted by bearing and distance); cells hold Smets' belief masses m(E),
@@ -100,5 +109,7 @@ def map_cmd(
         landmarks=Path(landmarks) if landmarks else None,
         figures=not no_figures,
         explicit_config=config is not None,
+        ranges=ranges,
+        sort=sort,
     )
     emit(build_map(log, trajectory, outdir, cfg, opts))

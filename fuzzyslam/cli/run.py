@@ -2,11 +2,12 @@
 
 from __future__ import annotations
 
+import math
 from pathlib import Path
 
 import click
 
-from fuzzyslam.cli import LOG_TIME, cli, config_option, emit, seed_option
+from fuzzyslam.cli import LOG_TIME, cli, config_option, emit, ranges_option, seed_option
 from fuzzyslam.config import load_config
 
 
@@ -29,6 +30,19 @@ def _build_aids(
     return make_aids(
         map_dir, mode, cfg, fix_from, expect_log_id=log_identity(world_dict, Path(log).name)
     )
+
+
+def _parse_pose(_ctx, _param, value: str | None) -> tuple[float, float, float] | None:
+    """``X,Y,THETA`` as three finite floats."""
+    if value is None:
+        return None
+    try:
+        x, y, th = (float(v) for v in value.split(","))
+    except ValueError:
+        raise click.BadParameter(f"expected X,Y,THETA (three numbers), got {value!r}") from None
+    if not all(map(math.isfinite, (x, y, th))):
+        raise click.BadParameter(f"expected three finite numbers, got {value!r}")
+    return x, y, th
 
 
 @cli.command("run")
@@ -64,6 +78,15 @@ def _build_aids(
     help="Log time (s) from which the fixes are applied. Default: the map's freeze time "
     "(e.g. 0 to use a map frozen on another log of the same world from the start).",
 )
+@ranges_option
+@click.option(
+    "--start-pose",
+    callback=_parse_pose,
+    default=None,
+    metavar="X,Y,THETA",
+    help="Start pose (m, m, rad). Default: the log's scenario, else slam.start_pose, else "
+    "the first odometry pose (nav_msgs/Odometry).",
+)
 @click.option(
     "--adapt-noise",
     is_flag=True,
@@ -72,7 +95,16 @@ def _build_aids(
 )
 @seed_option
 def run_command(
-    log: Path, outdir: Path, config: str | None, map_dir, fix, fix_from, adapt_noise, seed
+    log: Path,
+    outdir: Path,
+    config: str | None,
+    map_dir,
+    fix,
+    fix_from,
+    ranges,
+    start_pose,
+    adapt_noise,
+    seed,
 ) -> None:
     """EKF-SLAM on ceiling lamps over the recorded LOG (MCAP), written into OUTDIR.
 
@@ -80,8 +112,9 @@ def run_command(
     Reads odometry (wheel encoders on topics.joint_states, or topics.odom when the log
     has no encoders or slam.use_encoders is false) and lamps (mono8 frames on
     topics.image with topics.camera_info, or PoseArray detections on
-    topics.detections), and runs the augmented-state EKF with JCBB data association,
-    tentative lamps and a guard against duplicate lamps.
+    topics.detections; a log with neither runs on odometry and the map's fixes), and
+    runs the augmented-state EKF with JCBB data association, tentative lamps and a
+    guard against duplicate lamps.
 
     \b
     Writes trajectory.tum, odometry.tum (dead reckoning), covariance.csv,
@@ -96,4 +129,8 @@ def run_command(
     aids = _build_aids(map_dir, fix, cfg, log, fix_from)
     if adapt_noise and aids:
         raise click.UsageError("--adapt-noise cannot be combined with heading or pose fixes")
-    emit(run_stage(log, outdir, cfg, aids, adapt_noise=adapt_noise))
+    emit(
+        run_stage(
+            log, outdir, cfg, aids, adapt_noise=adapt_noise, ranges=ranges, start_pose=start_pose
+        )
+    )

@@ -26,11 +26,11 @@ from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.quality import wall_quality
 from fuzzyslam.maps.references import Reference, extract_references
 from fuzzyslam.progress import Progress
-from fuzzyslam.robot import sonar_mounts
 from fuzzyslam.se2 import wrap_angle, wrap_angle_period
 from fuzzyslam.streams.logmeta import World, read_scenario, read_world
+from fuzzyslam.streams.ranges import open_ranges
 from fuzzyslam.streams.reader import LogReader
-from fuzzyslam.streams.sonar import RingStats, group_rings, sonar_mounts_from_tf
+from fuzzyslam.streams.sonar import RingStats
 from fuzzyslam.streams.tum import read_tum
 
 
@@ -44,6 +44,8 @@ class MapOptions:
     landmarks: Path | None = None
     figures: bool = True
     explicit_config: bool = False
+    ranges: str | None = None
+    sort: bool = False
 
 
 def interpolate_poses(tq: np.ndarray, t: np.ndarray, poses: np.ndarray) -> np.ndarray:
@@ -138,36 +140,33 @@ class _RingTable:
         return out
 
 
-def read_rings(reader: LogReader, cfg: Config, t_end: float):
+def read_rings(reader: LogReader, cfg: Config, t_end: float, ranges: str | None = None):
     """(times (N,), ranges (N, M), max ranges (N, M), fov, mounts (M, 3), stats)."""
-    times, ranges, rmax, *rest = read_rings_compact(reader, cfg, t_end)
-    return times, ranges.astype(float), rmax.astype(float), *rest
+    times, rr, rmax, *rest = read_rings_compact(reader, cfg, t_end, ranges)
+    return times, rr.astype(float), rmax.astype(float), *rest
 
 
-def read_rings_compact(reader: LogReader, cfg: Config, t_end: float):
+def read_rings_compact(
+    reader: LogReader, cfg: Config, t_end: float, ranges: str | None = None, sensor=None
+):
     """``read_rings`` with ranges and max ranges as float32 (the exact values of the
-    Range messages, a quarter of the memory of lists of float64 rings; _RingTable)."""
-    count = cfg.sonar.count
-    topics = [cfg.topics.sonar(i) for i in range(count)]
-    reader.require(topics)
-    mounts = None
-    if reader.has(cfg.topics.tf_static):
-        tf = [m.msg for m in reader.messages([cfg.topics.tf_static])]
-        mounts = sonar_mounts_from_tf(tf, count)
-    if mounts is None:
-        mounts = sonar_mounts(count, cfg.robot.radius)
+    Range and LaserScan messages, a quarter of the memory of lists of float64 rings;
+    _RingTable). The range sensor is ``sensor`` or the log's (``open_ranges``, with
+    ``ranges`` = sonar|scan|None overriding ``ranges.source``)."""
+    if sensor is None:
+        sensor = open_ranges(reader, cfg, ranges)
+    mounts = sensor.mounts
     stats = RingStats()
-    index = {tp: i for i, tp in enumerate(topics)}
-    table, fov = _RingTable(count), 0.0
-    for ring in group_rings(reader.messages(topics), index, count, stats=stats):
+    table, fov = _RingTable(len(mounts)), 0.0
+    for ring in sensor.rings(reader.messages(sensor.topics), stats):
         if ring.t > t_end + 1e-9:
             break
         table.append(ring.t, ring.ranges, ring.max_range)
         fov = ring.fov
-    times, ranges, rmax = table.arrays()
+    times, rr, rmax = table.arrays()
     if not len(times):
-        raise InputError(reader.path, f"no sonar readings in the window [0, {t_end:.2f}] s")
-    return times, ranges, rmax, fov, mounts, stats
+        raise InputError(reader.path, f"no {sensor.kind} readings in the window [0, {t_end:.2f}] s")
+    return times, rr, rmax, fov, mounts, stats
 
 
 def reference_truth(refs: list[Reference], world: World | None) -> list[dict[str, Any]]:
@@ -205,9 +204,10 @@ def build_map(
     outdir = Path(outdir)
     check_outputs([log_path, traj_path], [outdir])
     reader = LogReader(log_path)
-    t_traj, p_traj = read_tum(traj_path)
+    t_traj, p_traj, tum_dropped = read_tum(traj_path, sort=opts.sort, report=True)
     t_end, how = freeze_time(reader, cfg, opts)
-    times, ranges, rmax, fov, mounts, stats = read_rings_compact(reader, cfg, t_end)
+    sensor = open_ranges(reader, cfg, opts.ranges)
+    times, ranges, rmax, fov, mounts, stats = read_rings_compact(reader, cfg, t_end, sensor=sensor)
     ok = covered(times, t_traj, params.max_pose_gap)
     skipped_readings = int(np.isfinite(ranges[~ok]).sum())
     if not ok.all():
@@ -267,6 +267,8 @@ def build_map(
         "readings_skipped": skipped_readings,
         "rings_skipped": int((~ok).sum()),
         "sonar_stats": stats.as_dict(),
+        "range_sensor": sensor.describe(),
+        "trajectory_repeats_dropped": tum_dropped,
         "cell_updates": builder.cell_updates,
         "cells_touched": int((fgm.m_t < 1.0).sum()),
         "freeze_time": t_end,

@@ -112,6 +112,9 @@ def _hough_panel(ax, wd: WallDirection, title: str) -> None:
     ax.set_title(title, fontsize=9)
 
 
+HOUGH_COLUMNS = 6  # corridor panels per row of hough.png
+
+
 def fig_hough(
     path: Path,
     fgm: BeliefMap,
@@ -121,13 +124,25 @@ def fig_hough(
     params: MapParams,
 ) -> None:
     """The paper's Fig. 2: each corridor segment's wall evidence and an FLM (top) with
-    their Hough planes and peaks (bottom)."""
+    their Hough planes and peaks (bottom); a grid of such pairs, ``HOUGH_COLUMNS`` per
+    row, for buildings with many corridors."""
     n = len(refs) + (1 if flm is not None else 0)
-    fig, axes = plt.subplots(2, max(n, 1), figsize=(3.6 * max(n, 1), 7), squeeze=False)
+    cols = min(max(n, 1), HOUGH_COLUMNS)
+    blocks = -(-max(n, 1) // cols)
+    fig, grid = plt.subplots(2 * blocks, cols, figsize=(3.6 * cols, 7 * blocks), squeeze=False)
+    for ax in grid.ravel():
+        ax.set_axis_off()
+
+    def pair(k: int):
+        top, bottom = grid[2 * (k // cols), k % cols], grid[2 * (k // cols) + 1, k % cols]
+        top.set_axis_on()
+        bottom.set_axis_on()
+        return top, bottom
+
     w = wall_weights(fgm, params.wall_threshold)
     for k, r in enumerate(refs):
         lo, hi = r.region.min(axis=0), r.region.max(axis=0)
-        ax = axes[0, k]
+        ax, bottom = pair(k)
         ax.imshow(w, origin="lower", extent=fgm.grid.extent, cmap="gray_r", vmin=0, vmax=1)
         poly = np.vstack([r.region, r.region[:1]])
         ax.plot(poly[:, 0], poly[:, 1], "--", color="tab:orange", lw=0.8)
@@ -136,9 +151,9 @@ def fig_hough(
         ax.set_aspect("equal")
         ax.set_title(f"{r.name}: {np.rad2deg(r.angle):.2f} deg", fontsize=9)
         if r.wall is not None:
-            _hough_panel(axes[1, k], r.wall, f"Hough, strength {r.strength:.2f} m")
+            _hough_panel(bottom, r.wall, f"Hough, strength {r.strength:.2f} m")
     if flm is not None and flm_wd is not None:
-        ax = axes[0, n - 1]
+        ax, bottom = pair(n - 1)
         ax.imshow(
             wall_weights(flm, params.wall_threshold),
             origin="lower",
@@ -150,7 +165,7 @@ def fig_hough(
         ax.plot(0, 0, "^", color="tab:blue")
         ax.set_aspect("equal")
         ax.set_title(f"FLM (robot frame): {np.rad2deg(flm_wd.angle):.2f} deg", fontsize=9)
-        _hough_panel(axes[1, n - 1], flm_wd, f"FLM Hough, strength {flm_wd.strength:.2f} m")
+        _hough_panel(bottom, flm_wd, f"FLM Hough, strength {flm_wd.strength:.2f} m")
     fig.tight_layout()
     _save(fig, path)
 

@@ -8,8 +8,16 @@ Input streams (topic names from the config's ``topics`` section):
 - lamps: ``topics.image`` mono8 frames + ``topics.camera_info`` (ceiling height from
   ``camera.ceiling_height``, lens offset from /tf_static ``ceiling_camera`` if present,
   else ``camera.offset``), or ``topics.detections`` PoseArray (base_link points);
-- sonar rings ``topics.sonar_prefix``NN, only when aids are given (mounts from
-  /tf_static, else the nominal ring).
+  A log with neither has no lamps (``lamp_source`` "none"): the same filter on
+  odometry alone, corrected only by the aids;
+- range rings, only when aids are given: the sonar topics present or the laser scan
+  (:func:`fuzzyslam.streams.ranges.open_ranges`, mounts from /tf_static).
+
+The start pose: ``start_pose`` when given (``--start-pose``), else the scenario's,
+else ``slam.start_pose`` when it is not all zeros, else the first odometry pose
+confirmed by the glitch gate (slam/odom_gate.py) when the odometry is nav_msgs/Odometry
+(a real log has no scenario), else zeros. Odometry poses that jump (stray poses) are
+skipped and counted (``odometry_jumps``).
 
 Glitches are counted in ``warnings`` (never silently used): frames of another
 encoding or of another size than the CameraInfo's, NaN odometry, odometry increments
@@ -40,16 +48,18 @@ import yaml
 from fuzzyslam.camera import CeilingCamera
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
-from fuzzyslam.robot import WHEEL_NAMES, sonar_mounts
+from fuzzyslam.robot import WHEEL_NAMES
 from fuzzyslam.se2 import wrap_angle
 from fuzzyslam.slam.detect import detect_lamps
+from fuzzyslam.slam.odom_gate import OdomGate, first_plausible_pose
 from fuzzyslam.slam.runner import Event, Frame, Odom, RingEvent, SlamResult, UpdateRow
 from fuzzyslam.stamps import TIME_FORMAT, format_time
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.cdr import encode_pose_with_covariance_block
 from fuzzyslam.streams.logmeta import read_scenario
+from fuzzyslam.streams.ranges import RangeSensor, open_ranges
 from fuzzyslam.streams.reader import LogReader
-from fuzzyslam.streams.sonar import RingStats, group_rings, sonar_mounts_from_tf
+from fuzzyslam.streams.sonar import RingStats
 from fuzzyslam.streams.tum import format_tum
 from fuzzyslam.streams.writer import LogWriter
 
@@ -83,6 +93,8 @@ class LogInputs:
     _idx: list = field(default_factory=list)
     _rejected_in_row: int = 0
     _cov_cache: tuple | None = None
+    ranges: RangeSensor | None = None
+    _gate: OdomGate = field(default_factory=OdomGate)
 
     def warn(self, key: str, problem: str = "") -> None:
         self.warnings[key] = self.warnings.get(key, 0) + 1
@@ -104,7 +116,8 @@ class LogInputs:
         lamp = self._frame if self.lamp_source == "frames" else self._pose_array
         last_t = {self.odom_topic: -np.inf, self.lamp_topic: -np.inf}
         prev = None
-        for m in self.reader.messages([self.odom_topic, self.lamp_topic]):
+        topics = [self.odom_topic, self.lamp_topic] if self.lamp_topic else [self.odom_topic]
+        for m in self.reader.messages(topics):
             t = M.stamp_to_sec(m.msg.header.stamp)
             if t < last_t[m.topic]:
                 self.warn("out_of_order", f"{m.topic}: header stamp {t:.3f} s goes back in time")
@@ -190,6 +203,12 @@ class LogInputs:
         if not all(math.isfinite(v) for v in pose):
             self.warn("nan_odometry", f"NaN odometry pose at t={t:.3f} s")
             return None, prev
+        status = self._gate.step(t, pose)
+        if status == "jump":  # a stray pose (slam/odom_gate.py): the next is from prev
+            self.warn("odometry_jumps", f"odometry pose at t={t:.3f} s jumps: skipped")
+            return None, prev
+        if status == "reset":  # refused poses that did not come back: real motion, kept
+            self.warn("odometry_jumps_kept", f"odometry jump at t={t:.3f} s kept as motion")
         if prev is None:
             return None, (pose, t)
         (px, py, pth), pt = prev
@@ -245,9 +264,9 @@ class LogInputs:
         return Frame(t, z, self.cfg.slam.detection_cov(z))
 
     def _ring_events(self, start: float | None = None) -> Iterator[Event]:
-        topics = {self.cfg.topics.sonar(i): i for i in range(self.cfg.sonar.count)}
-        msgs = self.reader.messages(list(topics), start)  # rings before ``start`` not read
-        for ring in group_rings(msgs, topics, self.cfg.sonar.count, stats=self.ring_stats):
+        assert self.ranges is not None
+        msgs = self.reader.messages(self.ranges.topics, start)  # rings before ``start`` not read
+        for ring in self.ranges.rings(msgs, self.ring_stats):
             yield RingEvent(ring.t, ring)
 
 
@@ -281,8 +300,17 @@ def _first(reader: LogReader, topic: str):
     return None
 
 
-def open_inputs(path: str | os.PathLike, cfg: Config, need_rings: bool = False) -> LogInputs:
-    """Open a log and decide its streams; InputError naming topics and config keys if missing."""
+def open_inputs(
+    path: str | os.PathLike,
+    cfg: Config,
+    need_rings: bool = False,
+    ranges: str | None = None,
+    start_pose: tuple[float, float, float] | None = None,
+) -> LogInputs:
+    """Open a log and decide its streams; InputError naming topics and config keys if missing.
+
+    ``ranges``: sonar|scan (``--ranges``) overriding ``ranges.source``; ``start_pose``:
+    ``--start-pose`` (module docstring)."""
     reader = LogReader(path)
     tp = cfg.topics
     if cfg.slam.use_encoders and reader.has(tp.joint_states):
@@ -314,23 +342,11 @@ def open_inputs(path: str | os.PathLike, cfg: Config, need_rings: bool = False) 
     elif reader.has(tp.detections):
         lamp_topic, lamp_source = tp.detections, "detections"
     else:
-        reader.require(
-            [tp.image, tp.detections], "the config's topics.image (frames) or topics.detections"
-        )
-        raise AssertionError("unreachable")
-    mounts = None
-    if reader.has(tp.tf_static):
-        mounts = sonar_mounts_from_tf(
-            (m.msg for m in reader.messages([tp.tf_static])), cfg.sonar.count
-        )
-    if mounts is None:
-        mounts = sonar_mounts(cfg.sonar.count, cfg.robot.radius)
-    if need_rings:
-        reader.require([tp.sonar(0)], "the config's topics.sonar_prefix")
-    scen = read_scenario(reader)
-    start_pose = np.asarray(scen.start_pose if scen is not None else cfg.slam.start_pose, float)
-    if start_pose.shape != (3,) or not np.all(np.isfinite(start_pose)):
-        raise InputError(reader.path, "start pose must be three finite numbers (x, y, theta)")
+        lamp_topic, lamp_source = "", "none"  # odometry alone (and the aids' fixes)
+    sensor = open_ranges(reader, cfg, ranges) if need_rings else None
+    mounts = sensor.mounts if sensor is not None else np.zeros((0, 3))
+    gate = OdomGate()
+    pose = _start_pose(reader, cfg, odom_topic, odom_source, start_pose, gate)
     return LogInputs(
         reader,
         cfg,
@@ -340,10 +356,50 @@ def open_inputs(path: str | os.PathLike, cfg: Config, need_rings: bool = False) 
         lamp_source,
         camera,
         mounts,
-        start_pose,
+        pose,
         reader.start,
         reader.end,
+        ranges=sensor,
+        _gate=gate,
     )
+
+
+def _first_odometry_pose(
+    reader: LogReader, topic: str, default: np.ndarray, gate: OdomGate
+) -> np.ndarray:
+    """The first confirmed odometry pose (slam/odom_gate.py ``first_plausible_pose``, from
+    the first 100 messages), ``gate`` primed with it; ``default`` when there is none."""
+    t, poses = [], []
+    for m in reader.messages([topic]):
+        p = M.pose_of(m.msg.pose.pose)
+        if np.all(np.isfinite(p)):
+            t.append(M.stamp_to_sec(m.msg.header.stamp))
+            poses.append(p)
+        if len(t) >= 100:
+            break
+    first = first_plausible_pose(np.asarray(t), np.asarray(poses).reshape(-1, 3), gate)
+    if first is None:
+        return default
+    gate.prime(*first)
+    return np.asarray(first[1], dtype=float)
+
+
+def _start_pose(
+    reader: LogReader, cfg: Config, odom_topic: str, odom_source: str, given, gate: OdomGate
+):
+    """The filter's start pose (module docstring), checked finite."""
+    scen = read_scenario(reader) if given is None else None
+    if given is not None:
+        pose = np.asarray(given, dtype=float)
+    elif scen is not None:
+        pose = np.asarray(scen.start_pose, dtype=float)
+    else:
+        pose = np.asarray(cfg.slam.start_pose, dtype=float)
+        if odom_source == "odom" and pose.shape == (3,) and not np.any(pose):
+            pose = _first_odometry_pose(reader, odom_topic, pose, gate)
+    if pose.shape != (3,) or not np.all(np.isfinite(pose)):
+        raise InputError(reader.path, "start pose must be three finite numbers (x, y, theta)")
+    return pose
 
 
 # -- outputs -------------------------------------------------------------------------------

@@ -59,6 +59,8 @@ def make_summary(
     if aids:
         out["aids"] = {type(a).__name__: a.summary() for a in aids}
         out["rings"] = inputs.ring_stats.as_dict()
+        if inputs.ranges is not None:
+            out["range_sensor"] = inputs.ranges.describe()
     return out
 
 
@@ -68,6 +70,8 @@ def run_stage(
     cfg: Config,
     aids: list | None = None,
     adapt_noise: bool = False,
+    ranges: str | None = None,
+    start_pose: tuple[float, float, float] | None = None,
 ) -> dict:
     """Run EKF-SLAM on ``log`` and write docs/contracts.md sec. 2 files into ``outdir``.
 
@@ -78,11 +82,15 @@ def run_stage(
     ``adapt_noise``: a first pass estimates the detection noise from the innovations
     (``slam.noise``); the outputs come from a second pass with that noise (the summary's
     ``noise_adapted`` gives it). Without it, a configured noise that the innovations
-    contradict is told on stderr in one line (which keys to change, to what)."""
+    contradict is told on stderr in one line (which keys to change, to what).
+
+    ``ranges`` (sonar|scan) chooses the aids' range sensor, ``start_pose`` overrides the
+    start pose (slam/io.py). A log without lamps and without aids is dead reckoning: a
+    one-line note on stderr says so."""
     if adapt_noise:
         if aids:
             raise ValueError("adapt_noise: the aids of a first pass cannot be reused")
-        first = _run_once(log, outdir, cfg, [], _quiet=True)
+        first = _run_once(log, outdir, cfg, [], True, ranges, start_pose)
         est = first.get("noise_estimate")
         if est:
             cfg = copy.deepcopy(cfg)
@@ -93,11 +101,11 @@ def run_stage(
             ):
                 if est[key] is not None:  # None: not measurable (slam.noise)
                     setattr(cfg.slam, key, float(est[key]))
-        summary = _run_once(log, outdir, cfg, [], _quiet=True)
+        summary = _run_once(log, outdir, cfg, [], True, ranges, start_pose)
         summary["noise_adapted"] = est
         _tell(summary)
         return summary
-    return _run_once(log, outdir, cfg, aids, _quiet=False)
+    return _run_once(log, outdir, cfg, aids, False, ranges, start_pose)
 
 
 def _tell(summary: dict, cfg: Config | None = None) -> None:
@@ -125,12 +133,24 @@ def _tell(summary: dict, cfg: Config | None = None) -> None:
 
 
 def _run_once(
-    log: str | os.PathLike, outdir: str | os.PathLike, cfg: Config, aids: list, _quiet: bool
+    log: str | os.PathLike,
+    outdir: str | os.PathLike,
+    cfg: Config,
+    aids: list,
+    _quiet: bool,
+    ranges: str | None = None,
+    start_pose: tuple[float, float, float] | None = None,
 ) -> dict:
     aids = list(aids or [])
     wall0 = time.perf_counter()
     check_outputs([log], [outdir])
-    inputs = open_inputs(log, cfg, need_rings=bool(aids))
+    inputs = open_inputs(log, cfg, bool(aids), ranges, start_pose)
+    if inputs.lamp_source == "none" and not aids and not _quiet:
+        note(
+            f"{log}: no lamps (topics.image {cfg.topics.image}, "
+            f"topics.detections {cfg.topics.detections}) and no map: the estimate is dead "
+            "reckoning (give --map FGMDIR --fix pose|heading)"
+        )
     staged = OutputDir(outdir, owns=RUN_OPTIONAL_OUTPUTS)
     with staged as tmp, StreamingOutputs(tmp, cfg, inputs.start_pose) as streamed:
         res = _run_filter(inputs, cfg, aids, streamed)

@@ -148,13 +148,34 @@ def group_rings(
         yield flush()
 
 
-def sonar_mounts_from_tf(tf_msgs: Iterable[object], count: int) -> np.ndarray | None:
-    """(count, 3) mount poses of ``sonar_00``.. from /tf_static messages, or None if absent."""
+def present_sonar_topics(topics: Iterable[str], prefix: str) -> list[str]:
+    """The sonar topics of a log: ``prefix`` followed by digits (``/sonar/s00``, ...), in
+    the order of their numbers (any number and subset of sonars)."""
+    found = []
+    for tp in topics:
+        rest = tp[len(prefix) :] if tp.startswith(prefix) else ""
+        if rest.isdigit():
+            found.append((int(rest), tp))
+    return [tp for _n, tp in sorted(found)]
+
+
+def mounts_of_frames(
+    tf_msgs: Iterable[object], frames: dict[str, str]
+) -> tuple[np.ndarray, list[str]]:
+    """(M, 3) mounts (x, y, yaw in base_link) of the sensors named by ``frames`` (topic ->
+    child frame of /tf_static, in ring order) and the topics whose frame has no mount.
+
+    Rows of the topics without a mount are NaN; the caller refuses them (a missing mount
+    is never replaced by a nominal one)."""
     found: dict[str, np.ndarray] = {}
     for msg in tf_msgs:
         for child, (_parent, pose) in planar_transforms(msg).items():
             found[child] = pose
-    names = [f"sonar_{i:02d}" for i in range(count)]
-    if not all(n in found for n in names):
-        return None
-    return np.array([found[n] for n in names])
+    rows, missing = [], []
+    for topic, frame in frames.items():
+        pose = found.get(frame)
+        if pose is None:
+            missing.append(topic)
+            pose = np.full(3, np.nan)
+        rows.append(pose)
+    return np.array(rows, dtype=float).reshape(-1, 3), missing

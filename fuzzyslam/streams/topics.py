@@ -12,6 +12,7 @@ class Topics:
     joint_states: str = "/joint_states"
     odom: str = "/odom"
     sonar_prefix: str = "/sonar/s"
+    scan: str = "/scan"
     tf_static: str = "/tf_static"
     image: str = "/ceiling_camera/image_raw"
     camera_info: str = "/ceiling_camera/camera_info"

@@ -31,17 +31,25 @@ def write_tum(path: str | os.PathLike, t: np.ndarray, poses: np.ndarray) -> None
         Path(tmp).write_text(format_tum(t, poses), encoding="utf-8")
 
 
-def read_tum(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
-    """Read a TUM file: times (N,) and planar poses (N, 3) (yaw from the quaternion)."""
-    t, poses, _planar = read_tum_planar(path)
-    return t, poses
+def read_tum(path: str | os.PathLike, sort: bool = False, report: bool = False):
+    """Read a TUM file: times (N,) and planar poses (N, 3) (yaw from the quaternion).
+
+    Stamps must increase strictly: the first line whose stamp is not after the previous
+    one's is an error naming it (``FILE: line N: ...``), unless ``sort``, which sorts the
+    poses by time (stable) and drops every repeat of a stamp but its first line. With
+    ``report`` a third value is returned: ``{"out_of_order": lines that went back in
+    time, "repeats_dropped": lines dropped}`` (zeros when nothing was sorted).
+    """
+    t, poses, _planar, fixes = read_tum_planar(path, sort, report=True)
+    return (t, poses, fixes) if report else (t, poses)
 
 
-def read_tum_planar(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, bool]:
+def read_tum_planar(path: str | os.PathLike, sort: bool = False, report: bool = False):
     """:func:`read_tum` and whether the file is planar (z = 0 and a yaw-only quaternion,
-    within 1 mm and 1e-3); a 3-D trajectory is read as its projection on the plane."""
+    within 1 mm and 1e-3); a 3-D trajectory is read as its projection on the plane.
+    With ``report``, the sorting counts of :func:`read_tum` come fourth."""
     p = check_input_file(path, "trajectory")
-    rows = []
+    rows, linenos = [], []
     try:
         text = p.read_text(encoding="utf-8")
     except UnicodeDecodeError:
@@ -60,13 +68,32 @@ def read_tum_planar(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray, bo
         if not np.all(np.isfinite(vals)):
             raise InputError(p, f"line {lineno}: NaN or infinite value")
         rows.append(vals)
+        linenos.append(lineno)
     if not rows:
         raise InputError(p, "trajectory holds no poses")
     a = np.array(rows)
     t = a[:, 0]
-    if np.any(np.diff(t) < 0):
-        raise InputError(p, "timestamps are not in increasing order")
+    step = np.diff(t)
+    bad = np.flatnonzero(step <= 0)
+    fixes = {"out_of_order": int(np.count_nonzero(step < 0)), "repeats_dropped": 0}
+    if len(bad) and not sort:
+        k = int(bad[0]) + 1
+        what = "repeats" if step[bad[0]] == 0 else "goes back before"
+        raise InputError(
+            p,
+            f"line {linenos[k]}: timestamp {t[k]:.9f} {what} the previous pose's "
+            f"{t[k - 1]:.9f} (line {linenos[k - 1]}); stamps must increase "
+            "(map --sort sorts them and drops repeats)",
+        )
+    if len(bad):
+        order = np.argsort(t, kind="stable")
+        a = a[order]
+        keep = np.concatenate([[True], np.diff(a[:, 0]) > 0])
+        fixes["repeats_dropped"] = int(np.count_nonzero(~keep))
+        a = a[keep]
+        t = a[:, 0]
     yaw = np.asarray(quaternion_to_yaw(a[:, 4:8])).reshape(-1)
     q = a[:, 4:8] / np.linalg.norm(a[:, 4:8], axis=1, keepdims=True)
     planar = bool(np.all(np.abs(a[:, 3]) <= 1e-3) and np.all(np.abs(q[:, :2]) <= 1e-3))
-    return t, np.column_stack([a[:, 1], a[:, 2], yaw]), planar
+    poses = np.column_stack([a[:, 1], a[:, 2], yaw])
+    return (t, poses, planar, fixes) if report else (t, poses, planar)

@@ -1,0 +1,111 @@
+"""Odometry pose glitches: increments a wheeled robot cannot make.
+
+A nav_msgs/Odometry stream from a real log may carry stray poses (a converter's
+placeholder, a reset, a pose of another stream): a jump of a metre sideways and back.
+Integrated as motion, the jump does not cancel with the jump back (each increment is
+integrated along its own mid heading) and leaves a permanent offset. An increment from
+the last accepted pose is refused when it is impossible for a differential-drive robot:
+
+- faster than ``max_speed`` m/s or ``max_turn_rate`` rad/s; or
+- not an arc: a differential-drive robot moves along a circular arc between two
+  samples, so its chord points at half the heading change from the start heading
+  (Thrun, Burgard and Fox, *Probabilistic Robotics*, sec. 5.4: the odometry model's
+  rot1 = d_rot / 2 for an arc). A chord whose lateral offset from that direction
+  (forwards or backwards) exceeds ``lateral_tol + lateral_frac * chord`` is a jump.
+
+A stray pose is an excursion that comes back: the refused poses are skipped and the next
+increment is measured from the last accepted pose. After ``reset_after`` refusals in a
+row the stream has not come back: it really moved (a correction of the pose stream, a
+turn faster than the limits), and the latest pose is accepted with the whole increment
+from the last accepted one (``"reset"``: the motion is kept, only delayed).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+@dataclass
+class OdomGate:
+    """Refuses impossible odometry increments (module docstring); state: the last
+    accepted pose and time, the refusals in a row."""
+
+    max_speed: float = 2.0
+    max_turn_rate: float = 2.0 * math.pi
+    lateral_tol: float = 0.15
+    lateral_frac: float = 0.2
+    reset_after: int = 10
+    _pose: np.ndarray | None = None
+    _t: float = 0.0
+    _refused: int = 0
+
+    def prime(self, t: float, pose: np.ndarray) -> None:
+        """Start from a known reference pose (e.g. :func:`first_plausible_pose`)."""
+        self._pose, self._t, self._refused = np.asarray(pose, dtype=float), float(t), 0
+
+    @property
+    def pose(self) -> np.ndarray | None:
+        """The last accepted pose (the reference of the next increment)."""
+        return self._pose
+
+    def step(self, t: float, pose: np.ndarray) -> str:
+        """``"first"``, ``"ok"`` (an increment from :attr:`pose` to ``pose``),
+        ``"jump"`` (refused) or ``"reset"`` (accepted after refusals: an increment from the
+        previous reference, read before the call, to ``pose``)."""
+        if self._pose is None:
+            self._pose, self._t = pose, t
+            return "first"
+        if self.plausible(self._pose, pose, t - self._t):
+            self._pose, self._t, self._refused = pose, t, 0
+            return "ok"
+        self._refused += 1
+        if self._refused >= self.reset_after:
+            self._pose, self._t, self._refused = pose, t, 0
+            return "reset"
+        return "jump"
+
+    def plausible(self, a: np.ndarray, b: np.ndarray, dt: float) -> bool:
+        """Whether the increment from pose ``a`` to ``b`` in ``dt`` s is possible."""
+        # rel = between(a, b) on floats (called for every odometry message)
+        dx, dy = float(b[0]) - float(a[0]), float(b[1]) - float(a[1])
+        c, s = math.cos(float(a[2])), math.sin(float(a[2]))
+        rel = (c * dx + s * dy, -s * dx + c * dy)
+        chord = math.hypot(rel[0], rel[1])
+        d_rot = math.remainder(float(b[2]) - float(a[2]), math.tau)
+        dt = max(dt, 1e-3)
+        if chord > self.max_speed * dt or abs(d_rot) > self.max_turn_rate * dt:
+            return False
+        # lateral offset of the chord from the arc's direction d_rot / 2 (either sense)
+        lateral = abs(-rel[0] * math.sin(0.5 * d_rot) + rel[1] * math.cos(0.5 * d_rot))
+        return lateral <= self.lateral_tol + self.lateral_frac * chord
+
+
+def first_plausible_pose(
+    t: np.ndarray, poses: np.ndarray, gate: OdomGate | None = None, look: int = 5, need: int = 3
+) -> tuple[float, np.ndarray] | None:
+    """(time, pose) of the stream's first confirmed pose: the first of ``poses`` (N, 3) at
+    times (N,) from which at least ``need`` of the next ``look`` poses are plausible
+    increments (``gate``'s test; a stray first pose is not confirmed by the stream that
+    follows it). The first pose when none is; None for no pose."""
+    gate = gate if gate is not None else OdomGate()
+    t = np.asarray(t, dtype=float)
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    for i in range(len(t)):
+        nxt = range(i + 1, min(i + 1 + look, len(t)))
+        ok = sum(gate.plausible(poses[i], poses[j], t[j] - t[i]) for j in nxt)
+        if ok >= min(need, len(nxt)) and len(nxt):
+            return float(t[i]), poses[i]
+    return (float(t[0]), poses[0]) if len(t) else None
+
+
+def plausible_mask(t: np.ndarray, poses: np.ndarray, gate: OdomGate | None = None) -> np.ndarray:
+    """(N,) bool: the poses the gate keeps (accepted or reset), starting from the first
+    confirmed pose (:func:`first_plausible_pose`); the others refused."""
+    gate = gate if gate is not None else OdomGate()
+    first = first_plausible_pose(t, poses, gate)
+    if first is not None:
+        gate.prime(*first)
+    return np.array([gate.step(float(ti), p) != "jump" for ti, p in zip(t, poses, strict=True)])

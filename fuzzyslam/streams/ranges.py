@@ -1,0 +1,181 @@
+"""The range sensor of a log, as the log has it: a sonar ring or a laser scanner.
+
+:func:`open_ranges` decides which sensor feeds the maps and the fixes and where its
+sensors sit (one home for ``map`` and ``run``):
+
+- ``sonar``: the topics ``topics.sonar_prefix``NN present in the log (any number and
+  placement: a 9-sonar front ring reads as 9 sensors), each placed by the /tf_static
+  mount of its Range messages' ``header.frame_id``. A present topic whose frame has no
+  mount is an error naming it. Only a log without any /tf_static (older simulated logs)
+  falls back to the nominal ``sonar.count`` ring of ``robot.radius``, and says so in
+  ``mounts_source``.
+- ``scan``: ``topics.scan`` (sensor_msgs/LaserScan) as a ring of narrow sensors, one per
+  kept beam (:mod:`fuzzyslam.streams.scan`), at the laser's /tf_static mount (frame of
+  the first message) composed with each beam angle; cone width ``ranges.beam_width_deg``,
+  every ``ranges.scan_step``-th beam kept.
+
+``ranges.source`` (or ``--ranges``): ``auto`` takes the sonar ring when the log has one,
+else the scan.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from fuzzyslam.errors import InputError
+from fuzzyslam.robot import sonar_mounts
+from fuzzyslam.streams.reader import LogMessage, LogReader
+from fuzzyslam.streams.scan import ScanGeometry, scan_geometry, scan_rings
+from fuzzyslam.streams.sonar import (
+    Ring,
+    RingStats,
+    group_rings,
+    mounts_of_frames,
+    present_sonar_topics,
+)
+
+SOURCES = ("auto", "sonar", "scan")
+
+
+@dataclass
+class RangeParams:
+    """Which range sensor feeds the maps and fixes, and how a laser scan is read.
+
+    ``beam_width_deg``: the cone of one laser beam in the evidence model. A laser's beam
+    diverges by well under a degree; the cone also stands for the angular share of the
+    beams left out by ``scan_step``, so the preset sets it to about the kept beams'
+    spacing (cones that tile the field of view, no cell between two beams skipped).
+    """
+
+    source: str = field(default="auto", metadata={"choices": list(SOURCES)})
+    beam_width_deg: float = field(default=1.0, metadata={"min": 0.01, "max": 45.0})
+    scan_step: int = field(default=1, metadata={"min": 1, "max": 100})
+
+
+@dataclass
+class RangeSensor:
+    """The chosen range sensor: its topics, the (M, 3) mounts of its M sensors in
+    base_link, and how its messages become :class:`Ring` s."""
+
+    kind: str
+    topics: list[str]
+    mounts: np.ndarray
+    mounts_source: str
+    geometry: ScanGeometry | None = None
+    beam_width: float = 0.0
+
+    def rings(self, messages: Iterable[LogMessage], stats: RingStats) -> Iterator[Ring]:
+        """Rings (or scans) of the log's messages on :attr:`topics`, in log order."""
+        if self.kind == "scan":
+            assert self.geometry is not None
+            return scan_rings(messages, self.geometry, self.beam_width, stats)
+        index = {tp: i for i, tp in enumerate(self.topics)}
+        return group_rings(messages, index, len(self.topics), stats=stats)
+
+    def describe(self) -> dict[str, Any]:
+        """For a stage's JSON summary."""
+        out: dict[str, Any] = {
+            "kind": self.kind,
+            "topics": self.topics if len(self.topics) <= 16 else self.topics[:1],
+            "sensors": len(self.mounts),
+            "mounts_source": self.mounts_source,
+        }
+        if self.geometry is not None:
+            out["beams"] = self.geometry.beams
+            out["scan_step"] = self.geometry.step
+            out["beam_width_deg"] = float(np.rad2deg(self.beam_width))
+        return out
+
+
+def _tf_messages(reader: LogReader, topic: str) -> list[Any] | None:
+    if not reader.has(topic):
+        return None
+    return [m.msg for m in reader.messages([topic])]
+
+
+def _first_frames(reader: LogReader, topics: list[str]) -> dict[str, str]:
+    """topic -> header.frame_id of its first message (topics without messages left out)."""
+    frames: dict[str, str] = {}
+    for m in reader.messages(topics):
+        frames.setdefault(m.topic, str(m.msg.header.frame_id))
+        if len(frames) == len(topics):
+            break
+    return {tp: frames[tp] for tp in topics if tp in frames}
+
+
+def _sonar(reader: LogReader, cfg: Any, topics: list[str]) -> RangeSensor:
+    tf = _tf_messages(reader, cfg.topics.tf_static)
+    if tf is None:
+        count = cfg.sonar.count
+        nominal = [cfg.topics.sonar(i) for i in range(count)]
+        if topics != nominal:
+            raise InputError(
+                reader.path,
+                f"no {cfg.topics.tf_static} to place the sonars {', '.join(topics)} "
+                f"(the nominal ring needs exactly {nominal[0]}..{nominal[-1]})",
+            )
+        return RangeSensor(
+            "sonar",
+            topics,
+            sonar_mounts(count, cfg.robot.radius),
+            f"nominal {count}-sonar ring (no {cfg.topics.tf_static})",
+        )
+    frames = _first_frames(reader, topics)
+    topics = [tp for tp in topics if tp in frames]
+    if not topics:
+        raise InputError(reader.path, f"no message on the sonar topics {cfg.topics.sonar_prefix}NN")
+    mounts, missing = mounts_of_frames(tf, frames)
+    if missing:
+        names = ", ".join(f"{tp} (frame {frames[tp]!r})" for tp in missing)
+        raise InputError(reader.path, f"no {cfg.topics.tf_static} mount for {names}")
+    return RangeSensor("sonar", topics, mounts, cfg.topics.tf_static)
+
+
+def _scan(reader: LogReader, cfg: Any) -> RangeSensor:
+    tp = cfg.topics.scan
+    first = next(iter(reader.messages([tp])), None)
+    if first is None:
+        raise InputError(reader.path, f"no message on {tp}")
+    rp: RangeParams = cfg.ranges
+    geom = scan_geometry(first.msg, rp.scan_step)
+    if geom.beams == 0 or not (np.isfinite(geom.angle_increment) and geom.angle_increment != 0):
+        raise InputError(reader.path, f"{tp}: a scan with no beams or a zero angle increment")
+    tf = _tf_messages(reader, cfg.topics.tf_static) or []
+    mounts, missing = mounts_of_frames(tf, {tp: geom.frame})
+    if missing:
+        raise InputError(
+            reader.path, f"no {cfg.topics.tf_static} mount for {tp} (frame {geom.frame!r})"
+        )
+    return RangeSensor(
+        "scan",
+        [tp],
+        geom.mounts(mounts[0]),
+        cfg.topics.tf_static,
+        geom,
+        float(np.deg2rad(rp.beam_width_deg)),
+    )
+
+
+def open_ranges(reader: LogReader, cfg: Any, choice: str | None = None) -> RangeSensor:
+    """The log's range sensor (module docstring); ``choice`` (``--ranges``) overrides
+    ``cfg.ranges.source``. InputError naming the topics and config keys when absent."""
+    source = choice or cfg.ranges.source
+    if source not in SOURCES:
+        raise ValueError(f"ranges source must be one of {', '.join(SOURCES)}, got {source!r}")
+    sonars = present_sonar_topics(reader.topics, cfg.topics.sonar_prefix)
+    has_scan = reader.has(cfg.topics.scan)
+    if source == "auto":
+        source = "sonar" if sonars else "scan" if has_scan else ""
+    if source == "sonar" and sonars:
+        return _sonar(reader, cfg, sonars)
+    if source == "scan" and has_scan:
+        return _scan(reader, cfg)
+    sonar = f"{cfg.topics.sonar_prefix}00..{cfg.topics.sonar_prefix}NN (topics.sonar_prefix)"
+    scan = f"{cfg.topics.scan} (topics.scan)"
+    looked = {"sonar": sonar, "scan": scan, "": f"{sonar} or {scan}"}[source]
+    have = ", ".join(sorted(reader.topics)) or "none"
+    raise InputError(reader.path, f"missing stream(s) {looked}; the log has: {have}")

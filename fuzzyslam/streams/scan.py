@@ -1,0 +1,131 @@
+"""Laser scans as rings of narrow range sensors: sensor_msgs/LaserScan into arrays.
+
+A scan of N beams is read as a ring of M = ceil(N / step) sensors, one per kept beam
+(every ``step``-th beam from the first), each sitting at the laser's mount composed with
+its beam angle ``angle_min + k * angle_increment`` (REP 103: counter-clockwise from the
+laser's x axis). The FGM and FLM evidence (:func:`fuzzyslam.maps.evidence.rings_evidence`)
+then treats each beam as a sonar whose cone is the laser's beam width, so the maps and
+fixes need no second evidence model.
+
+Ranges are read as the message defines them (sensor_msgs/LaserScan; REP 117):
+
+- a finite range in [range_min, range_max) is an echo;
+- ``+inf`` (or exactly range_max) is "no return within range_max": kept as range_max,
+  the "no echo" reading of :mod:`fuzzyslam.streams.sonar` (``no_echo``);
+- ``-inf`` (too close), NaN (erroneous) and finite ranges below range_min or above
+  range_max are invalid: NaN, skipped by the evidence (``invalid``);
+- a message whose geometry (angle_min, angle_increment, beam count) differs from the
+  first one's, or with a non-positive or non-finite range_max, is dropped (``bad_scans``);
+- a scan stamped before the previous one is dropped (``out_of_order``), a repeated stamp
+  too (``duplicates``).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from fuzzyslam.streams.messages import stamp_to_sec
+from fuzzyslam.streams.reader import LogMessage
+from fuzzyslam.streams.sonar import Ring, RingStats
+
+
+@dataclass(frozen=True)
+class ScanGeometry:
+    """Beam layout of a laser: the kept beams' angles in the laser frame (rad)."""
+
+    frame: str
+    angle_min: float
+    angle_increment: float
+    beams: int
+    step: int
+
+    @property
+    def kept(self) -> np.ndarray:
+        """Indices (M,) of the kept beams: every ``step``-th from the first."""
+        return np.arange(0, self.beams, self.step)
+
+    @property
+    def angles(self) -> np.ndarray:
+        """(M,) beam angles of the kept beams in the laser frame (rad)."""
+        return self.angle_min + self.kept * self.angle_increment
+
+    def mounts(self, laser: np.ndarray) -> np.ndarray:
+        """(M, 3) poses of the kept beams in base_link: ``laser`` (3,) composed with a pure
+        rotation by each beam angle (the beam's origin is the laser's)."""
+        laser = np.asarray(laser, dtype=float).reshape(3)
+        a = laser[2] + self.angles
+        return np.column_stack(
+            [np.full(len(a), laser[0]), np.full(len(a), laser[1]), np.arctan2(np.sin(a), np.cos(a))]
+        )
+
+    def matches(self, msg) -> bool:
+        """Whether a LaserScan message has this geometry (float32 fields compared exactly)."""
+        return (
+            len(msg.ranges) == self.beams
+            and float(msg.angle_min) == self.angle_min
+            and float(msg.angle_increment) == self.angle_increment
+        )
+
+
+def scan_geometry(msg, step: int = 1) -> ScanGeometry:
+    """The geometry of a LaserScan message, keeping every ``step``-th beam."""
+    if step < 1:
+        raise ValueError(f"step must be >= 1, got {step}")
+    return ScanGeometry(
+        str(msg.header.frame_id),
+        float(msg.angle_min),
+        float(msg.angle_increment),
+        len(msg.ranges),
+        int(step),
+    )
+
+
+def scan_ranges(raw: np.ndarray, range_min: float, range_max: float) -> tuple[np.ndarray, int, int]:
+    """(ranges (M,), invalid count, no-echo count) of raw LaserScan ranges (M,) (module
+    docstring): echoes kept, no return -> range_max, invalid -> NaN."""
+    r = np.asarray(raw, dtype=float)
+    with np.errstate(invalid="ignore"):
+        no_echo = (r == np.inf) | (r == np.float32(range_max))
+        echo = np.isfinite(r) & (r >= range_min) & (r < range_max)
+    out = np.where(echo, r, np.nan)
+    out[no_echo] = range_max
+    invalid = int(len(r) - np.count_nonzero(echo) - np.count_nonzero(no_echo))
+    return out, invalid, int(np.count_nonzero(no_echo))
+
+
+def scan_rings(
+    messages: Iterable[LogMessage],
+    geometry: ScanGeometry,
+    beam_width: float,
+    stats: RingStats | None = None,
+) -> Iterator[Ring]:
+    """LaserScan messages (log order) as :class:`Ring` s of the kept beams: ranges (M,),
+    max ranges (M,), ``fov`` = the beam width (rad). Glitches counted in ``stats``."""
+    st = stats if stats is not None else RingStats()
+    st.extra.setdefault("bad_scans", 0)
+    kept = geometry.kept
+    last_t = -np.inf
+    for m in messages:
+        msg = m.msg
+        t = stamp_to_sec(msg.header.stamp)
+        if t < last_t:
+            st.out_of_order += 1
+            continue
+        if t == last_t:
+            st.duplicates += 1
+            continue
+        hi, lo = float(msg.range_max), float(msg.range_min)
+        if not geometry.matches(msg) or not (np.isfinite(hi) and hi > 0):
+            st.extra["bad_scans"] += 1
+            continue
+        last_t = t
+        raw = np.asarray(msg.ranges, dtype=np.float32)[kept]
+        ranges, invalid, no_echo = scan_ranges(raw, lo, hi)
+        st.rings += 1
+        st.readings += len(kept)
+        st.invalid += invalid
+        st.no_echo += no_echo
+        yield Ring(t, ranges, np.full(len(kept), hi), float(beam_width))
