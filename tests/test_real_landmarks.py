@@ -343,3 +343,25 @@ def test_orphan_landmarks_flag_a_map_that_forgets_itself():
     n, at = orphan_landmarks(born, forgetful)
     # orphans 1..10 over 11..20 landmarks: > 5 and > 30 % first at the 6th orphan (t = 15)
     assert n == 10 and at == 15.0
+
+
+def test_frames_during_an_odometry_gap_are_not_used():
+    """A robot that keeps driving through a 10 s gap in its odometry while frames arrive:
+    those frames are skipped (counted), so no landmark is duplicated from the stale pose,
+    and the motion of the gap arrives with the next (cumulative) increment."""
+    p = SlamParams(tentative_hits=1, detection_sigma_range=0.02, detection_sigma_bearing_deg=0.5)
+    runner = SlamRunner(p, np.zeros(3))
+    lamp = np.array([3.0, 0.5])
+    x = odo_x = 0.0
+    for k in range(400):  # 40 s at 10 Hz, 0.05 m/s along x
+        t = 0.1 * (k + 1)
+        x += 0.005
+        if not 10.0 < t <= 20.0:  # cumulative odometry: the gap's motion comes after it
+            runner.odometry(Odom(t, x - odo_x, 0.0))
+            odo_x = x
+        if k % 5 == 4:
+            z = (lamp - [x, 0.0])[None]
+            runner.frame(Frame(t, z, p.detection_cov(z)))
+    assert runner.ekf.n_lamps == 1
+    assert runner.counts["frames_stale_odometry"] >= 15
+    assert abs(runner.ekf.pose[0] - x) < 0.05

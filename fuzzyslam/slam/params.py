@@ -67,6 +67,10 @@ class SlamParams:
     tentative_hits: int = field(default=3, metadata={"min": 1})
     tentative_radius: float = field(default=0.3, metadata={"min": 0.01, "max": 10.0})
     tentative_timeout: float = field(default=2.0, metadata={"min": 0.0})
+    # a frame arriving after the odometry has been silent for longer than this (s) is not
+    # used (counted: frames_stale_odometry): the robot may have moved since the last
+    # increment, so its detections would be compared with a stale pose (duplicates)
+    odometry_stale_s: float = field(default=1.0, metadata={"min": 0.01, "max": 1000.0})
     # outputs: trajectory rows at least this far apart (s) between camera updates
     record_period: float = field(default=0.2, metadata={"min": 0.0})
     # /slam/landmarks MarkerArray period in estimates.mcap (s)

@@ -212,6 +212,7 @@ class SlamRunner:
             "lamps_deferred": 0,
             "duplicates_guarded": 0,
             "ambiguous": 0,
+            "frames_stale_odometry": 0,
             "rings": 0,
             "aid_calls": 0,
             "out_of_order": 0,
@@ -226,6 +227,7 @@ class SlamRunner:
         self._last_seen: list[float] = []
         self._obs: list[int] = []
         self._last_t = -np.inf
+        self._last_odometry = -np.inf  # time of the last odometry increment (or the start)
         self._last_record = -np.inf
         self._last_snapshot = -np.inf
 
@@ -268,6 +270,7 @@ class SlamRunner:
 
     def odometry(self, ev: Odom) -> None:
         """Odometry increment: preintegrated (applied at the next flush), and dead reckoning."""
+        self._last_odometry = ev.t
         self.preint.add(ev.d_trans, ev.d_rot)
         self.sink.odometry(ev.t, ev.d_trans, ev.d_rot)  # type: ignore[union-attr]
         self.counts["odometry"] += 1
@@ -285,6 +288,13 @@ class SlamRunner:
         ekf = self.ekf
         self.flush()
         self.counts["frames"] += 1
+        if ev.t - self._last_odometry > self.params.odometry_stale_s:
+            # the odometry has been silent: the robot may have moved since the pose the
+            # detections would be compared with, so they could only be misassociated
+            # (duplicates). The motion itself is not lost (cumulative odometry).
+            self.counts["frames_stale_odometry"] += 1
+            self._record(ev.t)
+            return
         z = np.asarray(ev.z, dtype=float).reshape(-1, 2)
         r = np.asarray(ev.cov, dtype=float).reshape(-1, 2, 2)
         m = len(z)
@@ -452,6 +462,7 @@ class SlamRunner:
     def _start(self, t: float) -> None:
         """The start pose: first dead-reckoning time and first trajectory row."""
         self.sink.odometry_start(t)  # type: ignore[union-attr]
+        self._last_odometry = t
         self._record(t)
 
     def result(self) -> SlamResult:
