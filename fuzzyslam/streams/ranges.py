@@ -109,7 +109,7 @@ def _first_frames(reader: LogReader, topics: list[str]) -> dict[str, str]:
 
 def _sonar(reader: LogReader, cfg: Any, topics: list[str]) -> RangeSensor:
     tf = _tf_messages(reader, cfg.topics.tf_static)
-    if tf is None:
+    if not tf:  # no /tf_static topic, or none of its messages readable (a damaged log)
         count = cfg.sonar.count
         nominal = [cfg.topics.sonar(i) for i in range(count)]
         if topics != nominal:
@@ -122,7 +122,8 @@ def _sonar(reader: LogReader, cfg: Any, topics: list[str]) -> RangeSensor:
             "sonar",
             topics,
             sonar_mounts(count, cfg.robot.radius),
-            f"nominal {count}-sonar ring (no {cfg.topics.tf_static})",
+            f"nominal {count}-sonar ring (no {cfg.topics.tf_static}"
+            + (" message: the log is damaged)" if tf is not None else ")"),
         )
     frames = _first_frames(reader, topics)
     topics = [tp for tp in topics if tp in frames]
