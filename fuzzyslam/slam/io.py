@@ -50,7 +50,6 @@ from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.robot import WHEEL_NAMES
 from fuzzyslam.se2 import wrap_angle
-from fuzzyslam.slam.detect import detect_lamps
 from fuzzyslam.slam.odom_gate import OdomGate, first_plausible_pose
 from fuzzyslam.slam.runner import Event, Frame, Odom, RingEvent, SlamResult, UpdateRow
 from fuzzyslam.stamps import TIME_FORMAT, format_time
@@ -245,6 +244,8 @@ class LogInputs:
             )
             return None
         p = self.cfg.slam
+        from fuzzyslam.slam.detect import detect_lamps  # OpenCV, loaded for frames only
+
         blobs = detect_lamps(
             img, p.threshold, p.min_area, p.max_area, p.min_fill, p.max_aspect, p.border
         )

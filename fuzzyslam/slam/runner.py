@@ -227,7 +227,7 @@ class SlamRunner:
         self._last_seen: list[float] = []
         self._obs: list[int] = []
         self._last_t = -np.inf
-        self._last_odometry = -np.inf  # time of the last odometry increment (or the start)
+        self._last_odometry = -np.inf  # time of the last odometry increment
         self._last_record = -np.inf
         self._last_snapshot = -np.inf
 
@@ -288,7 +288,7 @@ class SlamRunner:
         ekf = self.ekf
         self.flush()
         self.counts["frames"] += 1
-        if ev.t - self._last_odometry > self.params.odometry_stale_s:
+        if -np.inf < self._last_odometry < ev.t - self.params.odometry_stale_s:
             # the odometry has been silent: the robot may have moved since the pose the
             # detections would be compared with, so they could only be misassociated
             # (duplicates). The motion itself is not lost (cumulative odometry).
@@ -462,7 +462,6 @@ class SlamRunner:
     def _start(self, t: float) -> None:
         """The start pose: first dead-reckoning time and first trajectory row."""
         self.sink.odometry_start(t)  # type: ignore[union-attr]
-        self._last_odometry = t
         self._record(t)
 
     def result(self) -> SlamResult:

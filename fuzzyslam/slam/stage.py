@@ -3,10 +3,10 @@
 from __future__ import annotations
 
 import copy
+import importlib
 import os
 import time
 
-import cv2
 import numpy as np
 
 from fuzzyslam.config import Config
@@ -170,8 +170,12 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs) -> Slam
     runner = SlamRunner(
         cfg.slam, inputs.start_pose, aids, inputs.mounts, cfg.slam.landmarks_period, sink
     )
-    threads = cv2.getNumThreads()
-    cv2.setNumThreads(1)  # frames are tiny: OpenCV's thread pool only costs here
+    # frames are tiny: OpenCV's thread pool only costs here (OpenCV is not even loaded
+    # for logs whose lamps come as detections and that have no aids: 0.3 s of start-up)
+    cv2 = importlib.import_module("cv2") if inputs.lamp_source == "frames" or aids else None
+    threads = cv2.getNumThreads() if cv2 is not None else 0
+    if cv2 is not None:
+        cv2.setNumThreads(1)
     try:
         with Progress(max(inputs.end - inputs.start, 1e-6), "run: EKF-SLAM") as bar:
             t0 = inputs.start
@@ -182,7 +186,8 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs) -> Slam
                 t0=t0,
             )
     finally:
-        cv2.setNumThreads(threads)
+        if cv2 is not None:
+            cv2.setNumThreads(threads)
     res.ekf.check_covariance()
     res.noise_estimate = runner.noise.estimate()
     res.health = {  # numerical guards and the divergence tests (slam/health.py)
