@@ -22,6 +22,8 @@ from test_robust_logs import cli, error_lines, leftovers
 
 from fuzzyslam import errors
 
+pytestmark = pytest.mark.slow  # faults injected into whole CLI runs (tmpfs, size limits)
+
 MICRO_YAML = """\
 extends: quick.yaml
 name: micro

@@ -24,6 +24,8 @@ from test_robust_logs import (
 
 from fuzzyslam.errors import EXIT_INPUT
 
+pytestmark = pytest.mark.slow  # whole runs on simulated logs with injected sensor glitches
+
 tiny = test_robust_logs.tiny  # the session fixture: a short simulated log, its run and map
 INFO = "/ceiling_camera/camera_info"
 IMAGE = "/ceiling_camera/image_raw"
