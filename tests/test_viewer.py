@@ -217,3 +217,36 @@ def test_map_writes_fgm_mcap(chain) -> None:
     refs = yaml.safe_load((chain / "fgm" / "references.yaml").read_text())["references"]
     labels = [m for m in msgs["/map_references"][0].markers if m.type == 9]
     assert len(labels) == len(refs) > 0
+
+
+def test_foxglove_layout_names_the_topics_written() -> None:
+    """docs/foxglove_layout.json: a 3D panel in the map frame showing every topic run and
+    map write for a viewer, plots of topics that exist (the default topic names, or the
+    layout's own user script's output)."""
+    import re
+    from dataclasses import asdict
+
+    layout = json.loads((Path(__file__).parents[1] / "docs" / "foxglove_layout.json").read_text())
+    topics = asdict(load_config("quick").topics)
+    known = set(topics.values())
+    (script,) = layout["userNodes"].values()
+    out = re.search(r'export const output = "([^"]+)"', script["sourceCode"]).group(1)
+    inputs = re.search(r"export const inputs = \[([^\]]*)\]", script["sourceCode"]).group(1)
+    assert set(re.findall(r'"([^"]+)"', inputs)) == {topics["slam_pose"], topics["ground_truth"]}
+    panels = layout["configById"]
+    (three_d,) = [v for k, v in panels.items() if k.startswith("3D!")]
+    assert three_d["followTf"] == "map"
+    shown = set(three_d["topics"])
+    assert shown <= known
+    viewer = ("map", "map_conflict", "map_references", "slam_pose", "slam_landmarks",
+              "heading_fixes", "pose_fixes", "slam_changes", "ground_truth")  # fmt: skip
+    assert {topics[k] for k in viewer} <= shown
+    plots = [v for k, v in panels.items() if k.startswith("Plot!")]
+    assert len(plots) == 3
+    for p in plots:
+        for path in p["paths"]:
+            assert path["value"].split(".")[0] in known | {out}, path["value"]
+            assert path["label"]
+    # every panel named in the layout tree has a configuration
+    names = re.findall(r'"((?:3D|Plot)![^"]+)"', json.dumps(layout["layout"]))
+    assert sorted(names) == sorted(panels)
