@@ -156,6 +156,11 @@ def _tf_tree(tf_msgs, pose_msgs) -> None:
 
 @pytest.mark.slow
 def test_run_estimates_have_a_connected_tf_tree(chain) -> None:
+    # the log's sensors hang under base_link (/tf_static): with /tf the tree is
+    # map -> odom -> base_link -> sonar_NN, ceiling_camera
+    static = decode_both(chain / "log.mcap")["/tf_static"]
+    parents = {(x.header.frame_id, x.child_frame_id) for m in static for x in m.transforms}
+    assert len(parents) == 17 and {p for p, _c in parents} == {"base_link"}
     msgs = decode_both(chain / "A" / "estimates.mcap")
     assert {"/tf", "/slam/pose", "/slam/landmarks"} <= set(msgs)
     _tf_tree(msgs["/tf"], msgs["/slam/pose"])
