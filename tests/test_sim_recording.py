@@ -57,7 +57,7 @@ def tiny(tmp_path_factory):
     cfg_path.write_text(TINY)
     out = d / "tiny.mcap"
     res = _cli("simulate", str(cfg_path), "-o", str(out), "--seed", "4", "--preview",
-               str(d / "tiny.png"))  # fmt: skip
+               str(d / "tiny.png"), "--truth-tum", str(d / "truth.tum"))  # fmt: skip
     assert res.returncode == 0, res.stderr
     summary = json.loads(res.stdout)
     return {"dir": d, "config": cfg_path, "mcap": out, "summary": summary,
@@ -193,10 +193,25 @@ def test_preview_and_summary(tiny):
     assert 0.0 <= s["frames_two_lamps_fraction"] <= 1.0
 
 
+def test_truth_tum_is_the_logs_ground_truth(tiny):
+    """--truth-tum: the poses of /ground_truth/odom, every one, as TUM (for evo)."""
+    from fuzzyslam.streams.tum import read_tum
+
+    t, poses = read_tum(tiny["dir"] / "truth.tum")
+    gt = [(m.t, *pose_of(m.msg.pose.pose))
+          for m in LogReader(tiny["mcap"]).messages([Topics().ground_truth])]  # fmt: skip
+    gt = np.array(gt)
+    assert len(t) == len(gt) > 100 and tiny["summary"]["truth_tum"].endswith("truth.tum")
+    assert np.allclose(t, gt[:, 0], atol=1e-9, rtol=0)
+    # TUM: positions to the micrometre, quaternions to nine decimals
+    assert np.allclose(poses[:, :2], gt[:, 1:3], atol=5.1e-7, rtol=0)
+    assert np.allclose(wrap_angle(poses[:, 2] - gt[:, 3]), 0.0, atol=1e-8)
+
+
 def test_help_explains_streams():
     res = _cli("simulate", "--help")
     assert res.returncode == 0
-    for word in ("/sonar/s00", "--seed", "--preview", "fuzzyslam.world", "CONFIG"):
+    for word in ("/sonar/s00", "--seed", "--preview", "--truth-tum", "fuzzyslam.world", "CONFIG"):
         assert word in res.stdout
 
 

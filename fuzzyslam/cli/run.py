@@ -119,8 +119,9 @@ def run_command(
     \b
     Writes trajectory.tum, odometry.tum (dead reckoning), covariance.csv,
     landmarks.yaml, updates.csv (innovation and NIS of every update attempt),
-    estimates.mcap (/slam/pose, /slam/landmarks for Foxglove) and summary.json;
-    with --map also heading_fixes.csv (and changes.csv with --fix pose).
+    estimates.mcap (/slam/pose, /tf, /slam/landmarks for Foxglove) and summary.json;
+    with --map also heading_fixes.csv (and changes.csv with --fix pose), and /map and
+    the fixes in estimates.mcap.
     The JSON summary is also printed on stdout; progress goes to stderr.
     """
     from fuzzyslam.slam.stage import run_stage

@@ -23,7 +23,13 @@ from fuzzyslam.fileio import atomic_path, check_outputs
     "--preview", type=click.Path(readable=False), default=None,
     help="Also write a PNG of walls, lamps (lit/failed), true and dead-reckoning paths.",
 )  # fmt: skip
-def simulate(config: str | None, output: str, seed: int | None, preview: str | None) -> None:
+@click.option(
+    "--truth-tum", type=click.Path(readable=False), default=None,
+    help="Also write the ground truth (/ground_truth/odom) as a TUM trajectory (for evo).",
+)  # fmt: skip
+def simulate(
+    config: str | None, output: str, seed: int | None, preview: str | None, truth_tum: str | None
+) -> None:
     """Simulate the robot, world and sensors of CONFIG and write one MCAP recording.
 
     CONFIG is a YAML path or an embedded config name (default: paper.yaml, the
@@ -50,6 +56,9 @@ def simulate(config: str | None, output: str, seed: int | None, preview: str | N
     MCAP metadata 'fuzzyslam.world' and 'fuzzyslam.scenario' (written first) hold
     the world and the scenario with its events and resolved config.
 
+    --truth-tum FILE also writes the true trajectory (the poses of /ground_truth/odom)
+    as TUM, for evo (evo_ape tum FILE OUTDIR/trajectory.tum).
+
     Prints a JSON summary on stdout: file, duration, message counts per topic,
     dead-reckoning end/max error, fraction of frames with >= 2 lamps in view
     (overall and while all lamps are on), sonar no-echo fraction. Progress goes
@@ -60,21 +69,31 @@ def simulate(config: str | None, output: str, seed: int | None, preview: str | N
 
     cfg_name = config if config is not None else DEFAULT_CONFIG
     inputs = [cfg_name] if Path(cfg_name).is_file() else []
-    outputs = [output] + ([preview] if preview else [])
-    check_outputs(inputs, outputs, kind="file")
-    if preview and Path(preview).resolve() == Path(output).resolve():
-        raise InputError(preview, "the preview and the recording must be different files")
+    extras = [p for p in (preview, truth_tum) if p]
+    check_outputs(inputs, [output, *extras], kind="file")
+    if len({Path(p).resolve() for p in [output, *extras]}) != 1 + len(extras):
+        raise InputError(
+            extras[0], "the recording, --preview and --truth-tum must be different files"
+        )
     cfg = load_config(cfg_name, seed)
-    if not preview:
+    if not extras:
         summary, _ = simulate_to_mcap(cfg, output, source=cfg_name)
         emit(summary)
         return
     from fuzzyslam.sim.preview import save_preview
+    from fuzzyslam.sim.record import write_truth_tum
 
-    # both files complete before either is renamed into place: never a new log beside an
-    # old preview (the preview is renamed first, the log right after)
+    # every file complete before the log is renamed into place: never a new log beside an
+    # old preview or truth (they are renamed first, the log right after)
     with atomic_path(output) as staged:
         summary, plan = simulate_to_mcap(cfg, staged, source=cfg_name)
-        save_preview(plan, preview, title=f"{cfg.name}, seed {cfg.seed}")
-    summary["file"], summary["preview"] = str(Path(output)), preview
+        if preview:
+            save_preview(plan, preview, title=f"{cfg.name}, seed {cfg.seed}")
+        if truth_tum:
+            write_truth_tum(plan, truth_tum)
+    summary["file"] = str(Path(output))
+    if preview:
+        summary["preview"] = preview
+    if truth_tum:
+        summary["truth_tum"] = truth_tum
     emit(summary)

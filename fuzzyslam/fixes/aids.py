@@ -125,11 +125,16 @@ def aids_for_map(fm: FrozenMap, mode: str, cfg: Any, start_time: float | None = 
             rings_flm=lambda recent, mounts: recent.flm(mounts, mp),
         )
 
+    refs = [(r.id, r.name, r.angle, r.polygon) for r in fm.references]
     if mode == "heading":
         if not fm.references:
             raise InputError("references.yaml", "no corridor references: heading fixes need some")
-        return [heading_aid()]
-    aids: list[Any] = [PoseFixAid(fm.fgm, cfg.fixes, source, t0)]
+        aid = heading_aid()
+        aid.viewer_map = (fm.fgm, refs)  # the map used, in estimates.mcap (one aid shows it)
+        return [aid]
+    pose = PoseFixAid(fm.fgm, cfg.fixes, source, t0)
+    pose.viewer_map = (fm.fgm, refs)
+    aids: list[Any] = [pose]
     if cfg.fixes.pose_with_heading and fm.references:
         # sonar echo arcs are centred on the robot, so the correlative match rarely pins
         # the heading (measured: free in > 98 % of the rings); the Hough heading fix does

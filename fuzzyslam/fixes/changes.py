@@ -174,9 +174,12 @@ class ChangeDetector:
         write_changes(Path(outdir) / "changes.csv", self.changes)
         draw_changes(Path(outdir) / "changes.png", self.fgm, self.changes)
 
-    def messages(self, topics: Any) -> list[tuple[str, str, Any, float]]:
+    def messages(
+        self, topics: Any, start: float | None = None
+    ) -> list[tuple[str, str, Any, float]]:
         """``/slam/changes`` (topics.slam_changes) for estimates.mcap: one MarkerArray per
-        ring with detections, a red cylinder per detection (diameter = its size)."""
+        ring with detections, a red cylinder per detection (diameter = its size); ``start``
+        is unused (the aids' common signature)."""
         return change_messages(self.changes, topics.slam_changes)
 
 

@@ -115,6 +115,9 @@ class HeadingDecision:
     odometry: float = math.nan
     # at an oblique junction (candidate corridors not at right angles): no bump evidence
     oblique: bool = False
+    # the filter's position at the ring, before the fix (where a viewer draws it)
+    x: float = math.nan
+    y: float = math.nan
 
     def row(self) -> list[str]:
         def num(v: float) -> str:
@@ -283,6 +286,7 @@ class HeadingFixAid:
     """
 
     kind = "heading"
+    viewer_map: Any = None  # (FGM, references) this aid shows in estimates.mcap (aids.py)
 
     def __init__(
         self,
@@ -332,6 +336,7 @@ class HeadingFixAid:
             self._push(t, ring, ekf)
             self._since_fix += 1
         pose = ekf.pose
+        x0, y0 = float(pose[0]), float(pose[1])
         odo = getattr(ekf, "odometry_pose", None)
         odo_heading = float(pose[2] if odo is None else odo[2])
         period = math.pi / 2 if self.params.right_angles else math.pi
@@ -397,7 +402,7 @@ class HeadingFixAid:
             else:
                 self._last_ok_xy = ekf.pose[:2]
         self._update_suspicion(single, d)
-        self.decisions.append(d)
+        self.decisions.append(replace(d, x=x0, y=y0))
 
     def _agrees(self, d: HeadingDecision) -> bool:
         """A formed fix within the gate whose NIS is at most ``suspect_chi2``."""
@@ -542,6 +547,15 @@ class HeadingFixAid:
             "reasons": dict(sorted(reasons.items())),
             "mean_nis": float(nis.mean()) if nis.size else None,
         }
+
+    def messages(self, topics: Any, start: float | None = None) -> list:
+        """The heading fixes for estimates.mcap (``topics.heading_fixes``, fixes/viewer.py),
+        and the map (``viewer_map``, stamped ``start``) when this aid shows it."""
+        from fuzzyslam.fixes.viewer import heading_fix_messages, map_messages
+
+        angles = {r.id: r.angle for r in self.refs}
+        fixes = heading_fix_messages(self.decisions, angles, topics.heading_fixes)
+        return map_messages(self.viewer_map, topics, start) + fixes
 
     def write(self, outdir: Path) -> None:
         write_heading_fixes(Path(outdir) / "heading_fixes.csv", self.decisions)

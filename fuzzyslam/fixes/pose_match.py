@@ -338,6 +338,7 @@ class PoseFixAid:
     """Plug-in of ``fuzzyslam run``: full-pose fixes update_robot(z, R, idx=[0, 1, 2])."""
 
     kind = "pose"
+    viewer_map: Any = None  # (FGM, references) this aid shows in estimates.mcap (aids.py)
 
     def __init__(
         self,
@@ -414,6 +415,14 @@ class PoseFixAid:
             "degenerate": int(sum(d.degenerate > 0 for d in acc)),
             "mean_nis": float(np.mean([d.nis for d in acc])) if acc else None,
         }
+
+    def messages(self, topics: Any, start: float | None = None) -> list:
+        """The pose matches for estimates.mcap (``topics.pose_fixes``, fixes/viewer.py),
+        and the map (``viewer_map``, stamped ``start``) when this aid shows it."""
+        from fuzzyslam.fixes.viewer import map_messages, pose_fix_messages
+
+        fixes = pose_fix_messages(self.decisions, topics.pose_fixes)
+        return map_messages(self.viewer_map, topics, start) + fixes
 
     def write(self, outdir: Path) -> None:
         write_pose_fixes(Path(outdir) / "pose_fixes.csv", self.decisions)

@@ -3,7 +3,8 @@
 Reads the log's sonar rings and mounts, places each ring at the trajectory's pose at
 the ring's time (linear in x, y; heading interpolated on the circle), builds the FGM up
 to the freeze time, freezes it, extracts corridor references and writes fgm.npz,
-fgm.yaml + fgm.pgm, references.yaml, figures and summary.json through
+fgm.yaml + fgm.pgm, references.yaml, fgm.mcap (the map for a viewer), figures and
+summary.json through
 :class:`fuzzyslam.fileio.OutputDir` (nothing partial is left on failure).
 """
 
@@ -195,6 +196,19 @@ def reference_truth(refs: list[Reference], world: World | None) -> list[dict[str
     return out
 
 
+def _write_viewer_log(path: Path, fgm, refs: list[Reference], t: float, cfg: Config) -> None:
+    """fgm.mcap: the frozen FGM (/map), its conflict layer and its corridor references
+    (maps/viewer.py), stamped at the log's start so that a viewer shows them over the
+    whole sensor log."""
+    from fuzzyslam.maps.viewer import fgm_messages
+    from fuzzyslam.streams.writer import LogWriter
+
+    ref_rows = [(r.id, r.name, r.angle, r.region) for r in refs]
+    with LogWriter(path) as w:
+        for topic, typename, msg, tm in fgm_messages(fgm, ref_rows, t, cfg.topics):
+            w.write(topic, typename, msg, tm)
+
+
 def build_map(
     log_path: str | Path, traj_path: str | Path, outdir: str | Path, cfg: Config, opts: MapOptions
 ) -> dict[str, Any]:
@@ -292,6 +306,7 @@ def build_map(
         mapio.save_fgm(tmp / "fgm.npz", fgm, True, t_end, log_id)
         mapio.save_nav2(tmp / "fgm.yaml", tmp / "fgm.pgm", fgm)
         mapio.save_references(tmp / "references.yaml", [r.to_dict() for r in refs])
+        _write_viewer_log(tmp / "fgm.mcap", fgm, refs, float(reader.start), cfg)
         if opts.figures:
             from fuzzyslam.maps import figures
 

@@ -49,18 +49,20 @@ def fig_fgm(
 ) -> None:
     """The paper's Fig. 1: BetP(O) of the FGM, the path, references, lamps."""
     fig, ax = plt.subplots(figsize=(9, 6))
-    ax.imshow(
-        1.0 - fgm.pignistic_occupied(),
+    im = ax.imshow(
+        fgm.pignistic_occupied(),
         origin="lower",
         extent=fgm.grid.extent,
-        cmap="gray",
+        cmap="gray_r",
         vmin=0,
         vmax=1,
     )
+    fig.colorbar(im, ax=ax, shrink=0.7, label="BetP(occupied) (probability)")
     ax.plot(poses[:, 0], poses[:, 1], "-", color="tab:blue", lw=0.8, label="path")
-    for r in refs:
+    for k, r in enumerate(refs):
         poly = np.vstack([r.region, r.region[:1]])
-        ax.plot(poly[:, 0], poly[:, 1], "--", color="tab:orange", lw=0.8)
+        ax.plot(poly[:, 0], poly[:, 1], "--", color="tab:orange", lw=0.8,
+                label="corridor region: id, reference angle" if k == 0 else "_")  # fmt: skip
         c = r.region.mean(axis=0)
         ax.annotate(f"{r.id}: {np.rad2deg(r.angle):.2f} deg", c, color="tab:orange", fontsize=8)
     if world is not None and len(world.lamps):
@@ -80,7 +82,9 @@ def fig_conflict(path: Path, fgm: BeliefMap) -> None:
     """Conflict mass m(emptyset) per cell."""
     fig, ax = plt.subplots(figsize=(9, 6))
     im = ax.imshow(fgm.m_c, origin="lower", extent=fgm.grid.extent, cmap="magma", vmin=0)
-    fig.colorbar(im, ax=ax, label="m(conflict)")
+    fig.colorbar(im, ax=ax, label="m(conflict) (mass)")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
     ax.set_title("FGM contradiction (conflict mass)")
     _save(fig, path)
@@ -91,24 +95,34 @@ def _hough_panel(ax, wd: WallDirection, title: str) -> None:
         ax.set_title(title + " (no evidence)")
         return
     pl = wd.plane
-    ax.imshow(
+    im = ax.imshow(
         pl.acc,
         origin="lower",
         aspect="auto",
         cmap="viridis",
         extent=(0, 180, pl.rhos[0], pl.rhos[-1]),
     )
+    ax.figure.colorbar(im, ax=ax, label="votes (m of wall)")
+    seen = set()
     for k, pk in enumerate(wd.peaks):
+        # the peaks of the wall direction (red), and the strongest peak of another
+        # direction (white, last) when the map has one (an ambiguous wall)
+        second = k == len(wd.peaks) - 1 and bool(wd.second_strength)
+        label = "peak of another direction" if second else "wall peaks (the direction)"
         ax.plot(
             np.rad2deg(pk.theta),
             pk.rho,
             "o",
-            color="red" if k < len(wd.peaks) - 1 or not wd.second_strength else "white",
+            color="white" if second else "red",
             mfc="none",
             ms=8,
+            label=label if label not in seen else "_",
         )
-    ax.set_xlabel("t (deg)")
-    ax.set_ylabel("r (m)")
+        seen.add(label)
+    if wd.peaks:
+        ax.legend(fontsize=6, loc="upper right", framealpha=0.7)
+    ax.set_xlabel("theta (deg)")
+    ax.set_ylabel("rho (m)")
     ax.set_title(title, fontsize=9)
 
 
@@ -143,18 +157,22 @@ def fig_hough(
     for k, r in enumerate(refs):
         lo, hi = r.region.min(axis=0), r.region.max(axis=0)
         ax, bottom = pair(k)
-        ax.imshow(w, origin="lower", extent=fgm.grid.extent, cmap="gray_r", vmin=0, vmax=1)
+        im = ax.imshow(w, origin="lower", extent=fgm.grid.extent, cmap="gray_r", vmin=0, vmax=1)
+        fig.colorbar(im, ax=ax, shrink=0.8, label="wall weight (0-1)")
         poly = np.vstack([r.region, r.region[:1]])
-        ax.plot(poly[:, 0], poly[:, 1], "--", color="tab:orange", lw=0.8)
+        ax.plot(poly[:, 0], poly[:, 1], "--", color="tab:orange", lw=0.8, label="region")
+        ax.legend(fontsize=6, loc="upper right", framealpha=0.7)
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
         ax.set_aspect("equal")
         ax.set_title(f"{r.name}: {np.rad2deg(r.angle):.2f} deg", fontsize=9)
         if r.wall is not None:
             _hough_panel(bottom, r.wall, f"Hough, strength {r.strength:.2f} m")
     if flm is not None and flm_wd is not None:
         ax, bottom = pair(n - 1)
-        ax.imshow(
+        im = ax.imshow(
             wall_weights(flm, params.wall_threshold),
             origin="lower",
             extent=flm.grid.extent,
@@ -162,7 +180,11 @@ def fig_hough(
             vmin=0,
             vmax=1,
         )
-        ax.plot(0, 0, "^", color="tab:blue")
+        fig.colorbar(im, ax=ax, shrink=0.8, label="wall weight (0-1)")
+        ax.plot(0, 0, "^", color="tab:blue", label="robot")
+        ax.legend(fontsize=6, loc="upper right", framealpha=0.7)
+        ax.set_xlabel("x, robot frame (m)")
+        ax.set_ylabel("y, robot frame (m)")
         ax.set_aspect("equal")
         ax.set_title(f"FLM (robot frame): {np.rad2deg(flm_wd.angle):.2f} deg", fontsize=9)
         _hough_panel(bottom, flm_wd, f"FLM Hough, strength {flm_wd.strength:.2f} m")

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from fuzzyslam.reproduce.plan import Step, evaluations
-from fuzzyslam.reproduce.table import Aggregate, run_labels
+from fuzzyslam.reproduce.table import Aggregate, headline_key, run_labels
 
 
 def fmt(v: float | None, digits: int) -> str:
@@ -216,12 +216,15 @@ def write_report(
 def write_results(
     path: Path, aggs: list[Aggregate], results: list[dict], info: dict, steps: list[dict]
 ) -> None:
-    """results.json: the table (values per seed, mean, std, min, max, target met), info, and
-    every step (command, seconds, its stderr)."""
+    """results.json: the table (values per seed, mean, std, min, max, target met, the
+    headline key with its unit), info, and every step (command, seconds, its stderr)."""
+    labels = run_labels(results[0]) if results else {}
     data = {
         "info": info,
-        "labels": run_labels(results[0]) if results else {},
-        "rows": [a.to_dict() for a in aggs],
+        "labels": labels,
+        "rows": [  # each row with its key in the headline JSON (stage.py)
+            {**a.to_dict(), "key": headline_key(a.row, labels) if labels else None} for a in aggs
+        ],
         "seeds": [{"seed": r["seed"], "seconds": r["seconds"]} for r in results],
         "steps": steps,
     }

@@ -21,7 +21,7 @@ from fuzzyslam.fileio import OutputDir
 from fuzzyslam.reproduce.execute import StepResult, execute
 from fuzzyslam.reproduce.plan import FULL, QUICK, build_plan, evaluations
 from fuzzyslam.reproduce.report import draw_summary, write_commands, write_report, write_results
-from fuzzyslam.reproduce.table import aggregate, run_labels
+from fuzzyslam.reproduce.table import aggregate, headline_key, run_labels
 
 
 def seed_result(
@@ -84,7 +84,7 @@ def reproduce(
         write_results(tmp / "results.json", aggs, results, info, step_log)
         write_report(tmp / "report.md", aggs, results, seeds, info, png, beyond)
     labels = run_labels(results[0])
-    headline = {f"{a.row.group}: {a.row.measure}".format(**labels): a.mean for a in aggs}
+    headline = {headline_key(a.row, labels): a.mean for a in aggs}  # keys end with the unit
     out = Path(outdir)
     return {
         "command": "reproduce",

@@ -254,6 +254,25 @@ class Aggregate:
         }
 
 
+HEADLINE_UNITS = ("cm", "deg", "m", "s", "x", "count", "ratio")
+
+
+def unit_suffix(row: Row) -> str:
+    """The unit a headline key ends with: the row's unit (cm, deg, m, s; x for a ratio shown
+    as a multiple), else ``count`` for counts and ``ratio`` for other dimensionless values
+    (NEES, precision, recall)."""
+    unit = row.unit or ("count" if row.integer else "ratio")
+    if unit not in HEADLINE_UNITS:
+        raise ValueError(f"row {row.measure!r}: unit {unit!r} is not one of {HEADLINE_UNITS}")
+    return unit
+
+
+def headline_key(row: Row, labels: dict[str, str]) -> str:
+    """The row's key in reproduce's headline JSON and results.json's ``key``:
+    ``"<group>: <measure>_<unit>"`` (measure placeholders filled from ``labels``)."""
+    return f"{row.group}: {row.measure}".format(**labels) + f"_{unit_suffix(row)}"
+
+
 def aggregate(results: list[SeedResult], rows: tuple[Row, ...] = ROWS) -> list[Aggregate]:
     """Each row's value for each seed's results, in seed order."""
     return [Aggregate(row, tuple(row.get(r) for r in results)) for row in rows]

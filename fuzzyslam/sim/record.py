@@ -113,6 +113,17 @@ def schedule(plan: Plan, sonar_rate: float, camera_rate: float) -> list[tuple[fl
     return list(zip(t[order].tolist(), kind[order].tolist(), idx[order].tolist(), strict=True))
 
 
+def write_truth_tum(plan: Plan, path: str | os.PathLike) -> None:
+    """The true trajectory of a simulation (the poses of /ground_truth/odom, at the robot
+    rate) as a TUM file (``streams.tum.format_tum``), written atomically: the truth evo
+    and ``evaluate`` read, beside the log."""
+    from fuzzyslam.fileio import atomic_path
+    from fuzzyslam.streams.tum import format_tum
+
+    with atomic_path(path) as tmp:
+        Path(tmp).write_text(format_tum(plan.drive.t, plan.drive.pose), encoding="utf-8")
+
+
 def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tuple[dict, Plan]:
     """Simulate ``cfg`` and write the recording to ``out`` (atomic): (summary, plan)."""
     rngs = rng_streams(cfg.seed)

@@ -49,12 +49,12 @@ from fuzzyslam.camera import CeilingCamera
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.robot import WHEEL_NAMES
-from fuzzyslam.se2 import wrap_angle
+from fuzzyslam.se2 import compose, inverse, wrap_angle
 from fuzzyslam.slam.odom_gate import OdomGate, first_plausible_pose
 from fuzzyslam.slam.runner import Event, Frame, Odom, RingEvent, SlamResult, UpdateRow
 from fuzzyslam.stamps import TIME_FORMAT, format_time
 from fuzzyslam.streams import messages as M
-from fuzzyslam.streams.cdr import encode_pose_with_covariance_block
+from fuzzyslam.streams.cdr import encode_pose_with_covariance_block, encode_tf_block
 from fuzzyslam.streams.logmeta import read_scenario
 from fuzzyslam.streams.ranges import RangeSensor, open_ranges
 from fuzzyslam.streams.reader import LogReader
@@ -63,6 +63,7 @@ from fuzzyslam.streams.tum import format_tum
 from fuzzyslam.streams.writer import LogWriter
 
 CAMERA_FRAME = "ceiling_camera"
+MAP_FRAME, ODOM_FRAME, BASE_FRAME = "map", "odom", "base_link"  # the /tf tree written
 ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
 ODOM_SPEED_MARGIN = 3.0  # increments over this many times the robot's top speed: rejected
 ODOM_SLACK_S = 0.2  # s of top speed always allowed (stamp jitter, a first message)
@@ -474,6 +475,24 @@ def _pose_message(t: float, pose: np.ndarray, c: np.ndarray):
     return M.pose_with_covariance(t, "map", pose, cov3)
 
 
+def dead_reckoning_at(t: np.ndarray, odo_t: np.ndarray, odo_poses: np.ndarray) -> np.ndarray:
+    """The dead-reckoning poses (N, 3) at times ``t``: the pose after the last odometry
+    increment at or before each time (the one the filter's estimate has integrated; the
+    first pose, the start pose, before the first increment)."""
+    idx = np.searchsorted(np.asarray(odo_t, dtype=float), np.asarray(t, dtype=float), "right")
+    return np.asarray(odo_poses, dtype=float).reshape(-1, 3)[np.maximum(idx - 1, 0)]
+
+
+def tf_payloads(t: np.ndarray, poses: np.ndarray, odo: np.ndarray) -> list[bytes]:
+    """CDR of the /tf messages of trajectory rows: map -> odom (the filter's correction,
+    estimate (+) (-)dead reckoning) and odom -> base_link (the dead reckoning ``odo`` at
+    the same times), so that map -> odom -> base_link composes to the estimate."""
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    odo = np.asarray(odo, dtype=float).reshape(-1, 3)
+    frames = [(MAP_FRAME, ODOM_FRAME), (ODOM_FRAME, BASE_FRAME)]
+    return encode_tf_block(t, frames, [compose(poses, inverse(odo)), odo])
+
+
 def _update_fields(u: UpdateRow) -> list:
     """The updates.csv fields of one update attempt (unused innovation components empty)."""
     return [
@@ -527,9 +546,11 @@ class StreamingOutputs:
     """A ``RowSink`` (slam/runner.py) writing the files of docs/contracts.md sec. 2 into the
     staging directory ``tmp`` as the rows come, in blocks, so memory stays flat over long
     logs. The files are the same bytes as :func:`write_result` on the whole result, but
-    estimates.mcap, whose /slam/pose and /slam/landmarks messages are interleaved in
-    log-time order (same messages, same payloads). Rows and messages are buffered and
-    written ``rows_block`` rows at a time.
+    estimates.mcap, whose /slam/pose (each followed by its /tf) and /slam/landmarks
+    messages are interleaved in log-time order (same messages, same payloads). /tf needs
+    the dead reckoning at each row's time: the odometry block is integrated before each
+    block of rows, and the poses from the last one at or before the last row are kept.
+    Rows and messages are buffered and written ``rows_block`` rows at a time.
 
     The dead reckoning is ``robot.integrate`` evaluated block by block with the running
     sums carried over (cumulative sums are sequential, so the floats are the same).
@@ -553,6 +574,10 @@ class StreamingOutputs:
         self._odo_u: list[tuple[float, float]] = []
         self._carry = (0.0, 0.0, 0.0)  # running sums of d_rot, dx, dy
         self._odo_first = True
+        # dead-reckoning poses integrated but maybe still needed by /tf (from the last one
+        # at or before the last row written)
+        self._dr_t = np.zeros(0)
+        self._dr_p = np.zeros((0, 3))
 
     def __enter__(self) -> StreamingOutputs:
         def text(name: str):
@@ -627,11 +652,18 @@ class StreamingOutputs:
         poses = np.array([r[1] for r in self._rows], dtype=float).reshape(-1, 3)
         cov = np.array([r[2] for r in self._rows], dtype=float).reshape(-1, 6)
         cdr = iter(encode_pose_with_covariance_block(t, poses, cov, "map"))
+        self._flush_odometry()  # every increment up to the rows' times (runner: rows lag)
+        odo = dead_reckoning_at(t, self._dr_t, self._dr_p)
+        tf = iter(tf_payloads(t, poses, odo))
+        if len(t):
+            keep = max(int(np.searchsorted(self._dr_t, t[-1], "right")) - 1, 0)
+            self._dr_t, self._dr_p = self._dr_t[keep:], self._dr_p[keep:]
         for lamps, tm, a, b in self._messages:  # in the order they came
             if lamps:
                 self._mcap.write(tp.slam_landmarks, M.MARKER_ARRAY, _lamp_markers(tm, a, b), tm)
             else:
                 self._mcap.write_cdr(tp.slam_pose, M.POSE_COV_STAMPED, next(cdr), tm)
+                self._mcap.write_cdr(tp.tf, M.TF_MESSAGE, next(tf), tm)
         self._messages.clear()
         if not self._rows:
             return
@@ -655,7 +687,10 @@ class StreamingOutputs:
         poses = np.column_stack([s[0] + cx, s[1] + cy, wrap_angle(theta)])
         if not self._odo_first:
             poses = poses[1:]  # the previous block's last pose, already written
-        self._odo.write(_tum_lines(np.asarray(self._odo_t, dtype=float), poses))
+        odo_t = np.asarray(self._odo_t, dtype=float)
+        self._odo.write(_tum_lines(odo_t, poses))
+        self._dr_t = np.concatenate([self._dr_t, odo_t])
+        self._dr_p = np.concatenate([self._dr_p, poses])
         self._carry = (float(rot[-1]), float(cx[-1]), float(cy[-1]))
         self._odo_first = False
         self._odo_t.clear()
@@ -710,9 +745,11 @@ def write_result(tmp: Path, res: SlamResult, cfg: Config, extra=()) -> None:
         yaml.safe_dump(landmarks_dict(res), sort_keys=False), encoding="utf-8"
     )
     tp = cfg.topics
+    tf = tf_payloads(res.t, res.poses, dead_reckoning_at(res.t, res.odo_t, res.odo_poses))
     with LogWriter(tmp / "estimates.mcap") as w:
-        for t, pose, c in zip(res.t, res.poses, res.cov, strict=True):
+        for t, pose, c, m in zip(res.t, res.poses, res.cov, tf, strict=True):
             w.write(tp.slam_pose, M.POSE_COV_STAMPED, _pose_message(t, pose, c), t)
+            w.write_cdr(tp.tf, M.TF_MESSAGE, m, t)
         for t, lamps, covs in res.snapshots:
             w.write(tp.slam_landmarks, M.MARKER_ARRAY, _lamp_markers(t, lamps, covs), t)
         for topic, typename, msg, t in extra:

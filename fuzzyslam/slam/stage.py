@@ -156,7 +156,10 @@ def _run_once(
         res = _run_filter(inputs, cfg, aids, streamed)
         for aid in aids:
             aid.write(tmp)
-        extra = [m for aid in aids if hasattr(aid, "messages") for m in aid.messages(cfg.topics)]
+        extra = [  # the aids' messages for estimates.mcap (/map stamped at the log's start)
+            m for aid in aids if hasattr(aid, "messages")
+            for m in aid.messages(cfg.topics, inputs.start)
+        ]  # fmt: skip
         write_outputs(tmp, streamed, res, extra)
         summary = make_summary(res, inputs, time.perf_counter() - wall0, aids, streamed)
         write_summary(tmp, summary)

@@ -14,6 +14,7 @@ class Topics:
     sonar_prefix: str = "/sonar/s"
     scan: str = "/scan"
     tf_static: str = "/tf_static"
+    tf: str = "/tf"
     image: str = "/ceiling_camera/image_raw"
     camera_info: str = "/ceiling_camera/camera_info"
     detections: str = "/ceiling_camera/detections"
@@ -24,6 +25,10 @@ class Topics:
     slam_landmarks: str = "/slam/landmarks"
     slam_changes: str = "/slam/changes"
     map: str = "/map"
+    map_conflict: str = "/map_conflict"
+    map_references: str = "/map_references"
+    heading_fixes: str = "/slam/heading_fixes"
+    pose_fixes: str = "/slam/pose_fixes"
 
     def sonar(self, i: int) -> str:
         """Topic of sonar ``i`` (``/sonar/s00`` .. ``/sonar/s15``)."""

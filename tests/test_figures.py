@@ -1,0 +1,173 @@
+"""Every figure the map and evaluate stages draw, checked as a reviewer would (issue 17):
+axes labelled with units, every mark of data labelled (a legend entry), every map image
+with a colour bar, and no data point outside its axes (nothing clipped).
+
+The figures are drawn by the stages themselves on a short simulated log (simulate | run |
+map | evaluate --map --compare), caught at ``_save`` before they are written.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+from pathlib import Path
+
+import matplotlib.pyplot as plt
+import numpy as np
+import pytest
+import yaml
+from click.testing import CliRunner
+from matplotlib.collections import PathCollection
+from matplotlib.image import AxesImage
+from matplotlib.lines import Line2D
+
+from fuzzyslam.cli import _register, cli
+from fuzzyslam.evaluation import figures as eval_figures
+from fuzzyslam.maps import figures as map_figures
+
+pytestmark = pytest.mark.slow  # end to end: a simulated log, a run, a map, an evaluation
+
+_register()
+
+UNIT = re.compile(r"\([^)]+\)")  # "x (m)", "time (s)", "t (deg)"
+
+
+def invoke(args: list) -> dict:
+    res = CliRunner().invoke(cli, [str(a) for a in args], catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    return json.loads(res.stdout)
+
+
+@pytest.fixture(scope="module")
+def drawn(tmp_path_factory) -> dict[str, plt.Figure]:
+    """file name -> the figure as drawn (open), for every figure of map and evaluate."""
+    tmp = tmp_path_factory.mktemp("figures")
+    cfg = tmp / "scenario.yaml"
+    cfg.write_text(
+        yaml.safe_dump(
+            {"extends": "quick.yaml", "name": "figures",
+             "scenario": {"lamp_failures": [{"run": 2, "lamps": [0, 1, 2, 3, 4]}],
+                          "bumps": [{"run": 2, "fraction": 0.5, "angle_deg": 8.0}]}}
+        )
+    )  # fmt: skip
+    log = tmp / "log.mcap"
+    invoke(["simulate", cfg, "-o", log, "--seed", 5])
+    invoke(["run", log, "-o", tmp / "A", "--config", cfg])
+    figs: dict[str, plt.Figure] = {}
+    mp = pytest.MonkeyPatch()
+    for mod in (map_figures, eval_figures):
+        real = mod._save
+
+        def keep(fig, path, real=real):
+            fig.canvas.draw()
+            figs[Path(path).name] = fig
+            fig.savefig(Path(path), format="png")  # written, not closed
+
+        mp.setattr(mod, "_save", keep)
+    try:
+        invoke(["map", log, "--trajectory", tmp / "A" / "trajectory.tum", "-o", tmp / "fgm",
+                "--landmarks", tmp / "A" / "landmarks.yaml"])  # fmt: skip
+        invoke(["run", log, "-o", tmp / "H", "--config", cfg, "--map", tmp / "fgm",
+                "--fix", "heading"])  # fmt: skip
+        invoke(["evaluate", log, tmp / "H", "-o", tmp / "eval", "--map", tmp / "fgm",
+                "--compare", tmp / "A"])  # fmt: skip
+    finally:
+        mp.undo()
+    yield figs
+    for f in figs.values():
+        plt.close(f)
+
+
+def _data_axes(fig: plt.Figure) -> list:
+    """Visible axes that are not colour bars."""
+    return [ax for ax in fig.axes if ax.axison and ax.get_label() != "<colorbar>"]
+
+
+def _data_lines(ax) -> list[Line2D]:
+    """Lines of data (in data coordinates, with a finite point): not axhline/axvline."""
+    out = []
+    for ln in ax.get_lines():
+        if ln.get_transform() != ax.transData:
+            continue
+        x, y = (np.asarray(v, dtype=float) for v in ln.get_data())
+        if np.isfinite(x).any() and np.isfinite(y).any():
+            out.append(ln)
+    return out
+
+
+def _style(artist) -> tuple:
+    """What tells a mark from another in a legend: colour, line style, marker."""
+    from matplotlib.colors import to_rgba
+
+    if isinstance(artist, Line2D):
+        return (to_rgba(artist.get_color()), artist.get_linestyle(), artist.get_marker())
+    fc = artist.get_facecolor()
+    ec = artist.get_edgecolor()
+    colour = fc[0] if len(fc) else (ec[0] if len(ec) else None)
+    return (tuple(np.round(colour, 3)) if colour is not None else None, "scatter")
+
+
+def _legend_styles(fig: plt.Figure) -> set[tuple]:
+    """The styles of every legend entry of the figure (axes and figure legends)."""
+    legends = [ax.get_legend() for ax in fig.axes] + list(fig.legends)
+    for ax in fig.axes:  # legends kept with add_artist (several per axes)
+        legends += [a for a in ax.artists if a.__class__.__name__ == "Legend"]
+    styles = set()
+    for leg in legends:
+        if leg is None:
+            continue
+        for h in leg.legend_handles:
+            if isinstance(h, Line2D | PathCollection):
+                styles.add(_style(h))
+    return styles
+
+
+def _unit_label(ax, which: str) -> bool:
+    """The axis, or one it shares (a column of plots labels the bottom one), has a label
+    with a unit."""
+    shared = ax.get_shared_x_axes() if which == "x" else ax.get_shared_y_axes()
+    get = "get_xlabel" if which == "x" else "get_ylabel"
+    return any(UNIT.search(getattr(a, get)()) for a in shared.get_siblings(ax))
+
+
+def test_every_figure_was_drawn(drawn) -> None:
+    expected = {"fgm.png", "conflict.png", "hough.png", "fig1_paths.png", "fig3_errors.png",
+                "compare.png"}  # fmt: skip
+    assert expected <= set(drawn), sorted(drawn)
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["fgm.png", "conflict.png", "hough.png", "fig1_paths.png", "fig3_errors.png", "compare.png",
+     "fig4_lamps.png", "consistency.png"],
+)  # fmt: skip
+def test_figure_is_labelled_and_clips_nothing(drawn, name) -> None:
+    if name not in drawn:
+        pytest.skip(f"{name} not drawn for this log")
+    fig = drawn[name]
+    legend = _legend_styles(fig)
+    problems = []
+    for ax in _data_axes(fig):
+        where = f"{name} [{ax.get_title() or ax.get_ylabel()}]"
+        for which in ("x", "y"):
+            if not _unit_label(ax, which):
+                problems.append(f"{where}: {which} axis without a label with a unit")
+        for ln in _data_lines(ax):
+            if _style(ln) not in legend:
+                problems.append(f"{where}: a line ({ln.get_label()}) not in any legend")
+            x, y = (np.asarray(v, dtype=float) for v in ln.get_data())
+            ok = np.isfinite(x) & np.isfinite(y)
+            (x0, x1), (y0, y1) = sorted(ax.get_xlim()), sorted(ax.get_ylim())
+            out = ok & ((x < x0) | (x > x1) | (y < y0) | (y > y1))
+            if out.any():
+                problems.append(
+                    f"{where}: {int(out.sum())} points of {ln.get_label()!r} outside the axes"
+                )
+        for col in ax.collections:
+            if isinstance(col, PathCollection) and len(col.get_offsets()):
+                if _style(col) not in legend:
+                    problems.append(f"{where}: scattered points not in any legend")
+        for im in ax.get_images():
+            if isinstance(im, AxesImage) and im.colorbar is None:
+                problems.append(f"{where}: an image without a colour bar")
+    assert not problems, "\n".join(problems)
