@@ -144,8 +144,8 @@ class PlanProgress:
             assert self._bar is not None
             self._bar.update_to(cost_done)
             return
-        seed = key.split("/", 1)[0]
-        seed = seed[4:] if seed.startswith("seed") and seed[4:].isdigit() else "-"
+        parts = [x[4:] for x in key.split("/") if x.startswith("seed") and x[4:].isdigit()]
+        seed = parts[0] if parts else "-"
         place = "" if where in ("", "local") else f" on {where}"
         self.line(f"[{n_done}/{self.n_steps}] {key} done in {seconds:.1f} s "
                   f"(seed {seed}){place}; {self._clock_text()}")

@@ -225,3 +225,47 @@ def test_reproduce_on_dask_equals_the_local_run(tmp_path, dask_cluster):
     ra = json.loads((local / "results.json").read_text())
     untimed_rows = [[r for r in res["rows"] if r["group"] != "Cost"] for res in (ra, results)]
     assert untimed_rows[0] == untimed_rows[1]
+
+
+# --- sweep (slow) ---------------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_sweep_killed_halfway_goes_on_and_skips_the_finished_steps(tmp_path):
+    """2 values x 2 seeds of sample.yaml; SIGTERM after 4 finished steps; the rerun skips
+    them (counted) and the table has a row per value with mean, sd, min, max."""
+    import signal
+
+    out = tmp_path / "sw"
+    args = [sys.executable, "-m", "fuzzyslam", "sweep", "sample.yaml",
+            "--set", "robot.wheel_noise=0.005,0.02", "--seeds", "2", "-o", str(out)]  # fmt: skip
+    env = {k: v for k, v in os.environ.items() if k != "FUZZYSLAM_NO_PROGRESS"}
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**env, "MPLBACKEND": "Agg"})  # fmt: skip
+    finished = 0
+    assert proc.stderr is not None
+    for line in proc.stderr:
+        finished += " done in " in line
+        if finished == 4:
+            proc.send_signal(signal.SIGTERM)
+            break
+    proc.communicate(timeout=120)
+    assert proc.returncode == 143
+    p = cli("sweep", "sample.yaml", "--set", "robot.wheel_noise=0.005,0.02", "--seeds", "2",
+            "-o", out)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    summary = json.loads(p.stdout)
+    assert summary["steps"] == 12 and summary["skipped"] >= 4
+    assert summary["ran"] + summary["skipped"] == 12
+    assert [r["values"] for r in summary["rows"]] == [{"robot.wheel_noise": 0.005},
+                                                      {"robot.wheel_noise": 0.02}]  # fmt: skip
+    for r in summary["rows"]:
+        st = r["measures"]["mean position error (cm)"]
+        assert st["n"] == 2 and st["min"] <= st["mean"] <= st["max"] and st["sd"] >= 0
+    table = (out / "sweep.md").read_text().splitlines()
+    assert table[-2].startswith("| 0.005 | ") and table[-1].startswith("| 0.02 | ")
+    # a third run changes nothing: every step skipped
+    p = cli("sweep", "sample.yaml", "--set", "robot.wheel_noise=0.005,0.02", "--seeds", "2",
+            "-o", out)  # fmt: skip
+    assert json.loads(p.stdout)["skipped"] == 12
+    assert (out / "sweep.md").read_text().splitlines()[4:] == table[4:]

@@ -164,7 +164,7 @@ def _register() -> None:
     """Import the command modules so that they attach to ``cli``."""
     import importlib
 
-    for name in ("simulate", "run", "map", "evaluate", "reproduce"):
+    for name in ("simulate", "run", "map", "evaluate", "reproduce", "sweep"):
         try:
             importlib.import_module(f"fuzzyslam.cli.{name}")
         except ModuleNotFoundError as exc:

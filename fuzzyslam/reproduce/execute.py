@@ -23,6 +23,7 @@ import os
 import socket
 import threading
 import time
+from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
@@ -202,6 +203,7 @@ def execute(
     scheduler: str | None = None,
     heartbeat_s: float = 30.0,
     final: Path | None = None,
+    on_done: Callable[[Step, StepResult], None] | None = None,
 ) -> dict[str, StepResult]:
     """Run every step (dependencies first) in ``root``.
 
@@ -221,6 +223,8 @@ def execute(
         Longest silence of the line-per-step progress (stderr not a terminal).
     final : Path or None
         Where ``root`` goes when the plan succeeded (named in the first progress line).
+    on_done : callable or None
+        Called with (step, result) as each step succeeds (sweep's resume records).
 
     Returns
     -------
@@ -262,6 +266,8 @@ def execute(
                     res = StepResult(s.key, *fut.result())
                     if res.ok:
                         done[s.key] = res
+                        if on_done is not None:
+                            on_done(s, res)
                         bar.step_done(s.key, res.seconds, len(done), res.worker,
                                       sum(costs[k] for k in done))
                     elif failure is None:
