@@ -64,3 +64,106 @@ def iterate(items: Iterable[T], length: int, label: str) -> Iterator[T]:
 def note(text: str) -> None:
     """One line on stderr for the user (always shown: a warning is not progress)."""
     click.echo(f"fuzzyslam: note: {' '.join(text.split())}", err=True)
+
+
+class PlanProgress:
+    """Progress of a plan of steps on stderr, for a person at a terminal or a log file.
+
+    On a terminal: the bar of :class:`Progress` (over the steps' expected cost). Anywhere
+    else (stderr a file or a pipe: CI, nohup): one line per finished step (step, seed,
+    seconds, steps done / total, where it ran) and a line at least every ``heartbeat_s``
+    seconds naming the running steps. Off, like every progress display, when
+    FUZZYSLAM_NO_PROGRESS is set.
+
+    Parameters
+    ----------
+    total_cost : float
+        Sum of the steps' expected costs (the bar's length).
+    n_steps : int
+        Number of steps.
+    label : str
+        Prefix of every line and the bar's label.
+    heartbeat_s : float
+        Longest silence between two lines (lines mode).
+    stream : file-like, optional
+        Where to write (default: sys.stderr).
+    clock : callable, optional
+        Monotonic seconds (default: time.monotonic); tests pass their own.
+    """
+
+    def __init__(
+        self,
+        total_cost: float,
+        n_steps: int,
+        label: str,
+        heartbeat_s: float = 30.0,
+        stream=None,
+        clock=None,
+    ) -> None:
+        import time
+
+        self.stream = stream if stream is not None else sys.stderr
+        self.clock = clock or time.monotonic
+        self.n_steps = n_steps
+        self.label = label
+        self.heartbeat_s = heartbeat_s
+        self.t0 = self.last = self.clock()
+        isatty = getattr(self.stream, "isatty", lambda: False)
+        if not enabled():
+            self.mode = "off"
+        elif isatty():
+            self.mode = "bar"
+        else:
+            self.mode = "lines"
+        self._total = total_cost
+        self._bar: Progress | None = None
+
+    def line(self, text: str) -> None:
+        """One line now (before the bar starts, in bar mode)."""
+        if self.mode == "off":
+            return
+        click.echo(f"{self.label}: {text}", file=self.stream)
+        self.stream.flush()
+        self.last = self.clock()
+        self._start_bar()
+
+    def timeout(self) -> float | None:
+        """Seconds until the next heartbeat is due (None: no heartbeat in this mode)."""
+        if self.mode != "lines":
+            return None
+        return max(self.heartbeat_s - (self.clock() - self.last), 0.01)
+
+    def _start_bar(self) -> None:
+        if self.mode == "bar" and self._bar is None:
+            self._bar = Progress(self._total, self.label)
+
+    def step_done(self, key: str, seconds: float, n_done: int, where: str, cost_done: float):
+        """A step finished: a line (lines mode) or the bar moved (bar mode)."""
+        if self.mode == "bar":
+            self._start_bar()
+            assert self._bar is not None
+            self._bar.update_to(cost_done)
+            return
+        parts = [x[4:] for x in key.split("/") if x.startswith("seed") and x[4:].isdigit()]
+        seed = parts[0] if parts else "-"
+        place = "" if where in ("", "local") else f" on {where}"
+        self.line(f"[{n_done}/{self.n_steps}] {key} done in {seconds:.1f} s "
+                  f"(seed {seed}){place}; {self._clock_text()}")
+
+    def heartbeat(self, n_done: int, running: list[tuple[str, float]]) -> None:
+        """A line if nothing was said for ``heartbeat_s`` seconds (lines mode)."""
+        if self.mode != "lines" or self.clock() - self.last < self.heartbeat_s:
+            return
+        names = ", ".join(f"{k} {s:.0f} s" for k, s in sorted(running)) or "none"
+        self.line(f"[{n_done}/{self.n_steps}] running: {names}; {self._clock_text()}")
+
+    def _clock_text(self) -> str:
+        return f"{self.clock() - self.t0:.0f} s elapsed"
+
+    def __enter__(self) -> PlanProgress:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        if self._bar is not None:
+            self._bar.close()
+            self._bar = None

@@ -15,7 +15,7 @@ SOURCES = sorted(
     [*(ROOT / "fuzzyslam").rglob("*.py"), *(ROOT / "configs").glob("*.yaml")],
 )
 # names of files the stages write (outputs), not documents of the repository
-OUTPUT_NAMES = {"report.md"}
+OUTPUT_NAMES = {"report.md", "sweep.md", "OUTDIR/sweep.md"}  # files the commands write
 MD_REF = re.compile(r"\b[\w/]+\.md\b")
 SEC_REF = re.compile(r"\b(models|contracts)\.md sec\. (\d+)(?:\s*-\s*(\d+))?")
 # the topic each cited section must be about: a word of its heading

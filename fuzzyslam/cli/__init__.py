@@ -28,6 +28,24 @@ from fuzzyslam.errors import (
 )
 from fuzzyslam.fileio import WRITE_ERRNOS, guard_inputs, write_error
 
+# One BLAS/OpenMP thread per process, set before numpy loads (none of the imports above
+# loads it; the commands do, later) and inherited by reproduce's workers: the filter's
+# small matrix products gain nothing from threads, and on a busy machine the threads wait
+# for cores (issue 16; benchmarks/bench_blas.py). FUZZYSLAM_BLAS_THREADS=N sets another
+# count, "default" leaves the libraries' own; a variable the user set already wins.
+BLAS_VARIABLES = (
+    "OPENBLAS_NUM_THREADS",
+    "OMP_NUM_THREADS",
+    "MKL_NUM_THREADS",
+    "BLIS_NUM_THREADS",
+    "VECLIB_MAXIMUM_THREADS",
+    "NUMEXPR_NUM_THREADS",
+)
+_blas_threads = os.environ.get("FUZZYSLAM_BLAS_THREADS", "1")
+if _blas_threads != "default":
+    for _var in BLAS_VARIABLES:
+        os.environ.setdefault(_var, _blas_threads)
+
 CONTEXT = {"help_option_names": ["-h", "--help"], "max_content_width": 100}
 
 
@@ -146,7 +164,7 @@ def _register() -> None:
     """Import the command modules so that they attach to ``cli``."""
     import importlib
 
-    for name in ("simulate", "run", "map", "evaluate", "reproduce"):
+    for name in ("simulate", "run", "map", "evaluate", "reproduce", "sweep"):
         try:
             importlib.import_module(f"fuzzyslam.cli.{name}")
         except ModuleNotFoundError as exc:

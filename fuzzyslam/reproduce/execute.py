@@ -1,10 +1,16 @@
-"""Run a plan of stage commands on the machine's cores (the edge of ``reproduce``).
+"""Run a plan of stage commands on the machine's cores or a Dask cluster (the edge of
+``reproduce``).
 
 Each step is the ``fuzzyslam`` command line it shows, run through the CLI in a worker
 process whose working directory is the (temporary) output directory, so the results are
 those of the same commands typed in a shell (``commands.sh``). Steps start as soon as
 their dependencies are done, longest remaining chain first. The first failing step stops
 the plan: running steps finish, nothing new starts, and its one-line error is raised.
+
+The engine only places the steps: a local process pool, or the workers of an existing
+Dask distributed scheduler (``scheduler="tcp://host:8786"``). Inputs and outputs move by
+path, so the workers must see the output directory's parent at the same absolute path
+(a shared filesystem); only the steps' JSON summaries travel through Dask.
 """
 
 from __future__ import annotations
@@ -14,14 +20,17 @@ import io
 import json
 import multiprocessing
 import os
+import socket
+import threading
 import time
-from concurrent.futures import FIRST_COMPLETED, Future, ProcessPoolExecutor, wait
+from collections.abc import Callable
+from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from fuzzyslam.errors import EXIT_INTERNAL, FuzzyslamError
-from fuzzyslam.progress import Progress
+from fuzzyslam.errors import EXIT_INTERNAL, FuzzyslamError, InputError
+from fuzzyslam.progress import PlanProgress
 from fuzzyslam.reproduce.plan import Step, critical_path
 
 
@@ -35,6 +44,8 @@ class StepFailed(FuzzyslamError):
 
 @dataclass
 class StepResult:
+    """What one step gave back: its outcome, time, JSON summary and where it ran."""
+
     key: str
     ok: bool
     seconds: float
@@ -42,82 +53,231 @@ class StepResult:
     error: str = ""
     exit_code: int = 0
     stderr: str = ""
+    worker: str = ""  # the Dask worker's address, or "local"
+    host: str = ""
+    pid: int = 0
 
 
-def run_step(argv: tuple[str, ...], root: str) -> tuple[bool, float, Any, str, int, str]:
-    """Run ``fuzzyslam ARGV`` in ``root`` in this process; return (ok, seconds, summary,
-    error line, exit code, stderr text). Errors are returned as text (they cross a process
-    boundary); the step's stderr (warnings) is kept for results.json, off the progress bar."""
+# One step at a time per process: a step changes the process's working directory and
+# its stdout/stderr, so a Dask worker with several threads must not run two at once.
+_STEP_LOCK = threading.Lock()
+
+
+def _where() -> str:
+    """The address of the Dask worker running this task, or "local" outside Dask."""
+    try:
+        from distributed import get_worker
+
+        return get_worker().address
+    except (ImportError, ValueError):
+        return "local"
+
+
+def run_step(argv: tuple[str, ...], root: str) -> tuple:
+    """Run ``fuzzyslam ARGV`` in ``root`` in this process.
+
+    Parameters
+    ----------
+    argv : tuple of str
+        The arguments after ``fuzzyslam``.
+    root : str
+        The absolute working directory of the step (the plan's output directory).
+
+    Returns
+    -------
+    tuple
+        (ok, seconds, summary, error line, exit code, stderr text, worker, host, pid).
+        Errors are returned as text (they cross a process boundary); the step's stderr
+        (warnings) is kept for results.json, off the progress display. BLAS is held to
+        one thread during the step (one process per core is the engine's parallelism).
+    """
     import click
+    from threadpoolctl import threadpool_limits
 
     from fuzzyslam.cli import _register, cli
 
-    os.chdir(root)
-    os.environ["FUZZYSLAM_NO_PROGRESS"] = "1"
-    _register()
-    out, err = io.StringIO(), io.StringIO()
-    t0 = time.perf_counter()
-    try:
-        with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-            cli.main(args=list(argv), prog_name="fuzzyslam", standalone_mode=False)
-    except FuzzyslamError as exc:
-        fail = " ".join(str(exc).split()), exc.exit_code
-    except click.ClickException as exc:
-        fail = exc.format_message(), exc.exit_code
-    except Exception as exc:  # a bug in a stage: report it as an internal failure
-        msg = " ".join(str(exc).split()) or type(exc).__name__
-        fail = f"{type(exc).__name__}: {msg}", EXIT_INTERNAL
-    else:
-        fail = None
-    seconds = time.perf_counter() - t0
+    where, host, pid = _where(), socket.gethostname(), os.getpid()
+    if not os.path.isdir(root):
+        msg = (f"{root}: the output directory is not visible on this worker ({where} on "
+               f"{host}); workers must share the filesystem at the same path")
+        return False, 0.0, None, msg, InputError.exit_code, "", where, host, pid
+    with _STEP_LOCK:
+        cwd = os.getcwd()
+        os.chdir(root)
+        os.environ["FUZZYSLAM_NO_PROGRESS"] = "1"
+        _register()
+        out, err = io.StringIO(), io.StringIO()
+        t0 = time.perf_counter()
+        try:
+            with threadpool_limits(limits=1), contextlib.redirect_stdout(out), \
+                    contextlib.redirect_stderr(err):
+                cli.main(args=list(argv), prog_name="fuzzyslam", standalone_mode=False)
+        except FuzzyslamError as exc:
+            fail = " ".join(str(exc).split()), exc.exit_code
+        except click.ClickException as exc:
+            fail = exc.format_message(), exc.exit_code
+        except Exception as exc:  # a bug in a stage: report it as an internal failure
+            msg = " ".join(str(exc).split()) or type(exc).__name__
+            fail = f"{type(exc).__name__}: {msg}", EXIT_INTERNAL
+        else:
+            fail = None
+        finally:
+            with contextlib.suppress(OSError):
+                os.chdir(cwd)
+        seconds = time.perf_counter() - t0
     if fail is not None:
-        return False, seconds, None, fail[0], fail[1], err.getvalue()
+        return False, seconds, None, fail[0], fail[1], err.getvalue(), where, host, pid
     text = out.getvalue()
     try:
         summary = json.loads(text) if text.strip() else {}
     except json.JSONDecodeError:
         summary = {"stdout": text}
-    return True, seconds, summary, "", 0, err.getvalue()
+    return True, seconds, summary, "", 0, err.getvalue(), where, host, pid
+
+
+class Engine:
+    """Where the steps run: a local process pool or a Dask distributed cluster.
+
+    Parameters
+    ----------
+    jobs : int
+        Steps run at once (local pool: its processes; Dask: the default is the
+        cluster's worker threads).
+    scheduler : str or None
+        Address of an existing Dask scheduler (``tcp://host:8786``); None: local pool.
+    """
+
+    def __init__(self, jobs: int | None, scheduler: str | None = None) -> None:
+        self.scheduler = scheduler
+        self._client = None
+        if scheduler is None:
+            self.jobs = max(1, jobs or os.cpu_count() or 1)
+            ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
+            self.pool: Executor = ProcessPoolExecutor(self.jobs, mp_context=ctx)
+            self.where = f"a local pool of {self.jobs} processes"
+            return
+        try:
+            from distributed import Client
+        except ImportError:
+            raise InputError(scheduler, "--scheduler needs Dask: pip install "
+                             "'fuzzyslam[dask]'") from None
+        try:
+            self._client = Client(scheduler, timeout=10, set_as_default=False)
+        except (OSError, TimeoutError) as exc:
+            msg = " ".join(str(exc).split())
+            raise InputError(scheduler, f"cannot reach the Dask scheduler: {msg}") from None
+        threads = sum(w.get("nthreads", 1) for w in
+                      self._client.scheduler_info()["workers"].values())
+        if threads == 0:
+            self._client.close()
+            raise InputError(scheduler, "the Dask scheduler has no workers")
+        self.jobs = jobs or threads
+        self.pool = self._client.get_executor(pure=False)
+        self.where = f"the Dask scheduler {scheduler} ({threads} worker threads)"
+
+    def submit(self, step: Step, root: Path) -> Future:
+        """Start ``step`` in ``root``; a concurrent.futures Future of run_step's tuple."""
+        if self._client is not None:
+            return self.pool.submit(run_step, step.argv, str(root), key=_task_key(step))
+        return self.pool.submit(run_step, step.argv, str(root))
+
+    def close(self, cancel: bool = False) -> None:
+        """Stop the pool (or leave the cluster), cancelling queued steps if ``cancel``."""
+        if self._client is None:
+            self.pool.shutdown(wait=True, cancel_futures=cancel)
+            return
+        self.pool.shutdown(wait=not cancel)  # Dask's executor: wait=False cancels
+        self._client.close()
+
+
+def _task_key(step: Step) -> str:
+    """A Dask task key naming the step (readable on the dashboard), unique per submit."""
+    return f"fuzzyslam {step.key} {time.time_ns()}"
 
 
 def execute(
-    steps: list[Step], root: Path, jobs: int, label: str = "reproduce"
+    steps: list[Step],
+    root: Path,
+    jobs: int | None = None,
+    label: str = "reproduce",
+    scheduler: str | None = None,
+    heartbeat_s: float = 30.0,
+    final: Path | None = None,
+    on_done: Callable[[Step, StepResult], None] | None = None,
 ) -> dict[str, StepResult]:
-    """Run every step (dependencies first) with ``jobs`` worker processes in ``root``."""
+    """Run every step (dependencies first) in ``root``.
+
+    Parameters
+    ----------
+    steps : list of Step
+        The plan (every dependency a step of it).
+    root : Path
+        The working directory of every step (on a filesystem the workers share).
+    jobs : int or None
+        Steps at once (default: the machine's cores, or the cluster's worker threads).
+    label : str
+        Name on the progress display.
+    scheduler : str or None
+        Address of an existing Dask scheduler; None runs on a local process pool.
+    heartbeat_s : float
+        Longest silence of the line-per-step progress (stderr not a terminal).
+    final : Path or None
+        Where ``root`` goes when the plan succeeded (named in the first progress line).
+    on_done : callable or None
+        Called with (step, result) as each step succeeds (sweep's resume records).
+
+    Returns
+    -------
+    dict
+        Step key -> StepResult of every step.
+    """
+    root = Path(root).resolve()
     prio = critical_path(steps)
     pending = {s.key: s for s in steps}
     done: dict[str, StepResult] = {}
     running: dict[Future, Step] = {}
+    started: dict[str, float] = {}
     failure: StepResult | None = None
-    total = sum(s.cost for s in steps)
-    ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
-    with Progress(total, label) as bar, ProcessPoolExecutor(jobs, mp_context=ctx) as pool:
+    engine = Engine(jobs, scheduler)
+    costs = {s.key: s.cost for s in steps}
+    with PlanProgress(sum(costs.values()), len(steps), label, heartbeat_s) as bar:
+        moved = f" (moved to {final} when every step succeeded)" if final else ""
+        bar.line(f"{len(steps)} steps on {engine.where}; writing into {root}{moved}")
         try:
             while pending or running:
                 if failure is None:
                     ready = [s for s in pending.values() if all(d in done for d in s.deps)]
                     ready.sort(key=lambda s: (-prio[s.key], s.key))
-                    for s in ready[: max(jobs - len(running), 0)]:
+                    for s in ready[: max(engine.jobs - len(running), 0)]:
                         del pending[s.key]
-                        running[pool.submit(run_step, s.argv, str(root))] = s
+                        running[engine.submit(s, root)] = s
+                        started[s.key] = time.monotonic()
                 elif not running:
                     break
                 if not running:
                     raise RuntimeError("plan is stuck: steps wait on steps that never ran")
-                finished, _ = wait(running, return_when=FIRST_COMPLETED)
+                finished, _ = wait(running, timeout=bar.timeout(), return_when=FIRST_COMPLETED)
+                if not finished:
+                    now = time.monotonic()
+                    bar.heartbeat(len(done), [(s.key, now - started[s.key])
+                                              for s in running.values()])
                 for fut in finished:
                     s = running.pop(fut)
                     res = StepResult(s.key, *fut.result())
                     if res.ok:
                         done[s.key] = res
-                        bar.update_to(sum(st.cost for st in steps if st.key in done))
+                        if on_done is not None:
+                            on_done(s, res)
+                        bar.step_done(s.key, res.seconds, len(done), res.worker,
+                                      sum(costs[k] for k in done))
                     elif failure is None:
                         failure = res
         except BaseException:
             for fut in running:
                 fut.cancel()
-            pool.shutdown(wait=True, cancel_futures=True)
+            engine.close(cancel=True)
             raise
+    engine.close()
     if failure is not None:
         step = next(s for s in steps if s.key == failure.key)
         raise StepFailed(step, failure.error, failure.exit_code)

@@ -4,7 +4,8 @@ Builds the plan (:mod:`~fuzzyslam.reproduce.plan`), runs it in a temporary direc
 beside OUTDIR (:mod:`~fuzzyslam.reproduce.execute`), reads every evaluation's
 metrics.json, aggregates the table (:mod:`~fuzzyslam.reproduce.table`), writes the
 report (:mod:`~fuzzyslam.reproduce.report`) and moves the whole tree into OUTDIR only
-when everything succeeded.
+when everything succeeded. A previous reproduce output in OUTDIR is replaced whole (no
+old seed folder survives); any other non-empty directory is refused.
 """
 
 from __future__ import annotations
@@ -17,7 +18,7 @@ from typing import Any
 
 from fuzzyslam import __version__
 from fuzzyslam.errors import InputError
-from fuzzyslam.fileio import OutputDir
+from fuzzyslam.fileio import OutputDir, _in_place_only
 from fuzzyslam.reproduce.execute import StepResult, execute
 from fuzzyslam.reproduce.plan import FULL, QUICK, build_plan, evaluations
 from fuzzyslam.reproduce.report import draw_summary, write_commands, write_report, write_results
@@ -40,26 +41,71 @@ def seed_result(
     return {"seed": seed, "eval": evals, "run": runs, "map": maps, "seconds": seconds}
 
 
+# Files that mark a directory as a reproduce output (which a rerun may replace whole).
+MARKERS = ("results.json", "commands.sh")
+
+
+def check_outdir(outdir: Path) -> None:
+    """Raise InputError (one line) unless ``outdir`` is absent, empty or a previous
+    reproduce output that can be replaced whole (not the working directory)."""
+    if not outdir.is_dir() or not any(outdir.iterdir()):
+        return
+    if not any((outdir / m).is_file() for m in MARKERS):
+        raise InputError(outdir, "exists and is not a reproduce output (no results.json); "
+                         "refusing to replace it: remove it or choose another -o")
+    if _in_place_only(outdir.resolve()):
+        raise InputError(outdir, "is the working directory (or holds it) and cannot be "
+                         "replaced whole; refusing: run from elsewhere or choose another -o")
+
+
 def reproduce(
     outdir: str | os.PathLike,
     seeds: list[int],
     quick: bool = False,
     jobs: int | None = None,
     beyond: bool = True,
+    scheduler: str | None = None,
+    keep_logs: bool | None = None,
 ) -> dict[str, Any]:
     """Run the experiment for ``seeds`` into ``outdir``; return the stdout summary.
-    ``beyond=False``: the paper's phases A-D only."""
+
+    Parameters
+    ----------
+    outdir : path
+        Output directory; a previous reproduce output there is replaced whole.
+    seeds : list of int
+        The seeds.
+    quick : bool
+        The two-run scenarios (quick_*.yaml).
+    jobs : int or None
+        Steps at once (default: the cores, or the Dask cluster's worker threads).
+    beyond : bool
+        False: the paper's phases A-D only.
+    scheduler : str or None
+        Address of an existing Dask scheduler that runs the steps (shared filesystem).
+    keep_logs : bool or None
+        Keep the simulated MCAP logs (44 MB each on the full scenario); default: only for
+        one seed.
+
+    Returns
+    -------
+    dict
+        The stdout summary.
+    """
     if not seeds:
         raise InputError(outdir, "no seeds to run")
     suite = QUICK if quick else FULL
-    jobs = max(1, jobs or os.cpu_count() or 1)
+    if keep_logs is None:
+        keep_logs = len(seeds) == 1
     steps = build_plan(seeds, suite, beyond)
     t0 = time.perf_counter()
-    with OutputDir(outdir) as tmp:
+    check_outdir(Path(outdir))
+    with OutputDir(outdir, owns=("*",)) as tmp:
         for s in seeds:
             (tmp / f"seed{s}").mkdir()
         write_commands(tmp / "commands.sh", steps)
-        done = execute(steps, tmp, jobs)
+        done = execute(steps, tmp, jobs, scheduler=scheduler, final=Path(outdir))
+        workers = sorted({r.worker for r in done.values()})
         results = [seed_result(tmp, s, done, beyond) for s in seeds]
         aggs = aggregate(results)
         info = {
@@ -70,7 +116,10 @@ def reproduce(
             "suite": "quick" if quick else "paper",
             "configs": [suite.paper, suite.bumps] + ([suite.dark, suite.people] if beyond else []),
             "seeds": seeds,
-            "jobs": jobs,
+            "jobs": jobs or (len(workers) if scheduler else os.cpu_count() or 1),
+            "engine": f"dask {scheduler}" if scheduler else "local",
+            "workers": workers,
+            "logs_kept": keep_logs,
             "steps": len(steps),
             "version": __version__,
         }
@@ -78,11 +127,15 @@ def reproduce(
         info["wall_s"] = time.perf_counter() - t0
         step_log = [
             {"key": s.key, "command": s.command, "seconds": round(done[s.key].seconds, 2),
-             "stderr": done[s.key].stderr}
+             "stderr": done[s.key].stderr, "worker": done[s.key].worker,
+             "pid": done[s.key].pid}
             for s in steps
         ]  # fmt: skip
         write_results(tmp / "results.json", aggs, results, info, step_log)
         write_report(tmp / "report.md", aggs, results, seeds, info, png, beyond)
+        if not keep_logs:  # read by the steps and draw_summary only
+            for log in tmp.glob("seed*/*.mcap"):
+                log.unlink()
     labels = run_labels(results[0])
     headline = {headline_key(a.row, labels): a.mean for a in aggs}  # keys end with the unit
     out = Path(outdir)

@@ -1,0 +1,271 @@
+"""``reproduce --scheduler``: the plan on a real Dask scheduler and two workers (issue 16),
+progress lines when stderr is a file, clean reruns and ``--keep-logs``."""
+
+from __future__ import annotations
+
+import io
+import json
+import os
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from fuzzyslam.progress import PlanProgress
+from fuzzyslam.reproduce.execute import execute
+from fuzzyslam.reproduce.plan import Step
+
+BIN = Path(sys.executable).parent
+
+
+def cli(*args: object, stderr=None, cwd: Path | None = None) -> subprocess.CompletedProcess:
+    """``fuzzyslam ARGS`` with progress on (stderr a file or a pipe: the lines mode)."""
+    env = {k: v for k, v in os.environ.items() if k != "FUZZYSLAM_NO_PROGRESS"}
+    return subprocess.run(
+        [sys.executable, "-m", "fuzzyslam", *map(str, args)],
+        stdout=subprocess.PIPE,
+        stderr=stderr if stderr is not None else subprocess.PIPE,
+        text=True,
+        cwd=cwd,
+        env={**env, "MPLBACKEND": "Agg"},
+    )
+
+
+# --- progress lines (fast) ----------------------------------------------------------------
+
+
+class Clock:
+    def __init__(self) -> None:
+        self.t = 100.0
+
+    def __call__(self) -> float:
+        return self.t
+
+
+def test_plan_progress_lines_and_heartbeat(monkeypatch):
+    """Not a terminal: a line per finished step (step, seed, seconds, done/total, where) and
+    a heartbeat only after ``heartbeat_s`` seconds of silence."""
+    monkeypatch.delenv("FUZZYSLAM_NO_PROGRESS", raising=False)
+    out, clock = io.StringIO(), Clock()
+    bar = PlanProgress(10.0, 3, "reproduce", heartbeat_s=30.0, stream=out, clock=clock)
+    assert bar.mode == "lines"
+    bar.line("3 steps on here; writing into /x/.out.abc.part")
+    clock.t += 12.5
+    bar.step_done("seed4/AB", 12.34, 1, "tcp://127.0.0.1:1234", 4.0)
+    assert bar.timeout() == pytest.approx(30.0)
+    clock.t += 29.0
+    bar.heartbeat(1, [("seed4/C", 29.0)])  # 29 s of silence: nothing yet
+    clock.t += 1.0
+    bar.heartbeat(1, [("seed4/C", 30.0), ("seed4/D", 2.0)])
+    lines = out.getvalue().splitlines()
+    assert lines == [
+        "reproduce: 3 steps on here; writing into /x/.out.abc.part",
+        "reproduce: [1/3] seed4/AB done in 12.3 s (seed 4) on tcp://127.0.0.1:1234; "
+        "12 s elapsed",
+        "reproduce: [1/3] running: seed4/C 30 s, seed4/D 2 s; 42 s elapsed",
+    ]
+    monkeypatch.setenv("FUZZYSLAM_NO_PROGRESS", "1")
+    assert PlanProgress(1.0, 1, "x", stream=io.StringIO()).mode == "off"
+
+
+def test_execute_writes_a_line_per_finished_step_to_a_file(tmp_path, monkeypatch, capsys):
+    """Three real steps (``fuzzyslam --version``) on the local pool; stderr is not a TTY."""
+    monkeypatch.delenv("FUZZYSLAM_NO_PROGRESS", raising=False)
+    steps = [
+        Step("seed0/a", ("--version",), (), 1.0),
+        Step("seed0/b", ("--version",), ("seed0/a",), 1.0),
+        Step("seed1/c", ("--version",), ("seed0/a",), 1.0),
+    ]
+    done = execute(steps, tmp_path, jobs=2, final=tmp_path / "final")
+    assert set(done) == {"seed0/a", "seed0/b", "seed1/c"}
+    assert all(r.ok and r.worker == "local" and r.pid != os.getpid() for r in done.values())
+    lines = capsys.readouterr().err.splitlines()
+    assert str(tmp_path) in lines[0] and "local pool of 2 processes" in lines[0]
+    finished = [ln for ln in lines if " done in " in ln]
+    assert [ln.split()[1] for ln in finished] == ["[1/3]", "[2/3]", "[3/3]"]
+    assert finished[0].split()[2] == "seed0/a" and "(seed 0)" in finished[0]
+
+
+def test_rerun_refuses_a_directory_that_is_not_a_reproduce_output(tmp_path):
+    out = tmp_path / "mine"
+    out.mkdir()
+    (out / "thesis.tex").write_text("keep me")
+    p = cli("reproduce", "--quick", "--seeds", "1", "-o", out)
+    assert p.returncode == 3
+    lines = [ln for ln in p.stderr.splitlines() if ln.startswith("fuzzyslam:")]
+    assert len(lines) == 1 and "not a reproduce output" in lines[0], p.stderr
+    assert (out / "thesis.tex").read_text() == "keep me"
+
+
+def test_scheduler_unreachable_is_one_line(tmp_path):
+    p = cli("reproduce", "--quick", "--seeds", "1", "-o", tmp_path / "o",
+            "--scheduler", "tcp://127.0.0.1:9")  # fmt: skip
+    assert p.returncode == 3
+    lines = [ln for ln in p.stderr.splitlines() if ln.startswith("fuzzyslam:")]
+    assert len(lines) == 1 and "Dask scheduler" in lines[0], p.stderr
+    assert not (tmp_path / "o").exists()
+
+
+# --- a real Dask cluster (slow) -------------------------------------------------------------
+
+
+@pytest.fixture
+def dask_cluster(tmp_path):
+    """``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1, as the README's
+    recipe starts them; yields (address, {worker address: pid})."""
+    from distributed import Client
+
+    sched_file = tmp_path / "scheduler.json"
+    logs = tmp_path / "dask-logs"
+    logs.mkdir()
+    env = {**os.environ, "MPLBACKEND": "Agg"}
+    procs = [
+        subprocess.Popen(
+            [BIN / "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
+             "--no-dashboard", "--scheduler-file", sched_file],
+            stdout=subprocess.DEVNULL, stderr=open(logs / "scheduler.log", "w"), env=env,
+        )
+    ]  # fmt: skip
+    try:
+        for _ in range(300):
+            if sched_file.is_file() and sched_file.stat().st_size > 0:
+                break
+            time.sleep(0.1)
+        for i in range(2):
+            procs.append(subprocess.Popen(
+                [BIN / "dask", "worker", "--scheduler-file", sched_file, "--nthreads", "1",
+                 "--nworkers", "1", "--host", "127.0.0.1", "--no-dashboard"],
+                stdout=subprocess.DEVNULL, stderr=open(logs / f"worker{i}.log", "w"), env=env,
+            ))  # fmt: skip
+        with Client(scheduler_file=str(sched_file), timeout=30) as client:
+            client.wait_for_workers(2, timeout=60)
+            pids = client.run(os.getpid)
+            address = client.scheduler.address
+        yield address, pids
+    finally:
+        for p in reversed(procs):
+            p.terminate()
+        for p in reversed(procs):
+            try:
+                p.wait(timeout=20)
+            except subprocess.TimeoutExpired:
+                p.kill()
+
+
+TIMING = ("seconds", "wall_time_s", "real_time_factor", "wall_s")
+
+
+def _untimed(obj):
+    """A JSON value without its timing fields (which differ between any two runs)."""
+    if isinstance(obj, dict):
+        return {k: _untimed(v) for k, v in obj.items() if not any(t in k for t in TIMING)}
+    if isinstance(obj, list):
+        return [_untimed(v) for v in obj]
+    return obj
+
+
+def _table(report: Path) -> list[str]:
+    """The report's table rows, without the Cost rows (times)."""
+    rows = [ln for ln in report.read_text().splitlines() if ln.startswith("| ")]
+    return [ln for ln in rows if not ln.startswith(("| Cost", "| time"))]
+
+
+@pytest.mark.slow
+def test_reproduce_on_dask_equals_the_local_run(tmp_path, dask_cluster):
+    """``reproduce --quick --paper-only --seeds 2`` locally and with ``--scheduler``: same
+    table, same files byte for byte (timing fields aside), every step on the two workers,
+    a progress line per finished step in a redirected stderr, the old output replaced
+    whole, the logs removed for two seeds unless ``--keep-logs``."""
+    address, worker_pids = dask_cluster
+    args = ("reproduce", "--quick", "--paper-only", "--seeds", "2")
+    local, remote = tmp_path / "local", tmp_path / "remote"
+    p = cli(*args, "-o", local, "--keep-logs")
+    assert p.returncode == 0, p.stderr
+    # a previous reproduce output with a seed the new run does not have
+    (remote / "seed7").mkdir(parents=True)
+    (remote / "seed7" / "paper.mcap").write_bytes(b"old")
+    (remote / "results.json").write_text("{}")
+    with open(tmp_path / "stderr.txt", "w") as err:
+        p = cli(*args, "-o", remote, "--scheduler", address, stderr=err)
+    stderr = (tmp_path / "stderr.txt").read_text()
+    assert p.returncode == 0, stderr
+
+    # progress: the temporary tree named first, then one line per finished step
+    results = json.loads((remote / "results.json").read_text())
+    n = len(results["steps"])
+    lines = stderr.splitlines()
+    assert ".remote." in lines[0] and ".part" in lines[0] and address in lines[0]
+    done = [ln for ln in lines if " done in " in ln]
+    assert [ln.split()[1] for ln in done] == [f"[{i}/{n}]" for i in range(1, n + 1)]
+    assert {ln.split()[2] for ln in done} == {s["key"] for s in results["steps"]}
+
+    # every step ran on one of the two workers (address and pid), and both worked
+    used = {(s["worker"], s["pid"]) for s in results["steps"]}
+    assert used <= set(worker_pids.items())
+    assert {w for w, _ in used} == set(worker_pids)
+    assert results["info"]["engine"] == f"dask {address}"
+
+    # clean outputs: old seed gone; logs removed for two seeds, kept with --keep-logs
+    assert not (remote / "seed7").exists()
+    assert not list(remote.glob("seed*/*.mcap"))
+    assert len(list(local.glob("seed*/*.mcap"))) == 4
+
+    # same results: the table rows, and every other file byte for byte
+    assert _table(remote / "report.md") == _table(local / "report.md")
+    files = sorted(f.relative_to(remote) for f in remote.glob("seed*/**/*") if f.is_file())
+    assert len(files) > 20
+    for rel in files:
+        a, b = (local / rel).read_bytes(), (remote / rel).read_bytes()
+        if rel.name == "summary.json":
+            assert _untimed(json.loads(a)) == _untimed(json.loads(b)), rel
+        else:
+            assert a == b, rel
+    ra = json.loads((local / "results.json").read_text())
+    untimed_rows = [[r for r in res["rows"] if r["group"] != "Cost"] for res in (ra, results)]
+    assert untimed_rows[0] == untimed_rows[1]
+
+
+# --- sweep (slow) ---------------------------------------------------------------------------
+
+
+@pytest.mark.slow
+def test_sweep_killed_halfway_goes_on_and_skips_the_finished_steps(tmp_path):
+    """2 values x 2 seeds of sample.yaml; SIGTERM after 4 finished steps; the rerun skips
+    them (counted) and the table has a row per value with mean, sd, min, max."""
+    import signal
+
+    out = tmp_path / "sw"
+    args = [sys.executable, "-m", "fuzzyslam", "sweep", "sample.yaml",
+            "--set", "robot.wheel_noise=0.005,0.02", "--seeds", "2", "-o", str(out)]  # fmt: skip
+    env = {k: v for k, v in os.environ.items() if k != "FUZZYSLAM_NO_PROGRESS"}
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**env, "MPLBACKEND": "Agg"})  # fmt: skip
+    finished = 0
+    assert proc.stderr is not None
+    for line in proc.stderr:
+        finished += " done in " in line
+        if finished == 4:
+            proc.send_signal(signal.SIGTERM)
+            break
+    proc.communicate(timeout=120)
+    assert proc.returncode == 143
+    p = cli("sweep", "sample.yaml", "--set", "robot.wheel_noise=0.005,0.02", "--seeds", "2",
+            "-o", out)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    summary = json.loads(p.stdout)
+    assert summary["steps"] == 12 and summary["skipped"] >= 4
+    assert summary["ran"] + summary["skipped"] == 12
+    assert [r["values"] for r in summary["rows"]] == [{"robot.wheel_noise": 0.005},
+                                                      {"robot.wheel_noise": 0.02}]  # fmt: skip
+    for r in summary["rows"]:
+        st = r["measures"]["mean position error (cm)"]
+        assert st["n"] == 2 and st["min"] <= st["mean"] <= st["max"] and st["sd"] >= 0
+    table = (out / "sweep.md").read_text().splitlines()
+    assert table[-2].startswith("| 0.005 | ") and table[-1].startswith("| 0.02 | ")
+    # a third run changes nothing: every step skipped
+    p = cli("sweep", "sample.yaml", "--set", "robot.wheel_noise=0.005,0.02", "--seeds", "2",
+            "-o", out)  # fmt: skip
+    assert json.loads(p.stdout)["skipped"] == 12
+    assert (out / "sweep.md").read_text().splitlines()[4:] == table[4:]
