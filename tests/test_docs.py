@@ -93,3 +93,22 @@ def test_every_cited_section_exists_and_is_on_its_topic(doc: str) -> None:
 def test_sections_are_numbered_in_order() -> None:
     for doc in ("models", "contracts"):
         assert list(headings(doc)) == list(range(1, len(headings(doc)) + 1)), doc
+
+
+def test_committed_reports_have_no_broken_link():
+    """Every local link of README.md, docs/*.md and data/results/report.md names a file of
+    the repository (the committed results are a subset of a reproduce output: links to
+    what is not committed are plain text, benchmarks/publish_results.py)."""
+    import re
+
+    root = Path(__file__).resolve().parents[1]
+    pages = [root / "README.md", root / "data" / "results" / "report.md"]
+    pages += sorted((root / "docs").glob("*.md"))
+    broken = []
+    for page in pages:
+        for target in re.findall(r"\]\(([^)\s]+)\)", page.read_text(encoding="utf-8")):
+            if target.startswith(("http://", "https://", "#", "mailto:")):
+                continue
+            if not (page.parent / target.split("#")[0]).exists():
+                broken.append(f"{page.relative_to(root)} -> {target}")
+    assert not broken, broken
