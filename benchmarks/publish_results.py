@@ -32,7 +32,7 @@ def unlink_missing(text: str, root: Path) -> str:
     """Markdown links (and images) whose local target is not under ``root``: their text."""
 
     def fix(m: re.Match) -> str:
-        bang, label, target = m.groups()
+        _bang, label, target = m.groups()
         if target.startswith(("http://", "https://", "#")) or (root / target).exists():
             return m.group(0)
         return f"{label or target} (`{target}`, not committed: rerun reproduce)"
