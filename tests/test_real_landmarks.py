@@ -365,3 +365,25 @@ def test_frames_during_an_odometry_gap_are_not_used():
     assert runner.ekf.n_lamps == 1
     assert runner.counts["frames_stale_odometry"] >= 15
     assert abs(runner.ekf.pose[0] - x) < 0.05
+
+
+@pytest.mark.slow
+def test_evo_on_the_files_evaluate_wrote_gives_the_reported_ape(excerpt_run, tmp_path):
+    """`evo_ape tum truth.tum trajectory.tum -a` on evaluate's truth.tum and the run's
+    trajectory.tum: the aligned APE of the report (evo's own association and alignment)."""
+    evo_io = pytest.importorskip("evo.tools.file_interface")
+    evo_sync = pytest.importorskip("evo.core.sync")
+    evo_metrics = pytest.importorskip("evo.core.metrics")
+    out, _ = excerpt_run
+    rep = tmp_path / "ev"
+    res = _fuzzyslam("evaluate", EXCERPT / "truth.tum", out, "--align", "-o", rep)
+    assert res.returncode == 0, res.stderr
+    h = json.loads(res.stdout)
+    ref = evo_io.read_tum_trajectory_file(str(rep / "truth.tum"))
+    est = evo_io.read_tum_trajectory_file(str(out / "trajectory.tum"))
+    ref, est = evo_sync.associate_trajectories(ref, est, max_diff=1e-6)
+    est.align(ref, correct_scale=False)
+    ape = evo_metrics.APE(evo_metrics.PoseRelation.translation_part)
+    ape.process_data((ref, est))
+    rmse = ape.get_statistic(evo_metrics.StatisticsType.rmse)
+    assert rmse == pytest.approx(h["ape_aligned_rmse_m"], rel=1e-4, abs=1e-5)

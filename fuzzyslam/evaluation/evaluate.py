@@ -296,7 +296,7 @@ def run_evaluate(
 
     Every input is read and checked before anything is written; the outputs appear together
     (fileio.OutputDir), so a failure leaves ``outdir`` as it was. ``truth.tum`` in
-    ``outdir`` is the truth that was used (for evo).
+    ``outdir`` is the truth that was used: interpolated at the estimate's stamps (for evo).
     """
     from fuzzyslam.evaluation import figures, report
 
@@ -332,7 +332,9 @@ def run_evaluate(
         if others:
             figures.fig_compare(tmp / "compare.png", truth, [(e.label, v) for e, v in evs])
             figs["compare"] = "compare.png"
-        (tmp / "truth.tum").write_text(format_tum(truth.t, truth.poses), encoding="utf-8")
+        # the truth as compared: interpolated at the estimate's stamps, so that evo pairs
+        # the two files exactly (`evo_ape tum truth.tum trajectory.tum -a` = this report)
+        (tmp / "truth.tum").write_text(format_tum(ev.assoc.t, ev.assoc.truth), encoding="utf-8")
         report.write_metrics(tmp / "metrics.json", ev.metrics)
         report.write_report(tmp / "report.md", ev.metrics, figs)
         files = sorted(x.name for x in tmp.iterdir())
