@@ -11,8 +11,6 @@ the undamaged run's.
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import shutil
 import struct
@@ -25,8 +23,8 @@ import numpy as np
 import pytest
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
+from test_robust_logs import cli  # the in-process CLI runner the robustness tests share
 
-from fuzzyslam.cli import main
 from fuzzyslam.errors import InputError
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.typestore import deserialize
@@ -34,17 +32,6 @@ from fuzzyslam.streams.typestore import deserialize
 SAMPLE = Path(__file__).resolve().parents[1] / "data" / "sample.mcap"
 FOOTER_TAIL = 8 + 29  # footer record (opcode, length, 2 x u64, crc) + magic
 OP_CHUNK_INDEX = 0x08
-
-
-def cli(*args) -> tuple[int, str, str]:
-    out, err = io.StringIO(), io.StringIO()
-    code = 0
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            main([str(a) for a in args])
-        except SystemExit as exc:
-            code = int(exc.code or 0)
-    return code, out.getvalue(), err.getvalue()
 
 
 # -- the file's structure, parsed independently of fuzzyslam (MCAP spec) ---------------------
