@@ -330,3 +330,26 @@ def test_compare_side_by_side(case: dict) -> None:
     r = _cli("evaluate", case["log"], case["run"], "-o", bad, "--compare", case["late"])
     assert r.returncode == 3 and "does not overlap" in r.stderr and str(case["late"]) in r.stderr
     assert len(r.stderr.strip().splitlines()) == 1 and not bad.exists()
+
+
+def test_compare_labels(case: dict) -> None:
+    """--compare LABEL=PATH names the compared estimate in metrics, report and figure; a
+    path that exists as written (even with '=' in its name) stays a path; the reproduce
+    plan names its compared runs by their report labels, not their folder names."""
+    from fuzzyslam.evaluation.evaluate import split_label
+    from fuzzyslam.reproduce.plan import COMPARE, compare_label
+
+    odd = case["root"] / "a=b.tum"
+    odd.write_bytes(case["truth_tum"].read_bytes())
+    assert split_label(str(odd)) == (None, str(odd))
+    assert split_label("lamps only=runs/AB") == ("lamps only", "runs/AB")
+    assert split_label("runs/x=AB") == (None, "runs/x=AB")  # a separator: not a label
+    out = case["root"] / "compare_labels"
+    r = _cli("evaluate", case["log"], case["run"], "-o", out, "--compare", f"truth copy={odd}")
+    assert r.returncode == 0, r.stderr
+    rows = json.loads((out / "metrics.json").read_text())["comparison"]
+    assert rows[1]["label"] == "truth copy"
+    assert rows[1]["phases"]["overall"]["position_mean_m"] == pytest.approx(0.0, abs=1e-9)
+    assert "| truth copy |" in (out / "report.md").read_text()
+    labels = {compare_label(o) for v in COMPARE.values() for o in v}
+    assert labels and not labels & {o for v in COMPARE.values() for o in v}

@@ -34,7 +34,9 @@ from fuzzyslam.cli import cli, config_option, emit
     "--compare",
     multiple=True,
     type=click.Path(readable=False, path_type=str),
-    help="Another estimate (run directory or TUM file) to put side by side; repeatable.",
+    help="Another estimate (run directory or TUM file) to put side by side, as PATH or "
+    "LABEL=PATH (the name in the table and figure; default: its file or directory name); "
+    "repeatable.",
 )
 @click.option(
     "--landmarks-truth",

@@ -223,6 +223,18 @@ def read_landmark_history(path: Path, topic: str) -> list[tuple[float, np.ndarra
     return out
 
 
+def split_label(spec: str | os.PathLike) -> tuple[str | None, str | os.PathLike]:
+    """``LABEL=PATH`` -> (LABEL, PATH); a plain path (or one that exists as written, even
+    with a '=' in it) -> (None, path). A label holds no path separator."""
+    text = os.fspath(spec)
+    label, sep, path = text.partition("=")
+    if not sep or not label or not path or "/" in label or os.sep in label:
+        return None, spec
+    if os.path.exists(text):
+        return None, spec
+    return label, path
+
+
 def read_estimate(path: str | os.PathLike, label: str | None = None) -> Estimate:
     """An estimate from a run OUTDIR (every file it holds) or a TUM file (poses only)."""
     kind = detect_kind(path)
@@ -284,7 +296,8 @@ def run_evaluate(
 ) -> EvaluateResult:
     """Read, evaluate, and write metrics.json, the figures and report.md into ``outdir``.
 
-    ``compare``: more estimates (run directories or TUM files) evaluated against the same
+    ``compare``: more estimates (run directories or TUM files, each optionally written
+    ``LABEL=PATH`` to name it in the table and figure) evaluated against the same
     truth with the same parameters; ``metrics["comparison"]`` holds one row per estimate
     (the main one first), report.md a side-by-side table and ``compare.png`` their position
     errors against time.
@@ -302,10 +315,12 @@ def run_evaluate(
 
     params = params or EvalParams()
     extra_inputs = [landmarks_truth] if landmarks_truth is not None else []
+    labelled = [split_label(c) for c in compare]
+    compare = [c for _, c in labelled]
     check_outputs([truth_path, estimate_path, *compare, *extra_inputs], [outdir])
     fgm = read_fgm(map_dir) if map_dir is not None else None
     est = read_estimate(estimate_path, label)
-    others = [read_estimate(c) for c in compare]
+    others = [read_estimate(c, lab) for lab, c in labelled]
     truth = read_truth(truth_path)
     if landmarks_truth is not None:
         truth.landmarks, _ = read_landmarks(Path(landmarks_truth))

@@ -80,6 +80,11 @@ COST = {"simulate": 16.0, "run": 4.0, "run_heading": 8.0, "run_pose": 9.0, "map"
 COST_EVALUATE = 5.0
 
 
+def compare_label(estimate: str) -> str:
+    """The report's name of an estimate directory (the label of its own evaluation)."""
+    return next(lab for _, est, _, lab in EVALUATIONS.values() if est == estimate)
+
+
 def evaluations(beyond: bool = True) -> dict[str, tuple[str, str, str, str]]:
     """The evaluations of the plan: all, or the paper's phases only."""
     return {k: v for k, v in EVALUATIONS.items() if beyond or k in PAPER_ONLY}
@@ -143,7 +148,7 @@ def seed_steps(seed: int, suite: Suite, beyond: bool = True) -> list[Step]:
         ]  # fmt: skip
         others = COMPARE.get(name, ())
         for other in others:
-            argv += ["--compare", f"{d}/{other}"]
+            argv += ["--compare", f"{compare_label(other)}={d}/{other}"]
         deps = [f"{log}.mcap", est, map_dir, *others]
         add(f"eval_{name}", "evaluate", argv, deps, COST_EVALUATE)
     return steps
