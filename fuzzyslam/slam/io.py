@@ -7,7 +7,8 @@ Input streams (topic names from the config's ``topics`` section):
   encoders or ``slam.use_encoders`` is false;
 - lamps: ``topics.image`` mono8 frames + ``topics.camera_info`` (ceiling height from
   ``camera.ceiling_height``, lens offset from /tf_static ``ceiling_camera`` if present,
-  else ``camera.offset``), or ``topics.detections`` PoseArray (base_link points);
+  else ``camera.offset``), or ``topics.detections`` PoseArray or vision_msgs
+  Detection3DArray (base_link points; the latter's own covariances are used);
   A log with neither has no lamps (``lamp_source`` "none"): the same filter on
   odometry alone, corrected only by the aids;
 - range rings, only when aids are given: the sonar topics present or the laser scan
@@ -89,6 +90,7 @@ class LogInputs:
     ring_stats: RingStats = field(default_factory=RingStats)
     first_problem: str = ""
     gap_seconds: float = 0.0
+    own_covariances: int = 0  # detections that brought their own covariance
     _names: list = field(default_factory=list)
     _idx: list = field(default_factory=list)
     _rejected_in_row: int = 0
@@ -258,12 +260,20 @@ class LogInputs:
         return Frame(t, z, self._measurement_cov(len(z), self.camera.metric_sigma(p.pixel_sigma)))
 
     def _pose_array(self, t: float, msg) -> Frame | None:
-        z = M.points_of_pose_array(msg)
+        """Detections (PoseArray or vision_msgs/Detection3DArray): each with the message's
+        own x, y covariance where it carries a valid one, else the configured range and
+        bearing model (``SlamParams.detection_cov``)."""
+        z, own = M.detections_of(msg)
         ok = np.all(np.isfinite(z), axis=1)
         if not np.all(ok):
             self.warn("nan_detections", f"NaN detection at t={t:.3f} s")
-            z = z[ok]
-        return Frame(t, z, self.cfg.slam.detection_cov(z))
+            z, own = z[ok], own[ok]
+        cov = self.cfg.slam.detection_cov(z)
+        has = np.all(np.isfinite(own), axis=(1, 2))
+        if np.any(has):
+            cov[has] = own[has]
+            self.own_covariances += int(np.count_nonzero(has))
+        return Frame(t, z, cov)
 
     def _ring_events(self, start: float | None = None) -> Iterator[Event]:
         assert self.ranges is not None

@@ -208,6 +208,8 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs) -> Slam
         at = res.health["diverged_at"]
         res.health["diverged_at"] = orphans_at if at is None else min(at, orphans_at)
         res.health["diverged"] = True
+    if inputs.lamp_source == "detections":
+        res.counts["detections_own_covariance"] = inputs.own_covariances
     if res.counts["odometry"] == 0:
         raise InputError(inputs.reader.path, f"no usable odometry on {inputs.odom_topic}")
     if inputs.lamp_source == "frames" and res.counts["frames"] == 0:

@@ -22,6 +22,7 @@ ODOMETRY = "nav_msgs/msg/Odometry"
 OCCUPANCY_GRID = "nav_msgs/msg/OccupancyGrid"
 POSE_COV_STAMPED = "geometry_msgs/msg/PoseWithCovarianceStamped"
 POSE_ARRAY = "geometry_msgs/msg/PoseArray"
+DETECTION3D_ARRAY = "vision_msgs/msg/Detection3DArray"
 MARKER_ARRAY = "visualization_msgs/msg/MarkerArray"
 TF_MESSAGE = "tf2_msgs/msg/TFMessage"
 STRING = "std_msgs/msg/String"
@@ -183,6 +184,67 @@ def pose_array(t: float, frame_id: str, points: np.ndarray) -> Any:
         for x, y in np.asarray(points, dtype=float).reshape(-1, 2)
     ]
     return msgtype(POSE_ARRAY)(header=header(t, frame_id), poses=poses)
+
+
+def detection3d_array(
+    t: float, frame_id: str, points: np.ndarray, covs: np.ndarray | None = None
+) -> Any:
+    """vision_msgs/Detection3DArray, one detection per (x, y) point with one hypothesis
+    whose PoseWithCovariance carries the point and its (2, 2) covariance in the x, y
+    block (zeros elsewhere; all zeros when ``covs`` is None: "unknown" in ROS)."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 2)
+    cv = np.zeros((len(pts), 2, 2)) if covs is None else np.asarray(covs, float).reshape(-1, 2, 2)
+    hyp = msgtype("vision_msgs/msg/ObjectHypothesis")
+    hwp = msgtype("vision_msgs/msg/ObjectHypothesisWithPose")
+    pwc = msgtype("geometry_msgs/msg/PoseWithCovariance")
+    box = msgtype("vision_msgs/msg/BoundingBox3D")
+    vec = msgtype("geometry_msgs/msg/Vector3")
+    det = msgtype("vision_msgs/msg/Detection3D")
+    dets = []
+    for (x, y), c in zip(pts, cv, strict=True):
+        c6 = np.zeros((6, 6))
+        c6[:2, :2] = c
+        pose = _pose_msg(float(x), float(y), 0.0)
+        dets.append(
+            det(
+                header=header(t, frame_id),
+                results=[hwp(hypothesis=hyp(class_id="landmark", score=1.0),
+                             pose=pwc(pose=pose, covariance=c6.reshape(-1)))],
+                bbox=box(center=pose, size=vec(x=0.0, y=0.0, z=0.0)),
+                id="",
+            )
+        )  # fmt: skip
+    return msgtype(DETECTION3D_ARRAY)(header=header(t, frame_id), detections=dets)
+
+
+def detections_of(msg: Any) -> tuple[np.ndarray, np.ndarray]:
+    """Landmark detections of a PoseArray or a vision_msgs/Detection3DArray.
+
+    Returns
+    -------
+    points : (N, 2) x, y in the message's frame
+    covs : (N, 2, 2) the x, y block of each detection's covariance; NaN where the message
+        carries none (a PoseArray; a Detection3D whose covariance is all zeros, ROS's
+        "unknown", or not a finite symmetric positive definite block).
+    """
+    if not hasattr(msg, "detections"):
+        pts = points_of_pose_array(msg)
+        return pts, np.full((len(pts), 2, 2), np.nan)
+    pts = np.full((len(msg.detections), 2), np.nan)
+    covs = np.full((len(msg.detections), 2, 2), np.nan)
+    for k, d in enumerate(msg.detections):
+        if d.results:
+            best = max(d.results, key=lambda h: h.hypothesis.score)
+            p, c = best.pose.pose.position, np.asarray(best.pose.covariance, dtype=float)
+            pts[k] = (p.x, p.y)
+            if c.size == 36:
+                c2 = c.reshape(6, 6)[:2, :2]
+                ok = np.all(np.isfinite(c2)) and c2[0, 1] == c2[1, 0]
+                if ok and c2[0, 0] > 0 and np.linalg.det(c2) > 0:
+                    covs[k] = c2
+        else:
+            pts[k] = (d.bbox.center.position.x, d.bbox.center.position.y)
+    return pts, covs
 
 
 def points_of_pose_array(msg: Any) -> np.ndarray:

@@ -5,14 +5,22 @@ from __future__ import annotations
 from functools import cache, lru_cache
 from typing import Any
 
-from rosbags.typesys import Stores, get_typestore
+from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 from rosbags.typesys.store import Typestore
+
+from fuzzyslam.streams.vision_msgs import DEFINITIONS
 
 
 @lru_cache(maxsize=1)
 def typestore() -> Typestore:
-    """The ROS 2 Humble typestore (standard message types)."""
-    return get_typestore(Stores.ROS2_HUMBLE)
+    """The ROS 2 Humble typestore (standard message types) with the vision_msgs detection
+    types (streams/vision_msgs.py) registered."""
+    store = get_typestore(Stores.ROS2_HUMBLE)
+    types: dict[str, Any] = {}
+    for name, text in DEFINITIONS.items():
+        types.update(get_types_from_msg(text, name))
+    store.register(types)
+    return store
 
 
 def normalise_typename(name: str) -> str:
