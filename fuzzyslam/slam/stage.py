@@ -14,8 +14,9 @@ from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, check_outputs
 from fuzzyslam.progress import Progress, note
 from fuzzyslam.slam.health import orphan_landmarks
-from fuzzyslam.slam.io import StreamingOutputs, open_inputs, write_outputs, write_summary
+from fuzzyslam.slam.inputs import open_inputs
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
+from fuzzyslam.slam.outputs import StreamingOutputs, write_outputs, write_summary
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
 
 # files a run writes only with some options: an old one would be mixed with a new run
@@ -85,7 +86,7 @@ def run_stage(
     contradict is told on stderr in one line (which keys to change, to what).
 
     ``ranges`` (sonar|scan) chooses the aids' range sensor, ``start_pose`` overrides the
-    start pose (slam/io.py). A log without lamps and without aids is dead reckoning: a
+    start pose (slam/inputs.py). A log without lamps and without aids is dead reckoning: a
     one-line note on stderr says so."""
     if adapt_noise:
         if aids:
