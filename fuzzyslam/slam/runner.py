@@ -131,14 +131,14 @@ class SlamRunner:
     def _record(self, t: float) -> None:
         """Record the current pose and covariance (replacing a row of the same time)."""
         self.flush()
-        p = self.ekf._p
+        p = self.ekf.P
         row = np.array([p[0, 0], p[0, 1], p[0, 2], p[1, 1], p[1, 2], p[2, 2]], dtype=float)
         pending = self._pending
         if pending is None or pending[0] != t:
             if pending is not None:
                 self.sink.row(*pending)  # type: ignore[union-attr]
             self._n_rows += 1
-        self._pending = (t, self.ekf._x[:3].copy(), row)
+        self._pending = (t, self.ekf.pose, row)
         self._last_record = t
         if self._n_rows % 50 == 0:
             self.ekf.check_covariance()  # O(n^3), every 50 rows (health.repair_covariance)
