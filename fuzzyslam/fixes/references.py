@@ -4,7 +4,7 @@
 angle_deg, strength, region}]}`` where ``region`` is a polygon ``[[x, y], ...]`` or a
 bounding box (``[xmin, ymin, xmax, ymax]`` or ``{bbox: [...]}``). This module turns
 those dicts into :class:`Reference` objects and answers "which corridors contain this
-point" (crossing-number test, vectorised over the polygon's edges).
+point" (:mod:`fuzzyslam.polygons`).
 """
 
 from __future__ import annotations
@@ -16,7 +16,17 @@ from typing import Any
 import numpy as np
 
 from fuzzyslam.errors import InputError
+from fuzzyslam.polygons import distance_to_polygon, points_in_polygon
 from fuzzyslam.se2 import wrap_angle_period
+
+__all__ = [
+    "Reference",
+    "corridors_at",
+    "corridors_near",
+    "distance_to_polygon",
+    "points_in_polygon",
+    "references_from_dicts",
+]
 
 
 @dataclass(frozen=True)
@@ -32,24 +42,6 @@ class Reference:
 
     def contains(self, xy: Sequence[float]) -> bool:
         return bool(points_in_polygon(np.asarray(xy, float).reshape(1, 2), self.polygon)[0])
-
-
-def points_in_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Crossing-number point-in-polygon test (W. R. Franklin, PNPOLY), (N,) bool.
-
-    A point is inside when a ray towards +x crosses the polygon's edges an odd number
-    of times. Vectorised over points and edges: (N, K) arrays.
-    """
-    p = np.asarray(pts, dtype=float).reshape(-1, 2)
-    a = np.asarray(poly, dtype=float).reshape(-1, 2)
-    b = np.roll(a, -1, axis=0)
-    x, y = p[:, :1], p[:, 1:]
-    straddles = (a[None, :, 1] > y) != (b[None, :, 1] > y)
-    dy = b[:, 1] - a[:, 1]
-    dy = np.where(dy == 0.0, np.inf, dy)
-    x_cross = a[:, 0] + (y - a[:, 1]) * (b[:, 0] - a[:, 0]) / dy
-    crossings = straddles & (x < x_cross)
-    return (np.count_nonzero(crossings, axis=1) % 2) == 1
 
 
 def _region_polygon(region: Any, source: str, where: str) -> np.ndarray:
@@ -111,17 +103,7 @@ def corridors_at(xy: Sequence[float], refs: Sequence[Reference]) -> list[Referen
     return [r for r in refs if r.contains(xy)]
 
 
-def distance_to_polygon(xy: Sequence[float], poly: np.ndarray) -> float:
-    """Euclidean distance from ``xy`` to the polygon (0 inside), vectorised over its edges."""
-    p = np.asarray(xy, dtype=float).reshape(2)
-    a = np.asarray(poly, dtype=float).reshape(-1, 2)
-    if points_in_polygon(p[None], a)[0]:
-        return 0.0
-    e = np.roll(a, -1, axis=0) - a
-    u = np.clip(np.sum((p - a) * e, axis=1) / np.maximum(np.sum(e * e, axis=1), 1e-300), 0, 1)
-    return float(np.min(np.hypot(*(a + u[:, None] * e - p).T)))
-
-
 def corridors_near(xy: Sequence[float], refs: Sequence[Reference], margin: float) -> list:
     """The corridors whose region lies within ``margin`` (m) of ``xy`` (junctions, corners)."""
-    return [r for r in refs if distance_to_polygon(xy, r.polygon) <= margin]
+    p = np.asarray(xy, dtype=float).reshape(1, 2)
+    return [r for r in refs if distance_to_polygon(p, r.polygon)[0] <= margin]
