@@ -26,7 +26,7 @@ import numpy as np
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.maps.hough import WallDirection, dominant_direction, wall_weights
 from fuzzyslam.maps.params import MapParams
-from fuzzyslam.se2 import wrap_angle_period
+from fuzzyslam.se2 import direction_mod_pi, wrap_angle_period
 
 
 @dataclass
@@ -41,7 +41,7 @@ class Stretch:
     @property
     def angle(self) -> float:
         """Direction mod pi in [0, pi)."""
-        return float(np.mod(np.arctan2(self.direction[1], self.direction[0]), np.pi))
+        return direction_mod_pi(np.arctan2(self.direction[1], self.direction[0]))
 
     @property
     def length(self) -> float:
