@@ -10,11 +10,20 @@ import math
 from pathlib import Path
 
 import numpy as np
-import yaml
 
 from fuzzyslam.config import Config
 from fuzzyslam.exactsum import ExactSum
 from fuzzyslam.robot import integrate_from
+from fuzzyslam.rundir import (
+    COVARIANCE,
+    ESTIMATES,
+    LANDMARKS,
+    ODOMETRY,
+    SUMMARY,
+    TRAJECTORY,
+    UPDATES,
+    write_landmarks,
+)
 from fuzzyslam.se2 import compose, inverse
 from fuzzyslam.slam.events import SlamResult, UpdateRow
 from fuzzyslam.slam.markers import lamp_markers
@@ -38,24 +47,6 @@ def _fmt_rows(a: np.ndarray) -> str:
         return ""
     fmt = ",".join([TIME_FORMAT] + ["%.9g"] * (a.shape[1] - 1))
     return "\n".join(fmt % tuple(r) for r in a.tolist()) + "\n"
-
-
-def landmarks_dict(res: SlamResult) -> dict:
-    return {
-        "frame": "map",
-        "landmarks": [
-            {
-                "id": int(lm.id),
-                "x": float(lm.x),
-                "y": float(lm.y),
-                "cov": [[float(v) for v in row] for row in lm.cov],
-                "first_seen": float(lm.first_seen),
-                "last_seen": float(lm.last_seen),
-                "observations": int(lm.observations),
-            }
-            for lm in res.lamps
-        ],
-    }
 
 
 def dead_reckoning_at(t: np.ndarray, odo_t: np.ndarray, odo_poses: np.ndarray) -> np.ndarray:
@@ -141,15 +132,15 @@ class StreamingOutputs:
 
         self._files = []
         try:
-            self._traj = text("trajectory.tum")
+            self._traj = text(TRAJECTORY)
             self._files.append(self._traj)
-            self._odo = text("odometry.tum")
+            self._odo = text(ODOMETRY)
             self._files.append(self._odo)
-            self._cov = text("covariance.csv")
+            self._cov = text(COVARIANCE)
             self._files.append(self._cov)
-            self._upd = text("updates.csv")
+            self._upd = text(UPDATES)
             self._files.append(self._upd)
-            self._mcap = LogWriter(self.tmp / "estimates.mcap").__enter__()
+            self._mcap = LogWriter(self.tmp / ESTIMATES).__enter__()
         except BaseException:
             self._close()
             raise
@@ -250,9 +241,7 @@ class StreamingOutputs:
         close estimates.mcap (renamed into place inside ``tmp``)."""
         self._flush_rows()
         self._flush_odometry()
-        (self.tmp / "landmarks.yaml").write_text(
-            yaml.safe_dump(landmarks_dict(res), sort_keys=False), encoding="utf-8"
-        )
+        write_landmarks(self.tmp / LANDMARKS, res.lamps)
         for topic, typename, msg, t in extra:
             self._mcap.write(topic, typename, msg, t)
         self._mcap_open = False
@@ -268,6 +257,6 @@ def write_outputs(tmp: Path, out: StreamingOutputs, res: SlamResult, extra=()) -
 
 
 def write_summary(tmp: Path, summary: dict) -> None:
-    (tmp / "summary.json").write_text(
+    (tmp / SUMMARY).write_text(
         json.dumps(summary, indent=2, sort_keys=True, default=float) + "\n", encoding="utf-8"
     )

@@ -13,14 +13,12 @@ from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, check_outputs
 from fuzzyslam.progress import Progress, note
+from fuzzyslam.rundir import OPTIONAL_OUTPUTS
 from fuzzyslam.slam.health import orphan_landmarks
 from fuzzyslam.slam.inputs import open_inputs
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
 from fuzzyslam.slam.outputs import StreamingOutputs, write_outputs, write_summary
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
-
-# files a run writes only with some options: an old one would be mixed with a new run
-RUN_OPTIONAL_OUTPUTS = ("heading_fixes.csv", "pose_fixes.csv", "changes.csv", "changes.png")
 
 
 def make_summary(
@@ -152,7 +150,7 @@ def _run_once(
             f"topics.detections {cfg.topics.detections}) and no map: the estimate is dead "
             "reckoning (give --map FGMDIR --fix pose|heading)"
         )
-    staged = OutputDir(outdir, owns=RUN_OPTIONAL_OUTPUTS)
+    staged = OutputDir(outdir, owns=OPTIONAL_OUTPUTS)
     with staged as tmp, StreamingOutputs(tmp, cfg, inputs.start_pose) as streamed:
         res = _run_filter(inputs, cfg, aids, streamed)
         for aid in aids:
