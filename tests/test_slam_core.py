@@ -405,3 +405,14 @@ def test_integrate_in_blocks_equals_one_call():
     for dt, dr in zip(d_trans, d_rot, strict=True):
         pose = motion_step(pose, dt, dr)
     assert np.allclose(pose, whole[-1], atol=1e-12)
+
+
+def test_odometry_speed_bound():
+    """odom_gate.within_speed: SPEED_MARGIN times the top speed over dt + SLACK_S."""
+    from fuzzyslam.slam.odom_gate import SLACK_S, SPEED_MARGIN, within_speed
+
+    span = SPEED_MARGIN * (0.1 + SLACK_S)
+    assert within_speed(0.1, 0.5 * span, 0.0, 0.5, 1.0)
+    assert not within_speed(0.1, 0.5 * span * 1.001, 0.0, 0.5, 1.0)
+    assert not within_speed(0.1, 0.0, -1.0 * span * 1.001, 0.5, 1.0)
+    assert within_speed(-1.0, 0.5 * SPEED_MARGIN * SLACK_S, 0.0, 0.5, 1.0)  # dt < 0: slack only

@@ -22,7 +22,7 @@ skipped and counted (``odometry_jumps``).
 Glitches are counted in ``warnings`` (never silently used): frames of another
 encoding or of another size than the CameraInfo's, NaN odometry, odometry increments
 faster than the robot can move (``implausible_odometry``: wheel speeds over
-``ODOM_SPEED_MARGIN`` times ``robot.max_speed`` plus the turn at
+``SPEED_MARGIN`` (slam/odom_gate.py) times ``robot.max_speed`` plus the turn at
 ``robot.max_turn_rate``), header stamps out of order, joint states without the wheel
 joints. A CameraInfo that no pinhole ceiling camera can have (a focal length that is
 not finite and positive, fx and fy more than 1 % apart, a field of view outside
@@ -45,7 +45,7 @@ from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.robot import WHEEL_NAMES
 from fuzzyslam.slam.events import Event, Frame, Odom, RingEvent
-from fuzzyslam.slam.odom_gate import OdomGate, first_plausible_pose
+from fuzzyslam.slam.odom_gate import REANCHOR, OdomGate, first_plausible_pose, within_speed
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.logmeta import read_scenario
 from fuzzyslam.streams.ranges import RangeSensor, open_ranges
@@ -54,9 +54,6 @@ from fuzzyslam.streams.sonar import RingStats
 
 CAMERA_FRAME = "ceiling_camera"
 ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
-ODOM_SPEED_MARGIN = 3.0  # increments over this many times the robot's top speed: rejected
-ODOM_SLACK_S = 0.2  # s of top speed always allowed (stamp jitter, a first message)
-ODOM_REANCHOR = 5  # after this many rejections in a row, restart from the latest reading
 
 
 @dataclass
@@ -157,20 +154,17 @@ class LogInputs:
         return Odom(t, d_trans, d_rot), cur
 
     def _plausible(self, dt: float, d_trans: float, d_rot: float) -> bool:
-        """An increment the robot can drive in ``dt``: |d_trans| and |d_rot| within
-        ODOM_SPEED_MARGIN times robot.max_speed and robot.max_turn_rate (the physical
-        bound; a wheel angle of +1e6 rad is a glitch, not motion)."""
+        """slam/odom_gate.py ``within_speed`` with robot.max_speed, robot.max_turn_rate."""
         r = self.cfg.robot
-        span = ODOM_SPEED_MARGIN * (max(dt, 0.0) + ODOM_SLACK_S)
-        return abs(d_trans) <= r.max_speed * span and abs(d_rot) <= r.max_turn_rate * span
+        return within_speed(dt, d_trans, d_rot, r.max_speed, r.max_turn_rate)
 
     def _reject(self, t: float, prev, cur):
         """Count an implausible increment and drop it (the previous reading stays the
-        reference); after ODOM_REANCHOR in a row the counter was reset or replaced, so
+        reference); after odom_gate.REANCHOR in a row the counter was reset or replaced, so
         the latest reading becomes the reference (that motion is lost, and counted)."""
         self.warn("implausible_odometry", f"{self.odom_topic}: implausible jump at t={t:.3f} s")
         self._rejected_in_row += 1
-        if self._rejected_in_row >= ODOM_REANCHOR:
+        if self._rejected_in_row >= REANCHOR:
             self._rejected_in_row = 0
             self.warn("odometry_reanchored", f"{self.odom_topic}: restarted at t={t:.3f} s")
             return None, cur
