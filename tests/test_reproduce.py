@@ -145,8 +145,10 @@ def test_run_labels_follow_the_phases():
 def test_a_failing_step_stops_the_plan_with_its_one_line_error(tmp_path):
     """The step's own error (naming the file) and exit code come back; later steps never run."""
     steps = [
-        Step("s/run", ("run", "missing.mcap", "-o", "est"), (), 1.0, "run"),
-        Step("s/eval", ("evaluate", "missing.mcap", "est", "-o", "ev"), ("s/run",), 1.0),
+        Step("s/run", ("run", "missing.mcap", "-o", "est"), (), 1.0, "run",
+             (("log", "missing.mcap"), ("outdir", "est"))),
+        Step("s/eval", ("evaluate", "missing.mcap", "est", "-o", "ev"), ("s/run",), 1.0,
+             "evaluate", (("truth", "missing.mcap"), ("estimate", "est"), ("outdir", "ev"))),
     ]
     with pytest.raises(StepFailed) as info:
         execute(steps, tmp_path, jobs=1)

@@ -149,3 +149,6 @@ def reproduce(
         "wall_time_s": round(info["wall_s"], 1),
         "headline": headline,
     }
+
+
+run = reproduce  # the stage convention: every stage package's entry is ``stage.run``

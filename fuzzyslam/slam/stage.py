@@ -1,4 +1,7 @@
-"""The ``run`` stage: open a log, run EKF-SLAM over it, write the outputs atomically."""
+"""The ``run`` stage: open a log, run EKF-SLAM over it, write the outputs atomically.
+
+:func:`run` is the stage's entry (the ``run`` command's arguments); :func:`run_stage`
+the same on a loaded config and built aids."""
 
 from __future__ import annotations
 
@@ -6,6 +9,7 @@ import copy
 import importlib
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -61,6 +65,36 @@ def make_summary(
         if inputs.ranges is not None:
             out["range_sensor"] = inputs.ranges.describe()
     return out
+
+
+def run(
+    log: str | os.PathLike,
+    outdir: str | os.PathLike,
+    config: str | None = None,
+    seed: int | None = None,
+    map_dir: str | os.PathLike | None = None,
+    fix: str | None = None,
+    fix_from: float | None = None,
+    ranges: str | None = None,
+    start_pose: tuple[float, float, float] | None = None,
+    adapt_noise: bool = False,
+) -> dict:
+    """The ``run`` stage on ``log`` into ``outdir``: the config ``config`` (a YAML path or
+    an embedded name; default paper.yaml) with ``seed``; with ``map_dir``, the fixes
+    ``fix`` (heading|pose|none; default the config's ``fixes.mode``) from ``fix_from``
+    (``fixes.aids.aids_for_log``, the plug-ins loaded on demand). Returns the JSON
+    summary; UsageError for options that do not go together."""
+    from fuzzyslam.config import load_config
+    from fuzzyslam.errors import UsageError
+    from fuzzyslam.fixes.aids import aids_for_log  # the plug-ins (fixes/) sit above slam/
+
+    cfg = load_config(config, seed)
+    aids = aids_for_log(Path(map_dir) if map_dir is not None else None, fix, cfg, log, fix_from)
+    if adapt_noise and aids:
+        raise UsageError("--adapt-noise cannot be combined with heading or pose fixes")
+    return run_stage(
+        log, outdir, cfg, aids, adapt_noise=adapt_noise, ranges=ranges, start_pose=start_pose
+    )
 
 
 def run_stage(
