@@ -126,7 +126,7 @@ def test_aggregate_mean_spread_and_target_over_seeds():
 
 def test_a_missing_metric_is_none_not_zero():
     ratio_row = next(r for r in ROWS if r.measure == "ratio to phase A")
-    results = [_seed(0.01, 0.03, 0.02), {"eval": {}, "run": {}, "seconds": 1.0}]
+    results = [_seed(0.01, 0.03, 0.02), {"eval": {}, "run": {}, "seconds": 1.0}]  # no C
     (agg,) = aggregate(results, (ratio_row,))
     assert agg.values[0] == pytest.approx(1.5)
     assert agg.values[1] is None
