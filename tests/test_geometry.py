@@ -53,3 +53,22 @@ def test_points_in_polygon_and_distance():
     assert d[1] == pytest.approx(1.0) and d[4] == pytest.approx(1.0) and d[5] == pytest.approx(0.5)
     # the same test whichever way round the corners go
     assert np.array_equal(points_in_polygon(pts, L_SHAPE[::-1]), inside)
+
+
+def test_references_yaml_round_trip(tmp_path):
+    """One Reference type and one reader and writer of references.yaml: what the map stage
+    writes the fixes read back (angle mod pi wrapped to (-pi/2, pi/2], the region)."""
+    from fuzzyslam.errors import InputError
+    from fuzzyslam.references import Reference, read_references, write_references
+
+    box = np.array([[0, 0], [4, 0], [4, 1], [0, 1]], float)
+    refs = [Reference(0, "a", 0.1, 2.0, box, cells=7), Reference(3, "b", 3.0, 1.0, box + 5)]
+    write_references(tmp_path / "references.yaml", refs)
+    back = read_references(tmp_path / "references.yaml")
+    assert [r.id for r in back] == [0, 3] and back[0].name == "a" and back[1].strength == 1.0
+    assert back[0].angle == pytest.approx(0.1) and back[1].angle == pytest.approx(3.0 - np.pi)
+    assert np.array_equal(back[1].polygon, box + 5) and back[1].contains((6.0, 5.5))
+    assert not back[1].contains((1.0, 0.5))
+    (tmp_path / "bad.yaml").write_text("references: [{id: 1, angle: 0.3}]\n")
+    with pytest.raises(InputError, match="region"):
+        read_references(tmp_path / "bad.yaml")

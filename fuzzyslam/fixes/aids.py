@@ -30,9 +30,9 @@ from fuzzyslam.errors import InputError, UsageError
 from fuzzyslam.fixes.changes import ChangeDetector
 from fuzzyslam.fixes.heading import FlmSource, HeadingFixAid
 from fuzzyslam.fixes.pose_match import PoseFixAid
-from fuzzyslam.fixes.references import Reference, references_from_dicts
 from fuzzyslam.maps.grid import BeliefMap
-from fuzzyslam.maps.mapio import load_fgm, load_references, log_identity
+from fuzzyslam.maps.mapio import load_fgm, log_identity
+from fuzzyslam.references import Reference, read_references
 from fuzzyslam.streams.logmeta import read_world
 from fuzzyslam.streams.reader import LogReader
 
@@ -81,7 +81,7 @@ def load_frozen_map(
     refs_path = fgm_dir / "references.yaml"
     refs: list[Reference] = []
     if need_references or refs_path.exists():
-        refs = references_from_dicts(load_references(refs_path), str(refs_path))
+        refs = read_references(refs_path)
     if need_references and not refs:
         raise InputError(refs_path, "no corridor references: heading fixes need some")
     return FrozenMap(m, f.freeze_time, f.log_id, refs)
