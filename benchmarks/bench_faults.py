@@ -59,13 +59,8 @@ from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.writer import LogWriter
 
 TIMEOUT = 30.0
-MICRO_YAML = """\
-extends: quick.yaml
-name: micro
-scenario:
-  runs: 1
-  lap_fraction: 0.1
-"""
+# the short scenario of tests/test_faults.py (1/10 of a lap)
+MICRO_YAML = (Path(__file__).parents[1] / "tests" / "micro.yaml").read_text(encoding="utf-8")
 ENV = {**os.environ, "FUZZYSLAM_NO_PROGRESS": "1", "MPLBACKEND": "Agg"}
 JOINTS, INFO, SONAR = "/joint_states", "/ceiling_camera/camera_info", "/sonar/s"
 

@@ -34,11 +34,11 @@ from pathlib import Path
 import numpy as np
 
 from fuzzyslam.config import load_config
-from fuzzyslam.maps.build import MapOptions, build_map, interpolate_poses, read_rings
+from fuzzyslam.maps.build import MapOptions, build_map, read_rings
 from fuzzyslam.maps.fgm import FgmBuilder
 from fuzzyslam.maps.flm import build_flm, build_flm_rings
 from fuzzyslam.maps.hough import flm_wall_direction
-from fuzzyslam.se2 import between, wrap_angle_period
+from fuzzyslam.se2 import between, interpolate_poses, wrap_angle_period
 from fuzzyslam.streams.logmeta import read_scenario, read_world
 from fuzzyslam.streams.messages import pose_of
 from fuzzyslam.streams.reader import LogReader
@@ -82,7 +82,7 @@ def main() -> None:
     t_end = scenario.run_end_time(params.freeze_run) if scenario else reader.end
     times, ranges, rmax, fov, mounts, _ = read_rings(reader, cfg, t_end)
     t, p = read_tum(tum)
-    poses = interpolate_poses(times, t, p)
+    poses = interpolate_poses(t, p, times, outside="hold")
 
     best = np.inf
     for _ in range(3):
@@ -104,8 +104,8 @@ def main() -> None:
     stage = {"seconds_without_figures": time.perf_counter() - t0}
 
     # FLM heading error in corridors: measured heading = axis - t_local, mod pi
-    truth = interpolate_poses(times, *read_tum(truth_tum(log, tmp / "t2.tum")))
-    odom = interpolate_poses(times, *odom_tum(log))
+    truth = interpolate_poses(*read_tum(truth_tum(log, tmp / "t2.tum")), times, outside="hold")
+    odom = interpolate_poses(*odom_tum(log), times, outside="hold")
     hough_only = dataclasses.replace(params, flm_refine="hough")
     errs: dict[str, list[float]] = {"hough": [], "tangent": [], "tangent_8_rings_odometry": []}
     amb = dict.fromkeys(errs, 0)

@@ -36,3 +36,10 @@ class InputError(FuzzyslamError):
 
 class ConfigError(InputError):
     """A configuration file has an unknown key, a wrong type or an out-of-range value."""
+
+
+class UsageError(FuzzyslamError):
+    """Arguments of a stage that do not go together (exit 2, as click's usage errors; the
+    CLI shows it as one)."""
+
+    exit_code = EXIT_USAGE

@@ -68,11 +68,57 @@ def motion_step(pose: np.ndarray, d_trans: float, d_rot: float) -> np.ndarray:
 
 
 def integrate(start: np.ndarray, d_trans: np.ndarray, d_rot: np.ndarray) -> np.ndarray:
-    """(N+1, 3) dead-reckoning poses from ``start`` and N increments (vectorised)."""
+    """Dead-reckoning poses from ``start`` and N increments (vectorised midpoint rule).
+
+    Parameters
+    ----------
+    start : ndarray, shape (3,)
+        Start pose (x, y, theta).
+    d_trans, d_rot : ndarray, shape (N,)
+        Odometry increments (m, rad).
+
+    Returns
+    -------
+    ndarray, shape (N + 1, 3)
+        The start pose, then the pose after each increment.
+    """
+    return integrate_from(start, d_trans, d_rot)[0]
+
+
+def integrate_from(
+    start: np.ndarray,
+    d_trans: np.ndarray,
+    d_rot: np.ndarray,
+    sums: tuple[float, float, float] = (0.0, 0.0, 0.0),
+) -> tuple[np.ndarray, tuple[float, float, float]]:
+    """:func:`integrate` continued from a previous block of increments, for a stream
+    integrated block by block: the running sums of d_rot, dx and dy are carried over
+    (cumulative sums are sequential, so the floats are those of one whole call).
+
+    Parameters
+    ----------
+    start : ndarray, shape (3,)
+        Start pose of the whole stream (x, y, theta).
+    d_trans, d_rot : ndarray, shape (N,)
+        This block's increments (m, rad).
+    sums : tuple of float
+        The running sums (d_rot, dx, dy) at the end of the previous block (zeros for
+        the first block).
+
+    Returns
+    -------
+    poses : ndarray, shape (N + 1, 3)
+        The pose at the end of the previous block (the start pose for the first), then
+        the pose after each increment.
+    sums : tuple of float
+        The running sums after this block (the next block's ``sums``).
+    """
     d_trans = np.asarray(d_trans, dtype=float)
     d_rot = np.asarray(d_rot, dtype=float)
-    theta = start[2] + np.concatenate([[0.0], np.cumsum(d_rot)])
+    rot = np.cumsum(np.concatenate([[sums[0]], d_rot]))
+    theta = start[2] + rot
     th_mid = theta[:-1] + 0.5 * d_rot
-    x = start[0] + np.concatenate([[0.0], np.cumsum(d_trans * np.cos(th_mid))])
-    y = start[1] + np.concatenate([[0.0], np.cumsum(d_trans * np.sin(th_mid))])
-    return np.column_stack([x, y, wrap_angle(theta)])
+    x = np.cumsum(np.concatenate([[sums[1]], d_trans * np.cos(th_mid)]))
+    y = np.cumsum(np.concatenate([[sums[2]], d_trans * np.sin(th_mid)]))
+    poses = np.column_stack([start[0] + x, start[1] + y, wrap_angle(theta)])
+    return poses, (float(rot[-1]), float(x[-1]), float(y[-1]))

@@ -10,6 +10,8 @@ and on-manifold optimization", 2010, sec. 2 (the planar case).
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
@@ -36,6 +38,17 @@ def wrap_angle_period(a: ArrayLike, period: float) -> Array | float:
     if w.ndim == 0:
         return float(w)
     return w
+
+
+def wrap_angle_scalar(a: float) -> float:
+    """:func:`wrap_angle` of one float (the hot loops of the simulator: no array)."""
+    return math.pi - (math.pi - a) % (2.0 * math.pi)
+
+
+def direction_mod_pi(a: ArrayLike) -> Array | float:
+    """The direction of an undirected line, angles taken mod pi into [0, pi)."""
+    w = np.mod(a, np.pi)
+    return float(w) if np.ndim(w) == 0 else w
 
 
 def rot(theta: float) -> Array:
@@ -122,3 +135,74 @@ def quaternion_to_yaw(q: ArrayLike) -> Array | float:
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))
     return wrap_angle(yaw)
+
+
+def interpolate_poses(
+    t: ArrayLike, poses: ArrayLike, tq: ArrayLike, outside: str = "nan"
+) -> Array:
+    """Poses at the query times: x, y linear in time, the heading linear on the unwrapped
+    heading (the shorter way round the circle between samples), wrapped to (-pi, pi].
+
+    Parameters
+    ----------
+    t : array_like, shape (N,)
+        Increasing sample times.
+    poses : array_like, shape (N, 3)
+        The poses at ``t``.
+    tq : array_like, shape (M,)
+        Query times.
+    outside : {"nan", "hold"}
+        Queries outside [t[0], t[-1]]: NaN rows, or the first / last pose.
+
+    Returns
+    -------
+    ndarray, shape (M, 3)
+        The interpolated poses.
+    """
+    t = np.asarray(t, dtype=float)
+    p = np.asarray(poses, dtype=float).reshape(-1, 3)
+    tq = np.asarray(tq, dtype=float).reshape(-1)
+    if outside == "hold":
+        inside = np.ones(tq.shape, dtype=bool)
+    elif outside == "nan":
+        inside = (tq >= t[0]) & (tq <= t[-1])
+    else:
+        raise ValueError(f"outside must be 'nan' or 'hold', not {outside!r}")
+    out = np.full((tq.size, 3), np.nan)
+    if not inside.any():
+        return out
+    q = tq[inside]
+    out[inside, 0] = np.interp(q, t, p[:, 0])
+    out[inside, 1] = np.interp(q, t, p[:, 1])
+    out[inside, 2] = np.asarray(wrap_angle(np.interp(q, t, np.unwrap(p[:, 2])))).reshape(-1)
+    return out
+
+
+def interpolate_pose(t: np.ndarray, poses: np.ndarray, tq: float) -> Array:
+    """The pose at one time ``tq``, linear between the samples around it (the heading
+    difference wrapped); beyond the ends, the end segments continued. The simulator's
+    form (one time at a time, each sensor sample; its floats are those its logs were
+    recorded with), :func:`interpolate_poses` for arrays of times.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Increasing sample times, N >= 2.
+    poses : ndarray, shape (N, 3)
+        The poses at ``t``.
+    tq : float
+        Query time.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+        The interpolated pose.
+    """
+    i = int(np.clip(np.searchsorted(t, tq, side="right") - 1, 0, len(t) - 2))
+    a = (tq - t[i]) / (t[i + 1] - t[i])
+    p0, p1 = poses[i], poses[i + 1]
+    d = p1 - p0
+    d[2] = wrap_angle(d[2])
+    out = p0 + a * d
+    out[2] = wrap_angle(out[2])
+    return out

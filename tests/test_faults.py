@@ -24,13 +24,7 @@ from fuzzyslam import errors
 
 pytestmark = pytest.mark.slow  # faults injected into whole CLI runs (tmpfs, size limits)
 
-MICRO_YAML = """\
-extends: quick.yaml
-name: micro
-scenario:
-  runs: 1
-  lap_fraction: 0.1
-"""
+MICRO_YAML = (Path(__file__).parent / "micro.yaml").read_text(encoding="utf-8")  # 1/10 lap
 ENV = {**os.environ, "FUZZYSLAM_NO_PROGRESS": "1", "MPLBACKEND": "Agg"}
 
 

@@ -126,7 +126,7 @@ def test_aggregate_mean_spread_and_target_over_seeds():
 
 def test_a_missing_metric_is_none_not_zero():
     ratio_row = next(r for r in ROWS if r.measure == "ratio to phase A")
-    results = [_seed(0.01, 0.03, 0.02), {"eval": {}, "run": {}, "seconds": 1.0}]
+    results = [_seed(0.01, 0.03, 0.02), {"eval": {}, "run": {}, "seconds": 1.0}]  # no C
     (agg,) = aggregate(results, (ratio_row,))
     assert agg.values[0] == pytest.approx(1.5)
     assert agg.values[1] is None
@@ -145,8 +145,10 @@ def test_run_labels_follow_the_phases():
 def test_a_failing_step_stops_the_plan_with_its_one_line_error(tmp_path):
     """The step's own error (naming the file) and exit code come back; later steps never run."""
     steps = [
-        Step("s/run", ("run", "missing.mcap", "-o", "est"), (), 1.0, "run"),
-        Step("s/eval", ("evaluate", "missing.mcap", "est", "-o", "ev"), ("s/run",), 1.0),
+        Step("s/run", ("run", "missing.mcap", "-o", "est"), (), 1.0, "run",
+             (("log", "missing.mcap"), ("outdir", "est"))),
+        Step("s/eval", ("evaluate", "missing.mcap", "est", "-o", "ev"), ("s/run",), 1.0,
+             "evaluate", (("truth", "missing.mcap"), ("estimate", "est"), ("outdir", "ev"))),
     ]
     with pytest.raises(StepFailed) as info:
         execute(steps, tmp_path, jobs=1)

@@ -74,9 +74,9 @@ def test_execute_writes_a_line_per_finished_step_to_a_file(tmp_path, monkeypatch
     """Three real steps (``fuzzyslam --version``) on the local pool; stderr is not a TTY."""
     monkeypatch.delenv("FUZZYSLAM_NO_PROGRESS", raising=False)
     steps = [
-        Step("seed0/a", ("--version",), (), 1.0),
-        Step("seed0/b", ("--version",), ("seed0/a",), 1.0),
-        Step("seed1/c", ("--version",), ("seed0/a",), 1.0),
+        Step("seed0/a", ("--version",), (), 1.0, "version"),
+        Step("seed0/b", ("--version",), ("seed0/a",), 1.0, "version"),
+        Step("seed1/c", ("--version",), ("seed0/a",), 1.0, "version"),
     ]
     done = execute(steps, tmp_path, jobs=2, final=tmp_path / "final")
     assert set(done) == {"seed0/a", "seed0/b", "seed1/c"}

@@ -300,34 +300,40 @@ def _mcap_messages(path: Path) -> dict:
 
 
 @pytest.mark.slow
-def test_streamed_outputs_equal_the_in_memory_path(quick_log, tmp_path, monkeypatch):
-    """`run` streams its rows to files in small blocks (7 rows, 5 odometry increments
-    here, so that many block boundaries are crossed); a second implementation keeps
-    the whole result in memory (MemorySink, robot.integrate, rosbags messages) and
-    writes it at the end. The text files must be the same bytes, estimates.mcap the
-    same messages (payload bytes, times, sequence numbers), the summary the same rows."""
-    from fuzzyslam.slam.io import StreamingOutputs, open_inputs, write_result
+def test_streamed_outputs_do_not_depend_on_blocks(quick_log, tmp_path, monkeypatch):
+    """`run` streams its rows to files in blocks. With tiny blocks (7 rows, 5 odometry
+    increments, so that many block boundaries are crossed) the files are the same bytes as
+    with the default blocks (estimates.mcap: the same messages, payloads, times, sequence
+    numbers); and they hold the rows of the in-memory run (MemorySink): the trajectory,
+    and the dead reckoning of ``robot.integrate`` on the whole increments at once."""
+    from fuzzyslam.slam.inputs import open_inputs
+    from fuzzyslam.slam.outputs import StreamingOutputs
     from fuzzyslam.slam.runner import SlamRunner
     from fuzzyslam.slam.stage import run_stage
+    from fuzzyslam.streams.tum import format_tum
 
     cfg = load_config("quick")
+    whole = run_stage(quick_log, tmp_path / "whole", cfg)
     monkeypatch.setattr(StreamingOutputs, "rows_block", 7)
     monkeypatch.setattr(StreamingOutputs, "odometry_block", 5)
     summary = run_stage(quick_log, tmp_path / "streamed", cfg)
 
-    inputs = open_inputs(quick_log, cfg)
-    runner = SlamRunner(cfg.slam, inputs.start_pose, [], inputs.mounts, cfg.slam.landmarks_period)
-    res = runner.run(inputs.events(), t0=inputs.start)
-    (tmp_path / "memory").mkdir()
-    write_result(tmp_path / "memory", res, cfg)
-
-    a, b = tmp_path / "streamed", tmp_path / "memory"
+    a, b = tmp_path / "streamed", tmp_path / "whole"
     for name in ("trajectory.tum", "odometry.tum", "covariance.csv", "updates.csv"):
         same = (a / name).read_bytes() == (b / name).read_bytes()  # no diff of megabytes
         assert same, name
     assert (a / "landmarks.yaml").read_bytes() == (b / "landmarks.yaml").read_bytes()
     ma, mb = _mcap_messages(a / "estimates.mcap"), _mcap_messages(b / "estimates.mcap")
-    assert ma == mb and len(ma["/slam/pose"]) == len(res.t) > 1000
+    assert ma == mb
+    for key in ("trajectory_rows", "final_pose", "mean_nis_lamp", "counts"):
+        assert summary[key] == whole[key]
+
+    inputs = open_inputs(quick_log, cfg)
+    runner = SlamRunner(cfg.slam, inputs.start_pose, [], inputs.mounts, cfg.slam.landmarks_period)
+    res = runner.run(inputs.events(), t0=inputs.start)  # every row in memory
+    assert (a / "trajectory.tum").read_text() == format_tum(res.t, res.poses)
+    assert (a / "odometry.tum").read_text() == format_tum(res.odo_t, res.odo_poses)
+    assert len(ma["/slam/pose"]) == len(ma["/tf"]) == len(res.t) > 1000
     assert len(ma["/slam/landmarks"]) == len(res.snapshots) > 10
     # the streamed file is in log-time order (poses and lamp snapshots interleaved)
     times = [m.t for m in LogReader(a / "estimates.mcap").messages()]

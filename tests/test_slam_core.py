@@ -360,7 +360,7 @@ def test_inline_wheel_odometry_equals_robot_model():
 
     from fuzzyslam.config import load_config
     from fuzzyslam.robot import wheel_increments_to_odometry
-    from fuzzyslam.slam.io import LogInputs
+    from fuzzyslam.slam.inputs import LogInputs
 
     cfg = load_config("quick")
     inputs = SimpleNamespace(cfg=cfg)
@@ -383,3 +383,36 @@ def test_joint_table_equals_joint_nis():
     table = JointTable(ekf, z, r, cands)
     for pairs in ([(0, 0)], [(0, 0), (1, 1)], [(0, 2), (2, 0), (3, 4)], [(1, 5), (3, 3)]):
         assert table.nis(pairs) == pytest.approx(joint_nis(ekf, pairs, z, r), rel=1e-9)
+
+
+def test_integrate_in_blocks_equals_one_call():
+    """The streamed dead reckoning (``robot.integrate_from`` block by block, the running
+    sums carried over) gives the floats of one ``robot.integrate`` call, which agrees with
+    ``motion_step`` applied one increment at a time."""
+    from fuzzyslam.robot import integrate, integrate_from, motion_step
+
+    rng = np.random.default_rng(4)
+    start = np.array([1.5, -2.0, 3.0])
+    d_trans, d_rot = rng.normal(0.05, 0.02, 200), rng.normal(0.0, 0.05, 200)
+    whole = integrate(start, d_trans, d_rot)
+    blocks, sums, first = [], (0.0, 0.0, 0.0), True
+    for a, b in ((0, 7), (7, 8), (8, 120), (120, 200)):
+        poses, sums = integrate_from(start, d_trans[a:b], d_rot[a:b], sums)
+        blocks.append(poses if first else poses[1:])
+        first = False
+    assert np.array_equal(np.concatenate(blocks), whole)
+    pose = start
+    for dt, dr in zip(d_trans, d_rot, strict=True):
+        pose = motion_step(pose, dt, dr)
+    assert np.allclose(pose, whole[-1], atol=1e-12)
+
+
+def test_odometry_speed_bound():
+    """odom_gate.within_speed: SPEED_MARGIN times the top speed over dt + SLACK_S."""
+    from fuzzyslam.slam.odom_gate import SLACK_S, SPEED_MARGIN, within_speed
+
+    span = SPEED_MARGIN * (0.1 + SLACK_S)
+    assert within_speed(0.1, 0.5 * span, 0.0, 0.5, 1.0)
+    assert not within_speed(0.1, 0.5 * span * 1.001, 0.0, 0.5, 1.0)
+    assert not within_speed(0.1, 0.0, -1.0 * span * 1.001, 0.5, 1.0)
+    assert within_speed(-1.0, 0.5 * SPEED_MARGIN * SLACK_S, 0.0, 0.5, 1.0)  # dt < 0: slack only

@@ -7,7 +7,6 @@ the ``cli`` group. Exit codes follow :mod:`fuzzyslam.errors`.
 from __future__ import annotations
 
 import contextlib
-import json
 import math
 import os
 import signal
@@ -25,8 +24,10 @@ from fuzzyslam.errors import (
     EXIT_OK,
     EXIT_TERMINATED,
     FuzzyslamError,
+    UsageError,
 )
 from fuzzyslam.fileio import WRITE_ERRNOS, guard_inputs, write_error
+from fuzzyslam.summary import summary_text
 
 # One BLAS/OpenMP thread per process, set before numpy loads (none of the imports above
 # loads it; the commands do, later) and inherited by reproduce's workers: the filter's
@@ -134,10 +135,18 @@ def ranges_option(f):
     )(f)
 
 
+def stage_call(entry: Any, *args: Any, **kwargs: Any) -> Any:
+    """Call a stage's entry; its UsageError is shown as click's usage errors are."""
+    try:
+        return entry(*args, **kwargs)
+    except UsageError as exc:
+        raise click.UsageError(str(exc)) from None
+
+
 def emit(summary: dict[str, Any]) -> None:
     """Print the machine-readable summary (one JSON object) on stdout; a full disk under
     a redirected stdout is the bad-input error of that output (exit 3)."""
-    text = json.dumps(summary, indent=2, sort_keys=True, default=_jsonable)
+    text = summary_text(summary)
     try:
         click.echo(text)
         sys.stdout.flush()
@@ -145,19 +154,6 @@ def emit(summary: dict[str, Any]) -> None:
         raise
     except OSError as exc:
         raise write_error("<stdout>", exc, replaced=True) from exc
-
-
-def _jsonable(obj: Any) -> Any:
-    try:
-        import numpy as np
-
-        if isinstance(obj, np.generic):
-            return obj.item()
-        if isinstance(obj, np.ndarray):
-            return obj.tolist()
-    except ImportError:  # pragma: no cover
-        pass
-    return str(obj)
 
 
 def _register() -> None:

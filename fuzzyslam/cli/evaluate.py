@@ -81,19 +81,6 @@ def evaluate_cmd(
     With --compare, further estimates of the same truth are evaluated alike and shown side
     by side (a table per phase and their position errors against time).
     """
-    from fuzzyslam.config import load_config
-    from fuzzyslam.evaluation.evaluate import run_evaluate, summary
+    from fuzzyslam.evaluation.stage import run
 
-    params = load_config(config).evaluation if config else None
-    res = run_evaluate(
-        truth,
-        estimate,
-        outdir,
-        params=params,
-        map_dir=map_dir,
-        label=label,
-        compare=compare,
-        landmarks_truth=landmarks_truth,
-        align=align,
-    )
-    emit(summary(res))
+    emit(run(truth, estimate, outdir, config, map_dir, label, compare, landmarks_truth, align))

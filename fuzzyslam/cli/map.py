@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import click
 
-from fuzzyslam.cli import LOG_TIME, cli, config_option, emit, ranges_option
+from fuzzyslam.cli import LOG_TIME, cli, config_option, emit, ranges_option, stage_call
 
 
 @cli.command("map")
@@ -94,22 +94,21 @@ def map_cmd(
     precision/recall). A trajectory that does not cover the sonar rings of the window is
     an error naming the gap unless --skip-uncovered.
     """
-    from pathlib import Path
+    from fuzzyslam.maps.stage import run
 
-    from fuzzyslam.config import load_config
-    from fuzzyslam.maps.build import MapOptions, build_map
-
-    if until is not None and until_run is not None:
-        raise click.UsageError("give at most one of --until-run and --until")
-    cfg = load_config(config)
-    opts = MapOptions(
-        until_run=until_run,
-        until=until,
-        skip_uncovered=skip_uncovered,
-        landmarks=Path(landmarks) if landmarks else None,
-        figures=not no_figures,
-        explicit_config=config is not None,
-        ranges=ranges,
-        sort=sort,
+    emit(
+        stage_call(
+            run,
+            log,
+            trajectory,
+            outdir,
+            config,
+            until_run,
+            until,
+            skip_uncovered,
+            landmarks,
+            not no_figures,
+            ranges,
+            sort,
+        )
     )
-    emit(build_map(log, trajectory, outdir, cfg, opts))

@@ -100,8 +100,8 @@ def reproduce_command(
     line per finished step), the path of the report and the headline figures to
     stdout (JSON).
     """
-    from fuzzyslam.reproduce.stage import reproduce
+    from fuzzyslam.reproduce.stage import run
 
     seed_list = list(range(first_seed, first_seed + seeds))
-    emit(reproduce(outdir, seed_list, quick, jobs, beyond=not paper_only,
+    emit(run(outdir, seed_list, quick, jobs, beyond=not paper_only,
                    scheduler=scheduler, keep_logs=keep_logs))

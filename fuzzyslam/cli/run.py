@@ -7,29 +7,15 @@ from pathlib import Path
 
 import click
 
-from fuzzyslam.cli import LOG_TIME, cli, config_option, emit, ranges_option, seed_option
-from fuzzyslam.config import load_config
-
-
-def _build_aids(
-    map_dir: Path | None, fix: str | None, cfg, log: Path, fix_from: float | None = None
-) -> list:
-    """Heading/pose-fix aids from a frozen map (``fuzzyslam.fixes.aids.make_aids``)."""
-    mode = fix if fix is not None else ("none" if map_dir is None else cfg.fixes.mode)
-    if mode == "none":
-        return []
-    if map_dir is None:
-        raise click.UsageError(f"--fix {mode} needs --map FGMDIR (a frozen map from 'map')")
-    from fuzzyslam.fixes.aids import make_aids
-    from fuzzyslam.maps.mapio import log_identity
-    from fuzzyslam.streams.logmeta import read_world
-    from fuzzyslam.streams.reader import LogReader
-
-    world = read_world(LogReader(log))  # the identity the map stage recorded (maps/build.py)
-    world_dict = world.to_dict() if world is not None else None
-    return make_aids(
-        map_dir, mode, cfg, fix_from, expect_log_id=log_identity(world_dict, Path(log).name)
-    )
+from fuzzyslam.cli import (
+    LOG_TIME,
+    cli,
+    config_option,
+    emit,
+    ranges_option,
+    seed_option,
+    stage_call,
+)
 
 
 def _parse_pose(_ctx, _param, value: str | None) -> tuple[float, float, float] | None:
@@ -124,14 +110,20 @@ def run_command(
     the fixes in estimates.mcap.
     The JSON summary is also printed on stdout; progress goes to stderr.
     """
-    from fuzzyslam.slam.stage import run_stage
+    from fuzzyslam.slam.stage import run
 
-    cfg = load_config(config, seed)
-    aids = _build_aids(map_dir, fix, cfg, log, fix_from)
-    if adapt_noise and aids:
-        raise click.UsageError("--adapt-noise cannot be combined with heading or pose fixes")
     emit(
-        run_stage(
-            log, outdir, cfg, aids, adapt_noise=adapt_noise, ranges=ranges, start_pose=start_pose
+        stage_call(
+            run,
+            log,
+            outdir,
+            config,
+            seed,
+            map_dir,
+            fix,
+            fix_from,
+            ranges,
+            start_pose,
+            adapt_noise,
         )
     )

@@ -2,14 +2,9 @@
 
 from __future__ import annotations
 
-from pathlib import Path
-
 import click
 
 from fuzzyslam.cli import cli, emit, seed_option
-from fuzzyslam.config import DEFAULT_CONFIG, load_config
-from fuzzyslam.errors import InputError
-from fuzzyslam.fileio import atomic_path, check_outputs
 
 
 @cli.command("simulate")
@@ -65,35 +60,6 @@ def simulate(
     to stderr. Same config and seed give a byte-identical file; an error leaves
     no partial file (exit 3 on bad input).
     """
-    from fuzzyslam.sim.record import simulate_to_mcap
+    from fuzzyslam.sim.stage import run
 
-    cfg_name = config if config is not None else DEFAULT_CONFIG
-    inputs = [cfg_name] if Path(cfg_name).is_file() else []
-    extras = [p for p in (preview, truth_tum) if p]
-    check_outputs(inputs, [output, *extras], kind="file")
-    if len({Path(p).resolve() for p in [output, *extras]}) != 1 + len(extras):
-        raise InputError(
-            extras[0], "the recording, --preview and --truth-tum must be different files"
-        )
-    cfg = load_config(cfg_name, seed)
-    if not extras:
-        summary, _ = simulate_to_mcap(cfg, output, source=cfg_name)
-        emit(summary)
-        return
-    from fuzzyslam.sim.preview import save_preview
-    from fuzzyslam.sim.record import write_truth_tum
-
-    # every file complete before the log is renamed into place: never a new log beside an
-    # old preview or truth (they are renamed first, the log right after)
-    with atomic_path(output) as staged:
-        summary, plan = simulate_to_mcap(cfg, staged, source=cfg_name)
-        if preview:
-            save_preview(plan, preview, title=f"{cfg.name}, seed {cfg.seed}")
-        if truth_tum:
-            write_truth_tum(plan, truth_tum)
-    summary["file"] = str(Path(output))
-    if preview:
-        summary["preview"] = preview
-    if truth_tum:
-        summary["truth_tum"] = truth_tum
-    emit(summary)
+    emit(run(config, output, seed, preview, truth_tum))

@@ -23,26 +23,10 @@ from typing import Any
 import numpy as np
 
 from fuzzyslam.errors import InputError
+from fuzzyslam.polygons import distance_to_polygon
 from fuzzyslam.streams.reader import LogReader
 
 OBSTACLES_KEY = "fuzzyslam.obstacles"  # written by sim.record (sim.obstacles)
-
-
-def distance_to_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
-    """Distances (N,) from points (N, 2) to a polygon's boundary, 0 inside (crossing number)."""
-    p = np.asarray(pts, dtype=float).reshape(-1, 2)
-    a = np.asarray(poly, dtype=float).reshape(-1, 2)
-    b = np.roll(a, -1, axis=0)
-    e = b - a
-    u = np.sum((p[:, None] - a[None]) * e[None], axis=2) / np.maximum(np.sum(e * e, axis=1), 1e-300)
-    q = a[None] + np.clip(u, 0.0, 1.0)[..., None] * e[None]
-    d = np.linalg.norm(p[:, None] - q, axis=2).min(axis=1)
-    y = p[:, 1:2]
-    straddles = (a[None, :, 1] > y) != (b[None, :, 1] > y)
-    dy = np.where(e[:, 1] == 0.0, np.inf, e[:, 1])
-    xc = a[:, 0] + (y - a[:, 1]) * e[:, 0] / dy
-    inside = (np.count_nonzero(straddles & (p[:, :1] < xc), axis=1) % 2) == 1
-    return np.where(inside, 0.0, d)
 
 
 def object_distance(obj: dict[str, Any], t: np.ndarray, xy: np.ndarray) -> np.ndarray:

@@ -14,8 +14,8 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-import yaml
 
+from fuzzyslam import rundir as R
 from fuzzyslam.errors import InputError
 from fuzzyslam.evaluation.core import (
     Estimate,
@@ -186,25 +186,6 @@ def read_heading_fixes(path: Path) -> HeadingFixes:
     )
 
 
-def read_landmarks(path: Path) -> tuple[np.ndarray, list[int]]:
-    """landmarks.yaml -> positions (M, 2) and ids."""
-    try:
-        data = yaml.safe_load(path.read_text(encoding="utf-8"))
-    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise InputError(path, f"cannot read landmarks YAML: {str(exc).splitlines()[0]}") from None
-    lms = (data or {}).get("landmarks") if isinstance(data, dict) else None
-    if lms is None:
-        lms = []
-    if not isinstance(lms, list):
-        raise InputError(path, "'landmarks' must be a list")
-    try:
-        xy = np.array([[float(d["x"]), float(d["y"])] for d in lms], dtype=float).reshape(-1, 2)
-        ids = [int(d.get("id", i)) for i, d in enumerate(lms)]
-    except (KeyError, TypeError, ValueError) as exc:
-        raise InputError(path, f"malformed landmark entry: {exc}") from None
-    return xy, ids
-
-
 def read_landmark_history(path: Path, topic: str) -> list[tuple[float, np.ndarray]]:
     """Snapshots (t, lamps (M, 2)) of the /slam/landmarks MarkerArrays in estimates.mcap.
 
@@ -244,23 +225,23 @@ def read_estimate(path: str | os.PathLike, label: str | None = None) -> Estimate
         return Estimate(t, poses, label=label or p.stem, source=str(p))
     if kind != KIND_RUNDIR:
         raise InputError(p, "ESTIMATE must be a run output directory or a TUM file, not a log")
-    traj = p / "trajectory.tum"
+    traj = p / R.TRAJECTORY
     if not traj.is_file():
         raise InputError(p, "not a run output directory (no trajectory.tum)")
     t, poses = read_tum(traj)
     est = Estimate(t, poses, label=label or p.name, source=str(p))
-    if (p / "covariance.csv").is_file():
-        est.cov = read_covariance(p / "covariance.csv", t.size)
-    if (p / "odometry.tum").is_file():
-        est.odometry = read_tum(p / "odometry.tum")
-    if (p / "landmarks.yaml").is_file():
-        est.landmarks, est.landmark_ids = read_landmarks(p / "landmarks.yaml")
-    if (p / "updates.csv").is_file():
-        est.updates = read_updates(p / "updates.csv")
-    if (p / "heading_fixes.csv").is_file():
-        est.heading_fixes = read_heading_fixes(p / "heading_fixes.csv")
-    if (p / "estimates.mcap").is_file():
-        est.landmark_history = read_landmark_history(p / "estimates.mcap", Topics().slam_landmarks)
+    if (p / R.COVARIANCE).is_file():
+        est.cov = read_covariance(p / R.COVARIANCE, t.size)
+    if (p / R.ODOMETRY).is_file():
+        est.odometry = read_tum(p / R.ODOMETRY)
+    if (p / R.LANDMARKS).is_file():
+        est.landmarks, est.landmark_ids = R.read_landmarks(p / R.LANDMARKS)
+    if (p / R.UPDATES).is_file():
+        est.updates = read_updates(p / R.UPDATES)
+    if (p / R.HEADING_FIXES).is_file():
+        est.heading_fixes = read_heading_fixes(p / R.HEADING_FIXES)
+    if (p / R.ESTIMATES).is_file():
+        est.landmark_history = read_landmark_history(p / R.ESTIMATES, Topics().slam_landmarks)
     return est
 
 
@@ -323,7 +304,7 @@ def run_evaluate(
     others = [read_estimate(c, lab) for lab, c in labelled]
     truth = read_truth(truth_path)
     if landmarks_truth is not None:
-        truth.landmarks, _ = read_landmarks(Path(landmarks_truth))
+        truth.landmarks, _ = R.read_landmarks(Path(landmarks_truth))
         align = True
     try:
         ev = evaluate(truth, est, params, align=align)

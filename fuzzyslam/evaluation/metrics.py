@@ -23,7 +23,7 @@ from scipy.optimize import linear_sum_assignment
 from scipy.stats import chi2
 
 from fuzzyslam.evaluation.align import umeyama
-from fuzzyslam.se2 import between, wrap_angle
+from fuzzyslam.se2 import between, interpolate_poses, wrap_angle
 
 Array = NDArray[np.float64]
 
@@ -84,27 +84,6 @@ def stats(values: ArrayLike) -> Stats:
 
 
 # --- association in time ------------------------------------------------------------------
-
-
-def interpolate_poses(t_ref: ArrayLike, poses_ref: ArrayLike, t_query: ArrayLike) -> Array:
-    """Poses (N, 3) at t_query, linear in x, y and in heading on the circle.
-
-    Heading is unwrapped along the reference before interpolation, so a turn across +-pi is
-    interpolated the short way, then wrapped back to (-pi, pi]. Times outside the reference
-    span give NaN.
-    """
-    t_ref = np.asarray(t_ref, dtype=float)
-    p = np.asarray(poses_ref, dtype=float).reshape(-1, 3)
-    tq = np.asarray(t_query, dtype=float).reshape(-1)
-    out = np.full((tq.size, 3), np.nan)
-    inside = (tq >= t_ref[0]) & (tq <= t_ref[-1])
-    if not inside.any():
-        return out
-    q = tq[inside]
-    out[inside, 0] = np.interp(q, t_ref, p[:, 0])
-    out[inside, 1] = np.interp(q, t_ref, p[:, 1])
-    out[inside, 2] = np.asarray(wrap_angle(np.interp(q, t_ref, np.unwrap(p[:, 2])))).reshape(-1)
-    return out
 
 
 def nearest_gap(t_ref: ArrayLike, t_query: ArrayLike) -> Array:

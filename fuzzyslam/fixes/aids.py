@@ -19,19 +19,22 @@ Each aid has ``start_time``, ``on_ring(t, ring, mounts, ekf)``, ``summary()`` an
 
 from __future__ import annotations
 
+import os
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fuzzyslam.errors import InputError
+from fuzzyslam.errors import InputError, UsageError
 from fuzzyslam.fixes.changes import ChangeDetector
 from fuzzyslam.fixes.heading import FlmSource, HeadingFixAid
 from fuzzyslam.fixes.pose_match import PoseFixAid
-from fuzzyslam.fixes.references import Reference, references_from_dicts
 from fuzzyslam.maps.grid import BeliefMap
-from fuzzyslam.maps.mapio import load_fgm, load_references
+from fuzzyslam.maps.mapio import load_fgm, log_identity
+from fuzzyslam.references import Reference, read_references
+from fuzzyslam.streams.logmeta import read_world
+from fuzzyslam.streams.reader import LogReader
 
 MODES = ("none", "heading", "pose")
 
@@ -78,7 +81,7 @@ def load_frozen_map(
     refs_path = fgm_dir / "references.yaml"
     refs: list[Reference] = []
     if need_references or refs_path.exists():
-        refs = references_from_dicts(load_references(refs_path), str(refs_path))
+        refs = read_references(refs_path)
     if need_references and not refs:
         raise InputError(refs_path, "no corridor references: heading fixes need some")
     return FrozenMap(m, f.freeze_time, f.log_id, refs)
@@ -142,3 +145,26 @@ def aids_for_map(fm: FrozenMap, mode: str, cfg: Any, start_time: float | None = 
     if cfg.fixes.detect_changes:
         aids.append(ChangeDetector(fm.fgm, cfg.fixes, source, t0))
     return aids
+
+
+def aids_for_log(
+    map_dir: Path | None,
+    fix: str | None,
+    cfg: Any,
+    log: str | os.PathLike,
+    fix_from: float | None = None,
+) -> list[Any]:
+    """The aids of ``run LOG [--map map_dir] [--fix fix] [--fix-from fix_from]``: the mode
+    ``fix``, else the config's ``fixes.mode`` when a map is given, else none; the map must
+    be of the log's world (its identity, maps.mapio.log_identity). UsageError for a fix
+    without a map."""
+    mode = fix if fix is not None else ("none" if map_dir is None else cfg.fixes.mode)
+    if mode == "none":
+        return []
+    if map_dir is None:
+        raise UsageError(f"--fix {mode} needs --map FGMDIR (a frozen map from 'map')")
+    world = read_world(LogReader(log))  # the identity the map stage recorded (maps/build.py)
+    world_dict = world.to_dict() if world is not None else None
+    return make_aids(
+        map_dir, mode, cfg, fix_from, expect_log_id=log_identity(world_dict, Path(log).name)
+    )

@@ -27,7 +27,7 @@ from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.quality import wall_quality
 from fuzzyslam.maps.references import Reference, extract_references
 from fuzzyslam.progress import Progress
-from fuzzyslam.se2 import wrap_angle, wrap_angle_period
+from fuzzyslam.se2 import interpolate_poses, wrap_angle_period
 from fuzzyslam.streams.logmeta import World, read_scenario, read_world
 from fuzzyslam.streams.ranges import open_ranges
 from fuzzyslam.streams.reader import LogReader
@@ -47,19 +47,6 @@ class MapOptions:
     explicit_config: bool = False
     ranges: str | None = None
     sort: bool = False
-
-
-def interpolate_poses(tq: np.ndarray, t: np.ndarray, poses: np.ndarray) -> np.ndarray:
-    """Poses at times ``tq``: x, y linear; theta linear on the unwrapped heading (the
-    shorter way round the circle between samples), wrapped to (-pi, pi]."""
-    th = np.unwrap(poses[:, 2])
-    return np.column_stack(
-        [
-            np.interp(tq, t, poses[:, 0]),
-            np.interp(tq, t, poses[:, 1]),
-            wrap_angle(np.interp(tq, t, th)),
-        ]
-    )
 
 
 def covered(tq: np.ndarray, t: np.ndarray, max_gap: float) -> np.ndarray:
@@ -238,7 +225,7 @@ def build_map(
             raise InputError(traj_path, f"trajectory covers none of the sonar rings ({desc})")
     if not ok.all():
         times, ranges, rmax = times[ok], ranges[ok], rmax[ok]
-    poses = interpolate_poses(times, t_traj, p_traj)
+    poses = interpolate_poses(t_traj, p_traj, times, outside="hold")
     try:
         builder = FgmBuilder.for_path(poses[:, :2], params)
     except ValueError as exc:  # a path too long for a map (or not finite)

@@ -11,26 +11,15 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
-import yaml
 
-from fuzzyslam.errors import InputError
-from fuzzyslam.fileio import atomic_path, check_input_file
+from fuzzyslam.fileio import atomic_path
 from fuzzyslam.maps.flm import build_flm
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.maps.hough import WallDirection, flm_wall_direction, wall_weights
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.references import Reference
+from fuzzyslam.rundir import read_landmarks
 from fuzzyslam.streams.logmeta import World
-
-
-def read_landmarks(path: Path) -> np.ndarray:
-    """(N, 2) estimated lamps of a landmarks.yaml (docs/contracts.md sec. 2)."""
-    p = check_input_file(path, "landmarks")
-    try:
-        data = yaml.safe_load(p.read_text(encoding="utf-8"))
-        return np.array([[float(d["x"]), float(d["y"])] for d in data["landmarks"]]).reshape(-1, 2)
-    except (yaml.YAMLError, KeyError, TypeError, ValueError, UnicodeDecodeError):
-        raise InputError(p, "not a landmarks.yaml ({landmarks: [{x, y, ...}]})") from None
 
 
 def _save(fig, path: Path) -> None:
@@ -216,7 +205,7 @@ def write_all(
     params: MapParams,
 ) -> list[str]:
     """Write fgm.png, conflict.png, hough.png into ``outdir``; returns their names."""
-    lm = read_landmarks(landmarks_path) if landmarks_path is not None else None
+    lm = read_landmarks(landmarks_path)[0] if landmarks_path is not None else None
     fig_fgm(outdir / "fgm.png", fgm, poses, refs, world, lm)
     fig_conflict(outdir / "conflict.png", fgm)
     k = pick_flm_ring(poses, refs)

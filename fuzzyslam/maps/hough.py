@@ -32,7 +32,7 @@ import numpy as np
 
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.maps.params import MapParams
-from fuzzyslam.se2 import wrap_angle_period
+from fuzzyslam.se2 import direction_mod_pi, wrap_angle_period
 
 
 @dataclass
@@ -157,7 +157,7 @@ def _tls_direction(
         return theta, rhos
     _evals, evecs = np.linalg.eigh(scatter)
     normal = evecs[:, 0]  # smallest eigenvalue: the common normal
-    t = float(np.mod(np.arctan2(normal[1], normal[0]), np.pi))
+    t = direction_mod_pi(np.arctan2(normal[1], normal[0]))
     nn = np.array([np.cos(t), np.sin(t)])
     new_rhos = np.array(
         [float(c @ nn) if c is not None else rk for c, rk in zip(cents, rhos, strict=True)]
@@ -235,7 +235,7 @@ def dominant_direction(
         for _ in range(3):
             t, rhos = _tls_direction(xc, yc, w, t, rhos, 1.0 * step)
     else:
-        t = float(np.mod(t0 + _parabolic_offset(energy, j) * dtheta, np.pi))
+        t = direction_mod_pi(t0 + _parabolic_offset(energy, j) * dtheta)
     peaks = [
         HoughPeak(t, float(r), float(acc[i, j]) * params.resolution)
         for r, i in zip(rhos, ri, strict=True)
@@ -243,7 +243,7 @@ def dominant_direction(
     if s2 > 0:
         i2 = int(np.argmax(acc[:, j2]))
         peaks.append(HoughPeak(float(plane.thetas[j2]), float(plane.rhos[i2]), s2))
-    angle = float(np.mod(t - np.pi / 2, np.pi))
+    angle = direction_mod_pi(t - np.pi / 2)
     ambiguous = bool(s2 >= params.ambiguity_ratio * s1)
     return WallDirection(angle, s1, ambiguous, peaks, s2, len(w), plane)
 
@@ -337,7 +337,7 @@ def refine_tangent(wd: WallDirection, readings, params: MapParams) -> WallDirect
     loose = fit.sigma > np.deg2rad(params.tangent_max_sigma_deg)
     return replace(
         wd,
-        angle=float(np.mod(fit.psi - np.pi / 2, np.pi)),
+        angle=direction_mod_pi(fit.psi - np.pi / 2),
         sigma=fit.sigma,
         method="tangent",
         inliers=n1,

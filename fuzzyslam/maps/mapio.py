@@ -1,5 +1,6 @@
 """Map files (docs/contracts.md sec. 3): fgm.npz, nav2 map_server fgm.yaml + fgm.pgm,
-references.yaml. Every file is written to a temporary name and renamed when complete.
+references.yaml (its reader and writer: :mod:`fuzzyslam.references`). Every file is written
+to a temporary name and renamed when complete.
 
 nav2 map_server (``nav2_map_server``, map_io): with ``negate: 0`` a pixel p in 0..255
 has occupancy (255 - p) / 255; ``mode: trinary`` makes it occupied above
@@ -23,6 +24,10 @@ import yaml
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import atomic_path, check_input_file
 from fuzzyslam.maps.grid import MAX_CELLS, BeliefMap, Grid
+
+# references.yaml's reader and writer live in fuzzyslam/references.py (re-exported)
+from fuzzyslam.references import load_references as load_references
+from fuzzyslam.references import save_references as save_references
 
 OCCUPIED_THRESH = 0.65
 FREE_THRESH = 0.196
@@ -201,30 +206,3 @@ def read_pgm(path: str | os.PathLike) -> np.ndarray:
     if len(body) != nx * ny:
         raise InputError(p, f"PGM holds {len(body)} bytes, expected {nx * ny}")
     return np.frombuffer(body, dtype=np.uint8).reshape(ny, nx)
-
-
-def save_references(
-    path: str | os.PathLike, refs: list[dict[str, Any]], frame: str = "map"
-) -> None:
-    """Write references.yaml: ``{frame, references: [{id, name, angle, angle_deg, strength,
-    region}]}`` (angles in rad mod pi, [0, pi))."""
-    with atomic_path(path) as tmp:
-        Path(tmp).write_text(
-            yaml.safe_dump({"frame": frame, "references": refs}, sort_keys=False),
-            encoding="utf-8",
-        )
-
-
-def load_references(path: str | os.PathLike) -> list[dict[str, Any]]:
-    """Read references.yaml back (a list of dicts); InputError when malformed."""
-    p = check_input_file(path, "references")
-    try:
-        data = yaml.safe_load(p.read_text(encoding="utf-8"))
-    except (yaml.YAMLError, UnicodeDecodeError):
-        raise InputError(p, "not valid YAML") from None
-    if not isinstance(data, dict) or not isinstance(data.get("references"), list):
-        raise InputError(p, "expected a mapping with a 'references' list")
-    for i, r in enumerate(data["references"]):
-        if not isinstance(r, dict) or not {"id", "angle", "region"} <= set(r):
-            raise InputError(p, f"reference {i} lacks id, angle or region")
-    return data["references"]

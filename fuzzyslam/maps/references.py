@@ -19,14 +19,15 @@ path the map was built along (the robot drives the corridors' centre lines):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
 from fuzzyslam.maps.grid import BeliefMap
-from fuzzyslam.maps.hough import WallDirection, dominant_direction, wall_weights
+from fuzzyslam.maps.hough import dominant_direction, wall_weights
 from fuzzyslam.maps.params import MapParams
-from fuzzyslam.se2 import wrap_angle_period
+from fuzzyslam.references import Reference
+from fuzzyslam.se2 import direction_mod_pi, wrap_angle_period
 
 
 @dataclass
@@ -41,7 +42,7 @@ class Stretch:
     @property
     def angle(self) -> float:
         """Direction mod pi in [0, pi)."""
-        return float(np.mod(np.arctan2(self.direction[1], self.direction[0]), np.pi))
+        return direction_mod_pi(np.arctan2(self.direction[1], self.direction[0]))
 
     @property
     def length(self) -> float:
@@ -54,33 +55,6 @@ class Stretch:
         a = self.point + self.s0 * d
         b = self.point + self.s1 * d
         return np.array([a - band * n, b - band * n, b + band * n, a + band * n])
-
-
-@dataclass
-class Reference:
-    """One corridor's reference: id, name, angle (rad, [0, pi)), Hough strength, region."""
-
-    id: int
-    name: str
-    angle: float
-    strength: float
-    region: np.ndarray
-    ambiguous: bool = False
-    cells: int = 0
-    wall: WallDirection | None = field(default=None, repr=False)
-    stretch: Stretch | None = field(default=None, repr=False)
-
-    def to_dict(self) -> dict:
-        return {
-            "id": int(self.id),
-            "name": self.name,
-            "angle": float(self.angle),
-            "angle_deg": float(np.rad2deg(self.angle)),
-            "strength": float(self.strength),
-            "ambiguous": bool(self.ambiguous),
-            "cells": int(self.cells),
-            "region": [[float(x), float(y)] for x, y in self.region],
-        }
 
 
 def _fit_line(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

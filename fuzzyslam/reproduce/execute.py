@@ -16,6 +16,7 @@ path, so the workers must see the output directory's parent at the same absolute
 from __future__ import annotations
 
 import contextlib
+import importlib
 import io
 import json
 import multiprocessing
@@ -30,8 +31,10 @@ from pathlib import Path
 from typing import Any
 
 from fuzzyslam.errors import EXIT_INTERNAL, FuzzyslamError, InputError
+from fuzzyslam.fileio import guard_inputs
 from fuzzyslam.progress import PlanProgress
 from fuzzyslam.reproduce.plan import Step, critical_path
+from fuzzyslam.summary import summary_text
 
 
 class StepFailed(FuzzyslamError):
@@ -73,13 +76,35 @@ def _where() -> str:
         return "local"
 
 
-def run_step(argv: tuple[str, ...], root: str) -> tuple:
-    """Run ``fuzzyslam ARGV`` in ``root`` in this process.
+# The entry of each kind of step: the stage package's ``stage.run`` (its public API)
+STAGES = {
+    "simulate": "fuzzyslam.sim.stage",
+    "run": "fuzzyslam.slam.stage",
+    "map": "fuzzyslam.maps.stage",
+    "evaluate": "fuzzyslam.evaluation.stage",
+}
+
+
+def _entry(kind: str) -> Callable[..., dict[str, Any]]:
+    """The entry of a step of ``kind``: a stage's ``run``; "version", the package's version
+    (``fuzzyslam --version``: a step that does nothing, to try the engine)."""
+    if kind == "version":
+        from fuzzyslam import __version__
+
+        return lambda: {"version": __version__}
+    return importlib.import_module(STAGES[kind]).run
+
+
+def run_step(kind: str, call: tuple[tuple[str, Any], ...], root: str) -> tuple:
+    """Run a step, the stage ``kind``'s entry ``run(**dict(call))`` (``Step.call``: the
+    same as the step's ``fuzzyslam`` command line), in ``root`` in this process.
 
     Parameters
     ----------
-    argv : tuple of str
-        The arguments after ``fuzzyslam``.
+    kind : str
+        simulate | run | map | evaluate (:data:`STAGES`).
+    call : tuple of (str, object)
+        The keyword arguments of the stage's entry.
     root : str
         The absolute working directory of the step (the plan's output directory).
 
@@ -91,10 +116,7 @@ def run_step(argv: tuple[str, ...], root: str) -> tuple:
         (warnings) is kept for results.json, off the progress display. BLAS is held to
         one thread during the step (one process per core is the engine's parallelism).
     """
-    import click
     from threadpoolctl import threadpool_limits
-
-    from fuzzyslam.cli import _register, cli
 
     where, host, pid = _where(), socket.gethostname(), os.getpid()
     if not os.path.isdir(root):
@@ -105,17 +127,15 @@ def run_step(argv: tuple[str, ...], root: str) -> tuple:
         cwd = os.getcwd()
         os.chdir(root)
         os.environ["FUZZYSLAM_NO_PROGRESS"] = "1"
-        _register()
+        guard_inputs(True)  # as each command does: no output may replace one of its inputs
         out, err = io.StringIO(), io.StringIO()
         t0 = time.perf_counter()
         try:
             with threadpool_limits(limits=1), contextlib.redirect_stdout(out), \
                     contextlib.redirect_stderr(err):
-                cli.main(args=list(argv), prog_name="fuzzyslam", standalone_mode=False)
+                summary = _entry(kind)(**dict(call))
         except FuzzyslamError as exc:
             fail = " ".join(str(exc).split()), exc.exit_code
-        except click.ClickException as exc:
-            fail = exc.format_message(), exc.exit_code
         except Exception as exc:  # a bug in a stage: report it as an internal failure
             msg = " ".join(str(exc).split()) or type(exc).__name__
             fail = f"{type(exc).__name__}: {msg}", EXIT_INTERNAL
@@ -127,11 +147,7 @@ def run_step(argv: tuple[str, ...], root: str) -> tuple:
         seconds = time.perf_counter() - t0
     if fail is not None:
         return False, seconds, None, fail[0], fail[1], err.getvalue(), where, host, pid
-    text = out.getvalue()
-    try:
-        summary = json.loads(text) if text.strip() else {}
-    except json.JSONDecodeError:
-        summary = {"stdout": text}
+    summary = json.loads(summary_text(summary))  # as the command prints it (JSON types)
     return True, seconds, summary, "", 0, err.getvalue(), where, host, pid
 
 
@@ -178,8 +194,8 @@ class Engine:
     def submit(self, step: Step, root: Path) -> Future:
         """Start ``step`` in ``root``; a concurrent.futures Future of run_step's tuple."""
         if self._client is not None:
-            return self.pool.submit(run_step, step.argv, str(root), key=_task_key(step))
-        return self.pool.submit(run_step, step.argv, str(root))
+            return self.pool.submit(run_step, step.kind, step.call, str(root), key=_task_key(step))
+        return self.pool.submit(run_step, step.kind, step.call, str(root))
 
     def close(self, cancel: bool = False) -> None:
         """Stop the pool (or leave the cluster), cancelling queued steps if ``cancel``."""

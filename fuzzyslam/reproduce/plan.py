@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import shlex
 from dataclasses import dataclass, field
+from typing import Any
 
 
 @dataclass(frozen=True)
@@ -46,6 +47,8 @@ class Step:
     deps: tuple[str, ...] = ()
     cost: float = 1.0  # expected seconds (full scenario), for scheduling and progress
     kind: str = field(default="")  # simulate | run | map | evaluate
+    # the same step as a call of the stage's entry: fuzzyslam.<package>.stage.run(**call)
+    call: tuple[tuple[str, Any], ...] = ()
 
     @property
     def command(self) -> str:
@@ -99,8 +102,19 @@ def seed_steps(seed: int, suite: Suite, beyond: bool = True) -> list[Step]:
         logs |= {"dark": suite.dark, "people": suite.people}
     steps: list[Step] = []
 
-    def add(name: str, kind: str, argv: list[str], deps: list[str], cost: float) -> None:
-        steps.append(Step(f"{d}/{name}", tuple(argv), tuple(f"{d}/{x}" for x in deps), cost, kind))
+    def add(
+        name: str, kind: str, argv: list[str], deps: list[str], cost: float, call: dict
+    ) -> None:
+        steps.append(
+            Step(
+                f"{d}/{name}",
+                tuple(argv),
+                tuple(f"{d}/{x}" for x in deps),
+                cost,
+                kind,
+                tuple(call.items()),
+            )
+        )
 
     for name, config in logs.items():
         add(
@@ -109,16 +123,24 @@ def seed_steps(seed: int, suite: Suite, beyond: bool = True) -> list[Step]:
             ["simulate", config, "-o", f"{d}/{name}.mcap", "--seed", str(seed)],
             [],
             COST["simulate"],
+            {"config": config, "output": f"{d}/{name}.mcap", "seed": seed},
         )
 
-    def run(name: str, log: str, fix: str = "none", fgm: str = "", extra: tuple = ()) -> None:
+    def run(
+        name: str, log: str, fix: str = "none", fgm: str = "", fix_from: float | None = None
+    ) -> None:
         argv = ["run", f"{d}/{log}.mcap", "-o", f"{d}/{name}", "--config", logs[log]]
+        call: dict[str, Any] = {"log": argv[1], "outdir": argv[3], "config": logs[log]}
         deps = [f"{log}.mcap"]
         if fix != "none":
-            argv += ["--map", f"{d}/{fgm}", "--fix", fix, *extra]
+            argv += ["--map", f"{d}/{fgm}", "--fix", fix]
+            call |= {"map_dir": f"{d}/{fgm}", "fix": fix}
+            if fix_from is not None:
+                argv += ["--fix-from", f"{fix_from:g}"]
+                call["fix_from"] = fix_from
             deps.append(fgm)
         cost = COST["run"] if fix == "none" else COST[f"run_{fix}"]
-        add(name, "run", argv, deps, cost)
+        add(name, "run", argv, deps, cost, call)
 
     def fgm(name: str, log: str, est: str) -> None:
         argv = [
@@ -126,12 +148,14 @@ def seed_steps(seed: int, suite: Suite, beyond: bool = True) -> list[Step]:
             "--landmarks", f"{d}/{est}/landmarks.yaml", "-o", f"{d}/{name}",
             "--config", logs[log],
         ]  # fmt: skip
-        add(name, "map", argv, [f"{log}.mcap", est], COST["map"])
+        call = {"log": argv[1], "trajectory": argv[3], "outdir": argv[7], "config": logs[log]}
+        call["landmarks"] = argv[5]
+        add(name, "map", argv, [f"{log}.mcap", est], COST["map"], call)
 
     run("AB", "paper")
     fgm("fgm", "paper", "AB")
     run("C", "paper", "heading", "fgm")
-    run("D", "bumps", "heading", "fgm", ("--fix-from", "0"))
+    run("D", "bumps", "heading", "fgm", fix_from=0.0)
     if beyond:
         run("C_pose", "paper", "pose", "fgm")
         for log in ("dark", "people"):
@@ -150,7 +174,9 @@ def seed_steps(seed: int, suite: Suite, beyond: bool = True) -> list[Step]:
         for other in others:
             argv += ["--compare", f"{compare_label(other)}={d}/{other}"]
         deps = [f"{log}.mcap", est, map_dir, *others]
-        add(f"eval_{name}", "evaluate", argv, deps, COST_EVALUATE)
+        call = {"truth": argv[1], "estimate": argv[2], "outdir": argv[4], "map_dir": argv[6]}
+        call |= {"label": label, "compare": tuple(f"{d}/{o}" for o in others)}
+        add(f"eval_{name}", "evaluate", argv, deps, COST_EVALUATE, call)
     return steps
 
 

@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from fuzzyslam.reproduce.plan import Step, evaluations
-from fuzzyslam.reproduce.table import Aggregate, headline_key, run_labels
+from fuzzyslam.reproduce.table import Aggregate, SeedResult, headline_key, run_labels
 
 
 def fmt(v: float | None, digits: int) -> str:
@@ -133,7 +133,7 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
 def write_report(
     path: Path,
     aggs: list[Aggregate],
-    results: list[dict[str, Any]],
+    results: list[SeedResult],
     seeds: list[int],
     info: dict[str, Any],
     summary_png: str | None,
@@ -214,7 +214,11 @@ def write_report(
 
 
 def write_results(
-    path: Path, aggs: list[Aggregate], results: list[dict], info: dict, steps: list[dict]
+    path: Path,
+    aggs: list[Aggregate],
+    results: list[SeedResult],
+    info: dict,
+    steps: list[dict],
 ) -> None:
     """results.json: the table (values per seed, mean, std, min, max, target met, the
     headline key with its unit), info, and every step (command, seconds, its stderr)."""
@@ -225,7 +229,7 @@ def write_results(
         "rows": [  # each row with its key in the headline JSON (stage.py)
             {**a.to_dict(), "key": headline_key(a.row, labels) if labels else None} for a in aggs
         ],
-        "seeds": [{"seed": r["seed"], "seconds": r["seconds"]} for r in results],
+        "seeds": [{"seed": r.seed, "seconds": r.seconds} for r in map(SeedResult.of, results)],
         "steps": steps,
     }
     path.write_text(json.dumps(data, indent=2, sort_keys=True), encoding="utf-8")

@@ -22,23 +22,33 @@ from fuzzyslam.fileio import OutputDir, _in_place_only
 from fuzzyslam.reproduce.execute import StepResult, execute
 from fuzzyslam.reproduce.plan import FULL, QUICK, build_plan, evaluations
 from fuzzyslam.reproduce.report import draw_summary, write_commands, write_report, write_results
-from fuzzyslam.reproduce.table import aggregate, headline_key, run_labels
+from fuzzyslam.reproduce.table import SeedResult, aggregate, headline_key, run_labels
 
 
 def seed_result(
-    root: Path, seed: int, done: dict[str, StepResult], beyond: bool = True
-) -> dict[str, Any]:
-    """The evaluations' metrics and the runs' summaries of one seed (table.SeedResult)."""
+    root: Path,
+    seed: int,
+    done: dict[str, StepResult],
+    beyond: bool = True,
+    kinds: dict[str, str] | None = None,
+) -> SeedResult:
+    """The evaluations' metrics and the runs' and maps' summaries of one seed; ``kinds``:
+    each step's kind (``Step.kind``) by key (default: told from the summaries)."""
     d = f"seed{seed}"
     evals = {}
     for name in evaluations(beyond):
         p = root / d / f"eval_{name}" / "metrics.json"
         evals[name] = json.loads(p.read_text(encoding="utf-8"))
     mine = {k.split("/", 1)[1]: r.summary for k, r in done.items() if k.startswith(f"{d}/")}
-    runs = {k: v for k, v in mine.items() if v and v.get("command") == "run"}
-    maps = {k: v for k, v in mine.items() if v and "reference_truth" in v}
+    if kinds is not None:
+        kind = {k.split("/", 1)[1]: v for k, v in kinds.items() if k.startswith(f"{d}/")}
+        runs = {k: v for k, v in mine.items() if v is not None and kind.get(k) == "run"}
+        maps = {k: v for k, v in mine.items() if v is not None and kind.get(k) == "map"}
+    else:
+        runs = {k: v for k, v in mine.items() if v and v.get("command") == "run"}
+        maps = {k: v for k, v in mine.items() if v and "reference_truth" in v}
     seconds = sum(r.seconds for k, r in done.items() if k.startswith(f"{d}/"))
-    return {"seed": seed, "eval": evals, "run": runs, "map": maps, "seconds": seconds}
+    return SeedResult(seed, evals, runs, maps, seconds)
 
 
 # Files that mark a directory as a reproduce output (which a rerun may replace whole).
@@ -106,7 +116,8 @@ def reproduce(
         write_commands(tmp / "commands.sh", steps)
         done = execute(steps, tmp, jobs, scheduler=scheduler, final=Path(outdir))
         workers = sorted({r.worker for r in done.values()})
-        results = [seed_result(tmp, s, done, beyond) for s in seeds]
+        kinds = {st.key: st.kind for st in steps}
+        results = [seed_result(tmp, s, done, beyond, kinds) for s in seeds]
         aggs = aggregate(results)
         info = {
             "command": "fuzzyslam reproduce"
@@ -149,3 +160,6 @@ def reproduce(
         "wall_time_s": round(info["wall_s"], 1),
         "headline": headline,
     }
+
+
+run = reproduce  # the stage convention: every stage package's entry is ``stage.run``

@@ -102,11 +102,15 @@ def sweep_steps(points: list[tuple[str, dict]], seeds: list[int]) -> list[Step]:
             d = f"g{i}/seed{s}"
             steps += [
                 Step(f"{d}/log", ("simulate", cfg, "-o", f"{d}/log.mcap", "--seed", str(s)),
-                     (), 16.0, "simulate"),
+                     (), 16.0, "simulate",
+                     (("config", cfg), ("output", f"{d}/log.mcap"), ("seed", s))),
                 Step(f"{d}/est", ("run", f"{d}/log.mcap", "-o", f"{d}/est", "--config", cfg),
-                     (f"{d}/log",), 4.0, "run"),
+                     (f"{d}/log",), 4.0, "run",
+                     (("log", f"{d}/log.mcap"), ("outdir", f"{d}/est"), ("config", cfg))),
                 Step(f"{d}/eval", ("evaluate", f"{d}/log.mcap", f"{d}/est", "-o", f"{d}/eval"),
-                     (f"{d}/log", f"{d}/est"), 5.0, "evaluate"),
+                     (f"{d}/log", f"{d}/est"), 5.0, "evaluate",
+                     (("truth", f"{d}/log.mcap"), ("estimate", f"{d}/est"),
+                      ("outdir", f"{d}/eval"))),
             ]  # fmt: skip
     return steps
 

@@ -1,26 +1,59 @@
 """docs/experiment.md's table: the paper's figure, our target and fuzzyslam's, over seeds (pure).
 
-A seed's results are a plain dict: ``{"eval": {name: metrics.json of eval_<name>},
-"run": {name: run summary}, "map": {name: map summary}, "seconds": summed step times}`` (names of
-:data:`fuzzyslam.reproduce.plan.EVALUATIONS`). Each :class:`Row` extracts one number per
-seed; :func:`aggregate` gives its mean and spread and whether the target is met.
+A seed's results are a :class:`SeedResult`: the metrics.json of each evaluation of the
+plan (names of :data:`fuzzyslam.reproduce.plan.EVALUATIONS`), the summaries of its runs
+and maps, the summed step times. Each :class:`Row` extracts one number per seed
+(:func:`metric`: a key the table reads that the results lack is an error,
+:class:`MissingMetric`, never a blank cell; a blank is a metric written as null or not
+finite, or an evaluation or run outside the plan); :func:`aggregate` gives its mean and
+spread and whether the target is met.
 """
 
 from __future__ import annotations
 
 import math
 from collections.abc import Callable
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any
 
-SeedResult = dict[str, Any]
+
+class MissingMetric(KeyError):
+    """A metric the table reads is not in the results (a renamed or dropped key)."""
 
 
-def dig(d: Any, *path: str | int) -> Any:
-    """``d[p0][p1]...`` or None when a key is missing (a metric a run could not give)."""
-    for p in path:
-        if not isinstance(d, dict) or p not in d:
+@dataclass(frozen=True)
+class SeedResult:
+    """One seed's results (reproduce/stage.py ``seed_result``).
+
+    ``eval``: metrics.json of each evaluation of the plan; ``run``, ``map``: the JSON
+    summaries of its runs and maps by step name; ``seconds``: its steps' summed times."""
+
+    seed: int
+    eval: dict[str, dict[str, Any]] = field(default_factory=dict)
+    run: dict[str, dict[str, Any]] = field(default_factory=dict)
+    map: dict[str, dict[str, Any]] = field(default_factory=dict)
+    seconds: float | None = None
+
+    @classmethod
+    def of(cls, r: SeedResult | dict[str, Any]) -> SeedResult:
+        """``r`` itself, or the SeedResult of its dict form (``{seed, eval, run, map,
+        seconds}``, parts left out empty)."""
+        if isinstance(r, SeedResult):
+            return r
+        parts = (r.get("eval", {}), r.get("run", {}), r.get("map", {}))
+        return cls(r.get("seed", 0), *parts, r.get("seconds"))
+
+
+def metric(tree: Any, *path: str) -> Any:
+    """``tree[p0][p1]...``; None when a value on the way is null (a metric a run could not
+    give). MissingMetric when a key is missing: the results do not have the shape the
+    table reads."""
+    d = tree
+    for i, p in enumerate(path):
+        if d is None:
             return None
+        if not isinstance(d, dict) or p not in d:
+            raise MissingMetric(f"no {'.'.join(path[: i + 1])} in the results")
         d = d[p]
     return d
 
@@ -35,32 +68,33 @@ def phase_stat(ev: str, phase: str, *path: str, scale: float = 1.0):
     """Extractor of ``eval[ev].phases[phase][path...]`` (``phase``: 'A', 'after', 'overall')."""
 
     def get(r: SeedResult) -> float | None:
-        return _num(dig(r, "eval", ev, "phases", phase, *path), scale)
+        m = r.eval.get(ev)  # None: an evaluation outside the plan (--paper-only)
+        return None if m is None else _num(metric(m, "phases", phase, *path), scale)
 
     return get
 
 
 def _lamp_snapshot(r: SeedResult, ev: str, which: str) -> dict | None:
     """Lamp matching at the end of the freeze run ('freeze') or of the last run ('last')."""
-    m = dig(r, "eval", ev)
-    by_run = dig(m, "lamps_by_run") or {}
-    if not by_run:
+    m = r.eval.get(ev)
+    by_run = metric(m, "lamps_by_run") if m is not None else None
+    if not by_run:  # outside the plan, or no lamp at the end of any run
         return None
     if which == "freeze":
-        return by_run.get(f"run{m.get('freeze_run')}")
+        return metric(by_run, f"run{metric(m, 'freeze_run')}")
     return by_run[max(by_run, key=lambda k: int(k[3:]))]
 
 
 def lamp_error(ev: str, which: str = "freeze", scale: float = 100.0):
     def get(r: SeedResult) -> float | None:
-        return _num(dig(_lamp_snapshot(r, ev, which), "error_m", "mean"), scale)
+        return _num(metric(_lamp_snapshot(r, ev, which), "error_m", "mean"), scale)
 
     return get
 
 
 def duplicates(ev: str, which: str = "last"):
     def get(r: SeedResult) -> float | None:
-        return _num(dig(_lamp_snapshot(r, ev, which), "duplicates"))
+        return _num(metric(_lamp_snapshot(r, ev, which), "duplicates"))
 
     return get
 
@@ -75,7 +109,8 @@ def ratio(num: Callable, den: Callable):
 
 def run_value(run: str, key: str):
     def get(r: SeedResult) -> float | None:
-        return _num(dig(r, "run", run, key))
+        s = r.run.get(run)  # None: a run outside the plan
+        return None if s is None else _num(metric(s, key))
 
     return get
 
@@ -84,7 +119,9 @@ def reference_error(which: str):
     """Largest |reference angle - true corridor axis| (deg) of a map, or their mean."""
 
     def get(r: SeedResult) -> float | None:
-        errs = [_num(e.get("error_deg")) for e in dig(r, "map", "fgm", "reference_truth") or []]
+        m = r.map.get("fgm")  # None: no map in the results
+        truth = (metric(m, "reference_truth") if m is not None else None) or []
+        errs = [_num(metric(e, "error_deg")) for e in truth]
         errs = [abs(e) for e in errs if e is not None]
         if not errs:
             return None
@@ -94,12 +131,13 @@ def reference_error(which: str):
 
 
 def seed_seconds(r: SeedResult) -> float | None:
-    return _num(r.get("seconds"))
+    return _num(r.seconds)
 
 
 def change_score(key: str):
     def get(r: SeedResult) -> float | None:
-        return _num(dig(r, "eval", "people_pose", "change_detection", key))
+        m = r.eval.get("people_pose")
+        return None if m is None else _num(metric(m, "change_detection", key))
 
     return get
 
@@ -273,23 +311,29 @@ def headline_key(row: Row, labels: dict[str, str]) -> str:
     return f"{row.group}: {row.measure}".format(**labels) + f"_{unit_suffix(row)}"
 
 
-def aggregate(results: list[SeedResult], rows: tuple[Row, ...] = ROWS) -> list[Aggregate]:
-    """Each row's value for each seed's results, in seed order."""
-    return [Aggregate(row, tuple(row.get(r) for r in results)) for row in rows]
+def aggregate(
+    results: list[SeedResult] | list[dict[str, Any]], rows: tuple[Row, ...] = ROWS
+) -> list[Aggregate]:
+    """Each row's value for each seed's results, in seed order (MissingMetric: a metric
+    the row reads is not in a seed's results)."""
+    typed = [SeedResult.of(r) for r in results]
+    return [Aggregate(row, tuple(row.get(r) for r in typed)) for row in rows]
 
 
-def run_labels(result: SeedResult) -> dict[str, str]:
+def run_labels(result: SeedResult | dict[str, Any]) -> dict[str, str]:
     """Run ranges that fill the measures' placeholders: {A}, {after}, {all}, {freeze}, {last}."""
-    ph = dig(result, "eval", "AB", "phases") or {}
+    ab = SeedResult.of(result).eval.get("AB")
+    ph = metric(ab, "phases") if ab is not None else {}
 
     def span(runs: list[int] | None) -> str:
         if not runs:
             return "runs ?"
         return f"run {runs[0]}" if len(runs) == 1 else f"runs {runs[0]}-{runs[-1]}"
 
-    a, after = dig(ph, "A", "runs"), dig(ph, "after", "runs")
+    a = metric(ph, "A", "runs") if "A" in ph else None  # a phase with no run: absent
+    after = metric(ph, "after", "runs") if "after" in ph else None
     every = sorted({*(a or []), *(after or [])})
-    freeze = dig(result, "eval", "AB", "freeze_run")
+    freeze = metric(ab, "freeze_run") if ab is not None else None
     return {
         "A": span(a),
         "after": span(after),

@@ -25,6 +25,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fuzzyslam.errors import ConfigError
+from fuzzyslam.se2 import rot
 
 OBSTACLES_KEY = "fuzzyslam.obstacles"
 
@@ -64,7 +65,7 @@ class Track:
 def box_polygon(centre, size, angle_deg: float) -> np.ndarray:
     """Corners (4, 2) of a rectangle of size [length, width] turned by angle_deg."""
     a = np.radians(angle_deg)
-    r = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    r = rot(a)
     half = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * (np.asarray(size, float) / 2)
     return half @ r.T + np.asarray(centre, float)
 

@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fuzzyslam.se2 import wrap_angle_scalar
 from fuzzyslam.sim.params import Bump, RobotParams, ScenarioParams
 from fuzzyslam.sim.world import loop_length, point_at
 from fuzzyslam.streams.logmeta import Event
@@ -67,11 +68,6 @@ def start_pose(centre: np.ndarray, scenario: ScenarioParams) -> np.ndarray:
     return np.array([p[0, 0], p[0, 1], math.atan2(tang[0, 1], tang[0, 0])])
 
 
-def _wrap(a: float) -> float:
-    """Scalar angle wrap to (-pi, pi] (the float twin of fuzzyslam.se2.wrap_angle, for speed)."""
-    return math.pi - (math.pi - a) % (2.0 * math.pi)
-
-
 def drive(
     centre: np.ndarray,
     robot: RobotParams,
@@ -106,7 +102,7 @@ def drive(
         v = w = 0.0
         if turning:
             g, _ = point_at(centre, np.array([s0 + direction * (sigma + robot.lookahead)]))
-            e = _wrap(math.atan2(g[0, 1] - y, g[0, 0] - x) - th)
+            e = wrap_angle_scalar(math.atan2(g[0, 1] - y, g[0, 0] - x) - th)
             if abs(e) < ALIGNED:
                 turning = False
                 events.append(Event(t=t, kind="run_start", run=run, direction=direction))
@@ -138,7 +134,7 @@ def drive(
             fade = min(1.0, sigma, max(lap - s_aim, 0.0))
             gx = g[0, 0] - direction * tg[0, 1] * offset * fade
             gy = g[0, 1] + direction * tg[0, 0] * offset * fade
-            e = _wrap(math.atan2(gy - y, gx - x) - th)
+            e = wrap_angle_scalar(math.atan2(gy - y, gx - x) - th)
             w = max(-robot.max_turn_rate, min(robot.max_turn_rate, K_OMEGA * e))
             v = 0.0 if abs(e) > math.pi / 3 else v_max * max(math.cos(e), 0.0) ** 2
             if lap - sigma < robot.lookahead:
@@ -147,12 +143,12 @@ def drive(
         th_mid = th + 0.5 * d_rot
         x += d_trans * math.cos(th_mid)
         y += d_trans * math.sin(th_mid)
-        th = _wrap(th + d_rot)
+        th = wrap_angle_scalar(th + d_rot)
         b = 0.0
         todo = bumps.get(run, [])
         if n_bumped < len(todo) and not turning and sigma >= todo[n_bumped].fraction * lap:
             b = math.radians(todo[n_bumped].angle_deg)
-            th = _wrap(th + b)
+            th = wrap_angle_scalar(th + b)
             n_bumped += 1
             events.append(Event(t=(k + 1) / robot.rate_hz, kind="bump", run=run, angle=b))
         k += 1

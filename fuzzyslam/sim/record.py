@@ -18,7 +18,7 @@ import numpy as np
 from fuzzyslam.config import config_to_dict
 from fuzzyslam.progress import Progress
 from fuzzyslam.robot import WHEEL_NAMES, sonar_frame, sonar_mounts
-from fuzzyslam.se2 import inverse_transform_points, wrap_angle
+from fuzzyslam.se2 import interpolate_pose, inverse_transform_points, wrap_angle
 from fuzzyslam.sim import camera as simcam
 from fuzzyslam.sim import sonar as simsonar
 from fuzzyslam.sim.obstacles import OBSTACLES_KEY, box_segments, discs_at, obstacles_record
@@ -48,18 +48,6 @@ def sensor_times(rate_hz: float, duration: float) -> np.ndarray:
     """Times j / rate for j = 0, 1, ... up to the duration."""
     n = int(np.floor(duration * rate_hz + 1e-9)) + 1
     return np.arange(n) / rate_hz
-
-
-def interpolate_pose(t_grid: np.ndarray, poses: np.ndarray, t: float) -> np.ndarray:
-    """True pose at time t, linear between robot steps (heading difference wrapped)."""
-    i = int(np.clip(np.searchsorted(t_grid, t, side="right") - 1, 0, len(t_grid) - 2))
-    a = (t - t_grid[i]) / (t_grid[i + 1] - t_grid[i])
-    p0, p1 = poses[i], poses[i + 1]
-    d = p1 - p0
-    d[2] = wrap_angle(d[2])
-    out = p0 + a * d
-    out[2] = wrap_angle(out[2])
-    return out
 
 
 def world_markers(world: World, lamp_z: float) -> object:

@@ -15,6 +15,7 @@ from __future__ import annotations
 import numpy as np
 
 from fuzzyslam.errors import ConfigError
+from fuzzyslam.se2 import direction_mod_pi
 from fuzzyslam.sim.params import CameraParams, WorldParams
 from fuzzyslam.streams.logmeta import Corridor, World
 
@@ -94,7 +95,7 @@ def build_world(params: WorldParams, camera: CameraParams, source: str = "config
     for i in range(n):
         j = (i + 1) % n
         a, b = pts[i], pts[j]
-        axis = float(np.mod(np.arctan2(b[1] - a[1], b[0] - a[0]), np.pi))
+        axis = direction_mod_pi(np.arctan2(b[1] - a[1], b[0] - a[0]))
         poly = [left[i], left[j], right[j], right[i]]
         corridors.append(
             Corridor(

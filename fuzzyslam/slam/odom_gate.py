@@ -1,4 +1,13 @@
-"""Odometry pose glitches: increments a wheeled robot cannot make.
+"""Odometry glitches: increments a wheeled robot cannot make (the one home of odometry
+plausibility).
+
+Two tests, both used by log-to-events (slam/inputs.py):
+
+- :func:`within_speed`, on every odometry increment (wheel encoders or poses): the
+  physical bound, ``SPEED_MARGIN`` times the robot's top speed and turn rate over the
+  increment's time plus ``SLACK_S`` (a wheel angle of +1e6 rad is a glitch, not motion);
+  after ``REANCHOR`` refusals in a row the reading is the new reference;
+- :class:`OdomGate`, on nav_msgs/Odometry poses: the arc gate below.
 
 A nav_msgs/Odometry stream from a real log may carry stray poses (a converter's
 placeholder, a reset, a pose of another stream): a jump of a metre sideways and back.
@@ -26,6 +35,20 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
+SPEED_MARGIN = 3.0  # increments over this many times the robot's top speed: refused
+SLACK_S = 0.2  # s of top speed always allowed (stamp jitter, a first message)
+REANCHOR = 5  # after this many refusals in a row, restart from the latest reading
+
+
+def within_speed(
+    dt: float, d_trans: float, d_rot: float, max_speed: float, max_turn_rate: float
+) -> bool:
+    """An increment (d_trans m, d_rot rad) the robot can drive in ``dt`` s: |d_trans| and
+    |d_rot| within ``SPEED_MARGIN`` times ``max_speed`` and ``max_turn_rate`` over
+    ``dt + SLACK_S``."""
+    span = SPEED_MARGIN * (max(dt, 0.0) + SLACK_S)
+    return abs(d_trans) <= max_speed * span and abs(d_rot) <= max_turn_rate * span
 
 
 @dataclass

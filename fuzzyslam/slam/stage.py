@@ -1,4 +1,7 @@
-"""The ``run`` stage: open a log, run EKF-SLAM over it, write the outputs atomically."""
+"""The ``run`` stage: open a log, run EKF-SLAM over it, write the outputs atomically.
+
+:func:`run` is the stage's entry (the ``run`` command's arguments); :func:`run_stage`
+the same on a loaded config and built aids."""
 
 from __future__ import annotations
 
@@ -6,6 +9,7 @@ import copy
 import importlib
 import os
 import time
+from pathlib import Path
 
 import numpy as np
 
@@ -13,13 +17,12 @@ from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, check_outputs
 from fuzzyslam.progress import Progress, note
+from fuzzyslam.rundir import OPTIONAL_OUTPUTS
 from fuzzyslam.slam.health import orphan_landmarks
-from fuzzyslam.slam.io import StreamingOutputs, open_inputs, write_outputs, write_summary
+from fuzzyslam.slam.inputs import open_inputs
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
+from fuzzyslam.slam.outputs import StreamingOutputs, write_outputs, write_summary
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
-
-# files a run writes only with some options: an old one would be mixed with a new run
-RUN_OPTIONAL_OUTPUTS = ("heading_fixes.csv", "pose_fixes.csv", "changes.csv", "changes.png")
 
 
 def make_summary(
@@ -64,6 +67,36 @@ def make_summary(
     return out
 
 
+def run(
+    log: str | os.PathLike,
+    outdir: str | os.PathLike,
+    config: str | None = None,
+    seed: int | None = None,
+    map_dir: str | os.PathLike | None = None,
+    fix: str | None = None,
+    fix_from: float | None = None,
+    ranges: str | None = None,
+    start_pose: tuple[float, float, float] | None = None,
+    adapt_noise: bool = False,
+) -> dict:
+    """The ``run`` stage on ``log`` into ``outdir``: the config ``config`` (a YAML path or
+    an embedded name; default paper.yaml) with ``seed``; with ``map_dir``, the fixes
+    ``fix`` (heading|pose|none; default the config's ``fixes.mode``) from ``fix_from``
+    (``fixes.aids.aids_for_log``, the plug-ins loaded on demand). Returns the JSON
+    summary; UsageError for options that do not go together."""
+    from fuzzyslam.config import load_config
+    from fuzzyslam.errors import UsageError
+    from fuzzyslam.fixes.aids import aids_for_log  # the plug-ins (fixes/) sit above slam/
+
+    cfg = load_config(config, seed)
+    aids = aids_for_log(Path(map_dir) if map_dir is not None else None, fix, cfg, log, fix_from)
+    if adapt_noise and aids:
+        raise UsageError("--adapt-noise cannot be combined with heading or pose fixes")
+    return run_stage(
+        log, outdir, cfg, aids, adapt_noise=adapt_noise, ranges=ranges, start_pose=start_pose
+    )
+
+
 def run_stage(
     log: str | os.PathLike,
     outdir: str | os.PathLike,
@@ -85,7 +118,7 @@ def run_stage(
     contradict is told on stderr in one line (which keys to change, to what).
 
     ``ranges`` (sonar|scan) chooses the aids' range sensor, ``start_pose`` overrides the
-    start pose (slam/io.py). A log without lamps and without aids is dead reckoning: a
+    start pose (slam/inputs.py). A log without lamps and without aids is dead reckoning: a
     one-line note on stderr says so."""
     if adapt_noise:
         if aids:
@@ -151,7 +184,7 @@ def _run_once(
             f"topics.detections {cfg.topics.detections}) and no map: the estimate is dead "
             "reckoning (give --map FGMDIR --fix pose|heading)"
         )
-    staged = OutputDir(outdir, owns=RUN_OPTIONAL_OUTPUTS)
+    staged = OutputDir(outdir, owns=OPTIONAL_OUTPUTS)
     with staged as tmp, StreamingOutputs(tmp, cfg, inputs.start_pose) as streamed:
         res = _run_filter(inputs, cfg, aids, streamed)
         for aid in aids:

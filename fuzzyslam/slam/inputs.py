@@ -1,4 +1,4 @@
-"""Edge of the SLAM stage: events from an MCAP log in, result files out.
+"""Log-to-events, the input edge of the SLAM stage: an MCAP log in, time-ordered events out.
 
 Input streams (topic names from the config's ``topics`` section):
 
@@ -23,7 +23,7 @@ skipped and counted (``odometry_jumps``).
 Glitches are counted in ``warnings`` (never silently used): frames of another
 encoding or of another size than the CameraInfo's, NaN odometry, odometry increments
 faster than the robot can move (``implausible_odometry``: wheel speeds over
-``ODOM_SPEED_MARGIN`` times ``robot.max_speed`` plus the turn at
+``SPEED_MARGIN`` (slam/odom_gate.py) times ``robot.max_speed`` plus the turn at
 ``robot.max_turn_rate``), header stamps out of order, joint states without the wheel
 joints. A CameraInfo that no pinhole ceiling camera can have (a focal length that is
 not finite and positive, fx and fy more than 1 % apart, a field of view outside
@@ -33,42 +33,28 @@ header stamps.
 
 from __future__ import annotations
 
-import csv
 import heapq
-import io
-import json
 import math
 import os
 from collections.abc import Iterator
 from dataclasses import dataclass, field
-from pathlib import Path
 
 import numpy as np
-import yaml
 
 from fuzzyslam.camera import CeilingCamera
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.robot import WHEEL_NAMES
-from fuzzyslam.se2 import compose, inverse, wrap_angle
-from fuzzyslam.slam.odom_gate import OdomGate, first_plausible_pose
-from fuzzyslam.slam.runner import Event, Frame, Odom, RingEvent, SlamResult, UpdateRow
-from fuzzyslam.stamps import TIME_FORMAT, format_time
+from fuzzyslam.slam.events import Event, Frame, Odom, RingEvent
+from fuzzyslam.slam.odom_gate import REANCHOR, OdomGate, first_plausible_pose, within_speed
 from fuzzyslam.streams import messages as M
-from fuzzyslam.streams.cdr import encode_pose_with_covariance_block, encode_tf_block
 from fuzzyslam.streams.logmeta import read_scenario
 from fuzzyslam.streams.ranges import RangeSensor, open_ranges
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.sonar import RingStats
-from fuzzyslam.streams.tum import format_tum
-from fuzzyslam.streams.writer import LogWriter
 
 CAMERA_FRAME = "ceiling_camera"
-MAP_FRAME, ODOM_FRAME, BASE_FRAME = "map", "odom", "base_link"  # the /tf tree written
 ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
-ODOM_SPEED_MARGIN = 3.0  # increments over this many times the robot's top speed: rejected
-ODOM_SLACK_S = 0.2  # s of top speed always allowed (stamp jitter, a first message)
-ODOM_REANCHOR = 5  # after this many rejections in a row, restart from the latest reading
 
 
 @dataclass
@@ -170,20 +156,17 @@ class LogInputs:
         return Odom(t, d_trans, d_rot), cur
 
     def _plausible(self, dt: float, d_trans: float, d_rot: float) -> bool:
-        """An increment the robot can drive in ``dt``: |d_trans| and |d_rot| within
-        ODOM_SPEED_MARGIN times robot.max_speed and robot.max_turn_rate (the physical
-        bound; a wheel angle of +1e6 rad is a glitch, not motion)."""
+        """slam/odom_gate.py ``within_speed`` with robot.max_speed, robot.max_turn_rate."""
         r = self.cfg.robot
-        span = ODOM_SPEED_MARGIN * (max(dt, 0.0) + ODOM_SLACK_S)
-        return abs(d_trans) <= r.max_speed * span and abs(d_rot) <= r.max_turn_rate * span
+        return within_speed(dt, d_trans, d_rot, r.max_speed, r.max_turn_rate)
 
     def _reject(self, t: float, prev, cur):
         """Count an implausible increment and drop it (the previous reading stays the
-        reference); after ODOM_REANCHOR in a row the counter was reset or replaced, so
+        reference); after odom_gate.REANCHOR in a row the counter was reset or replaced, so
         the latest reading becomes the reference (that motion is lost, and counted)."""
         self.warn("implausible_odometry", f"{self.odom_topic}: implausible jump at t={t:.3f} s")
         self._rejected_in_row += 1
-        if self._rejected_in_row >= ODOM_REANCHOR:
+        if self._rejected_in_row >= REANCHOR:
             self._rejected_in_row = 0
             self.warn("odometry_reanchored", f"{self.odom_topic}: restarted at t={t:.3f} s")
             return None, cur
@@ -412,355 +395,3 @@ def _start_pose(
     if pose.shape != (3,) or not np.all(np.isfinite(pose)):
         raise InputError(reader.path, "start pose must be three finite numbers (x, y, theta)")
     return pose
-
-
-# -- outputs -------------------------------------------------------------------------------
-
-
-def _csv_text(header: list[str], rows) -> str:
-    buf = io.StringIO()
-    w = csv.writer(buf, lineterminator="\n")
-    w.writerow(header)
-    w.writerows(rows)
-    return buf.getvalue()
-
-
-def _num(v: float) -> str:
-    return f"{v:.9g}" if math.isfinite(v) else ""
-
-
-def _fmt_rows(a: np.ndarray) -> str:
-    """CSV rows of a finite float array (N, k): the time column (first) in
-    ``stamps.TIME_FORMAT``, the others to 9 significant digits."""
-    if len(a) == 0:
-        return ""
-    fmt = ",".join([TIME_FORMAT] + ["%.9g"] * (a.shape[1] - 1))
-    return "\n".join(fmt % tuple(r) for r in a.tolist()) + "\n"
-
-
-def landmarks_dict(res: SlamResult) -> dict:
-    return {
-        "frame": "map",
-        "landmarks": [
-            {
-                "id": int(lm.id),
-                "x": float(lm.x),
-                "y": float(lm.y),
-                "cov": [[float(v) for v in row] for row in lm.cov],
-                "first_seen": float(lm.first_seen),
-                "last_seen": float(lm.last_seen),
-                "observations": int(lm.observations),
-            }
-            for lm in res.lamps
-        ],
-    }
-
-
-def _lamp_markers(t: float, lamps: np.ndarray, covs: np.ndarray) -> object:
-    """One flat ellipse per lamp (3 sigma, at least 5 cm across); marker id = lamp id."""
-    markers = []
-    for i, (xy, c) in enumerate(zip(lamps, covs, strict=True)):
-        w, v = np.linalg.eigh(c)
-        ang = float(np.arctan2(v[1, 1], v[0, 1]))
-        sx, sy = (max(6.0 * float(np.sqrt(max(e, 0.0))), 0.05) for e in (w[1], w[0]))
-        markers.append(
-            M.marker(
-                t,
-                "map",
-                "lamps",
-                i,
-                2,
-                (xy[0], xy[1], ang),
-                2.5,
-                (sx, sy, 0.02),
-                (1.0, 0.8, 0.1, 0.8),
-            )
-        )
-    return M.marker_array(markers)
-
-
-def _pose_message(t: float, pose: np.ndarray, c: np.ndarray):
-    """/slam/pose of a trajectory row (covariance row ``pxx pxy pxt pyy pyt ptt``)."""
-    cov3 = np.array([[c[0], c[1], c[2]], [c[1], c[3], c[4]], [c[2], c[4], c[5]]])
-    return M.pose_with_covariance(t, "map", pose, cov3)
-
-
-def dead_reckoning_at(t: np.ndarray, odo_t: np.ndarray, odo_poses: np.ndarray) -> np.ndarray:
-    """The dead-reckoning poses (N, 3) at times ``t``: the pose after the last odometry
-    increment at or before each time (the one the filter's estimate has integrated; the
-    first pose, the start pose, before the first increment)."""
-    idx = np.searchsorted(np.asarray(odo_t, dtype=float), np.asarray(t, dtype=float), "right")
-    return np.asarray(odo_poses, dtype=float).reshape(-1, 3)[np.maximum(idx - 1, 0)]
-
-
-def tf_payloads(t: np.ndarray, poses: np.ndarray, odo: np.ndarray) -> list[bytes]:
-    """CDR of the /tf messages of trajectory rows: map -> odom (the filter's correction,
-    estimate (+) (-)dead reckoning) and odom -> base_link (the dead reckoning ``odo`` at
-    the same times), so that map -> odom -> base_link composes to the estimate."""
-    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
-    odo = np.asarray(odo, dtype=float).reshape(-1, 3)
-    frames = [(MAP_FRAME, ODOM_FRAME), (ODOM_FRAME, BASE_FRAME)]
-    return encode_tf_block(t, frames, [compose(poses, inverse(odo)), odo])
-
-
-def _update_fields(u: UpdateRow) -> list:
-    """The updates.csv fields of one update attempt (unused innovation components empty)."""
-    return [
-        format_time(u.t),
-        u.kind,
-        u.id,
-        u.dof,
-        _num(u.nis),
-        int(u.accepted),
-        *(_num(x) for x in (*u.v, np.nan, np.nan, np.nan)[:3]),
-    ]
-
-
-UPDATES_HEADER = ["t", "kind", "id", "dof", "nis", "accepted", "v0", "v1", "v2"]
-COVARIANCE_HEADER = "t,pxx,pxy,pxt,pyy,pyt,ptt\n"
-
-
-def _tum_lines(t, poses) -> str:
-    """TUM lines of ``format_tum`` without its header line (a block of a longer file)."""
-    return format_tum(t, poses).split("\n", 1)[1]
-
-
-class ExactSum:
-    """Exactly rounded running sum of floats in O(1) memory (Shewchuk's partials, the
-    algorithm of ``math.fsum``: J. R. Shewchuk, "Adaptive precision floating-point
-    arithmetic", Discrete Comput. Geom. 18, 1997)."""
-
-    def __init__(self) -> None:
-        self.partials: list[float] = []
-        self.n = 0
-
-    def add(self, x: float) -> None:
-        i = 0
-        for y in self.partials:
-            if abs(x) < abs(y):
-                x, y = y, x
-            hi = x + y
-            lo = y - (hi - x)
-            if lo:
-                self.partials[i] = lo
-                i += 1
-            x = hi
-        self.partials[i:] = [x]
-        self.n += 1
-
-    def mean(self) -> float | None:
-        return math.fsum(self.partials) / self.n if self.n else None
-
-
-class StreamingOutputs:
-    """A ``RowSink`` (slam/runner.py) writing the files of docs/contracts.md sec. 2 into the
-    staging directory ``tmp`` as the rows come, in blocks, so memory stays flat over long
-    logs. The files are the same bytes as :func:`write_result` on the whole result, but
-    estimates.mcap, whose /slam/pose (each followed by its /tf) and /slam/landmarks
-    messages are interleaved in log-time order (same messages, same payloads). /tf needs
-    the dead reckoning at each row's time: the odometry block is integrated before each
-    block of rows, and the poses from the last one at or before the last row are kept.
-    Rows and messages are buffered and written ``rows_block`` rows at a time.
-
-    The dead reckoning is ``robot.integrate`` evaluated block by block with the running
-    sums carried over (cumulative sums are sequential, so the floats are the same).
-    Use as a context manager inside ``OutputDir``; :meth:`finish` writes landmarks.yaml
-    and the extra messages; on an exception every file is closed (and the staging
-    directory is removed by ``OutputDir``)."""
-
-    rows_block = 1024  # trajectory rows formatted per block
-    odometry_block = 4096  # odometry increments integrated per block
-
-    def __init__(self, tmp: Path, cfg: Config, start_pose: np.ndarray) -> None:
-        self.tmp = Path(tmp)
-        self.topics = cfg.topics
-        self.start_pose = np.asarray(start_pose, dtype=float)
-        self.rows = 0
-        self.lamp_nis = ExactSum()  # accepted lamp updates (summary's mean_nis_lamp)
-        self._rows: list[tuple[float, np.ndarray, np.ndarray]] = []
-        # estimates.mcap messages of the buffered block: (is /slam/landmarks, t, a, b)
-        self._messages: list[tuple[bool, float, np.ndarray, np.ndarray]] = []
-        self._odo_t: list[float] = []
-        self._odo_u: list[tuple[float, float]] = []
-        self._carry = (0.0, 0.0, 0.0)  # running sums of d_rot, dx, dy
-        self._odo_first = True
-        # dead-reckoning poses integrated but maybe still needed by /tf (from the last one
-        # at or before the last row written)
-        self._dr_t = np.zeros(0)
-        self._dr_p = np.zeros((0, 3))
-
-    def __enter__(self) -> StreamingOutputs:
-        def text(name: str):
-            return open(self.tmp / name, "w", encoding="utf-8", newline="")
-
-        self._files = []
-        try:
-            self._traj = text("trajectory.tum")
-            self._files.append(self._traj)
-            self._odo = text("odometry.tum")
-            self._files.append(self._odo)
-            self._cov = text("covariance.csv")
-            self._files.append(self._cov)
-            self._upd = text("updates.csv")
-            self._files.append(self._upd)
-            self._mcap = LogWriter(self.tmp / "estimates.mcap").__enter__()
-        except BaseException:
-            self._close()
-            raise
-        self._mcap_open = True
-        header = format_tum(np.zeros(0), np.zeros((0, 3)))  # the header line alone
-        self._traj.write(header)
-        self._odo.write(header)
-        self._cov.write(COVARIANCE_HEADER)
-        self._csv = csv.writer(self._upd, lineterminator="\n")
-        self._csv.writerow(UPDATES_HEADER)
-        return self
-
-    def __exit__(self, exc_type, exc, tb) -> None:
-        if self._mcap_open:  # not finished: an error or Ctrl-C; no estimates.mcap
-            self._mcap_open = False
-            self._mcap.__exit__(exc_type or RuntimeError, exc, tb)
-        self._close()
-
-    def _close(self) -> None:
-        for f in self._files:
-            f.close()
-
-    # -- RowSink ---------------------------------------------------------------------
-
-    def row(self, t: float, pose: np.ndarray, cov: np.ndarray) -> None:
-        self.rows += 1
-        self._rows.append((t, pose, cov))
-        self._messages.append((False, t, pose, cov))
-        if len(self._rows) >= self.rows_block:
-            self._flush_rows()
-
-    def odometry_start(self, t: float) -> None:
-        self._odo_t.append(t)
-
-    def odometry(self, t: float, d_trans: float, d_rot: float) -> None:
-        self._odo_t.append(t)
-        self._odo_u.append((d_trans, d_rot))
-        if len(self._odo_u) >= self.odometry_block:
-            self._flush_odometry()
-
-    def update(self, row: UpdateRow) -> None:
-        if row.kind == "lamp" and row.accepted:
-            self.lamp_nis.add(row.nis)
-        self._csv.writerow(_update_fields(row))
-
-    def snapshot(self, t: float, lamps: np.ndarray, covs: np.ndarray) -> None:
-        self._messages.append((True, t, lamps, covs))
-
-    # -- blocks ----------------------------------------------------------------------
-
-    def _flush_rows(self) -> None:
-        """Write the buffered rows and messages (in blocks: building the messages in a
-        batch costs half as much as one at a time between filter steps)."""
-        tp = self.topics
-        t = np.array([r[0] for r in self._rows], dtype=float)
-        poses = np.array([r[1] for r in self._rows], dtype=float).reshape(-1, 3)
-        cov = np.array([r[2] for r in self._rows], dtype=float).reshape(-1, 6)
-        cdr = iter(encode_pose_with_covariance_block(t, poses, cov, "map"))
-        self._flush_odometry()  # every increment up to the rows' times (runner: rows lag)
-        odo = dead_reckoning_at(t, self._dr_t, self._dr_p)
-        tf = iter(tf_payloads(t, poses, odo))
-        if len(t):
-            keep = max(int(np.searchsorted(self._dr_t, t[-1], "right")) - 1, 0)
-            self._dr_t, self._dr_p = self._dr_t[keep:], self._dr_p[keep:]
-        for lamps, tm, a, b in self._messages:  # in the order they came
-            if lamps:
-                self._mcap.write(tp.slam_landmarks, M.MARKER_ARRAY, _lamp_markers(tm, a, b), tm)
-            else:
-                self._mcap.write_cdr(tp.slam_pose, M.POSE_COV_STAMPED, next(cdr), tm)
-                self._mcap.write_cdr(tp.tf, M.TF_MESSAGE, next(tf), tm)
-        self._messages.clear()
-        if not self._rows:
-            return
-        self._traj.write(_tum_lines(t, poses))
-        self._cov.write(_fmt_rows(np.column_stack([t, cov])))
-        self._rows.clear()
-
-    def _flush_odometry(self) -> None:
-        """``robot.integrate`` over the buffered increments, continuing the running sums."""
-        if not self._odo_t:
-            return
-        u = np.asarray(self._odo_u, dtype=float).reshape(-1, 2)
-        d_trans, d_rot = u[:, 0], u[:, 1]
-        s = self.start_pose
-        c_rot, c_x, c_y = self._carry
-        rot = np.cumsum(np.concatenate([[c_rot], d_rot]))
-        theta = s[2] + rot
-        th_mid = theta[:-1] + 0.5 * d_rot
-        cx = np.cumsum(np.concatenate([[c_x], d_trans * np.cos(th_mid)]))
-        cy = np.cumsum(np.concatenate([[c_y], d_trans * np.sin(th_mid)]))
-        poses = np.column_stack([s[0] + cx, s[1] + cy, wrap_angle(theta)])
-        if not self._odo_first:
-            poses = poses[1:]  # the previous block's last pose, already written
-        odo_t = np.asarray(self._odo_t, dtype=float)
-        self._odo.write(_tum_lines(odo_t, poses))
-        self._dr_t = np.concatenate([self._dr_t, odo_t])
-        self._dr_p = np.concatenate([self._dr_p, poses])
-        self._carry = (float(rot[-1]), float(cx[-1]), float(cy[-1]))
-        self._odo_first = False
-        self._odo_t.clear()
-        self._odo_u.clear()
-
-    def finish(self, res: SlamResult, extra=()) -> None:
-        """Write what is left: the last blocks, landmarks.yaml and ``extra`` (topic, type
-        name, message, t) messages of estimates.mcap (e.g. the aids' /slam/changes), and
-        close estimates.mcap (renamed into place inside ``tmp``)."""
-        self._flush_rows()
-        self._flush_odometry()
-        (self.tmp / "landmarks.yaml").write_text(
-            yaml.safe_dump(landmarks_dict(res), sort_keys=False), encoding="utf-8"
-        )
-        for topic, typename, msg, t in extra:
-            self._mcap.write(topic, typename, msg, t)
-        self._mcap_open = False
-        self._mcap.__exit__(None, None, None)
-        self._close()
-
-
-def write_outputs(tmp: Path, out: StreamingOutputs, res: SlamResult, extra=()) -> None:
-    """Complete the streamed files of docs/contracts.md sec. 2 (but summary.json and the fix
-    files) in the staging directory ``tmp`` (:meth:`StreamingOutputs.finish`)."""
-    assert out.tmp == Path(tmp)
-    out.finish(res, extra)
-
-
-def write_summary(tmp: Path, summary: dict) -> None:
-    (tmp / "summary.json").write_text(
-        json.dumps(summary, indent=2, sort_keys=True, default=float) + "\n", encoding="utf-8"
-    )
-
-
-def write_result(tmp: Path, res: SlamResult, cfg: Config, extra=()) -> None:
-    """The files of docs/contracts.md sec. 2 but summary.json and the fix files, into ``tmp``,
-    from a whole in-memory result (``SlamRunner.run`` with its default ``MemorySink``).
-    ``run`` streams the same files instead (:class:`StreamingOutputs`).
-
-    ``extra``: further (topic, type name, message, t) for estimates.mcap (e.g. the aids'
-    ``/slam/changes``)."""
-    (tmp / "trajectory.tum").write_text(format_tum(res.t, res.poses), encoding="utf-8")
-    (tmp / "odometry.tum").write_text(format_tum(res.odo_t, res.odo_poses), encoding="utf-8")
-    (tmp / "covariance.csv").write_text(
-        COVARIANCE_HEADER + _fmt_rows(np.column_stack([res.t, res.cov])),
-        encoding="utf-8",
-    )
-    (tmp / "updates.csv").write_text(
-        _csv_text(UPDATES_HEADER, (_update_fields(u) for u in res.updates)), encoding="utf-8"
-    )
-    (tmp / "landmarks.yaml").write_text(
-        yaml.safe_dump(landmarks_dict(res), sort_keys=False), encoding="utf-8"
-    )
-    tp = cfg.topics
-    tf = tf_payloads(res.t, res.poses, dead_reckoning_at(res.t, res.odo_t, res.odo_poses))
-    with LogWriter(tmp / "estimates.mcap") as w:
-        for t, pose, c, m in zip(res.t, res.poses, res.cov, tf, strict=True):
-            w.write(tp.slam_pose, M.POSE_COV_STAMPED, _pose_message(t, pose, c), t)
-            w.write_cdr(tp.tf, M.TF_MESSAGE, m, t)
-        for t, lamps, covs in res.snapshots:
-            w.write(tp.slam_landmarks, M.MARKER_ARRAY, _lamp_markers(t, lamps, covs), t)
-        for topic, typename, msg, t in extra:
-            w.write(topic, typename, msg, t)

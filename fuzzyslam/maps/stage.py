@@ -1,0 +1,44 @@
+"""The ``map`` stage's entry: the command's arguments in, the map directory out
+(:func:`fuzzyslam.maps.build.build_map` does the work)."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from fuzzyslam.config import load_config
+from fuzzyslam.errors import UsageError
+from fuzzyslam.maps.build import MapOptions, build_map
+
+
+def run(
+    log: str | os.PathLike,
+    trajectory: str | os.PathLike,
+    outdir: str | os.PathLike,
+    config: str | None = None,
+    until_run: int | None = None,
+    until: float | None = None,
+    skip_uncovered: bool = False,
+    landmarks: str | os.PathLike | None = None,
+    figures: bool = True,
+    ranges: str | None = None,
+    sort: bool = False,
+) -> dict[str, Any]:
+    """The FGM of ``log``'s range readings along ``trajectory`` (TUM) into ``outdir``, frozen
+    at the end of run ``until_run`` or at the log time ``until`` (at most one; default the
+    config's ``fgm.freeze_run``). Returns the JSON summary (also summary.json)."""
+    if until is not None and until_run is not None:
+        raise UsageError("give at most one of --until-run and --until")
+    cfg = load_config(config)
+    opts = MapOptions(
+        until_run=until_run,
+        until=until,
+        skip_uncovered=skip_uncovered,
+        landmarks=Path(landmarks) if landmarks else None,
+        figures=figures,
+        explicit_config=config is not None,
+        ranges=ranges,
+        sort=sort,
+    )
+    return build_map(log, trajectory, outdir, cfg, opts)

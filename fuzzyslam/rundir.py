@@ -1,0 +1,92 @@
+"""The run directory (``fuzzyslam run -o OUTDIR``, docs/contracts.md sec. 2): its file
+names, and the one reader and writer of its landmarks.yaml.
+
+Written by the run stage (:mod:`fuzzyslam.slam.outputs`, the aids' own files from
+``fixes/``); read by ``map --landmarks``, ``evaluate`` and ``reproduce``.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import yaml
+
+from fuzzyslam.errors import InputError
+from fuzzyslam.fileio import check_input_file
+
+TRAJECTORY = "trajectory.tum"
+ODOMETRY = "odometry.tum"
+COVARIANCE = "covariance.csv"
+UPDATES = "updates.csv"
+LANDMARKS = "landmarks.yaml"
+ESTIMATES = "estimates.mcap"
+SUMMARY = "summary.json"
+HEADING_FIXES = "heading_fixes.csv"
+POSE_FIXES = "pose_fixes.csv"
+CHANGES = "changes.csv"
+# files a run writes only with some options: an old one would be mixed with a new run
+OPTIONAL_OUTPUTS = (HEADING_FIXES, POSE_FIXES, CHANGES, "changes.png")
+
+
+def landmarks_dict(lamps: Iterable[Any]) -> dict:
+    """The content of landmarks.yaml: ``{frame: map, landmarks: [{id, x, y, cov,
+    first_seen, last_seen, observations}]}`` of lamp records (``slam.events.LampRecord``:
+    ``cov`` (2, 2))."""
+    return {
+        "frame": "map",
+        "landmarks": [
+            {
+                "id": int(lm.id),
+                "x": float(lm.x),
+                "y": float(lm.y),
+                "cov": [[float(v) for v in row] for row in lm.cov],
+                "first_seen": float(lm.first_seen),
+                "last_seen": float(lm.last_seen),
+                "observations": int(lm.observations),
+            }
+            for lm in lamps
+        ],
+    }
+
+
+def write_landmarks(path: str | os.PathLike, lamps: Iterable[Any]) -> None:
+    """Write landmarks.yaml (:func:`landmarks_dict`) at ``path``."""
+    Path(path).write_text(yaml.safe_dump(landmarks_dict(lamps), sort_keys=False), encoding="utf-8")
+
+
+def read_landmarks(path: str | os.PathLike) -> tuple[np.ndarray, list[int]]:
+    """The lamps of a landmarks.yaml (this module's, or a real log's true landmarks:
+    ``{landmarks: [{id, x, y}, ...]}``, ``id`` defaulting to the position in the list).
+
+    Parameters
+    ----------
+    path : path
+        The YAML file.
+
+    Returns
+    -------
+    xy : ndarray, shape (M, 2)
+        Positions (m).
+    ids : list of int
+        Their ids.
+    """
+    p = check_input_file(path, "landmarks")
+    try:
+        data = yaml.safe_load(p.read_text(encoding="utf-8"))
+    except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
+        raise InputError(p, f"cannot read landmarks YAML: {str(exc).splitlines()[0]}") from None
+    lms = (data or {}).get("landmarks") if isinstance(data, dict) else None
+    if lms is None:
+        lms = []
+    if not isinstance(lms, list):
+        raise InputError(p, "'landmarks' must be a list")
+    try:
+        xy = np.array([[float(d["x"]), float(d["y"])] for d in lms], dtype=float).reshape(-1, 2)
+        ids = [int(d.get("id", i)) for i, d in enumerate(lms)]
+    except (KeyError, TypeError, ValueError, AttributeError) as exc:
+        raise InputError(p, f"malformed landmark entry: {exc}") from None
+    return xy, ids

@@ -1,0 +1,56 @@
+"""The ``simulate`` stage: a config in, one MCAP recording (and optionally its preview
+and true trajectory) out, atomically."""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+from typing import Any
+
+from fuzzyslam.config import DEFAULT_CONFIG, load_config
+from fuzzyslam.errors import InputError
+from fuzzyslam.fileio import atomic_path, check_outputs
+
+
+def run(
+    config: str | None,
+    output: str | os.PathLike,
+    seed: int | None = None,
+    preview: str | None = None,
+    truth_tum: str | None = None,
+) -> dict[str, Any]:
+    """Simulate ``config`` (a YAML path or an embedded name; default paper.yaml) with
+    ``seed`` into the MCAP file ``output``; ``preview`` (PNG) and ``truth_tum`` (the true
+    trajectory as TUM) are written too when given, every file complete before the log is
+    renamed into place. Returns the JSON summary."""
+    from fuzzyslam.sim.record import simulate_to_mcap
+
+    cfg_name = config if config is not None else DEFAULT_CONFIG
+    inputs = [cfg_name] if Path(cfg_name).is_file() else []
+    extras = [p for p in (preview, truth_tum) if p]
+    check_outputs(inputs, [output, *extras], kind="file")
+    if len({Path(p).resolve() for p in [output, *extras]}) != 1 + len(extras):
+        raise InputError(
+            extras[0], "the recording, --preview and --truth-tum must be different files"
+        )
+    cfg = load_config(cfg_name, seed)
+    if not extras:
+        summary, _ = simulate_to_mcap(cfg, output, source=cfg_name)
+        return summary
+    from fuzzyslam.sim.preview import save_preview
+    from fuzzyslam.sim.record import write_truth_tum
+
+    # every file complete before the log is renamed into place: never a new log beside an
+    # old preview or truth (they are renamed first, the log right after)
+    with atomic_path(output) as staged:
+        summary, plan = simulate_to_mcap(cfg, staged, source=cfg_name)
+        if preview:
+            save_preview(plan, preview, title=f"{cfg.name}, seed {cfg.seed}")
+        if truth_tum:
+            write_truth_tum(plan, truth_tum)
+    summary["file"] = str(Path(output))
+    if preview:
+        summary["preview"] = preview
+    if truth_tum:
+        summary["truth_tum"] = truth_tum
+    return summary

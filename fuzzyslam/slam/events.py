@@ -1,0 +1,159 @@
+"""The data of the EKF-SLAM loop (:mod:`fuzzyslam.slam.runner`): its events, the
+aid protocol, the rows it emits, the sink protocol and the result.
+
+Events (built from a log by :mod:`fuzzyslam.slam.inputs`, or by a test):
+
+- :class:`Odom`: an odometry increment (d_trans, d_rot) ending at time t;
+- :class:`Frame`: lamp detections z (m, 2) in base_link with covariances (m, 2, 2);
+- :class:`RingEvent`: a sonar ring, handed to the aids.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Protocol
+
+import numpy as np
+
+from fuzzyslam.slam.ekf import EkfSlam
+from fuzzyslam.slam.noise import DetectionNoiseEstimate
+from fuzzyslam.streams.sonar import Ring
+
+
+@dataclass(slots=True)
+class Odom:
+    t: float
+    d_trans: float
+    d_rot: float
+
+
+@dataclass(slots=True)
+class Frame:
+    t: float
+    z: np.ndarray
+    cov: np.ndarray
+
+
+@dataclass(slots=True)
+class RingEvent:
+    t: float
+    ring: Ring
+
+
+Event = Odom | Frame | RingEvent
+
+
+class Aid(Protocol):
+    """A plug-in that corrects the filter from sonar rings (heading or pose fixes)."""
+
+    start_time: float
+
+    def on_ring(self, t: float, ring: Ring, mounts: np.ndarray, ekf: EkfSlam) -> None: ...
+
+    def summary(self) -> dict: ...
+
+    def write(self, outdir: Path) -> None: ...
+
+
+@dataclass(slots=True)
+class UpdateRow:
+    """One measurement update attempt (updates.csv)."""
+
+    t: float
+    kind: str
+    id: int
+    dof: int
+    nis: float
+    accepted: bool
+    v: np.ndarray
+
+
+@dataclass
+class LampRecord:
+    id: int
+    x: float
+    y: float
+    cov: np.ndarray
+    first_seen: float
+    last_seen: float
+    observations: int
+
+
+class RowSink(Protocol):
+    """Receives the rows of a run in time order, each once it is final."""
+
+    def row(self, t: float, pose: np.ndarray, cov: np.ndarray) -> None:
+        """A trajectory row: pose (3,) and covariance (6,) ``pxx pxy pxt pyy pyt ptt``."""
+
+    def odometry_start(self, t: float) -> None:
+        """Time of the start pose of the dead reckoning."""
+
+    def odometry(self, t: float, d_trans: float, d_rot: float) -> None:
+        """One odometry increment ending at ``t``."""
+
+    def update(self, row: UpdateRow) -> None:
+        """One measurement update attempt."""
+
+    def snapshot(self, t: float, lamps: np.ndarray, covs: np.ndarray) -> None:
+        """The lamps (n, 2) and their covariances (n, 2, 2) at ``t``."""
+
+
+class MemorySink:
+    """A :class:`RowSink` that keeps every row in memory (tests, short logs)."""
+
+    def __init__(self) -> None:
+        self.t: list[float] = []
+        self.x: list[np.ndarray] = []
+        self.p: list[np.ndarray] = []
+        self.odo_t: list[float] = []
+        self.odo_u: list[tuple[float, float]] = []
+        self.updates: list[UpdateRow] = []
+        self.snapshots: list[tuple[float, np.ndarray, np.ndarray]] = []
+
+    def row(self, t: float, pose: np.ndarray, cov: np.ndarray) -> None:
+        self.t.append(t)
+        self.x.append(pose)
+        self.p.append(cov)
+
+    def odometry_start(self, t: float) -> None:
+        self.odo_t.append(t)
+
+    def odometry(self, t: float, d_trans: float, d_rot: float) -> None:
+        self.odo_t.append(t)
+        self.odo_u.append((d_trans, d_rot))
+
+    def update(self, row: UpdateRow) -> None:
+        self.updates.append(row)
+
+    def snapshot(self, t: float, lamps: np.ndarray, covs: np.ndarray) -> None:
+        self.snapshots.append((t, lamps, covs))
+
+
+@dataclass
+class SlamResult:
+    """Everything ``run`` writes: trajectory (N, 3) with covariance rows (N, 6), etc.
+
+    With a streaming sink the rows went to the sink: ``t``, ``poses``, ``cov`` then hold
+    only the last row, and ``odo_*``, ``updates``, ``snapshots`` are empty.
+    """
+
+    t: np.ndarray
+    poses: np.ndarray
+    cov: np.ndarray
+    odo_t: np.ndarray
+    odo_poses: np.ndarray
+    lamps: list[LampRecord]
+    updates: list[UpdateRow]
+    counts: dict[str, int]
+    snapshots: list[tuple[float, np.ndarray, np.ndarray]]
+    ekf: EkfSlam
+    # set by the run stage: numerical guards and the divergence test (slam/health.py),
+    # and the detection noise the innovations imply (slam/noise.py)
+    health: dict = field(default_factory=dict)
+    noise_estimate: DetectionNoiseEstimate | None = None
+
+    def mean_nis(self, kind: str = "lamp") -> float:
+        """Mean NIS of the accepted updates of ``kind`` (expected value: their dof)."""
+        vals = [u.nis for u in self.updates if u.kind == kind and u.accepted]
+        return float(np.mean(vals)) if vals else float("nan")

@@ -1,0 +1,262 @@
+"""The output edge of the SLAM stage: the files of docs/contracts.md sec. 2 (trajectory.tum,
+odometry.tum, covariance.csv, updates.csv, landmarks.yaml, estimates.mcap, summary.json),
+streamed as the filter's rows come (:class:`StreamingOutputs`, a ``RowSink``)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+
+from fuzzyslam.config import Config
+from fuzzyslam.exactsum import ExactSum
+from fuzzyslam.robot import integrate_from
+from fuzzyslam.rundir import (
+    COVARIANCE,
+    ESTIMATES,
+    LANDMARKS,
+    ODOMETRY,
+    SUMMARY,
+    TRAJECTORY,
+    UPDATES,
+    write_landmarks,
+)
+from fuzzyslam.se2 import compose, inverse
+from fuzzyslam.slam.events import SlamResult, UpdateRow
+from fuzzyslam.slam.markers import lamp_markers
+from fuzzyslam.stamps import TIME_FORMAT, format_time
+from fuzzyslam.streams import messages as M
+from fuzzyslam.streams.cdr import encode_pose_with_covariance_block, encode_tf_block
+from fuzzyslam.streams.tum import format_tum
+from fuzzyslam.streams.writer import LogWriter
+
+MAP_FRAME, ODOM_FRAME, BASE_FRAME = "map", "odom", "base_link"  # the /tf tree written
+
+
+def _num(v: float) -> str:
+    return f"{v:.9g}" if math.isfinite(v) else ""
+
+
+def _fmt_rows(a: np.ndarray) -> str:
+    """CSV rows of a finite float array (N, k): the time column (first) in
+    ``stamps.TIME_FORMAT``, the others to 9 significant digits."""
+    if len(a) == 0:
+        return ""
+    fmt = ",".join([TIME_FORMAT] + ["%.9g"] * (a.shape[1] - 1))
+    return "\n".join(fmt % tuple(r) for r in a.tolist()) + "\n"
+
+
+def dead_reckoning_at(t: np.ndarray, odo_t: np.ndarray, odo_poses: np.ndarray) -> np.ndarray:
+    """The dead-reckoning poses (N, 3) at times ``t``: the pose after the last odometry
+    increment at or before each time (the one the filter's estimate has integrated; the
+    first pose, the start pose, before the first increment)."""
+    idx = np.searchsorted(np.asarray(odo_t, dtype=float), np.asarray(t, dtype=float), "right")
+    return np.asarray(odo_poses, dtype=float).reshape(-1, 3)[np.maximum(idx - 1, 0)]
+
+
+def tf_payloads(t: np.ndarray, poses: np.ndarray, odo: np.ndarray) -> list[bytes]:
+    """CDR of the /tf messages of trajectory rows: map -> odom (the filter's correction,
+    estimate (+) (-)dead reckoning) and odom -> base_link (the dead reckoning ``odo`` at
+    the same times), so that map -> odom -> base_link composes to the estimate."""
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    odo = np.asarray(odo, dtype=float).reshape(-1, 3)
+    frames = [(MAP_FRAME, ODOM_FRAME), (ODOM_FRAME, BASE_FRAME)]
+    return encode_tf_block(t, frames, [compose(poses, inverse(odo)), odo])
+
+
+def _update_fields(u: UpdateRow) -> list:
+    """The updates.csv fields of one update attempt (unused innovation components empty)."""
+    return [
+        format_time(u.t),
+        u.kind,
+        u.id,
+        u.dof,
+        _num(u.nis),
+        int(u.accepted),
+        *(_num(x) for x in (*u.v, np.nan, np.nan, np.nan)[:3]),
+    ]
+
+
+UPDATES_HEADER = ["t", "kind", "id", "dof", "nis", "accepted", "v0", "v1", "v2"]
+COVARIANCE_HEADER = "t,pxx,pxy,pxt,pyy,pyt,ptt\n"
+
+
+def _tum_lines(t, poses) -> str:
+    """TUM lines of ``format_tum`` without its header line (a block of a longer file)."""
+    return format_tum(t, poses).split("\n", 1)[1]
+
+
+class StreamingOutputs:
+    """A ``RowSink`` (slam/events.py) writing the files of docs/contracts.md sec. 2 into the
+    staging directory ``tmp`` as the rows come, in blocks, so memory stays flat over long
+    logs; the bytes do not depend on the block sizes. In estimates.mcap the /slam/pose
+    (each followed by its /tf) and /slam/landmarks messages are interleaved in log-time
+    order. /tf needs
+    the dead reckoning at each row's time: the odometry block is integrated before each
+    block of rows, and the poses from the last one at or before the last row are kept.
+    Rows and messages are buffered and written ``rows_block`` rows at a time.
+
+    The dead reckoning is ``robot.integrate_from`` (``robot.integrate`` block by block with
+    the running sums carried over: the floats of one whole call).
+    Use as a context manager inside ``OutputDir``; :meth:`finish` writes landmarks.yaml
+    and the extra messages; on an exception every file is closed (and the staging
+    directory is removed by ``OutputDir``)."""
+
+    rows_block = 1024  # trajectory rows formatted per block
+    odometry_block = 4096  # odometry increments integrated per block
+
+    def __init__(self, tmp: Path, cfg: Config, start_pose: np.ndarray) -> None:
+        self.tmp = Path(tmp)
+        self.topics = cfg.topics
+        self.start_pose = np.asarray(start_pose, dtype=float)
+        self.rows = 0
+        self.lamp_nis = ExactSum()  # accepted lamp updates (summary's mean_nis_lamp)
+        self._rows: list[tuple[float, np.ndarray, np.ndarray]] = []
+        # estimates.mcap messages of the buffered block: (is /slam/landmarks, t, a, b)
+        self._messages: list[tuple[bool, float, np.ndarray, np.ndarray]] = []
+        self._odo_t: list[float] = []
+        self._odo_u: list[tuple[float, float]] = []
+        self._carry = (0.0, 0.0, 0.0)  # running sums of d_rot, dx, dy
+        self._odo_first = True
+        # dead-reckoning poses integrated but maybe still needed by /tf (from the last one
+        # at or before the last row written)
+        self._dr_t = np.zeros(0)
+        self._dr_p = np.zeros((0, 3))
+
+    def __enter__(self) -> StreamingOutputs:
+        def text(name: str):
+            return open(self.tmp / name, "w", encoding="utf-8", newline="")
+
+        self._files = []
+        try:
+            self._traj = text(TRAJECTORY)
+            self._files.append(self._traj)
+            self._odo = text(ODOMETRY)
+            self._files.append(self._odo)
+            self._cov = text(COVARIANCE)
+            self._files.append(self._cov)
+            self._upd = text(UPDATES)
+            self._files.append(self._upd)
+            self._mcap = LogWriter(self.tmp / ESTIMATES).__enter__()
+        except BaseException:
+            self._close()
+            raise
+        self._mcap_open = True
+        header = format_tum(np.zeros(0), np.zeros((0, 3)))  # the header line alone
+        self._traj.write(header)
+        self._odo.write(header)
+        self._cov.write(COVARIANCE_HEADER)
+        self._csv = csv.writer(self._upd, lineterminator="\n")
+        self._csv.writerow(UPDATES_HEADER)
+        return self
+
+    def __exit__(self, exc_type, exc, tb) -> None:
+        if self._mcap_open:  # not finished: an error or Ctrl-C; no estimates.mcap
+            self._mcap_open = False
+            self._mcap.__exit__(exc_type or RuntimeError, exc, tb)
+        self._close()
+
+    def _close(self) -> None:
+        for f in self._files:
+            f.close()
+
+    # -- RowSink ---------------------------------------------------------------------
+
+    def row(self, t: float, pose: np.ndarray, cov: np.ndarray) -> None:
+        self.rows += 1
+        self._rows.append((t, pose, cov))
+        self._messages.append((False, t, pose, cov))
+        if len(self._rows) >= self.rows_block:
+            self._flush_rows()
+
+    def odometry_start(self, t: float) -> None:
+        self._odo_t.append(t)
+
+    def odometry(self, t: float, d_trans: float, d_rot: float) -> None:
+        self._odo_t.append(t)
+        self._odo_u.append((d_trans, d_rot))
+        if len(self._odo_u) >= self.odometry_block:
+            self._flush_odometry()
+
+    def update(self, row: UpdateRow) -> None:
+        if row.kind == "lamp" and row.accepted:
+            self.lamp_nis.add(row.nis)
+        self._csv.writerow(_update_fields(row))
+
+    def snapshot(self, t: float, lamps: np.ndarray, covs: np.ndarray) -> None:
+        self._messages.append((True, t, lamps, covs))
+
+    # -- blocks ----------------------------------------------------------------------
+
+    def _flush_rows(self) -> None:
+        """Write the buffered rows and messages (in blocks: building the messages in a
+        batch costs half as much as one at a time between filter steps)."""
+        tp = self.topics
+        t = np.array([r[0] for r in self._rows], dtype=float)
+        poses = np.array([r[1] for r in self._rows], dtype=float).reshape(-1, 3)
+        cov = np.array([r[2] for r in self._rows], dtype=float).reshape(-1, 6)
+        cdr = iter(encode_pose_with_covariance_block(t, poses, cov, "map"))
+        self._flush_odometry()  # every increment up to the rows' times (runner: rows lag)
+        odo = dead_reckoning_at(t, self._dr_t, self._dr_p)
+        tf = iter(tf_payloads(t, poses, odo))
+        if len(t):
+            keep = max(int(np.searchsorted(self._dr_t, t[-1], "right")) - 1, 0)
+            self._dr_t, self._dr_p = self._dr_t[keep:], self._dr_p[keep:]
+        for lamps, tm, a, b in self._messages:  # in the order they came
+            if lamps:
+                self._mcap.write(tp.slam_landmarks, M.MARKER_ARRAY, lamp_markers(tm, a, b), tm)
+            else:
+                self._mcap.write_cdr(tp.slam_pose, M.POSE_COV_STAMPED, next(cdr), tm)
+                self._mcap.write_cdr(tp.tf, M.TF_MESSAGE, next(tf), tm)
+        self._messages.clear()
+        if not self._rows:
+            return
+        self._traj.write(_tum_lines(t, poses))
+        self._cov.write(_fmt_rows(np.column_stack([t, cov])))
+        self._rows.clear()
+
+    def _flush_odometry(self) -> None:
+        """``robot.integrate_from`` over the buffered increments, continuing the running
+        sums."""
+        if not self._odo_t:
+            return
+        u = np.asarray(self._odo_u, dtype=float).reshape(-1, 2)
+        poses, self._carry = integrate_from(self.start_pose, u[:, 0], u[:, 1], self._carry)
+        if not self._odo_first:
+            poses = poses[1:]  # the previous block's last pose, already written
+        odo_t = np.asarray(self._odo_t, dtype=float)
+        self._odo.write(_tum_lines(odo_t, poses))
+        self._dr_t = np.concatenate([self._dr_t, odo_t])
+        self._dr_p = np.concatenate([self._dr_p, poses])
+        self._odo_first = False
+        self._odo_t.clear()
+        self._odo_u.clear()
+
+    def finish(self, res: SlamResult, extra=()) -> None:
+        """Write what is left: the last blocks, landmarks.yaml and ``extra`` (topic, type
+        name, message, t) messages of estimates.mcap (e.g. the aids' /slam/changes), and
+        close estimates.mcap (renamed into place inside ``tmp``)."""
+        self._flush_rows()
+        self._flush_odometry()
+        write_landmarks(self.tmp / LANDMARKS, res.lamps)
+        for topic, typename, msg, t in extra:
+            self._mcap.write(topic, typename, msg, t)
+        self._mcap_open = False
+        self._mcap.__exit__(None, None, None)
+        self._close()
+
+
+def write_outputs(tmp: Path, out: StreamingOutputs, res: SlamResult, extra=()) -> None:
+    """Complete the streamed files of docs/contracts.md sec. 2 (but summary.json and the fix
+    files) in the staging directory ``tmp`` (:meth:`StreamingOutputs.finish`)."""
+    assert out.tmp == Path(tmp)
+    out.finish(res, extra)
+
+
+def write_summary(tmp: Path, summary: dict) -> None:
+    (tmp / SUMMARY).write_text(
+        json.dumps(summary, indent=2, sort_keys=True, default=float) + "\n", encoding="utf-8"
+    )
