@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from fuzzyslam.config import load_config
-from fuzzyslam.slam.io import open_inputs
+from fuzzyslam.slam.inputs import open_inputs
 from fuzzyslam.slam.runner import Frame
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.reader import LogReader

@@ -175,7 +175,7 @@ def seed_steps(seed: int, suite: Suite, beyond: bool = True) -> list[Step]:
             argv += ["--compare", f"{compare_label(other)}={d}/{other}"]
         deps = [f"{log}.mcap", est, map_dir, *others]
         call = {"truth": argv[1], "estimate": argv[2], "outdir": argv[4], "map_dir": argv[6]}
-        call |= {"label": label, "compare": tuple(f"{d}/{o}" for o in others)}
+        call |= {"label": label, "compare": tuple(f"{compare_label(o)}={d}/{o}" for o in others)}
         add(f"eval_{name}", "evaluate", argv, deps, COST_EVALUATE, call)
     return steps
 
