@@ -157,3 +157,17 @@ class SlamResult:
         """Mean NIS of the accepted updates of ``kind`` (expected value: their dof)."""
         vals = [u.nis for u in self.updates if u.kind == kind and u.accepted]
         return float(np.mean(vals)) if vals else float("nan")
+
+
+@dataclass(frozen=True)
+class TfFrames:
+    """The /tf tree ``run`` writes into estimates.mcap: ``map`` -> ``odom`` (the filter's
+    correction) and, unless the log already carries it on /tf, ``odom`` -> ``base`` (the
+    dead reckoning). Names follow the log's nav_msgs/Odometry (header.frame_id,
+    child_frame_id) so that the sensor log and the estimates open together as one tree
+    (REP 105)."""
+
+    map: str = "map"
+    odom: str = "odom"
+    base: str = "base_link"
+    odom_to_base: bool = True  # False: the log's own /tf has odom -> base

@@ -45,7 +45,7 @@ from fuzzyslam.camera import CeilingCamera
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.robot import WHEEL_NAMES
-from fuzzyslam.slam.events import Event, Frame, Odom, RingEvent
+from fuzzyslam.slam.events import Event, Frame, Odom, RingEvent, TfFrames
 from fuzzyslam.slam.odom_gate import REANCHOR, OdomGate, first_plausible_pose, within_speed
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.logmeta import read_scenario
@@ -83,6 +83,7 @@ class LogInputs:
     _cov_cache: tuple | None = None
     ranges: RangeSensor | None = None
     _gate: OdomGate = field(default_factory=OdomGate)
+    frames: TfFrames = field(default_factory=TfFrames)
 
     def warn(self, key: str, problem: str = "") -> None:
         self.warnings[key] = self.warnings.get(key, 0) + 1
@@ -356,7 +357,30 @@ def open_inputs(
         reader.end,
         ranges=sensor,
         _gate=gate,
+        frames=tf_frames(reader, cfg, odom_topic if odom_source == "odom" else None),
     )
+
+
+def tf_frames(reader: LogReader, cfg: Config, odom_topic: str | None) -> TfFrames:
+    """The /tf frames of the estimates (:class:`TfFrames`): the odometry's own frame names
+    when it is nav_msgs/Odometry (``odom_topic``), and whether the log's /tf already
+    carries odom -> base (looked for in its first messages), so that it is not
+    written twice."""
+    if odom_topic is None:
+        return TfFrames()
+    first = _first(reader, odom_topic)
+    odom = str(first.header.frame_id).lstrip("/") if first is not None else ""
+    base = str(first.child_frame_id).lstrip("/") if first is not None else ""
+    frames = TfFrames(odom=odom or "odom", base=base or "base_link")
+    if reader.has(cfg.topics.tf):
+        for k, m in enumerate(reader.messages([cfg.topics.tf])):
+            for ts in m.msg.transforms:
+                pair = (str(ts.header.frame_id).lstrip("/"), str(ts.child_frame_id).lstrip("/"))
+                if pair == (frames.odom, frames.base):
+                    return TfFrames(frames.map, frames.odom, frames.base, odom_to_base=False)
+            if k >= 100:
+                break
+    return frames
 
 
 def _first_odometry_pose(

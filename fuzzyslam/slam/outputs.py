@@ -25,15 +25,13 @@ from fuzzyslam.rundir import (
     write_landmarks,
 )
 from fuzzyslam.se2 import compose, inverse
-from fuzzyslam.slam.events import SlamResult, UpdateRow
+from fuzzyslam.slam.events import SlamResult, TfFrames, UpdateRow
 from fuzzyslam.slam.markers import lamp_markers
 from fuzzyslam.stamps import TIME_FORMAT, format_time
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.cdr import encode_pose_with_covariance_block, encode_tf_block
 from fuzzyslam.streams.tum import format_tum
 from fuzzyslam.streams.writer import LogWriter
-
-MAP_FRAME, ODOM_FRAME, BASE_FRAME = "map", "odom", "base_link"  # the /tf tree written
 
 
 def _num(v: float) -> str:
@@ -57,14 +55,20 @@ def dead_reckoning_at(t: np.ndarray, odo_t: np.ndarray, odo_poses: np.ndarray) -
     return np.asarray(odo_poses, dtype=float).reshape(-1, 3)[np.maximum(idx - 1, 0)]
 
 
-def tf_payloads(t: np.ndarray, poses: np.ndarray, odo: np.ndarray) -> list[bytes]:
+def tf_payloads(
+    t: np.ndarray, poses: np.ndarray, odo: np.ndarray, frames: TfFrames | None = None
+) -> list[bytes]:
     """CDR of the /tf messages of trajectory rows: map -> odom (the filter's correction,
     estimate (+) (-)dead reckoning) and odom -> base_link (the dead reckoning ``odo`` at
-    the same times), so that map -> odom -> base_link composes to the estimate."""
+    the same times), so that map -> odom -> base_link composes to the estimate; the
+    frame names and whether odom -> base is written from ``frames`` (slam/events.py)."""
+    f = frames or TfFrames()
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
     odo = np.asarray(odo, dtype=float).reshape(-1, 3)
-    frames = [(MAP_FRAME, ODOM_FRAME), (ODOM_FRAME, BASE_FRAME)]
-    return encode_tf_block(t, frames, [compose(poses, inverse(odo)), odo])
+    correction = compose(poses, inverse(odo))
+    if not f.odom_to_base:
+        return encode_tf_block(t, [(f.map, f.odom)], [correction])
+    return encode_tf_block(t, [(f.map, f.odom), (f.odom, f.base)], [correction, odo])
 
 
 def _update_fields(u: UpdateRow) -> list:
@@ -108,8 +112,11 @@ class StreamingOutputs:
     rows_block = 1024  # trajectory rows formatted per block
     odometry_block = 4096  # odometry increments integrated per block
 
-    def __init__(self, tmp: Path, cfg: Config, start_pose: np.ndarray) -> None:
+    def __init__(
+        self, tmp: Path, cfg: Config, start_pose: np.ndarray, frames: TfFrames | None = None
+    ) -> None:
         self.tmp = Path(tmp)
+        self.frames = frames or TfFrames()
         self.topics = cfg.topics
         self.start_pose = np.asarray(start_pose, dtype=float)
         self.rows = 0
@@ -198,10 +205,10 @@ class StreamingOutputs:
         t = np.array([r[0] for r in self._rows], dtype=float)
         poses = np.array([r[1] for r in self._rows], dtype=float).reshape(-1, 3)
         cov = np.array([r[2] for r in self._rows], dtype=float).reshape(-1, 6)
-        cdr = iter(encode_pose_with_covariance_block(t, poses, cov, "map"))
+        cdr = iter(encode_pose_with_covariance_block(t, poses, cov, self.frames.map))
         self._flush_odometry()  # every increment up to the rows' times (runner: rows lag)
         odo = dead_reckoning_at(t, self._dr_t, self._dr_p)
-        tf = iter(tf_payloads(t, poses, odo))
+        tf = iter(tf_payloads(t, poses, odo, self.frames))
         if len(t):
             keep = max(int(np.searchsorted(self._dr_t, t[-1], "right")) - 1, 0)
             self._dr_t, self._dr_p = self._dr_t[keep:], self._dr_p[keep:]

@@ -185,7 +185,7 @@ def _run_once(
             "reckoning (give --map FGMDIR --fix pose|heading)"
         )
     staged = OutputDir(outdir, owns=OPTIONAL_OUTPUTS)
-    with staged as tmp, StreamingOutputs(tmp, cfg, inputs.start_pose) as streamed:
+    with staged as tmp, StreamingOutputs(tmp, cfg, inputs.start_pose, inputs.frames) as streamed:
         res = _run_filter(inputs, cfg, aids, streamed)
         for aid in aids:
             aid.write(tmp)
