@@ -41,6 +41,7 @@ import argparse
 import json
 import math
 import os
+import resource
 import subprocess
 import sys
 import tempfile
@@ -64,14 +65,18 @@ def fuzzyslam(*args: str) -> dict:
     """Run one ``fuzzyslam`` command; its JSON summary and wall time."""
     env = {**os.environ, "FUZZYSLAM_NO_PROGRESS": "1"}
     t0 = time.perf_counter()
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
     out = subprocess.run(
         [sys.executable, "-m", "fuzzyslam", *args], capture_output=True, text=True, env=env
     )
     wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
     if out.returncode != 0:
         raise SystemExit(f"fuzzyslam {' '.join(args)} failed: {out.stderr.strip()}")
     summary = json.loads(out.stdout)
     summary["_wall"] = wall
+    summary["_cpu"] = cpu
     return summary
 
 
@@ -224,6 +229,8 @@ def bench_building(
             row[fix] = {
                 **errors(rdir / "trajectory.tum", truth),
                 "real_time_factor": round(s["log_duration_s"] / s["_wall"], 1),
+                "real_time_factor_cpu": round(s["log_duration_s"] / s["_cpu"], 1),
+                "cpu_ms_per_log_s": round(1e3 * s["_cpu"] / s["log_duration_s"], 2),
                 "real_time_factor_in_process": s["real_time_factor"],
             }
         if figures is not None:

@@ -27,7 +27,8 @@ from fuzzyslam.fixes.heading import (
     nearest_candidate,
 )
 from fuzzyslam.fixes.params import FixParams
-from fuzzyslam.fixes.pose_match import PoseFixAid, PoseMatcher
+from fuzzyslam.fixes.pose_aid import PoseFixAid
+from fuzzyslam.fixes.pose_match import PoseMatcher
 from fuzzyslam.fixes.references import Reference, points_in_polygon, references_from_dicts
 from fuzzyslam.maps.fgm import FgmBuilder
 from fuzzyslam.maps.flm import RecentRings, build_flm

@@ -28,7 +28,7 @@ import numpy as np
 from fuzzyslam.errors import InputError
 from fuzzyslam.fixes.changes import ChangeDetector
 from fuzzyslam.fixes.heading import FlmSource, HeadingFixAid
-from fuzzyslam.fixes.pose_match import PoseFixAid
+from fuzzyslam.fixes.pose_aid import PoseFixAid
 from fuzzyslam.fixes.references import Reference, references_from_dicts
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.maps.mapio import load_fgm, load_references

@@ -119,6 +119,12 @@ class FixParams:
     # at lags 1 / 2 / 4 / 8 rings). Chosen on paper_dark.yaml seed 0, runs 5-6, 3-dof NEES
     # (before pose_map_sigma): 10.4 at 8, 5.5 at 32, 4.9 at 100
     pose_cov_scale: float = field(default=100.0, metadata={"min": 1.0, "max": 1000.0})
+    # correlation length (m of travel) of successive matches' errors; > 0: the inflation
+    # is that of exponentially correlated errors sampled s metres apart (s the travel
+    # since the last applied match), coth(s / 2L) (the sum of their autocorrelations,
+    # Bar-Shalom et al. sec. 8.2), at most pose_cov_scale (fixes.pose_match.cov_inflation);
+    # 0: always pose_cov_scale (rings at a fixed rate)
+    pose_corr_distance: float = field(default=0.0, metadata={"min": 0.0, "max": 100.0})
     # accuracy of the frozen map itself (m, 1 sigma): a match is skipped ("prior_better")
     # while the filter's position sigma (largest axis) is below it, since the map's error
     # is the same ring after ring and would be averaged in as if it were information.
@@ -137,6 +143,11 @@ class FixParams:
     # FLM evidence: cells with m(O) or m(E) above this take part; fewer O cells: reject
     pose_min_mass: float = field(default=0.05, metadata={"min": 0.0, "max": 1.0})
     pose_min_occupied_cells: int = field(default=8, metadata={"min": 1})
+    # relocalisation (fixes.pose_aid): a ring whose match mode lies on or beyond the
+    # 3-sigma window is matched again over the widest window, and after this many
+    # consecutive gated matches agreeing on the correction of the dead reckoning the
+    # robot covariance is inflated by the innovation and the match applied; 0: never
+    pose_recover_after: int = field(default=0, metadata={"min": 0, "max": 100})
     # match every n-th ring (amortises the cost)
     pose_every: int = field(default=1, metadata={"min": 1})
 
