@@ -27,7 +27,7 @@ from fuzzyslam.fixes.heading import (
     nearest_candidate,
 )
 from fuzzyslam.fixes.params import FixParams
-from fuzzyslam.fixes.pose_aid import PoseFixAid
+from fuzzyslam.fixes.pose_aid import PoseFixAid, cov_inflation
 from fuzzyslam.fixes.pose_match import PoseMatcher
 from fuzzyslam.fixes.references import Reference, points_in_polygon, references_from_dicts
 from fuzzyslam.maps.fgm import FgmBuilder
@@ -37,6 +37,7 @@ from fuzzyslam.maps.hough import flm_wall_direction
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.robot import sonar_mounts
 from fuzzyslam.se2 import compose, rot, transform_points, wrap_angle, wrap_angle_period
+from fuzzyslam.slam.ekf import EkfSlam
 from fuzzyslam.streams.sonar import Ring
 
 FOV = math.radians(25.0)
@@ -543,6 +544,56 @@ def test_pose_match_refuses_flat_surface(room):
     flm = build_flm(np.full(16, MAXR), np.full(16, MAXR), FOV, MOUNTS, MP)
     m = PoseMatcher(fgm, FixParams()).match(flm, np.array([1.5, 1.5, 0.0]), np.eye(3) * 0.01)
     assert not m.ok and m.reason in ("no_evidence", "flat")
+
+
+def test_cov_inflation_is_the_sum_of_exponential_autocorrelations():
+    """coth(s / 2L) = sum_k rho^|k|, rho = exp(-s / L) (errors sampled s metres apart);
+    bounded by the cap (standing still), 1 far apart, the cap when L = 0 (fixed scale)."""
+    for s, corr in ((0.2, 1.5), (1.0, 1.5), (3.0, 1.0), (0.05, 0.5)):
+        rho = math.exp(-s / corr)
+        series = 1.0 + 2.0 * sum(rho**k for k in range(1, 20000))
+        assert cov_inflation(s, corr, 1e6) == pytest.approx(series, rel=1e-6)
+    assert cov_inflation(0.0, 1.5, 100.0) == 100.0
+    assert cov_inflation(0.001, 1.5, 100.0) == 100.0
+    assert cov_inflation(math.inf, 1.5, 100.0) == 1.0
+    assert cov_inflation(0.3, 0.0, 100.0) == 100.0
+
+
+def _relocalise(fgm, walls, recover_after):
+    """The real EKF, confidently wrong by 0.6 m (sigma 3 cm: a 0.2 m search window),
+    driven 6 rings along x in the L room with pose fixes."""
+    true = np.array([1.5, 1.2, 0.0])
+    ekf = EkfSlam(
+        true + np.array([0.45, -0.4, 0.0]), np.diag([0.03**2, 0.03**2, (0.5 * DEG) ** 2]),
+        (1e-5, 1e-6, 1e-5, 1e-6),
+    )  # fmt: skip
+    params = FixParams(
+        pose_cov_scale=1.0, pose_window_max=1.0, pose_recover_after=recover_after,
+        pose_map_sigma=0.0,
+    )  # fmt: skip
+    src = {}
+    aid = PoseFixAid(fgm, params, lambda r, m: src["flm"], 0.0)
+    for k in range(6):
+        src["flm"] = ideal_flm(true, walls, in_l_room)
+        aid.on_ring(float(k), ring(float(k)), MOUNTS, ekf)
+        ekf.predict(0.1, 0.0)
+        true = compose(true, [0.1, 0.0, 0.0])
+    return np.hypot(*(ekf.pose[:2] - true[:2])), aid
+
+
+def test_pose_fixes_relocalise_beyond_the_search_window(room):
+    """An offset of 0.6 m, three times the search window: the mode is on the window's edge
+    or outside it, the wide search finds it, the gate refuses it (the filter is sure), and
+    two agreeing gated matches inflate the covariance: the filter is back within 5 cm.
+    Without the recovery it stays lost."""
+    walls, fgm = room
+    err, aid = _relocalise(fgm, walls, 2)
+    reasons = [d.reason for d in aid.decisions]
+    assert reasons[0] == "gated" and "recovered" in reasons, reasons
+    assert aid.summary()["wide_searches"] >= 1 and aid.summary()["recoveries"] == 1
+    assert err < 0.05
+    err0, aid0 = _relocalise(fgm, walls, 0)
+    assert err0 > 0.5 and "recovered" not in [d.reason for d in aid0.decisions]
 
 
 # --- change detection -------------------------------------------------------------------------

@@ -12,10 +12,11 @@ Relocalisation [ours] (``pose_recover_after`` > 0): after an unmodelled disturba
 jump of the pose stream, a systematic odometry error along a corridor that no match
 could pin) the filter can be confidently wrong by more than its 3-sigma search window:
 the likelihood's mode then lies on the window's edge or outside it (``edge``,
-``no_match``). Such a ring is matched again over the widest window (``pose_window_max``,
-``pose_window_max_deg``). A match found there that the NIS gate refuses is evidence
+``no_match``). Such a ring is matched again over windows 3, 9, ... times wider, up to
+the widest (``pose_window_max``, ``pose_window_max_deg``). A match found there that the NIS gate refuses is evidence
 that the filter, not the match, is wrong only when it is repeated: when
-``pose_recover_after`` consecutive gated matches imply the same correction of the dead
+``pose_recover_after`` consecutive gated matches, spread over at least the errors'
+correlation length ``pose_corr_distance``, imply the same correction of the dead
 reckoning (the world-from-odometry transform pose_i * inv(odo_i) agrees between
 successive ones within the chi-square gate of their summed covariances), the robot
 covariance is inflated by the innovation (P_rr += diag(v^2), fading memory: Simon,
@@ -126,23 +127,43 @@ class PoseFixAid:
         self.decisions: list[PoseDecision] = []
         self.before_start = 0
         self._count = 0
-        self._last_odo: np.ndarray | None = None  # dead-reckoning xy at the last applied match
+        self._last_odo: np.ndarray | None = None  # dead-reckoning pose at the last applied match
         # gated matches since the last applied one: (measured pose, covariance, odometry)
         self._gated: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
         self.recoveries = 0
         self.wide_searches = 0
+        self.near_last = 0  # rings not matched: too near the last applied match
+
+    def _can_widen(self) -> bool:
+        """Whether the last search was narrower than the widest window."""
+        wxy, wth = self.matcher.last_window
+        p = self.params
+        return wxy < p.pose_window_max or wth < math.radians(p.pose_window_max_deg)
 
     def _recovery_due(self, m: PoseMatch, odo: np.ndarray) -> bool:
         """Whether the gated match ``m`` and the previous ``pose_recover_after`` - 1 gated
         ones agree on the world-from-odometry transform T_i = pose_i * inv(odo_i)
         (module docstring): each successive pair within the chi-square gate
-        (``pose_gate_chi2``, 3 dof) of their summed covariances, in T's frame."""
+        (``pose_gate_chi2``, 3 dof) of their summed covariances, in T's frame, and the
+        streak spanning at least ``pose_corr_distance`` of travel (closer matches share
+        their errors: a door frame matched twice is no second opinion)."""
         self._gated.append((m.pose, m.cov, np.asarray(odo, dtype=float).copy()))
-        k = self.params.pose_recover_after
-        del self._gated[:-k]
-        if len(self._gated) < k:
-            return False
-        for (pa, ca, oa), (pb, cb, ob) in zip(self._gated[:-1], self._gated[1:], strict=True):
+        del self._gated[:-32]
+        k, corr = self.params.pose_recover_after, self.params.pose_corr_distance
+        # the shortest recent streak of at least k matches spanning corr metres
+        last = self._gated[-1][2][:2]
+        n = next(
+            (
+                i
+                for i in range(k, len(self._gated) + 1)
+                if np.hypot(*(self._gated[-i][2][:2] - last)) >= corr
+            ),
+            None,
+        )
+        if n is None:
+            return False  # matches that close share their errors: no independent evidence
+        streak = self._gated[-n:]
+        for (pa, ca, oa), (pb, cb, ob) in zip(streak[:-1], streak[1:], strict=True):
             # the measured pose b predicted from a through the dead reckoning: z_a * (o_a^-1 o_b)
             pred = compose(pa, between(oa, ob))
             d = pb - pred
@@ -169,16 +190,23 @@ class PoseFixAid:
             return
         odo = getattr(ekf, "odometry_pose", None)
         odo = ekf.pose if odo is None else odo
-        travel = (
-            math.inf if self._last_odo is None else float(np.hypot(*(odo[:2] - self._last_odo)))
-        )
+        travel, turn = math.inf, math.inf
+        if self._last_odo is not None:
+            travel = float(np.hypot(*(odo[:2] - self._last_odo[:2])))
+            turn = abs(float(wrap_angle(odo[2] - self._last_odo[2])))
+        p = self.params
+        if travel < p.pose_min_travel and turn < math.radians(p.pose_min_turn_deg):
+            self.near_last += 1
+            return  # too close to the last applied match to add information (params)
         scale = cov_inflation(travel, self.params.pose_corr_distance, self.params.pose_cov_scale)
         flm = self.flm_source(ring, mounts)
         m = self.matcher.match(flm, ekf.pose, cov, scale)
         recover = self.params.pose_recover_after > 0
-        if recover and m.reason in ("edge", "no_match"):
-            # the mode lies on or beyond the 3-sigma window: search the widest one
-            m = self.matcher.match(flm, ekf.pose, cov, scale, wide=True)
+        widen = 1.0
+        while recover and m.reason in ("edge", "no_match") and self._can_widen():
+            # the mode lies on or beyond the window: search again 3 times wider
+            widen *= 3.0
+            m = self.matcher.match(flm, ekf.pose, cov, scale, widen=widen)
             self.wide_searches += 1
         if not m.ok:
             self.decisions.append(
@@ -199,7 +227,7 @@ class PoseFixAid:
             self.recoveries += 1
             self._gated.clear()
         if res.accepted:
-            self._last_odo = np.array(odo[:2], dtype=float)
+            self._last_odo = np.array(odo, dtype=float)
         v = np.asarray(res.innovation, dtype=float).reshape(-1)
         self.decisions.append(
             PoseDecision(
@@ -237,6 +265,7 @@ class PoseFixAid:
             "mean_nis": float(np.mean([d.nis for d in acc])) if acc else None,
             "recoveries": self.recoveries,
             "wide_searches": self.wide_searches,
+            "near_last_match": self.near_last,
         }
 
     def messages(self, topics: Any, start: float | None = None) -> list:

@@ -129,6 +129,7 @@ class PoseMatcher:
     def __init__(self, fgm: BeliefMap, params: FixParams) -> None:
         self.grid = fgm.grid
         self.params = params
+        self.last_window = (math.nan, math.nan)  # (xy m, heading rad) of the last search
         res = fgm.grid.resolution
         lam = params.pose_conflict_weight
         lam_o = params.pose_arc_conflict_weight
@@ -189,7 +190,7 @@ class PoseMatcher:
         pose0: np.ndarray,
         cov0: np.ndarray,
         scale: float | None = None,
-        wide: bool = False,
+        widen: float = 1.0,
     ) -> PoseMatch:
         """Measure the pose of ``flm`` in the FGM around ``pose0`` (module docstring).
 
@@ -202,9 +203,10 @@ class PoseMatcher:
             of it, clipped to ``pose_window_min``..``pose_window_max`` (and in degrees).
         scale : float, optional
             The covariance inflation (default ``pose_cov_scale``).
-        wide : bool
-            Search the widest window (``pose_window_max``, ``pose_window_max_deg``)
-            whatever ``cov0`` (relocalisation, fixes.pose_aid).
+        widen : float
+            Factor on the windows (at most ``pose_window_max``, ``pose_window_max_deg``):
+            a search again when the mode lay on the window's edge (fixes.pose_aid).
+            The windows searched are left in :attr:`last_window` (m, rad).
 
         Returns
         -------
@@ -212,8 +214,6 @@ class PoseMatcher:
         """
         p = self.params
         scale = p.pose_cov_scale if scale is None else float(scale)
-        if wide:
-            cov0 = np.diag([1e6, 1e6, 1e6])
         pose0 = np.asarray(pose0, dtype=float)
         res = self.grid.resolution
         nan3 = np.full(3, np.nan)
@@ -222,14 +222,12 @@ class PoseMatcher:
             return PoseMatch(False, "no_evidence", nan3, np.full((3, 3), np.nan))
         sig = np.sqrt(np.maximum(np.diag(np.asarray(cov0, float)), 0.0))
         wxy = float(np.clip(3.0 * max(sig[0], sig[1]), p.pose_window_min, p.pose_window_max))
+        wxy = min(wxy * widen, p.pose_window_max)
         w = max(1, math.ceil(wxy / res - 1e-9))
-        wth = float(
-            np.clip(
-                3.0 * sig[2],
-                math.radians(p.pose_window_min_deg),
-                math.radians(p.pose_window_max_deg),
-            )
-        )
+        th_max = math.radians(p.pose_window_max_deg)
+        wth = float(np.clip(3.0 * sig[2], math.radians(p.pose_window_min_deg), th_max))
+        wth = min(wth * widen, th_max)
+        self.last_window = (wxy, wth)
         cstep, fstep = math.radians(p.pose_coarse_deg), math.radians(p.pose_fine_deg)
         nc = max(1, math.ceil(wth / cstep - 1e-9))
         coarse = np.arange(-nc, nc + 1) * cstep
