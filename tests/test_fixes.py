@@ -28,7 +28,7 @@ from fuzzyslam.fixes.heading import (
 )
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.pose_aid import PoseFixAid, cov_inflation
-from fuzzyslam.fixes.pose_match import PoseMatcher
+from fuzzyslam.fixes.pose_match import PoseMatcher, flm_evidence
 from fuzzyslam.fixes.references import Reference, points_in_polygon, references_from_dicts
 from fuzzyslam.maps.fgm import FgmBuilder
 from fuzzyslam.maps.flm import RecentRings, build_flm
@@ -1076,3 +1076,17 @@ def test_pose_fix_skipped_while_filter_knows_better_than_the_map(room):
         aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
         assert aid.decisions[-1].reason == want
         assert ekf.updates == (want == "ok")
+
+
+def test_direct_correlation_equals_match_template(room):
+    """The matrix-product correlation of small windows (``pose_direct_shifts``) gives
+    cv2.matchTemplate's scores (a second implementation of the same sums)."""
+    walls, fgm = room
+    pose = np.array([1.5, 1.2, 0.3])
+    pts, masses = flm_evidence(flm_at(pose, walls), 0.05)
+    thetas = pose[2] + np.deg2rad(np.arange(-3.0, 3.5, 0.5))
+    for w in (1, 2, 4):
+        a = PoseMatcher(fgm, FixParams()).scores(pts, masses, pose, thetas, w)
+        b = PoseMatcher(fgm, FixParams(pose_direct_shifts=81)).scores(pts, masses, pose, thetas, w)
+        assert a.shape == b.shape == (len(thetas), 2 * w + 1, 2 * w + 1)
+        assert np.allclose(a, b, rtol=1e-5, atol=1e-4 * np.abs(a).max())
