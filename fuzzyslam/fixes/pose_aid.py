@@ -13,8 +13,9 @@ jump of the pose stream, a systematic odometry error along a corridor that no ma
 could pin) the filter can be confidently wrong by more than its 3-sigma search window:
 the likelihood's mode then lies on the window's edge or outside it (``edge``,
 ``no_match``). Such a ring is matched again over windows 3, 9, ... times wider, up to
-the widest (``pose_window_max``, ``pose_window_max_deg``). A match found there that the NIS gate refuses is evidence
-that the filter, not the match, is wrong only when it is repeated: when
+the widest (``pose_window_max``, ``pose_window_max_deg``). A match found there that the
+NIS gate refuses is evidence that the filter, not the match, is wrong only when it is
+repeated: when
 ``pose_recover_after`` consecutive gated matches, spread over at least the errors'
 correlation length ``pose_corr_distance``, imply the same correction of the dead
 reckoning (the world-from-odometry transform pose_i * inv(odo_i) agrees between
@@ -26,6 +27,7 @@ covariance is inflated by the innovation (P_rr += diag(v^2), fading memory: Simo
 from __future__ import annotations
 
 import csv
+import itertools
 import math
 from collections import Counter
 from collections.abc import Callable
@@ -163,7 +165,7 @@ class PoseFixAid:
         if n is None:
             return False  # matches that close share their errors: no independent evidence
         streak = self._gated[-n:]
-        for (pa, ca, oa), (pb, cb, ob) in zip(streak[:-1], streak[1:], strict=True):
+        for (pa, ca, oa), (pb, cb, ob) in itertools.pairwise(streak):
             # the measured pose b predicted from a through the dead reckoning: z_a * (o_a^-1 o_b)
             pred = compose(pa, between(oa, ob))
             d = pb - pred
