@@ -12,7 +12,8 @@ Relocalisation [ours] (``pose_recover_after`` > 0): after an unmodelled disturba
 jump of the pose stream, a systematic odometry error along a corridor that no match
 could pin) the filter can be confidently wrong by more than its 3-sigma search window:
 the likelihood's mode then lies on the window's edge or outside it (``edge``,
-``no_match``). Such a ring is matched again over windows 3, 9, ... times wider, up to
+``no_match``). Such a ring is matched again: centred on the lattice's best pose (an
+edge), then over windows 3, 9, ... times wider, up to
 the widest (``pose_window_max``, ``pose_window_max_deg``). A match found there that the
 NIS gate refuses is evidence that the filter, not the match, is wrong only when it is
 repeated: when
@@ -135,6 +136,7 @@ class PoseFixAid:
         self.recoveries = 0
         self.wide_searches = 0
         self.near_last = 0  # rings not matched: too near the last applied match
+        self.recentred = 0  # searches again centred on an edge peak
 
     def _can_widen(self) -> bool:
         """Whether the last search was narrower than the widest window."""
@@ -204,6 +206,11 @@ class PoseFixAid:
         flm = self.flm_source(ring, mounts)
         m = self.matcher.match(flm, ekf.pose, cov, scale)
         recover = self.params.pose_recover_after > 0
+        if recover and m.reason == "edge":
+            # the mode on the window's edge: first a search of the same size centred on
+            # the lattice's best pose (a hill-climbing step, as cheap as the first)
+            m = self.matcher.match(flm, self.matcher.last_peak, cov, scale)
+            self.recentred += 1
         widen = 1.0
         while recover and m.reason in ("edge", "no_match") and self._can_widen():
             # the mode lies on or beyond the window: search again 3 times wider
@@ -268,6 +275,7 @@ class PoseFixAid:
             "recoveries": self.recoveries,
             "wide_searches": self.wide_searches,
             "near_last_match": self.near_last,
+            "recentred_searches": self.recentred,
         }
 
     def messages(self, topics: Any, start: float | None = None) -> list:

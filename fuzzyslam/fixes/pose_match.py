@@ -130,6 +130,7 @@ class PoseMatcher:
         self.grid = fgm.grid
         self.params = params
         self.last_window = (math.nan, math.nan)  # (xy m, heading rad) of the last search
+        self.last_peak = np.full(3, np.nan)  # the lattice's best pose of the last "edge"
         res = fgm.grid.resolution
         lam = params.pose_conflict_weight
         lam_o = params.pose_arc_conflict_weight
@@ -316,6 +317,8 @@ class PoseMatcher:
             return PoseMatch(False, "flat", nan3, nan33, smax, ndeg, ncand)
         kb, iy, ix = np.unravel_index(int(np.argmax(s)), s.shape)
         if ndeg == 0 and (kb in (0, len(dth) - 1) or iy in (0, 2 * w) or ix in (0, 2 * w)):
+            # where the surface peaked: a search centred there may contain the mode
+            self.last_peak = pose0 + np.array([(ix - w) * res, (iy - w) * res, dth[kb]])
             return PoseMatch(False, "edge", nan3, nan33, smax, ndeg, ncand)
         cb = basis.T @ cov @ basis
         cb[degenerate, :] = 0.0
