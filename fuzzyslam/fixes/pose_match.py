@@ -172,13 +172,20 @@ class PoseMatcher:
         v = sn * px + cs * py + (frac[1] + half)  # template row
         iu, iv = np.floor(u), np.floor(v)
         au, av = u - iu, v - iv
-        # bilinear splat: 4 corners x 2 channels, one bincount
+        # bilinear splat: 4 corners, one bincount per channel (the same sums, in the same
+        # order, as one bincount over interleaved channels; half the index arithmetic)
         corner = (np.arange(n)[:, None] * size + iv.astype(np.int64)) * size + iu.astype(np.int64)
         offs = np.array([0, 1, size, size + 1])
-        flat = (corner[..., None] + offs)[..., None] * 2 + np.array([0, 1])  # (n, N, 4, 2)
+        flat = (corner[..., None] + offs).ravel()  # (n, N, 4)
         wb = np.stack([(1 - av) * (1 - au), (1 - av) * au, av * (1 - au), av * au], axis=-1)
-        wts = wb[..., None] * masses[None, :, None, :]
-        tmpl = np.bincount(flat.ravel(), weights=wts.ravel(), minlength=n * size * size * 2)
+        cells = n * size * size
+        tmpl = np.stack(
+            [
+                np.bincount(flat, weights=(wb * masses[None, :, None, ch]).ravel(), minlength=cells)
+                for ch in (0, 1)
+            ],
+            axis=-1,
+        )
         tmpl = tmpl.astype(np.float32).reshape(n, size, size, 2)
         patch = self._patch(base[1] - half - w, base[0] - half - w, size + 2 * w)
         shifts = (2 * w + 1) ** 2
