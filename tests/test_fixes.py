@@ -1090,3 +1090,33 @@ def test_direct_correlation_equals_match_template(room):
         b = PoseMatcher(fgm, FixParams(pose_direct_shifts=81)).scores(pts, masses, pose, thetas, w)
         assert a.shape == b.shape == (len(thetas), 2 * w + 1, 2 * w + 1)
         assert np.allclose(a, b, rtol=1e-5, atol=1e-4 * np.abs(a).max())
+
+
+def test_pose_matches_wait_for_travel_or_turn(room):
+    """With pose_min_travel 0.5 m and pose_min_turn_deg 20, 0.1 m steps are matched every
+    5th step after an applied match, and a turn in place of 25 deg is matched at once;
+    the covariance inflation of those matches is coth(s / 2L) of their spacing."""
+    walls, fgm = room
+    true = np.array([1.2, 1.2, 0.0])
+    ekf = EkfSlam(true.copy(), np.diag([0.05**2, 0.05**2, (1 * DEG) ** 2]), (1e-5, 0, 1e-5, 0))
+    params = FixParams(
+        pose_min_travel=0.5, pose_min_turn_deg=20.0, pose_corr_distance=1.0, pose_map_sigma=0.0
+    )
+    src = {}
+    aid = PoseFixAid(fgm, params, lambda r, m: src["flm"], 0.0)
+    matched = []
+    for k in range(11):
+        src["flm"] = ideal_flm(true, walls, in_l_room)
+        n = len(aid.decisions)
+        aid.on_ring(float(k), ring(float(k)), MOUNTS, ekf)
+        matched.append(len(aid.decisions) > n)
+        ekf.predict(0.1, 0.0)
+        true = compose(true, [0.1, 0.0, 0.0])
+    assert matched == [True, False, False, False, False, True, False, False, False, False, True]
+    assert aid.summary()["near_last_match"] == 8
+    ekf.predict(0.0, math.radians(25.0))
+    true = compose(true, [0.0, 0.0, math.radians(25.0)])
+    src["flm"] = ideal_flm(true, walls, in_l_room)
+    aid.on_ring(11.0, ring(11.0), MOUNTS, ekf)
+    assert len(aid.decisions) == 4
+    assert cov_inflation(0.5, 1.0, 100.0) == pytest.approx(1.0 / math.tanh(0.25))
