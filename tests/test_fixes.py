@@ -27,7 +27,8 @@ from fuzzyslam.fixes.heading import (
     nearest_candidate,
 )
 from fuzzyslam.fixes.params import FixParams
-from fuzzyslam.fixes.pose_match import PoseFixAid, PoseMatcher
+from fuzzyslam.fixes.pose_aid import PoseFixAid, cov_inflation
+from fuzzyslam.fixes.pose_match import PoseMatcher, flm_evidence
 from fuzzyslam.fixes.references import Reference, points_in_polygon, references_from_dicts
 from fuzzyslam.maps.fgm import FgmBuilder
 from fuzzyslam.maps.flm import RecentRings, build_flm
@@ -36,6 +37,7 @@ from fuzzyslam.maps.hough import flm_wall_direction
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.robot import sonar_mounts
 from fuzzyslam.se2 import compose, rot, transform_points, wrap_angle, wrap_angle_period
+from fuzzyslam.slam.ekf import EkfSlam
 from fuzzyslam.streams.sonar import Ring
 
 FOV = math.radians(25.0)
@@ -544,6 +546,56 @@ def test_pose_match_refuses_flat_surface(room):
     assert not m.ok and m.reason in ("no_evidence", "flat")
 
 
+def test_cov_inflation_is_the_sum_of_exponential_autocorrelations():
+    """coth(s / 2L) = sum_k rho^|k|, rho = exp(-s / L) (errors sampled s metres apart);
+    bounded by the cap (standing still), 1 far apart, the cap when L = 0 (fixed scale)."""
+    for s, corr in ((0.2, 1.5), (1.0, 1.5), (3.0, 1.0), (0.05, 0.5)):
+        rho = math.exp(-s / corr)
+        series = 1.0 + 2.0 * sum(rho**k for k in range(1, 20000))
+        assert cov_inflation(s, corr, 1e6) == pytest.approx(series, rel=1e-6)
+    assert cov_inflation(0.0, 1.5, 100.0) == 100.0
+    assert cov_inflation(0.001, 1.5, 100.0) == 100.0
+    assert cov_inflation(math.inf, 1.5, 100.0) == 1.0
+    assert cov_inflation(0.3, 0.0, 100.0) == 100.0
+
+
+def _relocalise(fgm, walls, recover_after):
+    """The real EKF, confidently wrong by 0.6 m (sigma 3 cm: a 0.2 m search window),
+    driven 6 rings along x in the L room with pose fixes."""
+    true = np.array([1.5, 1.2, 0.0])
+    ekf = EkfSlam(
+        true + np.array([0.45, -0.4, 0.0]), np.diag([0.03**2, 0.03**2, (0.5 * DEG) ** 2]),
+        (1e-5, 1e-6, 1e-5, 1e-6),
+    )  # fmt: skip
+    params = FixParams(
+        pose_cov_scale=1.0, pose_window_max=1.0, pose_recover_after=recover_after,
+        pose_map_sigma=0.0,
+    )  # fmt: skip
+    src = {}
+    aid = PoseFixAid(fgm, params, lambda r, m: src["flm"], 0.0)
+    for k in range(6):
+        src["flm"] = ideal_flm(true, walls, in_l_room)
+        aid.on_ring(float(k), ring(float(k)), MOUNTS, ekf)
+        ekf.predict(0.1, 0.0)
+        true = compose(true, [0.1, 0.0, 0.0])
+    return np.hypot(*(ekf.pose[:2] - true[:2])), aid
+
+
+def test_pose_fixes_relocalise_beyond_the_search_window(room):
+    """An offset of 0.6 m, three times the search window: the mode is on the window's edge
+    or outside it, the wide search finds it, the gate refuses it (the filter is sure), and
+    two agreeing gated matches inflate the covariance: the filter is back within 5 cm.
+    Without the recovery it stays lost."""
+    walls, fgm = room
+    err, aid = _relocalise(fgm, walls, 2)
+    reasons = [d.reason for d in aid.decisions]
+    assert reasons[0] == "gated" and "recovered" in reasons, reasons
+    assert aid.summary()["wide_searches"] >= 1 and aid.summary()["recoveries"] == 1
+    assert err < 0.05
+    err0, aid0 = _relocalise(fgm, walls, 0)
+    assert err0 > 0.5 and "recovered" not in [d.reason for d in aid0.decisions]
+
+
 # --- change detection -------------------------------------------------------------------------
 
 
@@ -1024,3 +1076,47 @@ def test_pose_fix_skipped_while_filter_knows_better_than_the_map(room):
         aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
         assert aid.decisions[-1].reason == want
         assert ekf.updates == (want == "ok")
+
+
+def test_direct_correlation_equals_match_template(room):
+    """The matrix-product correlation of small windows (``pose_direct_shifts``) gives
+    cv2.matchTemplate's scores (a second implementation of the same sums)."""
+    walls, fgm = room
+    pose = np.array([1.5, 1.2, 0.3])
+    pts, masses = flm_evidence(flm_at(pose, walls), 0.05)
+    thetas = pose[2] + np.deg2rad(np.arange(-3.0, 3.5, 0.5))
+    for w in (1, 2, 4):
+        a = PoseMatcher(fgm, FixParams()).scores(pts, masses, pose, thetas, w)
+        b = PoseMatcher(fgm, FixParams(pose_direct_shifts=81)).scores(pts, masses, pose, thetas, w)
+        assert a.shape == b.shape == (len(thetas), 2 * w + 1, 2 * w + 1)
+        assert np.allclose(a, b, rtol=1e-5, atol=1e-4 * np.abs(a).max())
+
+
+def test_pose_matches_wait_for_travel_or_turn(room):
+    """With pose_min_travel 0.5 m and pose_min_turn_deg 20, 0.1 m steps are matched every
+    5th step after an applied match, and a turn in place of 25 deg is matched at once;
+    the covariance inflation of those matches is coth(s / 2L) of their spacing."""
+    walls, fgm = room
+    true = np.array([1.2, 1.2, 0.0])
+    ekf = EkfSlam(true.copy(), np.diag([0.05**2, 0.05**2, (1 * DEG) ** 2]), (1e-5, 0, 1e-5, 0))
+    params = FixParams(
+        pose_min_travel=0.5, pose_min_turn_deg=20.0, pose_corr_distance=1.0, pose_map_sigma=0.0
+    )
+    src = {}
+    aid = PoseFixAid(fgm, params, lambda r, m: src["flm"], 0.0)
+    matched = []
+    for k in range(11):
+        src["flm"] = ideal_flm(true, walls, in_l_room)
+        n = len(aid.decisions)
+        aid.on_ring(float(k), ring(float(k)), MOUNTS, ekf)
+        matched.append(len(aid.decisions) > n)
+        ekf.predict(0.1, 0.0)
+        true = compose(true, [0.1, 0.0, 0.0])
+    assert matched == [True, False, False, False, False, True, False, False, False, False, True]
+    assert aid.summary()["near_last_match"] == 8
+    ekf.predict(0.0, math.radians(25.0))
+    true = compose(true, [0.0, 0.0, math.radians(25.0)])
+    src["flm"] = ideal_flm(true, walls, in_l_room)
+    aid.on_ring(11.0, ring(11.0), MOUNTS, ekf)
+    assert len(aid.decisions) == 4
+    assert cov_inflation(0.5, 1.0, 100.0) == pytest.approx(1.0 / math.tanh(0.25))

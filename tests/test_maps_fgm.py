@@ -319,3 +319,42 @@ def test_cone_enumeration_misses_no_cell():
         np.testing.assert_allclose(ev.masses[2][order], q_t, atol=1e-9)
         np.testing.assert_allclose(ev.masses[0][order], q_e - q_t, atol=1e-9)
         np.testing.assert_allclose(ev.masses[1][order], q_o - q_t, atol=1e-9)
+
+
+def _paint_segment(bm: BeliefMap, a, b, mass: float = 0.8) -> None:
+    """Wall evidence m(O) = mass on the cells whose centres lie within half a cell of the
+    segment a-b (the rest of the masses stays ignorance)."""
+    X, Y = bm.grid.centres()
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    e = b - a
+    u = np.clip(((X - a[0]) * e[0] + (Y - a[1]) * e[1]) / (e @ e), 0.0, 1.0)
+    d = np.hypot(X - a[0] - u * e[0], Y - a[1] - u * e[1])
+    on = d <= 0.5 * bm.grid.resolution
+    bm.m_o[on] = mass
+    bm.m_t[on] = 1.0 - mass
+
+
+def test_a_stub_beside_the_path_gives_no_confident_reference():
+    """A 7 m corridor (walls y = +-1) and a 4 m leg of path beside which the only wall is
+    a 1.5 m stub at 80 deg (a room's corner, a doorway): without a bound the stub makes a
+    confident reference 10 deg off the building's 90; with ``reference_min_strength`` of
+    a corridor segment's length it is flagged ambiguous, and the corridor is not."""
+    grid = Grid.covering(-2.0, -3.0, 13.0, 6.0, 0.1)
+    bm = BeliefMap.vacuous(grid)
+    for y in (-1.0, 1.0):
+        _paint_segment(bm, (0.0, y), (7.0, y))
+    a80 = np.deg2rad(80.0)
+    _paint_segment(bm, (10.0, 1.5), (10.0 + 1.5 * np.cos(a80), 1.5 + 1.5 * np.sin(a80)))
+    path = np.concatenate(
+        [np.column_stack([np.linspace(0, 9, 91), np.zeros(91)]),
+         np.column_stack([np.full(41, 9.0), [*np.linspace(0.1, 4.0, 40).tolist(), 4.0]])]
+    )  # fmt: skip
+    loose = extract_references(bm, path, MapParams())
+    bound = extract_references(bm, path, MapParams(reference_min_strength=3.0))
+    assert len(loose) == len(bound) == 2
+    corr = [r for r in bound if angle_error_deg(r.angle, 0.0) < 1.0]
+    stub = [r for r in bound if angle_error_deg(r.angle, a80) < 2.0]
+    assert len(corr) == 1 and len(stub) == 1, [np.rad2deg(r.angle) for r in bound]
+    assert not corr[0].ambiguous and corr[0].strength > 3.0
+    assert stub[0].ambiguous and stub[0].strength < 1.5
+    assert not next(r for r in loose if angle_error_deg(r.angle, a80) < 2.0).ambiguous

@@ -29,7 +29,7 @@ import numpy as np
 from fuzzyslam.errors import InputError, UsageError
 from fuzzyslam.fixes.changes import ChangeDetector
 from fuzzyslam.fixes.heading import FlmSource, HeadingFixAid
-from fuzzyslam.fixes.pose_match import PoseFixAid
+from fuzzyslam.fixes.pose_aid import PoseFixAid
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.maps.mapio import load_fgm, log_identity
 from fuzzyslam.references import Reference, read_references

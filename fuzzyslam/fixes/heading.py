@@ -515,6 +515,10 @@ class HeadingFixAid:
         k = self.params.recover_after
         if k <= 0 or d.oblique or d.reason != "gated" or not _formed(d):
             return []
+        if abs(float(wrap_angle(d.measured - d.predicted))) > math.radians(
+            self.params.recover_max_deg
+        ):
+            return []  # as likely another corridor's walls as a bump (recover_max_deg)
         last = [d]
         for x in reversed(history):
             if len(last) >= k or x.t < d.t - self.params.recover_window_s:

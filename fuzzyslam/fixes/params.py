@@ -60,6 +60,10 @@ class FixParams:
     # 0 / 2 / 2 -> 0, latency of the 30 true ones at most 1.2 s (was 3.55 s); without the
     # oblique rule 24 false recoveries (up to 19.7 cm)
     recover_spread_p: float = field(default=0.99, metadata={"min": 0.5, "max": 0.999999})
+    # a streak is no bump evidence when its innovation exceeds this (deg): beyond half
+    # the angle between a building's corridors a "consistent" streak is as likely the
+    # next corridor's walls (a right-angled junction) as a bump; 180: no bound
+    recover_max_deg: float = field(default=180.0, metadata={"min": 0.0, "max": 180.0})
     # the streak's rings all lie within this many seconds (skipped rings in between)
     recover_window_s: float = field(default=2.0, metadata={"min": 0.0, "max": 30.0})
 
@@ -119,6 +123,12 @@ class FixParams:
     # at lags 1 / 2 / 4 / 8 rings). Chosen on paper_dark.yaml seed 0, runs 5-6, 3-dof NEES
     # (before pose_map_sigma): 10.4 at 8, 5.5 at 32, 4.9 at 100
     pose_cov_scale: float = field(default=100.0, metadata={"min": 1.0, "max": 1000.0})
+    # correlation length (m of travel) of successive matches' errors; > 0: the inflation
+    # is that of exponentially correlated errors sampled s metres apart (s the travel
+    # since the last applied match), coth(s / 2L) (the sum of their autocorrelations,
+    # Bar-Shalom et al. sec. 8.2), at most pose_cov_scale (fixes.pose_match.cov_inflation);
+    # 0: always pose_cov_scale (rings at a fixed rate)
+    pose_corr_distance: float = field(default=0.0, metadata={"min": 0.0, "max": 100.0})
     # accuracy of the frozen map itself (m, 1 sigma): a match is skipped ("prior_better")
     # while the filter's position sigma (largest axis) is below it, since the map's error
     # is the same ring after ring and would be averaged in as if it were information.
@@ -137,6 +147,22 @@ class FixParams:
     # FLM evidence: cells with m(O) or m(E) above this take part; fewer O cells: reject
     pose_min_mass: float = field(default=0.05, metadata={"min": 0.0, "max": 1.0})
     pose_min_occupied_cells: int = field(default=8, metadata={"min": 1})
+    # relocalisation (fixes.pose_aid): a ring whose match mode lies on or beyond the
+    # 3-sigma window is matched again over 3, 9, ... times wider windows, and after this many
+    # consecutive gated matches agreeing on the correction of the dead reckoning the
+    # robot covariance is inflated by the innovation and the match applied; 0: never
+    pose_recover_after: int = field(default=0, metadata={"min": 0, "max": 100})
+    # a ring is matched only once the robot has moved this far (m) or turned this much
+    # (deg) since the last applied match (dead reckoning; 0: every ring). With errors
+    # correlated over pose_corr_distance L, matches s apart carry tanh(s / 2L) / s of
+    # information per metre (cov_inflation): L / 3 keeps 99 % of it
+    pose_min_travel: float = field(default=0.0, metadata={"min": 0.0, "max": 100.0})
+    pose_min_turn_deg: float = field(default=0.0, metadata={"min": 0.0, "max": 180.0})
+    # windows of at most this many translations are correlated by one matrix product
+    # for all rotations instead of one cv2.matchTemplate per rotation (the same sums,
+    # rounded differently; measured 10x faster for a 5 x 5 window, slower beyond about
+    # 13 x 13); 0: always matchTemplate
+    pose_direct_shifts: int = field(default=0, metadata={"min": 0, "max": 10000})
     # match every n-th ring (amortises the cost)
     pose_every: int = field(default=1, metadata={"min": 1})
 

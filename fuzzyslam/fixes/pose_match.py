@@ -63,23 +63,16 @@ directions unconstrained), a peak on the window's edge, or a second separate mod
 
 from __future__ import annotations
 
-import csv
 import math
-from collections import Counter
-from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
-from typing import Any
 
 import cv2
 import numpy as np
 from scipy import ndimage
 
-from fuzzyslam.fileio import atomic_path
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import wrap_angle
-from fuzzyslam.stamps import format_time
 
 UNCONSTRAINED_VAR = 1.0e4  # variance given to a direction the scan does not constrain
 
@@ -136,6 +129,8 @@ class PoseMatcher:
     def __init__(self, fgm: BeliefMap, params: FixParams) -> None:
         self.grid = fgm.grid
         self.params = params
+        self.last_window = (math.nan, math.nan)  # (xy m, heading rad) of the last search
+        self.last_peak = np.full(3, np.nan)  # the lattice's best pose of the last "edge"
         res = fgm.grid.resolution
         lam = params.pose_conflict_weight
         lam_o = params.pose_arc_conflict_weight
@@ -177,22 +172,65 @@ class PoseMatcher:
         v = sn * px + cs * py + (frac[1] + half)  # template row
         iu, iv = np.floor(u), np.floor(v)
         au, av = u - iu, v - iv
-        # bilinear splat: 4 corners x 2 channels, one bincount
+        # bilinear splat: 4 corners, one bincount per channel (the same sums, in the same
+        # order, as one bincount over interleaved channels; half the index arithmetic)
         corner = (np.arange(n)[:, None] * size + iv.astype(np.int64)) * size + iu.astype(np.int64)
         offs = np.array([0, 1, size, size + 1])
-        flat = (corner[..., None] + offs)[..., None] * 2 + np.array([0, 1])  # (n, N, 4, 2)
+        flat = (corner[..., None] + offs).ravel()  # (n, N, 4)
         wb = np.stack([(1 - av) * (1 - au), (1 - av) * au, av * (1 - au), av * au], axis=-1)
-        wts = wb[..., None] * masses[None, :, None, :]
-        tmpl = np.bincount(flat.ravel(), weights=wts.ravel(), minlength=n * size * size * 2)
+        cells = n * size * size
+        tmpl = np.stack(
+            [
+                np.bincount(flat, weights=(wb * masses[None, :, None, ch]).ravel(), minlength=cells)
+                for ch in (0, 1)
+            ],
+            axis=-1,
+        )
         tmpl = tmpl.astype(np.float32).reshape(n, size, size, 2)
         patch = self._patch(base[1] - half - w, base[0] - half - w, size + 2 * w)
+        shifts = (2 * w + 1) ** 2
+        if shifts <= self.params.pose_direct_shifts:
+            # few translations: every rotation's correlation at once, one matrix product
+            # of the templates (n, K) with the patch's windows (K, shifts), K = size^2 x 2
+            # (cv2.matchTemplate's DFT costs the same ~1 ms per rotation for any window)
+            win = np.lib.stride_tricks.sliding_window_view(patch, (size, size, 2))
+            win = win.reshape(shifts, -1)
+            out = tmpl.reshape(n, -1) @ win.T
+            return out.reshape(n, 2 * w + 1, 2 * w + 1)
         return np.stack([cv2.matchTemplate(patch, tmpl[i], cv2.TM_CCORR) for i in range(n)])
 
     # -- the match ------------------------------------------------------------------------
 
-    def match(self, flm: BeliefMap, pose0: np.ndarray, cov0: np.ndarray) -> PoseMatch:
-        """Measure the pose of ``flm`` in the FGM around ``pose0`` (module docstring)."""
+    def match(
+        self,
+        flm: BeliefMap,
+        pose0: np.ndarray,
+        cov0: np.ndarray,
+        scale: float | None = None,
+        widen: float = 1.0,
+    ) -> PoseMatch:
+        """Measure the pose of ``flm`` in the FGM around ``pose0`` (module docstring).
+
+        Parameters
+        ----------
+        flm : BeliefMap
+            The ring's FLM (robot frame).
+        pose0, cov0 : ndarray
+            The prediction (3,) and its covariance (3, 3): the search window is 3 sigma
+            of it, clipped to ``pose_window_min``..``pose_window_max`` (and in degrees).
+        scale : float, optional
+            The covariance inflation (default ``pose_cov_scale``).
+        widen : float
+            Factor on the windows (at most ``pose_window_max``, ``pose_window_max_deg``):
+            a search again when the mode lay on the window's edge (fixes.pose_aid).
+            The windows searched are left in :attr:`last_window` (m, rad).
+
+        Returns
+        -------
+        PoseMatch
+        """
         p = self.params
+        scale = p.pose_cov_scale if scale is None else float(scale)
         pose0 = np.asarray(pose0, dtype=float)
         res = self.grid.resolution
         nan3 = np.full(3, np.nan)
@@ -201,14 +239,12 @@ class PoseMatcher:
             return PoseMatch(False, "no_evidence", nan3, np.full((3, 3), np.nan))
         sig = np.sqrt(np.maximum(np.diag(np.asarray(cov0, float)), 0.0))
         wxy = float(np.clip(3.0 * max(sig[0], sig[1]), p.pose_window_min, p.pose_window_max))
+        wxy = min(wxy * widen, p.pose_window_max)
         w = max(1, math.ceil(wxy / res - 1e-9))
-        wth = float(
-            np.clip(
-                3.0 * sig[2],
-                math.radians(p.pose_window_min_deg),
-                math.radians(p.pose_window_max_deg),
-            )
-        )
+        th_max = math.radians(p.pose_window_max_deg)
+        wth = float(np.clip(3.0 * sig[2], math.radians(p.pose_window_min_deg), th_max))
+        wth = min(wth * widen, th_max)
+        self.last_window = (wxy, wth)
         cstep, fstep = math.radians(p.pose_coarse_deg), math.radians(p.pose_fine_deg)
         nc = max(1, math.ceil(wth / cstep - 1e-9))
         coarse = np.arange(-nc, nc + 1) * cstep
@@ -222,7 +258,7 @@ class PoseMatcher:
         pk = lk / lk.sum()
         var_th = float(pk @ (coarse - pk @ coarse) ** 2)
         if nc > 1 and var_th > p.pose_degenerate_fraction * (coarse[-1] - coarse[0]) ** 2 / 12:
-            return self._moments(pose0, coarse, _extents(coarse), s_coarse, w, res)
+            return self._moments(pose0, coarse, _extents(coarse), s_coarse, w, res, scale)
         # fine rotations within one coarse step of the coarse peak, trapezoid weights
         nf = max(1, round(cstep / fstep))
         fine = coarse[kc] + np.arange(-nf, nf + 1) * (cstep / nf)
@@ -238,7 +274,7 @@ class PoseMatcher:
         s = np.concatenate([s_coarse[keep], s_fine])
         order = np.argsort(dth)
         dth, s = dth[order], s[order]
-        return self._moments(pose0, dth, _extents(dth), s, w, res)
+        return self._moments(pose0, dth, _extents(dth), s, w, res, scale)
 
     def _moments(
         self,
@@ -248,6 +284,7 @@ class PoseMatcher:
         s: np.ndarray,
         w: int,
         res: float,
+        scale: float,
     ) -> PoseMatch:
         p = self.params
         smax = float(s.max())
@@ -287,6 +324,8 @@ class PoseMatcher:
             return PoseMatch(False, "flat", nan3, nan33, smax, ndeg, ncand)
         kb, iy, ix = np.unravel_index(int(np.argmax(s)), s.shape)
         if ndeg == 0 and (kb in (0, len(dth) - 1) or iy in (0, 2 * w) or ix in (0, 2 * w)):
+            # where the surface peaked: a search centred there may contain the mode
+            self.last_peak = pose0 + np.array([(ix - w) * res, (iy - w) * res, dth[kb]])
             return PoseMatch(False, "edge", nan3, nan33, smax, ndeg, ncand)
         cb = basis.T @ cov @ basis
         cb[degenerate, :] = 0.0
@@ -294,143 +333,7 @@ class PoseMatcher:
         cb[degenerate, degenerate] = UNCONSTRAINED_VAR
         cov = basis @ cb @ basis.T
         floor = np.array([p.pose_min_sigma, p.pose_min_sigma, math.radians(p.pose_min_sigma_deg)])
-        cov = p.pose_cov_scale * (0.5 * (cov + cov.T)) + np.diag(floor**2)
+        cov = scale * (0.5 * (cov + cov.T)) + np.diag(floor**2)
         pose = pose0 + mu
         pose[2] = wrap_angle(pose[2])
         return PoseMatch(True, "ok", pose, cov, smax, ndeg, ncand)
-
-
-POSE_FIELDS = (
-    "t", "accepted", "reason", "x", "y", "theta", "sxx", "syy", "stt", "degenerate", "nis",
-)  # fmt: skip
-
-
-@dataclass(frozen=True)
-class PoseDecision:
-    """One ring's pose fix: the match, and whether the EKF took it (NIS gate)."""
-
-    t: float
-    accepted: bool
-    reason: str
-    pose: np.ndarray
-    cov: np.ndarray
-    degenerate: int
-    nis: float
-    innovation: np.ndarray | None = None  # z - h(x) when the EKF was asked (3,)
-
-    def row(self) -> list[str]:
-        def num(v: float) -> str:
-            return "" if not np.isfinite(v) else f"{v:.9g}"
-
-        d = np.diag(self.cov)
-        vals = [*self.pose, *d]
-        return [
-            format_time(self.t),
-            str(int(self.accepted)),
-            self.reason,
-            *[num(float(v)) for v in vals],
-            str(self.degenerate),
-            num(self.nis),
-        ]
-
-
-class PoseFixAid:
-    """Plug-in of ``fuzzyslam run``: full-pose fixes update_robot(z, R, idx=[0, 1, 2])."""
-
-    kind = "pose"
-    viewer_map: Any = None  # (FGM, references) this aid shows in estimates.mcap (aids.py)
-
-    def __init__(
-        self,
-        fgm: BeliefMap,
-        params: FixParams,
-        flm_source: Callable[[Any, np.ndarray], BeliefMap],
-        start_time: float = 0.0,
-    ) -> None:
-        self.matcher = PoseMatcher(fgm, params)
-        self.params = params
-        self.flm_source = flm_source
-        self.start_time = float(start_time)
-        self.decisions: list[PoseDecision] = []
-        self.before_start = 0
-        self._count = 0
-
-    def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: Any) -> None:
-        if t < self.start_time:
-            self.before_start += 1
-            return
-        self._count += 1
-        if (self._count - 1) % self.params.pose_every:
-            return
-        cov = ekf.pose_cov
-        if np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 0.0)) < self.params.pose_map_sigma:
-            # the filter already knows its position better than the map is known: a match
-            # would only pull it toward the map's own (correlated) error
-            nan3 = np.full(3, np.nan)
-            self.decisions.append(
-                PoseDecision(t, False, "prior_better", nan3, np.full((3, 3), np.nan), 0, math.nan)
-            )
-            return
-        m = self.matcher.match(self.flm_source(ring, mounts), ekf.pose, cov)
-        if not m.ok:
-            self.decisions.append(
-                PoseDecision(t, False, m.reason, m.pose, m.cov, m.degenerate, math.nan)
-            )
-            return
-        res = ekf.update_robot(m.pose, m.cov, [0, 1, 2], gate_chi2=self.params.pose_gate_chi2)
-        reason = "ok" if res.accepted else "gated"
-        v = np.asarray(res.innovation, dtype=float).reshape(-1)
-        self.decisions.append(
-            PoseDecision(
-                t, bool(res.accepted), reason, m.pose, m.cov, m.degenerate, float(res.nis), v
-            )
-        )
-
-    def update_rows(self) -> list[dict[str, Any]]:
-        """The EKF update attempts, as rows of run's updates.csv (docs/contracts.md sec. 2)."""
-        return [
-            {
-                "t": d.t,
-                "kind": self.kind,
-                "id": -1,
-                "dof": 3,
-                "nis": d.nis,
-                "accepted": int(d.accepted),
-                "v0": d.innovation[0],
-                "v1": d.innovation[1],
-                "v2": d.innovation[2],
-            }
-            for d in self.decisions
-            if d.innovation is not None
-        ]
-
-    def summary(self) -> dict[str, Any]:
-        reasons = Counter(d.reason for d in self.decisions)
-        acc = [d for d in self.decisions if d.accepted]
-        return {
-            "rings": len(self.decisions),
-            "before_start": self.before_start,
-            "accepted": len(acc),
-            "reasons": dict(sorted(reasons.items())),
-            "degenerate": int(sum(d.degenerate > 0 for d in acc)),
-            "mean_nis": float(np.mean([d.nis for d in acc])) if acc else None,
-        }
-
-    def messages(self, topics: Any, start: float | None = None) -> list:
-        """The pose matches for estimates.mcap (``topics.pose_fixes``, fixes/viewer.py),
-        and the map (``viewer_map``, stamped ``start``) when this aid shows it."""
-        from fuzzyslam.fixes.viewer import map_messages, pose_fix_messages
-
-        fixes = pose_fix_messages(self.decisions, topics.pose_fixes)
-        return map_messages(self.viewer_map, topics, start) + fixes
-
-    def write(self, outdir: Path) -> None:
-        write_pose_fixes(Path(outdir) / "pose_fixes.csv", self.decisions)
-
-
-def write_pose_fixes(path: Path, decisions: list[PoseDecision]) -> None:
-    """pose_fixes.csv: ``t,accepted,reason,x,y,theta,sxx,syy,stt,degenerate,nis``."""
-    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(POSE_FIELDS)
-        w.writerows(d.row() for d in decisions)

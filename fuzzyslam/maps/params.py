@@ -106,6 +106,10 @@ class MapParams:
     segment_band: float = field(default=1.6, metadata={"min": 0.1, "max": 20.0})
     segment_end_trim: float = field(default=0.5, metadata={"min": 0.0, "max": 20.0})
     segment_merge_distance: float = field(default=0.8, metadata={"min": 0.0, "max": 20.0})
+    # a reference whose strongest wall line holds less than this (m of wall at full
+    # belief) is flagged ambiguous (no heading fix from it): a room, a stub or a doorway
+    # seen from the path, not a corridor; 0: no bound
+    reference_min_strength: float = field(default=0.0, metadata={"min": 0.0, "max": 100.0})
 
     def __post_init__(self) -> None:
         if self.k_occupied + self.k_empty > 1.0 + 1e-9:

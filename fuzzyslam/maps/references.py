@@ -14,7 +14,10 @@ path the map was built along (the robot drives the corridors' centre lines):
 5. each corridor's region is the rectangle along its line over the stretch's extent
    less ``segment_end_trim`` at both ends (junctions carry the next corridor's walls),
    ``segment_band`` metres either side; its wall evidence (bel(O)) goes to the Hough
-   transform (:func:`fuzzyslam.maps.hough.dominant_direction`).
+   transform (:func:`fuzzyslam.maps.hough.dominant_direction`);
+6. a reference is flagged ambiguous (no heading fix uses it) when its Hough finds two
+   directions alike, or when its strongest wall line is shorter than
+   ``reference_min_strength`` metres of wall (a room, a stub, a doorway beside the path).
 """
 
 from __future__ import annotations
@@ -165,7 +168,7 @@ def extract_references(fgm: BeliefMap, path_xy: np.ndarray, params: MapParams) -
                 wd.angle,
                 wd.strength,
                 st.polygon(params.segment_band),
-                wd.ambiguous,
+                bool(wd.ambiguous or wd.strength < params.reference_min_strength),
                 wd.cells,
                 wd,
                 st,

@@ -1,0 +1,298 @@
+"""The full-pose fix plug-in of ``fuzzyslam run`` (docs/models.md sec. 10): per ring, the
+correlative match of :mod:`fuzzyslam.fixes.pose_match` around the filter's prediction,
+applied as a direct measurement of the pose (``EkfSlam.update_robot``, NIS-gated).
+
+Correlated errors [ours]: successive matches see the same walls from nearly the same
+place, so their errors are correlated; the match covariance is inflated by the sum of
+their autocorrelations (:func:`cov_inflation`: a fixed ``pose_cov_scale`` for rings at a
+fixed rate, or from the travel between matches and the errors' correlation length
+``pose_corr_distance``).
+
+Relocalisation [ours] (``pose_recover_after`` > 0): after an unmodelled disturbance (a
+jump of the pose stream, a systematic odometry error along a corridor that no match
+could pin) the filter can be confidently wrong by more than its 3-sigma search window:
+the likelihood's mode then lies on the window's edge or outside it (``edge``,
+``no_match``). Such a ring is matched again: centred on the lattice's best pose (an
+edge), then over windows 3, 9, ... times wider, up to
+the widest (``pose_window_max``, ``pose_window_max_deg``). A match found there that the
+NIS gate refuses is evidence that the filter, not the match, is wrong only when it is
+repeated: when
+``pose_recover_after`` consecutive gated matches, spread over at least the errors'
+correlation length ``pose_corr_distance``, imply the same correction of the dead
+reckoning (the world-from-odometry transform pose_i * inv(odo_i) agrees between
+successive ones within the chi-square gate of their summed covariances), the robot
+covariance is inflated by the innovation (P_rr += diag(v^2), fading memory: Simon,
+"Optimal state estimation", sec. 7.4) and the match applied (reason ``recovered``).
+"""
+
+from __future__ import annotations
+
+import csv
+import itertools
+import math
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from fuzzyslam.fileio import atomic_path
+from fuzzyslam.fixes.params import FixParams
+from fuzzyslam.fixes.pose_match import PoseMatch, PoseMatcher
+from fuzzyslam.maps.grid import BeliefMap
+from fuzzyslam.se2 import between, compose, wrap_angle
+from fuzzyslam.stamps import format_time
+
+
+def cov_inflation(travel: float, corr_distance: float, cap: float) -> float:
+    """Covariance inflation of a match whose error is correlated with the previous
+    applied match's (module docstring; Bar-Shalom et al. sec. 8.2).
+
+    Errors with autocorrelation rho^k, rho = exp(-s / L), sampled every s metres of
+    travel: their mean carries the information of independent errors of variance
+    sum_k rho^|k| = (1 + rho) / (1 - rho) = coth(s / 2L) times theirs.
+
+    Parameters
+    ----------
+    travel : float
+        s, the distance (m) travelled since the previous applied match (inf: none).
+    corr_distance : float
+        L (m); 0 or less: ``cap`` whatever the travel.
+    cap : float
+        Upper bound (the robot standing still).
+
+    Returns
+    -------
+    float
+        The factor, in [1, cap].
+    """
+    if corr_distance <= 0:
+        return float(cap)
+    x = travel / (2.0 * corr_distance)
+    if x <= 0:
+        return float(cap)
+    return float(np.clip(1.0 / math.tanh(x), 1.0, cap)) if x < 20 else 1.0
+
+
+POSE_FIELDS = (
+    "t", "accepted", "reason", "x", "y", "theta", "sxx", "syy", "stt", "degenerate", "nis",
+)  # fmt: skip
+
+
+@dataclass(frozen=True)
+class PoseDecision:
+    """One ring's pose fix: the match, and whether the EKF took it (NIS gate)."""
+
+    t: float
+    accepted: bool
+    reason: str
+    pose: np.ndarray
+    cov: np.ndarray
+    degenerate: int
+    nis: float
+    innovation: np.ndarray | None = None  # z - h(x) when the EKF was asked (3,)
+
+    def row(self) -> list[str]:
+        def num(v: float) -> str:
+            return "" if not np.isfinite(v) else f"{v:.9g}"
+
+        d = np.diag(self.cov)
+        vals = [*self.pose, *d]
+        return [
+            format_time(self.t),
+            str(int(self.accepted)),
+            self.reason,
+            *[num(float(v)) for v in vals],
+            str(self.degenerate),
+            num(self.nis),
+        ]
+
+
+class PoseFixAid:
+    """Plug-in of ``fuzzyslam run``: full-pose fixes update_robot(z, R, idx=[0, 1, 2])."""
+
+    kind = "pose"
+    viewer_map: Any = None  # (FGM, references) this aid shows in estimates.mcap (aids.py)
+
+    def __init__(
+        self,
+        fgm: BeliefMap,
+        params: FixParams,
+        flm_source: Callable[[Any, np.ndarray], BeliefMap],
+        start_time: float = 0.0,
+    ) -> None:
+        self.matcher = PoseMatcher(fgm, params)
+        self.params = params
+        self.flm_source = flm_source
+        self.start_time = float(start_time)
+        self.decisions: list[PoseDecision] = []
+        self.before_start = 0
+        self._count = 0
+        self._last_odo: np.ndarray | None = None  # dead-reckoning pose at the last applied match
+        # gated matches since the last applied one: (measured pose, covariance, odometry)
+        self._gated: list[tuple[np.ndarray, np.ndarray, np.ndarray]] = []
+        self.recoveries = 0
+        self.wide_searches = 0
+        self.near_last = 0  # rings not matched: too near the last applied match
+        self.recentred = 0  # searches again centred on an edge peak
+
+    def _can_widen(self) -> bool:
+        """Whether the last search was narrower than the widest window."""
+        wxy, wth = self.matcher.last_window
+        p = self.params
+        return wxy < p.pose_window_max or wth < math.radians(p.pose_window_max_deg)
+
+    def _recovery_due(self, m: PoseMatch, odo: np.ndarray) -> bool:
+        """Whether the gated match ``m`` and the previous ``pose_recover_after`` - 1 gated
+        ones agree on the world-from-odometry transform T_i = pose_i * inv(odo_i)
+        (module docstring): each successive pair within the chi-square gate
+        (``pose_gate_chi2``, 3 dof) of their summed covariances, in T's frame, and the
+        streak spanning at least ``pose_corr_distance`` of travel (closer matches share
+        their errors: a door frame matched twice is no second opinion)."""
+        self._gated.append((m.pose, m.cov, np.asarray(odo, dtype=float).copy()))
+        del self._gated[:-32]
+        k, corr = self.params.pose_recover_after, self.params.pose_corr_distance
+        # the shortest recent streak of at least k matches spanning corr metres
+        last = self._gated[-1][2][:2]
+        n = next(
+            (
+                i
+                for i in range(k, len(self._gated) + 1)
+                if np.hypot(*(self._gated[-i][2][:2] - last)) >= corr
+            ),
+            None,
+        )
+        if n is None:
+            return False  # matches that close share their errors: no independent evidence
+        streak = self._gated[-n:]
+        for (pa, ca, oa), (pb, cb, ob) in itertools.pairwise(streak):
+            # the measured pose b predicted from a through the dead reckoning: z_a * (o_a^-1 o_b)
+            pred = compose(pa, between(oa, ob))
+            d = pb - pred
+            d[2] = wrap_angle(d[2])
+            if float(d @ np.linalg.solve(ca + cb, d)) > self.params.pose_gate_chi2:
+                return False
+        return True
+
+    def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: Any) -> None:
+        if t < self.start_time:
+            self.before_start += 1
+            return
+        self._count += 1
+        if (self._count - 1) % self.params.pose_every:
+            return
+        cov = ekf.pose_cov
+        if np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 0.0)) < self.params.pose_map_sigma:
+            # the filter already knows its position better than the map is known: a match
+            # would only pull it toward the map's own (correlated) error
+            nan3 = np.full(3, np.nan)
+            self.decisions.append(
+                PoseDecision(t, False, "prior_better", nan3, np.full((3, 3), np.nan), 0, math.nan)
+            )
+            return
+        odo = getattr(ekf, "odometry_pose", None)
+        odo = ekf.pose if odo is None else odo
+        travel, turn = math.inf, math.inf
+        if self._last_odo is not None:
+            travel = float(np.hypot(*(odo[:2] - self._last_odo[:2])))
+            turn = abs(float(wrap_angle(odo[2] - self._last_odo[2])))
+        p = self.params
+        if travel < p.pose_min_travel and turn < math.radians(p.pose_min_turn_deg):
+            self.near_last += 1
+            return  # too close to the last applied match to add information (params)
+        scale = cov_inflation(travel, self.params.pose_corr_distance, self.params.pose_cov_scale)
+        flm = self.flm_source(ring, mounts)
+        m = self.matcher.match(flm, ekf.pose, cov, scale)
+        recover = self.params.pose_recover_after > 0
+        if recover and m.reason == "edge":
+            # the mode on the window's edge: first a search of the same size centred on
+            # the lattice's best pose (a hill-climbing step, as cheap as the first)
+            m = self.matcher.match(flm, self.matcher.last_peak, cov, scale)
+            self.recentred += 1
+        widen = 1.0
+        while recover and m.reason in ("edge", "no_match") and self._can_widen():
+            # the mode lies on or beyond the window: search again 3 times wider
+            widen *= 3.0
+            m = self.matcher.match(flm, ekf.pose, cov, scale, widen=widen)
+            self.wide_searches += 1
+        if not m.ok:
+            self.decisions.append(
+                PoseDecision(t, False, m.reason, m.pose, m.cov, m.degenerate, math.nan)
+            )
+            return
+        res = ekf.update_robot(m.pose, m.cov, [0, 1, 2], gate_chi2=self.params.pose_gate_chi2)
+        reason = "ok" if res.accepted else "gated"
+        if res.accepted:
+            self._gated.clear()
+        elif recover and self._recovery_due(m, odo):
+            # the last pose_recover_after gated matches agree on the correction of the
+            # dead reckoning: the filter is wrong, not the matches (module docstring)
+            v = np.asarray(res.innovation, dtype=float).reshape(3)
+            ekf.inflate_robot(np.diag(v * v))
+            res = ekf.update_robot(m.pose, m.cov, [0, 1, 2], gate_chi2=None)
+            reason = "recovered"
+            self.recoveries += 1
+            self._gated.clear()
+        if res.accepted:
+            self._last_odo = np.array(odo, dtype=float)
+        v = np.asarray(res.innovation, dtype=float).reshape(-1)
+        self.decisions.append(
+            PoseDecision(
+                t, bool(res.accepted), reason, m.pose, m.cov, m.degenerate, float(res.nis), v
+            )
+        )
+
+    def update_rows(self) -> list[dict[str, Any]]:
+        """The EKF update attempts, as rows of run's updates.csv (docs/contracts.md sec. 2)."""
+        return [
+            {
+                "t": d.t,
+                "kind": self.kind,
+                "id": -1,
+                "dof": 3,
+                "nis": d.nis,
+                "accepted": int(d.accepted),
+                "v0": d.innovation[0],
+                "v1": d.innovation[1],
+                "v2": d.innovation[2],
+            }
+            for d in self.decisions
+            if d.innovation is not None
+        ]
+
+    def summary(self) -> dict[str, Any]:
+        reasons = Counter(d.reason for d in self.decisions)
+        acc = [d for d in self.decisions if d.accepted]
+        return {
+            "rings": len(self.decisions),
+            "before_start": self.before_start,
+            "accepted": len(acc),
+            "reasons": dict(sorted(reasons.items())),
+            "degenerate": int(sum(d.degenerate > 0 for d in acc)),
+            "mean_nis": float(np.mean([d.nis for d in acc])) if acc else None,
+            "recoveries": self.recoveries,
+            "wide_searches": self.wide_searches,
+            "near_last_match": self.near_last,
+            "recentred_searches": self.recentred,
+        }
+
+    def messages(self, topics: Any, start: float | None = None) -> list:
+        """The pose matches for estimates.mcap (``topics.pose_fixes``, fixes/viewer.py),
+        and the map (``viewer_map``, stamped ``start``) when this aid shows it."""
+        from fuzzyslam.fixes.viewer import map_messages, pose_fix_messages
+
+        fixes = pose_fix_messages(self.decisions, topics.pose_fixes)
+        return map_messages(self.viewer_map, topics, start) + fixes
+
+    def write(self, outdir: Path) -> None:
+        write_pose_fixes(Path(outdir) / "pose_fixes.csv", self.decisions)
+
+
+def write_pose_fixes(path: Path, decisions: list[PoseDecision]) -> None:
+    """pose_fixes.csv: ``t,accepted,reason,x,y,theta,sxx,syy,stt,degenerate,nis``."""
+    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(POSE_FIELDS)
+        w.writerows(d.row() for d in decisions)
