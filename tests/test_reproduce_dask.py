@@ -229,6 +229,23 @@ def test_reproduce_on_dask_equals_the_local_run(tmp_path, dask_cluster):
     assert untimed_rows[0] == untimed_rows[1]
 
 
+@pytest.mark.slow
+def test_an_output_directory_a_worker_cannot_see_is_one_line(tmp_path, dask_cluster):
+    """Workers must share the filesystem: a plan whose directory a worker does not see (a
+    path absent there) stops with one line naming the path and the worker."""
+    from fuzzyslam.errors import InputError
+    from fuzzyslam.reproduce.execute import StepFailed
+
+    address, workers = dask_cluster
+    root = tmp_path / "only-on-the-client"
+    with pytest.raises(StepFailed) as exc:
+        execute([Step("seed0/a", ("--version",), (), 1.0)], root, scheduler=address)
+    msg = str(exc.value)
+    assert "\n" not in msg and "not visible on this worker" in msg
+    assert str(root) in msg and any(w in msg for w in workers)
+    assert exc.value.exit_code == InputError.exit_code
+
+
 # --- sweep (slow) ---------------------------------------------------------------------------
 
 
