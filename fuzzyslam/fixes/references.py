@@ -11,6 +11,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass
+from functools import cached_property
 from typing import Any
 
 import numpy as np
@@ -30,8 +31,19 @@ class Reference:
     polygon: np.ndarray  # (K, 2), K >= 3
     ambiguous: bool = False  # the map stage found no single dominant direction
 
+    @cached_property
+    def _box(self) -> tuple[float, float, float, float]:
+        """The polygon's bounding box grown by 1 um: a point beyond it is outside (no
+        edge straddles its y, or all cross on one side), so ``contains`` skips the test."""
+        lo, hi = self.polygon.min(axis=0), self.polygon.max(axis=0)
+        return float(lo[0]) - 1e-6, float(lo[1]) - 1e-6, float(hi[0]) + 1e-6, float(hi[1]) + 1e-6
+
     def contains(self, xy: Sequence[float]) -> bool:
-        return bool(points_in_polygon(np.asarray(xy, float).reshape(1, 2), self.polygon)[0])
+        p = np.asarray(xy, float).reshape(1, 2)
+        x0, y0, x1, y1 = self._box
+        if not (x0 <= p[0, 0] <= x1 and y0 <= p[0, 1] <= y1):
+            return False
+        return bool(points_in_polygon(p, self.polygon)[0])
 
 
 def points_in_polygon(pts: np.ndarray, poly: np.ndarray) -> np.ndarray:
