@@ -103,6 +103,7 @@ def side_by_side_reproduce(args) -> None:
 
     src = export_revision(args.baseline)
     work = args.workdir or Path(tempfile.mkdtemp(prefix="bench_reproduce."))
+    work.mkdir(parents=True, exist_ok=True)
     for name, extra in (("paper", ["--paper-only"]), ("full", [])):
         if args.only and name != args.only:
             continue

@@ -135,11 +135,15 @@ def dask_cluster(tmp_path):
             if sched_file.is_file() and sched_file.stat().st_size > 0:
                 break
             time.sleep(0.1)
-        for i in range(2):
+        for i in range(2):  # each in a working directory (and temp directory) of its own
+            home = tmp_path / f"worker{i}"
+            home.mkdir()
             procs.append(subprocess.Popen(
                 [BIN / "dask", "worker", "--scheduler-file", sched_file, "--nthreads", "1",
-                 "--nworkers", "1", "--host", "127.0.0.1", "--no-dashboard"],
-                stdout=subprocess.DEVNULL, stderr=open(logs / f"worker{i}.log", "w"), env=env,
+                 "--nworkers", "1", "--host", "127.0.0.1", "--no-dashboard",
+                 "--local-directory", home],
+                stdout=subprocess.DEVNULL, stderr=open(logs / f"worker{i}.log", "w"),
+                env={**env, "TMPDIR": str(home)}, cwd=home,
             ))  # fmt: skip
         with Client(scheduler_file=str(sched_file), timeout=30) as client:
             client.wait_for_workers(2, timeout=60)
@@ -244,6 +248,37 @@ def test_an_output_directory_a_worker_cannot_see_is_one_line(tmp_path, dask_clus
     assert "\n" not in msg and "not visible on this worker" in msg
     assert str(root) in msg and any(w in msg for w in workers)
     assert exc.value.exit_code == InputError.exit_code
+
+
+@pytest.mark.slow
+def test_reproduce_ships_the_files_with_the_tasks(tmp_path, dask_cluster):
+    """``--ship-files``: each step's inputs go to a worker as bytes, it runs in a private
+    directory under the worker's own temp directory, and its outputs come back to the
+    client; the same files byte for byte as the local run (timings aside), every step on
+    the two workers (each in a working directory of its own)."""
+    address, worker_pids = dask_cluster
+    args = ("reproduce", "--quick", "--paper-only", "--seeds", "1")
+    local, remote = tmp_path / "local", tmp_path / "remote"
+    p = cli(*args, "-o", local)
+    assert p.returncode == 0, p.stderr
+    p = cli(*args, "-o", remote, "--scheduler", address, "--ship-files")
+    assert p.returncode == 0, p.stderr
+    results = json.loads((remote / "results.json").read_text())
+    used = {(s["worker"], s["pid"]) for s in results["steps"]}
+    assert used <= set(worker_pids.items()) and {w for w, _ in used} == set(worker_pids)
+    assert _table(remote / "report.md") == _table(local / "report.md")
+    files = sorted(f.relative_to(local) for f in local.glob("seed*/**/*") if f.is_file())
+    assert len(files) > 20
+    assert files == sorted(f.relative_to(remote) for f in remote.glob("seed*/**/*")
+                           if f.is_file())  # fmt: skip
+    for rel in files:
+        a, b = (local / rel).read_bytes(), (remote / rel).read_bytes()
+        if rel.name == "summary.json":
+            assert _untimed(json.loads(a)) == _untimed(json.loads(b)), rel
+        else:
+            assert a == b, rel
+    # the workers' private step directories are gone; no output was written beside them
+    assert not list(tmp_path.glob("worker*/fuzzyslam-step.*"))
 
 
 # --- sweep (slow) ---------------------------------------------------------------------------

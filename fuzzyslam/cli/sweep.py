@@ -32,9 +32,12 @@ from fuzzyslam.cli import cli, emit
               help="Steps at once (default: the cores, or the Dask threads).")  # fmt: skip
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Run the steps on an existing Dask scheduler (shared filesystem).")  # fmt: skip
+@click.option("--ship-files", is_flag=True,
+              help="Send each step's input files with its task and take its outputs back: "
+              "for Dask workers that do not share OUTDIR's filesystem.")  # fmt: skip
 def sweep_command(config: str, sets: tuple[str, ...], seeds: int | None,
                   logs_glob: str | None, outdir: Path, jobs,
-                  scheduler: str | None) -> None:  # fmt: skip
+                  scheduler: str | None, ship_files: bool) -> None:  # fmt: skip
     """Sweep config values: simulate, run and evaluate each grid point x seed (or run and
     evaluate each grid point x recorded log with --logs).
 
@@ -62,4 +65,5 @@ def sweep_command(config: str, sets: tuple[str, ...], seeds: int | None,
         logs = sorted(p for p in glob.glob(logs_glob, recursive=True) if Path(p).is_file())
         if not logs:
             raise InputError(logs_glob, "--logs matches no file")
-    emit(sweep(config, parsed, list(range(seeds or 3)), outdir, jobs, scheduler, logs))
+    emit(sweep(config, parsed, list(range(seeds or 3)), outdir, jobs, scheduler, logs,
+               ship_files))  # fmt: skip

@@ -221,6 +221,7 @@ def sweep(
     jobs: int | None = None,
     scheduler: str | None = None,
     logs: list[str | os.PathLike] | None = None,
+    ship: bool = False,
 ) -> dict[str, Any]:
     """Run the grid x seeds (or x recorded logs) into ``outdir`` (resumable); return the
     stdout summary.
@@ -240,6 +241,8 @@ def sweep(
     logs : list of path or None
         Recorded logs: each is run (and evaluated, given a truth) at every grid point
         instead of simulating seeds.
+    ship : bool
+        Send the steps' files with their tasks (workers without a shared filesystem).
 
     Returns
     -------
@@ -286,7 +289,8 @@ def sweep(
         os.replace(tmp, _record(root, step.key))
 
     if todo:
-        execute(todo, root, jobs, label="sweep", scheduler=scheduler, on_done=remember)
+        execute(todo, root, jobs, label="sweep", scheduler=scheduler, on_done=remember,
+                ship=ship)  # fmt: skip
     rows = [_row(root, i, overrides, units) for i, (_, overrides) in enumerate(points)]
     info = {"config": config, "sets": [[k, v] for k, v in sets],
             "seeds": [] if logs else seeds, "logs": [str(p) for p in log_paths] if logs else [],
