@@ -57,7 +57,7 @@ def sensor_times(rate_hz: float, duration: float) -> np.ndarray:
 
 def interpolate_pose(t_grid: np.ndarray, poses: np.ndarray, t: float) -> np.ndarray:
     """True pose at time t, linear between robot steps (heading difference wrapped)."""
-    i = int(np.clip(np.searchsorted(t_grid, t, side="right") - 1, 0, len(t_grid) - 2))
+    i = min(max(int(np.searchsorted(t_grid, t, side="right")) - 1, 0), len(t_grid) - 2)
     a = (t - t_grid[i]) / (t_grid[i + 1] - t_grid[i])
     p0, p1 = poses[i], poses[i + 1]
     d = p1 - p0

@@ -57,7 +57,8 @@ class Loop:
         """Points (N, 2) and unit tangents (N, 2) at arc lengths ``s`` (mod the length)."""
         cum = self.cum
         s = np.mod(np.asarray(s, dtype=float), cum[-1])
-        i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(self.pts) - 1)
+        # integer indices: minimum(maximum()) is np.clip without its call overhead
+        i = np.minimum(np.maximum(np.searchsorted(cum, s, side="right") - 1, 0), len(self.pts) - 1)
         tang = self.edges[i] / self.lens[i, None]
         return self.pts[i] + tang * (s - cum[i])[:, None], tang
 
