@@ -110,6 +110,18 @@ def test_scheduler_unreachable_is_one_line(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+def test_sweep_logs_bad_arguments_are_one_line(tmp_path):
+    """--logs with --seeds, or a glob matching nothing: one line, exit 3, nothing written."""
+    (tmp_path / "a.mcap").write_bytes(b"")
+    for extra, why in ((["--seeds", "2", "--logs", tmp_path / "*.mcap"], "not both"),
+                       (["--logs", tmp_path / "none" / "*.mcap"], "matches no file")):  # fmt: skip
+        p = cli("sweep", "sample.yaml", "--set", "robot.wheel_noise=0.01", *extra,
+                "-o", tmp_path / "sw")  # fmt: skip
+        lines = [ln for ln in p.stderr.splitlines() if ln.startswith("fuzzyslam:")]
+        assert p.returncode == 3 and len(lines) == 1 and why in lines[0], p.stderr
+        assert not (tmp_path / "sw").exists()
+
+
 # --- a real Dask cluster (slow) -------------------------------------------------------------
 
 
