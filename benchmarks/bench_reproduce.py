@@ -8,6 +8,13 @@ the all-lamps-off and people scenarios, pose fixes), each in a fresh directory a
 process, and prints one JSON object per variant: wall time, the sum of the steps' times
 (the work), the work of each kind of step, and two lower bounds of the wall time: the
 longest chain of dependent steps (measured times) and the work divided by the jobs.
+
+With ``--baseline REV`` (e.g. main) each variant also runs with the old code (git revision
+REV), alternating old and new ``--repeat`` times: wall and CPU time (user + sys of every
+process of the run) of both, the speed-up, whether the two reports' tables are the same,
+and the target (one seed: <= 30 s wall on 2 cores).
+
+    python benchmarks/bench_reproduce.py --seeds 1 --baseline main --only full
 """
 
 from __future__ import annotations
@@ -42,7 +49,13 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=os.cpu_count() or 1)
     ap.add_argument("--workdir", type=Path, default=None)
     ap.add_argument("--only", choices=["paper", "full"], default=None)
+    ap.add_argument("--baseline", metavar="REV", default=None,
+                    help="git revision of the old code to time side by side")  # fmt: skip
+    ap.add_argument("--repeat", type=int, default=1)
     args = ap.parse_args()
+    if args.baseline:
+        side_by_side_reproduce(args)
+        return
 
     from fuzzyslam.reproduce.plan import FULL, build_plan
 
@@ -81,6 +94,32 @@ def main() -> None:
             "bound_work_over_jobs_s": round(work_s / args.jobs, 1),
             "steps": len(steps),
         }))  # fmt: skip
+
+
+def side_by_side_reproduce(args) -> None:
+    """Old (``--baseline``) and new ``reproduce`` alternately, per variant."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    from sidebyside import export_revision, load, side_by_side
+
+    src = export_revision(args.baseline)
+    work = args.workdir or Path(tempfile.mkdtemp(prefix="bench_reproduce."))
+    work.mkdir(parents=True, exist_ok=True)
+    for name, extra in (("paper", ["--paper-only"]), ("full", [])):
+        if args.only and name != args.only:
+            continue
+        outs = {v: work / f"{name}_{v}" for v in ("old", "new")}
+        before = load()
+        res = side_by_side(lambda v, outs=outs, extra=extra: [
+            "reproduce", "-o", str(outs[v]), "--seeds", str(args.seeds), "--jobs",
+            str(args.jobs), *extra], src, args.repeat)  # fmt: skip
+        tables = [[ln for ln in (outs[v] / "report.md").read_text().splitlines()
+                   if ln.startswith("| ") and "Cost" not in ln and "time" not in ln]
+                  for v in ("old", "new")]  # fmt: skip
+        print(json.dumps({"variant": name, "seeds": args.seeds, "jobs": args.jobs,
+                          "baseline": args.baseline, **res,
+                          "target_wall_s": 30.0 if args.seeds == 1 and name == "full" else None,
+                          "same_table": tables[0] == tables[1],
+                          "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
 
 
 if __name__ == "__main__":

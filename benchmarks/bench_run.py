@@ -9,6 +9,15 @@ two lamps (O(n^2)), the individual compatibility of 3 detections against all lam
 and the growth exponent log(cost ratio) / log(n ratio), which must stay <= 2. Below ~100
 lamps a step costs mostly Python/numpy call overhead; from 1000 lamps P (16 MB+) leaves
 the caches, so 1000 -> 2000 shows the asymptotic exponent.
+
+With ``--baseline REV`` (e.g. main) it instead times ``fuzzyslam run`` of the old code
+(git revision REV) and of this code side by side, alternating, ``--repeat`` times each, on
+the paper log: lamps only, heading fixes and pose fixes (from the FGM of the lamps-only
+run), with the real-time factors (log duration / CPU and / wall time) against the targets
+(>= 500x lamps only, >= 300x with fixes) and whether the outputs are byte-identical
+(summary.json without its timing fields).
+
+    python benchmarks/bench_run.py [LOG.mcap] --baseline main --repeat 3
 """
 
 from __future__ import annotations
@@ -106,9 +115,77 @@ def bench_scaling() -> None:
         )
 
 
+TIMING = ("seconds", "wall", "real_time", "_s_per_", "cpu")
+
+
+def _untimed(obj):
+    if isinstance(obj, dict):
+        return {k: _untimed(v) for k, v in obj.items() if not any(t in k for t in TIMING)}
+    if isinstance(obj, list):
+        return [_untimed(v) for v in obj]
+    return obj
+
+
+def _same_outputs(a: Path, b: Path) -> bool:
+    import filecmp
+    import json
+
+    files = sorted(f.relative_to(a) for f in a.rglob("*") if f.is_file())
+    if files != sorted(f.relative_to(b) for f in b.rglob("*") if f.is_file()):
+        return False
+    for rel in files:
+        if rel.name == "summary.json":
+            sa, sb = (json.loads((d / rel).read_text()) for d in (a, b))
+            if _untimed(sa) != _untimed(sb):
+                return False
+        elif not filecmp.cmp(a / rel, b / rel, shallow=False):
+            return False
+    return True
+
+
+def side_by_side_run(log: Path, rev: str, repeat: int) -> None:
+    """Old (``rev``) and new ``fuzzyslam run`` alternately: lamps only, heading, pose."""
+    import json
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from sidebyside import export_revision, load, run_cli, side_by_side
+
+    from fuzzyslam.streams.reader import LogReader
+
+    reader = LogReader(log)
+    duration = reader.end - reader.start
+    src = export_revision(rev)
+    work = Path(tempfile.mkdtemp(prefix="bench_run."))
+    run_cli(["run", str(log), "-o", str(work / "AB"), "--config", "paper"], None)
+    run_cli(["map", str(log), "--trajectory", str(work / "AB" / "trajectory.tum"),
+             "--landmarks", str(work / "AB" / "landmarks.yaml"), "-o", str(work / "fgm"),
+             "--config", "paper"], None)  # fmt: skip
+    for name, extra, target in (("lamps only", [], 500), ("heading fixes", ["heading"], 300),
+                                ("pose fixes", ["pose"], 300)):  # fmt: skip
+        fix = ["--map", str(work / "fgm"), "--fix", extra[0]] if extra else []
+        outs = {v: work / f"{name.split()[0]}_{v}" for v in ("old", "new")}
+        before = load()
+        res = side_by_side(lambda v, outs=outs, fix=fix: [
+            "run", str(log), "-o", str(outs[v]), "--config", "paper", *fix], src, repeat)
+        for v in ("old", "new"):
+            res[v]["real_time_factor_cpu"] = round(duration / res[v]["cpu_median_s"])
+            res[v]["real_time_factor_wall"] = round(duration / res[v]["wall_median_s"])
+        print(json.dumps({"run": name, "log_s": round(duration, 1), "baseline": rev,
+                          "repeat": repeat, **res, "target_real_time_factor": target,
+                          "outputs_byte_identical": _same_outputs(outs["old"], outs["new"]),
+                          "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
+
+
 def main() -> None:
-    if len(sys.argv) > 1:
-        log = Path(sys.argv[1])
+    import argparse
+
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("log", nargs="?", default=None)
+    ap.add_argument("--baseline", metavar="REV", default=None)
+    ap.add_argument("--repeat", type=int, default=3)
+    args = ap.parse_args()
+    if args.log:
+        log = Path(args.log)
     else:
         log = Path(tempfile.gettempdir()) / "fuzzyslam_bench_paper.mcap"
         if not log.exists():
@@ -117,6 +194,9 @@ def main() -> None:
                 check=True,
                 stdout=subprocess.DEVNULL,
             )
+    if args.baseline:
+        side_by_side_run(log.resolve(), args.baseline, args.repeat)
+        return
     bench_log(log)
     bench_scaling()
 

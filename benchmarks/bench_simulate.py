@@ -1,9 +1,13 @@
 """Benchmark `fuzzyslam simulate` on the full paper scenario (run on demand, not a test).
 
 Prints wall time, real-time factor, file size and peak memory (resource.getrusage),
-plus the simulation's own summary figures. Usage:
+plus the simulation's own summary figures. With ``--baseline REV`` (e.g. main) it also
+runs ``fuzzyslam simulate`` of the old code (git revision REV) and of this code side by
+side, alternating, ``--repeat`` times each, and prints their CPU and wall times, the
+speed-up and whether the two logs are byte-identical. Usage:
 
     python benchmarks/bench_simulate.py [CONFIG] [--seed N] [--out FILE]
+    python benchmarks/bench_simulate.py paper --baseline main --repeat 3
 """
 
 from __future__ import annotations
@@ -23,7 +27,13 @@ def main() -> None:
     ap.add_argument("config", nargs="?", default="paper")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--out", default=None)
+    ap.add_argument("--baseline", metavar="REV", default=None,
+                    help="git revision of the old code to time side by side")  # fmt: skip
+    ap.add_argument("--repeat", type=int, default=3)
     args = ap.parse_args()
+    if args.baseline:
+        side_by_side_simulate(args)
+        return
     os.environ.setdefault("FUZZYSLAM_NO_PROGRESS", "1")
     from fuzzyslam.config import load_config
     from fuzzyslam.sim.record import simulate_to_mcap
@@ -53,6 +63,28 @@ def main() -> None:
         "targets": {"wall_time_s": 30, "file_size_mb": 100, "peak_rss_mb": 1024},
     }
     json.dump(figures, sys.stdout, indent=2)
+    print()
+
+
+def side_by_side_simulate(args) -> None:
+    """Old (``--baseline``) and new ``fuzzyslam simulate`` alternately; identical bytes?"""
+    import filecmp
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from sidebyside import export_revision, load, side_by_side
+
+    src = export_revision(args.baseline)
+    with tempfile.TemporaryDirectory() as tmp:
+        logs = {v: Path(tmp) / f"{v}.mcap" for v in ("old", "new")}
+        before = load()
+        res = side_by_side(lambda v: ["simulate", args.config, "-o", str(logs[v]), "--seed",
+                                      str(args.seed)], src, args.repeat)  # fmt: skip
+        same = filecmp.cmp(logs["old"], logs["new"], shallow=False)
+        size = logs["new"].stat().st_size
+    json.dump({"command": f"fuzzyslam simulate {args.config} --seed {args.seed}",
+               "baseline": args.baseline, "repeat": args.repeat, **res,
+               "logs_byte_identical": same, "file_size_mb": round(size / 1e6, 2),
+               "load_before": before, "load_after": load()}, sys.stdout, indent=2)  # fmt: skip
     print()
 
 

@@ -13,6 +13,7 @@ from __future__ import annotations
 import os
 from collections.abc import Iterable, Sequence
 from dataclasses import dataclass, field
+from functools import cached_property
 from pathlib import Path
 from typing import Any
 
@@ -47,8 +48,20 @@ class Reference:
         """The region (K, 2)."""
         return self.region
 
+    @cached_property
+    def _box(self) -> tuple[float, float, float, float]:
+        """The region's bounding box grown by 1 um: a point beyond it is outside (no edge
+        straddles its y, or all cross on one side), so ``contains`` skips the test."""
+        lo, hi = self.region.min(axis=0), self.region.max(axis=0)
+        return float(lo[0]) - 1e-6, float(lo[1]) - 1e-6, float(hi[0]) + 1e-6, float(hi[1]) + 1e-6
+
     def contains(self, xy: Sequence[float]) -> bool:
-        return bool(points_in_polygon(np.asarray(xy, float).reshape(1, 2), self.region)[0])
+        """Whether the point ``xy`` lies in the region (PNPOLY, after the box test)."""
+        p = np.asarray(xy, float).reshape(1, 2)
+        x0, y0, x1, y1 = self._box
+        if not (x0 <= p[0, 0] <= x1 and y0 <= p[0, 1] <= y1):
+            return False
+        return bool(points_in_polygon(p, self.region)[0])
 
     def to_dict(self) -> dict:
         return {

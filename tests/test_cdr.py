@@ -15,7 +15,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from fuzzyslam.streams import cdr
+from fuzzyslam.streams import cdr, cdr_encode
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.typestore import deserialize, msgtype, serialize, typestore
 
@@ -170,6 +170,38 @@ def test_pose_block_encoder_equals_rosbags(rows, frame) -> None:
         cov3 = np.array([[c[0], c[1], c[2]], [c[1], c[3], c[4]], [c[2], c[4], c[5]]])
         ref = serialize(M.pose_with_covariance(t[k], frame, poses[k], cov3), M.POSE_COV_STAMPED)
         assert got[k] == ref
+
+
+ROWS = st.lists(st.tuples(st.floats(0, 2e9), *(st.floats(-1e6, 1e6),) * 5), min_size=1,
+                max_size=5)  # fmt: skip
+
+
+@settings(max_examples=30, deadline=None)
+@given(ROWS, TEXT, TEXT)
+def test_simulation_encoders_equal_rosbags(rows, frame, child) -> None:
+    """The encoders of simulated logs (streams/cdr_encode.py) give rosbags' bytes for the
+    messages of the builders: odometry, joint states, a sonar ring, images, a restamp."""
+    a = np.array(rows, dtype=float)
+    t, poses, v, w = a[:, 0], a[:, 1:4], a[:, 4], a[:, 5]
+    got = cdr_encode.encode_odometry_block(t, frame, child, poses, v, w)
+    names = [frame, child, "wheel"]
+    joints = cdr_encode.encode_joint_state_block(t, names, a[:, 1:4])
+    for k in range(len(t)):
+        ref = M.odometry(t[k], frame, child, poses[k], None, v[k], w[k])
+        assert got[k] == serialize(ref, M.ODOMETRY)
+        assert joints[k] == serialize(M.joint_state(t[k], names, a[k, 1:4]), M.JOINT_STATE)
+    frames = [frame, child, frame + child]
+    ring = cdr_encode.encode_ranges(t[0], frames, np.abs(a[0, 1:4]), 0.4, 0.1, 5.0)
+    for j, data in enumerate(ring):
+        ref = M.range_msg(t[0], frames[j], abs(a[0, 1 + j]), 0.4, 0.1, 5.0)
+        assert data == serialize(ref, M.RANGE)
+    shape = (1 + len(frame) % 4, 1 + len(child) % 5)  # odd sizes: no padding at the end
+    img = np.arange(shape[0] * shape[1], dtype=np.uint8).reshape(shape)
+    assert cdr_encode.encode_image_mono8(t[-1], frame, img) == serialize(
+        M.image_mono8(t[-1], frame, img), M.IMAGE)  # fmt: skip
+    info = serialize(M.camera_info(0.0, frame, 64, 48, 50.0, 32.0, 24.0), M.CAMERA_INFO)
+    assert cdr_encode.restamp(info, t[-1]) == serialize(
+        M.camera_info(t[-1], frame, 64, 48, 50.0, 32.0, 24.0), M.CAMERA_INFO)  # fmt: skip
 
 
 @settings(max_examples=100, deadline=None)

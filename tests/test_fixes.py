@@ -219,6 +219,20 @@ def test_points_in_polygon_agrees_with_matplotlib():
     assert np.array_equal(ours, ref)
 
 
+
+def test_reference_contains_is_the_polygon_test():
+    """Reference.contains (bounding box first) answers as points_in_polygon for points
+    inside, outside, on and a hair off the vertices, of random and L-shaped polygons."""
+    rng = np.random.default_rng(4)
+    for k in range(40):
+        poly = np.array(L_ROOM, float) if k == 0 else rng.uniform(-10, 10, (3 + k % 6, 2))
+        ref = Reference(0, "c", 0.0, 1.0, poly)
+        pts = np.vstack([rng.uniform(-12, 12, (100, 2)), poly,
+                         poly + rng.normal(0, 1e-7, poly.shape)])  # fmt: skip
+        expect = points_in_polygon(pts, poly)
+        assert [ref.contains(q) for q in pts] == expect.tolist()
+        assert k > 0 or expect.sum() >= 10
+
 def test_references_parse_bbox_and_reject_bad():
     refs = references_from_dicts(
         [{"id": 3, "angle": 3.5, "region": [0, 0, 2, 1]}, {"angle": 0.1, "region": L_ROOM}], "r"

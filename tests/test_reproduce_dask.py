@@ -6,11 +6,13 @@ from __future__ import annotations
 import io
 import json
 import os
+import struct
 import subprocess
 import sys
 import time
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 from fuzzyslam.progress import PlanProgress
@@ -108,6 +110,18 @@ def test_scheduler_unreachable_is_one_line(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+def test_sweep_logs_bad_arguments_are_one_line(tmp_path):
+    """--logs with --seeds, or a glob matching nothing: one line, exit 3, nothing written."""
+    (tmp_path / "a.mcap").write_bytes(b"")
+    for extra, why in ((["--seeds", "2", "--logs", tmp_path / "*.mcap"], "not both"),
+                       (["--logs", tmp_path / "none" / "*.mcap"], "matches no file")):  # fmt: skip
+        p = cli("sweep", "sample.yaml", "--set", "robot.wheel_noise=0.01", *extra,
+                "-o", tmp_path / "sw")  # fmt: skip
+        lines = [ln for ln in p.stderr.splitlines() if ln.startswith("fuzzyslam:")]
+        assert p.returncode == 3 and len(lines) == 1 and why in lines[0], p.stderr
+        assert not (tmp_path / "sw").exists()
+
+
 # --- a real Dask cluster (slow) -------------------------------------------------------------
 
 
@@ -133,11 +147,15 @@ def dask_cluster(tmp_path):
             if sched_file.is_file() and sched_file.stat().st_size > 0:
                 break
             time.sleep(0.1)
-        for i in range(2):
+        for i in range(2):  # each in a working directory (and temp directory) of its own
+            home = tmp_path / f"worker{i}"
+            home.mkdir()
             procs.append(subprocess.Popen(
                 [BIN / "dask", "worker", "--scheduler-file", sched_file, "--nthreads", "1",
-                 "--nworkers", "1", "--host", "127.0.0.1", "--no-dashboard"],
-                stdout=subprocess.DEVNULL, stderr=open(logs / f"worker{i}.log", "w"), env=env,
+                 "--nworkers", "1", "--host", "127.0.0.1", "--no-dashboard",
+                 "--local-directory", home],
+                stdout=subprocess.DEVNULL, stderr=open(logs / f"worker{i}.log", "w"),
+                env={**env, "TMPDIR": str(home)}, cwd=home,
             ))  # fmt: skip
         with Client(scheduler_file=str(sched_file), timeout=30) as client:
             client.wait_for_workers(2, timeout=60)
@@ -227,45 +245,171 @@ def test_reproduce_on_dask_equals_the_local_run(tmp_path, dask_cluster):
     assert untimed_rows[0] == untimed_rows[1]
 
 
+@pytest.mark.slow
+def test_an_output_directory_a_worker_cannot_see_is_one_line(tmp_path, dask_cluster):
+    """Workers must share the filesystem: a plan whose directory a worker does not see (a
+    path absent there) stops with one line naming the path and the worker."""
+    from fuzzyslam.errors import InputError
+    from fuzzyslam.reproduce.execute import StepFailed
+
+    address, workers = dask_cluster
+    root = tmp_path / "only-on-the-client"
+    with pytest.raises(StepFailed) as exc:
+        execute([Step("seed0/a", ("--version",), (), 1.0)], root, scheduler=address)
+    msg = str(exc.value)
+    assert "\n" not in msg and "not visible on this worker" in msg
+    assert str(root) in msg and any(w in msg for w in workers)
+    assert exc.value.exit_code == InputError.exit_code
+
+
+@pytest.mark.slow
+def test_reproduce_ships_the_files_with_the_tasks(tmp_path, dask_cluster):
+    """``--ship-files``: each step's inputs go to a worker as bytes, it runs in a private
+    directory under the worker's own temp directory, and its outputs come back to the
+    client; the same files byte for byte as the local run (timings aside), every step on
+    the two workers (each in a working directory of its own)."""
+    address, worker_pids = dask_cluster
+    args = ("reproduce", "--quick", "--paper-only", "--seeds", "1")
+    local, remote = tmp_path / "local", tmp_path / "remote"
+    p = cli(*args, "-o", local)
+    assert p.returncode == 0, p.stderr
+    p = cli(*args, "-o", remote, "--scheduler", address, "--ship-files")
+    assert p.returncode == 0, p.stderr
+    results = json.loads((remote / "results.json").read_text())
+    used = {(s["worker"], s["pid"]) for s in results["steps"]}
+    assert used <= set(worker_pids.items()) and {w for w, _ in used} == set(worker_pids)
+    assert _table(remote / "report.md") == _table(local / "report.md")
+    files = sorted(f.relative_to(local) for f in local.glob("seed*/**/*") if f.is_file())
+    assert len(files) > 20
+    assert files == sorted(f.relative_to(remote) for f in remote.glob("seed*/**/*")
+                           if f.is_file())  # fmt: skip
+    for rel in files:
+        a, b = (local / rel).read_bytes(), (remote / rel).read_bytes()
+        if rel.name == "summary.json":
+            assert _untimed(json.loads(a)) == _untimed(json.loads(b)), rel
+        else:
+            assert a == b, rel
+    # the workers' private step directories are gone; no output was written beside them
+    assert not list(tmp_path.glob("worker*/fuzzyslam-step.*"))
+
+
 # --- sweep (slow) ---------------------------------------------------------------------------
+
+
+SWEEP = ("sweep", "sample.yaml", "--set", "robot.wheel_noise=0.002,0.01,0.03", "--seeds", "3")
+
+
+def _stats(values: list[float]) -> tuple[float, float, float, float]:
+    """Mean, sample sd, min, max: the second computation of the sweep's table (numpy)."""
+    a = np.asarray(values, dtype=float)
+    return float(a.mean()), float(a.std(ddof=1)), float(a.min()), float(a.max())
 
 
 @pytest.mark.slow
 def test_sweep_killed_halfway_goes_on_and_skips_the_finished_steps(tmp_path):
-    """2 values x 2 seeds of sample.yaml; SIGTERM after 4 finished steps; the rerun skips
-    them (counted) and the table has a row per value with mean, sd, min, max."""
+    """3 values x 3 seeds of sample.yaml (27 steps); SIGTERM after 6 finished steps; the
+    rerun skips them (counted) and writes the table and the figure; every row's mean, sd,
+    min and max equal numpy's over the three evaluations' metrics.json."""
     import signal
 
     out = tmp_path / "sw"
-    args = [sys.executable, "-m", "fuzzyslam", "sweep", "sample.yaml",
-            "--set", "robot.wheel_noise=0.005,0.02", "--seeds", "2", "-o", str(out)]  # fmt: skip
     env = {k: v for k, v in os.environ.items() if k != "FUZZYSLAM_NO_PROGRESS"}
-    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+    proc = subprocess.Popen([sys.executable, "-m", "fuzzyslam", *SWEEP, "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
                             env={**env, "MPLBACKEND": "Agg"})  # fmt: skip
     finished = 0
     assert proc.stderr is not None
     for line in proc.stderr:
         finished += " done in " in line
-        if finished == 4:
+        if finished == 6:
             proc.send_signal(signal.SIGTERM)
             break
     proc.communicate(timeout=120)
     assert proc.returncode == 143
-    p = cli("sweep", "sample.yaml", "--set", "robot.wheel_noise=0.005,0.02", "--seeds", "2",
-            "-o", out)  # fmt: skip
+    recorded = len(list((out / ".sweep").glob("*.json")))
+    assert recorded >= 6
+    assert not (out / "sweep.md").exists()
+    p = cli(*SWEEP, "-o", out)
     assert p.returncode == 0, p.stderr
     summary = json.loads(p.stdout)
-    assert summary["steps"] == 12 and summary["skipped"] >= 4
-    assert summary["ran"] + summary["skipped"] == 12
-    assert [r["values"] for r in summary["rows"]] == [{"robot.wheel_noise": 0.005},
-                                                      {"robot.wheel_noise": 0.02}]  # fmt: skip
-    for r in summary["rows"]:
-        st = r["measures"]["mean position error (cm)"]
-        assert st["n"] == 2 and st["min"] <= st["mean"] <= st["max"] and st["sd"] >= 0
+    assert summary["steps"] == 27 and summary["skipped"] == recorded
+    assert summary["ran"] + summary["skipped"] == 27
+
+    # the table: a row per value, each statistic recomputed from the per-seed files
+    assert [r["values"] for r in summary["rows"]] == [{"robot.wheel_noise": v}
+                                                      for v in (0.002, 0.01, 0.03)]  # fmt: skip
     table = (out / "sweep.md").read_text().splitlines()
-    assert table[-2].startswith("| 0.005 | ") and table[-1].startswith("| 0.02 | ")
-    # a third run changes nothing: every step skipped
-    p = cli("sweep", "sample.yaml", "--set", "robot.wheel_noise=0.005,0.02", "--seeds", "2",
-            "-o", out)  # fmt: skip
-    assert json.loads(p.stdout)["skipped"] == 12
+    rows = [ln for ln in table if ln.startswith("| 0.")]
+    assert [ln.split(" | ")[0] for ln in rows] == ["| 0.002", "| 0.01", "| 0.03"]
+    for i, (r, line) in enumerate(zip(summary["rows"], rows, strict=True)):
+        overall = [json.loads((out / f"g{i}/seed{s}/eval/metrics.json").read_text())
+                   ["phases"]["overall"] for s in range(3)]  # fmt: skip
+        expect = {
+            "mean position error (cm)": _stats([100 * o["position_m"]["mean"] for o in overall]),
+            "max position error (cm)": _stats([100 * o["position_m"]["max"] for o in overall]),
+            "mean heading error (deg)": _stats([o["heading_deg"]["mean"] for o in overall]),
+        }
+        cells = line.strip("| ").split(" | ")[1:]
+        for cell, (m, (mean, sd, lo, hi)) in zip(cells, expect.items(), strict=True):
+            st = r["measures"][m]
+            assert st["n"] == 3
+            assert [st["mean"], st["sd"], st["min"], st["max"]] == pytest.approx(
+                [mean, sd, lo, hi], rel=1e-12)
+            assert cell == f"{mean:.2f}, {sd:.2f} [{lo:.2f}, {hi:.2f}]"
+    # the seeds differ, so the statistics are not degenerate
+    assert all(r["measures"]["mean position error (cm)"]["sd"] > 0 for r in summary["rows"])
+
+    # one figure for the one swept key, a PNG of at least 150 dpi
+    assert summary["figures"] == [str(out / "sweep_robot.wheel_noise.png")]
+    png = (out / "sweep_robot.wheel_noise.png").read_bytes()
+    assert png[:8] == b"\x89PNG\r\n\x1a\n"
+    width, height = struct.unpack(">II", png[16:24])
+    assert width >= 1500 and height >= 500  # 13.8 x 4 inches at 150 dpi
+
+    # a third run changes nothing: every step skipped, the same table
+    p = cli(*SWEEP, "-o", out)
+    assert json.loads(p.stdout)["skipped"] == 27
     assert (out / "sweep.md").read_text().splitlines()[4:] == table[4:]
+
+
+@pytest.mark.slow
+def test_sweep_over_recorded_logs(tmp_path):
+    """--logs: the sample log in two folders, one with a truth.tum beside it (evaluated
+    aligned against it), one evaluated against its own ground truth; 2 values x 2 logs;
+    a changed log is run again, the other steps are skipped."""
+    import shutil
+
+    from fuzzyslam.streams.messages import pose_of
+    from fuzzyslam.streams.reader import LogReader
+    from fuzzyslam.streams.tum import format_tum
+
+    sample = Path(__file__).resolve().parents[1] / "data" / "sample.mcap"
+    for d in ("a", "b"):
+        (tmp_path / "runs" / d).mkdir(parents=True)
+        shutil.copyfile(sample, tmp_path / "runs" / d / "log.mcap")
+    msgs = list(LogReader(sample).messages(["/ground_truth/odom"]))
+    t = np.array([m.t for m in msgs])
+    poses = np.array([pose_of(m.msg.pose.pose) for m in msgs])
+    (tmp_path / "runs" / "b" / "truth.tum").write_text(format_tum(t, poses))
+    args = ("sweep", "sample.yaml", "--set", "slam.use_encoders=true,false",
+            "--logs", tmp_path / "runs" / "*" / "log.mcap", "-o", tmp_path / "sw")  # fmt: skip
+    p = cli(*args)
+    assert p.returncode == 0, p.stderr
+    summary = json.loads(p.stdout)
+    assert summary["steps"] == 8 and summary["ran"] == 8 and summary["seeds"] == []
+    units = ["log0_a_log", "log1_b_log"]
+    for r in summary["rows"]:
+        assert sorted(r["runs"]) == units and r["measures"]["mean position error (cm)"]["n"] == 2
+    records = tmp_path / "sw" / ".sweep"
+    cmd = json.loads((records / "g0__log1_b_log__eval.json").read_text())["command"]
+    assert "truth.tum" in cmd and "--align" in cmd
+    cmd = json.loads((records / "g0__log0_a_log__eval.json").read_text())["command"]
+    assert "truth.tum" not in cmd and "a/log.mcap" in cmd
+    assert (tmp_path / "sw" / "sweep_slam.use_encoders.png").is_file()
+    # a changed log: its steps run again, the other log's are skipped
+    with open(tmp_path / "runs" / "a" / "log.mcap", "ab") as f:
+        f.write(b"\0")  # after the MCAP footer: still a readable log, other bytes
+    p = cli(*args)
+    assert p.returncode == 0, p.stderr
+    again = json.loads(p.stdout)
+    assert again["ran"] == 4 and again["skipped"] == 4

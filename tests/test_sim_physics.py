@@ -197,6 +197,34 @@ def test_disc_coverage_conserves_area_and_failed_lamp_is_dark():
     assert dark.max() < params.background + 6 * params.noise_sigma
 
 
+
+def test_disc_coverage_is_the_whole_canvas_box_filtered():
+    """coverage() box-filters only the blocks under each disc: the same float32 bytes as
+    drawing every disc on the whole supersampled canvas and resizing all of it, for discs
+    inside, across and beyond the image edges and overlapping ones."""
+    params = CameraParams()
+    cam = simcam.make_camera(params)
+    w, h = cam.width, cam.height_px
+    rng = np.random.default_rng(5)
+    for _ in range(60):
+        k = int(rng.choice([1, 2, 3, 4]))
+        rpx = float(rng.uniform(0.5, 15.0))
+        uv = rng.uniform(-20.0, max(w, h) + 20.0, size=(int(rng.integers(1, 5)), 2))
+        uv[0] = rng.uniform(0, 4, 2) if rng.random() < 0.3 else uv[0]  # near a corner
+        canvas = np.zeros((h * k, w * k), np.uint8)
+        s = float(1 << simcam.SHIFT)
+        r = max(round((k * rpx - simcam.AA_RADIUS_EXCESS) * s), 1)
+        for u, v in uv:
+            if -rpx - 1 < u < w + rpx and -rpx - 1 < v < h + rpx:
+                c = (round((k * (u + 0.5) - 0.5) * s), round((k * (v + 0.5) - 0.5) * s))
+                cv2.circle(canvas, c, r, 255, -1, cv2.LINE_AA, simcam.SHIFT)
+        whole = canvas.astype(np.float32)
+        if k > 1:
+            whole = cv2.resize(whole, (w, h), interpolation=cv2.INTER_AREA)
+        got = simcam.coverage(cam, uv, rpx, k)
+        assert got.dtype == np.float32 and got.tobytes() == (whole / 255.0).tobytes()
+
+
 # --- encoders ----------------------------------------------------------------------
 
 

@@ -64,6 +64,9 @@ from fuzzyslam.cli import cli, emit
     help="Keep each seed's simulated MCAP logs (4 per seed, 44 MB each on the full "
     "scenario). Default: kept for one seed, removed for more.",
 )
+@click.option("--ship-files", is_flag=True,
+              help="Send each step's input files with its task and take its outputs back: "
+              "for Dask workers that do not share OUTDIR's filesystem.")  # fmt: skip
 def reproduce_command(
     outdir: Path,
     seeds: int,
@@ -73,6 +76,7 @@ def reproduce_command(
     jobs,
     scheduler: str | None,
     keep_logs: bool | None,
+    ship_files: bool,
 ) -> None:
     """Reproduce the paper's experiment: simulate, run, map, run with fixes, evaluate.
 
@@ -104,4 +108,4 @@ def reproduce_command(
 
     seed_list = list(range(first_seed, first_seed + seeds))
     emit(run(outdir, seed_list, quick, jobs, beyond=not paper_only,
-                   scheduler=scheduler, keep_logs=keep_logs))
+             scheduler=scheduler, keep_logs=keep_logs, ship=ship_files))

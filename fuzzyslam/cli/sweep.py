@@ -19,8 +19,12 @@ from fuzzyslam.cli import cli, emit
     metavar="KEY=V1,V2,...",
     help="A config key (dotted, e.g. fgm.freeze_run) and its values; repeat for a grid.",
 )
-@click.option("--seeds", type=click.IntRange(min=1), default=3, show_default=True,
-              help="Seeds per grid point (0 .. N-1).")  # fmt: skip
+@click.option("--seeds", type=click.IntRange(min=1), default=None,
+              help="Seeds per grid point (0 .. N-1; default 3).")  # fmt: skip
+@click.option("--logs", "logs_glob", metavar="GLOB", default=None,
+              help="Recorded logs (a glob, e.g. 'runs/*/log.mcap') to run at every grid "
+              "point instead of simulated seeds; evaluated against truth.tum beside a log "
+              "(aligned) or the log's own ground truth.")  # fmt: skip
 @click.option("-o", "--output", "outdir", default="sweep", show_default=True,
               type=click.Path(path_type=Path),
               help="Output directory; rerun into it to go on where it stopped.")  # fmt: skip
@@ -28,20 +32,38 @@ from fuzzyslam.cli import cli, emit
               help="Steps at once (default: the cores, or the Dask threads).")  # fmt: skip
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Run the steps on an existing Dask scheduler (shared filesystem).")  # fmt: skip
-def sweep_command(config: str, sets: tuple[str, ...], seeds: int, outdir: Path, jobs,
-                  scheduler: str | None) -> None:  # fmt: skip
-    """Sweep config values: simulate, run and evaluate each grid point x seed.
+@click.option("--ship-files", is_flag=True,
+              help="Send each step's input files with its task and take its outputs back: "
+              "for Dask workers that do not share OUTDIR's filesystem.")  # fmt: skip
+def sweep_command(config: str, sets: tuple[str, ...], seeds: int | None,
+                  logs_glob: str | None, outdir: Path, jobs,
+                  scheduler: str | None, ship_files: bool) -> None:  # fmt: skip
+    """Sweep config values: simulate, run and evaluate each grid point x seed (or run and
+    evaluate each grid point x recorded log with --logs).
 
     \b
     CONFIG is a YAML file or an embedded config name, e.g.
       fuzzyslam sweep quick.yaml --set fgm.freeze_run=1,2 --seeds 3 -o sweep
+      fuzzyslam sweep real.yaml --set slam.gate=9,16 --logs 'runs/*/log.mcap' -o sw
 
     Writes OUTDIR/sweep.md and sweep.json (per grid point: mean, sd, min, max over
-    seeds of the position and heading errors) and each step's files under gI/seedS/.
+    seeds or logs of the position and heading errors), one figure per swept key
+    (sweep_KEY.png) and each step's files under gI/seedS/ (gI/logJ_NAME/).
     Resumable: a step whose command, configs and inputs are unchanged is skipped
     (counted as "skipped" in the summary), so a sweep killed halfway goes on.
     """
+    import glob
+
+    from fuzzyslam.errors import InputError
     from fuzzyslam.reproduce.sweep import parse_set, sweep
 
     parsed = [parse_set(s) for s in sets]
-    emit(sweep(config, parsed, list(range(seeds)), outdir, jobs, scheduler))
+    logs = None
+    if logs_glob is not None:
+        if seeds is not None:
+            raise InputError(logs_glob, "give --seeds or --logs, not both")
+        logs = sorted(p for p in glob.glob(logs_glob, recursive=True) if Path(p).is_file())
+        if not logs:
+            raise InputError(logs_glob, "--logs matches no file")
+    emit(sweep(config, parsed, list(range(seeds or 3)), outdir, jobs, scheduler, logs,
+               ship_files))  # fmt: skip

@@ -10,7 +10,9 @@ the plan: running steps finish, nothing new starts, and its one-line error is ra
 The engine only places the steps: a local process pool, or the workers of an existing
 Dask distributed scheduler (``scheduler="tcp://host:8786"``). Inputs and outputs move by
 path, so the workers must see the output directory's parent at the same absolute path
-(a shared filesystem); only the steps' JSON summaries travel through Dask.
+(a shared filesystem); only the steps' JSON summaries travel through Dask. With
+``ship=True`` the files travel with the tasks instead (``reproduce/ship.py``): workers
+need no shared filesystem.
 """
 
 from __future__ import annotations
@@ -161,10 +163,16 @@ class Engine:
         cluster's worker threads).
     scheduler : str or None
         Address of an existing Dask scheduler (``tcp://host:8786``); None: local pool.
+    ship : bool
+        Send each step's input files with it and take its outputs back (no shared
+        filesystem needed).
     """
 
-    def __init__(self, jobs: int | None, scheduler: str | None = None) -> None:
+    def __init__(self, jobs: int | None, scheduler: str | None = None,
+                 ship: bool = False) -> None:  # fmt: skip
         self.scheduler = scheduler
+        self.ship = ship
+        self._shipped: dict[Future, tuple[str, ...]] = {}
         self._client = None
         if scheduler is None:
             self.jobs = max(1, jobs or os.cpu_count() or 1)
@@ -193,9 +201,31 @@ class Engine:
 
     def submit(self, step: Step, root: Path) -> Future:
         """Start ``step`` in ``root``; a concurrent.futures Future of run_step's tuple."""
-        if self._client is not None:
-            return self.pool.submit(run_step, step.kind, step.call, str(root), key=_task_key(step))
-        return self.pool.submit(run_step, step.kind, step.call, str(root))
+        fn, args = run_step, (step.kind, step.call, str(root))
+        if self.ship:
+            from fuzzyslam.reproduce.ship import pack_inputs, rewrite_call, run_shipped_step
+
+            argv, files = pack_inputs(step.argv, root)
+            fn, args = run_shipped_step, (step.kind, rewrite_call(step.call, step.argv, argv),
+                                          argv, files)  # fmt: skip
+        kw = {"key": _task_key(step)} if self._client is not None else {}
+        fut = self.pool.submit(fn, *args, **kw)
+        if self.ship:
+            self._shipped[fut] = args[2]
+        return fut
+
+    def result(self, fut: Future, root: Path) -> tuple:
+        """run_step's tuple of a finished step; a shipped step's outputs are written
+        into ``root`` first."""
+        out = fut.result()
+        argv = self._shipped.pop(fut, None)
+        if argv is None:
+            return out
+        from fuzzyslam.reproduce.ship import write_outputs
+
+        if out[0]:
+            write_outputs(argv, out[-1], root)
+        return out[:-1]
 
     def close(self, cancel: bool = False) -> None:
         """Stop the pool (or leave the cluster), cancelling queued steps if ``cancel``."""
@@ -220,6 +250,7 @@ def execute(
     heartbeat_s: float = 30.0,
     final: Path | None = None,
     on_done: Callable[[Step, StepResult], None] | None = None,
+    ship: bool = False,
 ) -> dict[str, StepResult]:
     """Run every step (dependencies first) in ``root``.
 
@@ -241,6 +272,8 @@ def execute(
         Where ``root`` goes when the plan succeeded (named in the first progress line).
     on_done : callable or None
         Called with (step, result) as each step succeeds (sweep's resume records).
+    ship : bool
+        Send the files with the tasks (workers without a shared filesystem).
 
     Returns
     -------
@@ -254,7 +287,7 @@ def execute(
     running: dict[Future, Step] = {}
     started: dict[str, float] = {}
     failure: StepResult | None = None
-    engine = Engine(jobs, scheduler)
+    engine = Engine(jobs, scheduler, ship)
     costs = {s.key: s.cost for s in steps}
     with PlanProgress(sum(costs.values()), len(steps), label, heartbeat_s) as bar:
         moved = f" (moved to {final} when every step succeeded)" if final else ""
@@ -279,7 +312,7 @@ def execute(
                                               for s in running.values()])
                 for fut in finished:
                     s = running.pop(fut)
-                    res = StepResult(s.key, *fut.result())
+                    res = StepResult(s.key, *engine.result(fut, root))
                     if res.ok:
                         done[s.key] = res
                         if on_done is not None:

@@ -76,6 +76,7 @@ def reproduce(
     beyond: bool = True,
     scheduler: str | None = None,
     keep_logs: bool | None = None,
+    ship: bool = False,
 ) -> dict[str, Any]:
     """Run the experiment for ``seeds`` into ``outdir``; return the stdout summary.
 
@@ -96,6 +97,8 @@ def reproduce(
     keep_logs : bool or None
         Keep the simulated MCAP logs (44 MB each on the full scenario); default: only for
         one seed.
+    ship : bool
+        Send the steps' files with their tasks (workers without a shared filesystem).
 
     Returns
     -------
@@ -114,7 +117,7 @@ def reproduce(
         for s in seeds:
             (tmp / f"seed{s}").mkdir()
         write_commands(tmp / "commands.sh", steps)
-        done = execute(steps, tmp, jobs, scheduler=scheduler, final=Path(outdir))
+        done = execute(steps, tmp, jobs, scheduler=scheduler, final=Path(outdir), ship=ship)
         workers = sorted({r.worker for r in done.values()})
         kinds = {st.key: st.kind for st in steps}
         results = [seed_result(tmp, s, done, beyond, kinds) for s in seeds]

@@ -1,4 +1,4 @@
-"""``fuzzyslam sweep``: a grid of config values x seeds through simulate, run, evaluate.
+"""``fuzzyslam sweep``: a grid of config values x seeds (or x recorded logs).
 
 Each grid point is a config file ``OUTDIR/gI.yaml`` that ``extends`` the base config and
 sets the swept keys; each (grid point, seed) is the chain::
@@ -6,13 +6,23 @@ sets the swept keys; each (grid point, seed) is the chain::
     simulate gI.yaml --seed S -> gI/seedS/log.mcap -> run -> gI/seedS/est
                                                     -> evaluate -> gI/seedS/eval
 
+and with recorded logs (``logs``) each (grid point, log J) is::
+
+    run LOG --config gI.yaml -> gI/logJ/est -> evaluate TRUTH -> gI/logJ/eval
+
+where TRUTH is ``truth.tum`` beside the log (evaluated with ``--align``: a real log's map
+frame is its start), else the log itself when it holds a ground-truth topic (a simulated
+log), else there is no evaluation (the run only).
+
 run by the same engine as ``reproduce`` (local pool or ``--scheduler``), in OUTDIR itself
 so that a sweep killed halfway goes on: every finished step leaves a record
 ``OUTDIR/.sweep/<step>.json`` with a content hash of its command, the config files it
 names, the fuzzyslam version and its dependencies' hashes (a chain, so a changed config
 reaches every step after it). A step whose hash is unchanged and whose output exists is
-skipped and counted. The table (``sweep.md``, ``sweep.json``) gives, per grid point, the
-mean, sample standard deviation, min and max over seeds of the evaluation's errors.
+skipped and counted; a log's hash is that of its bytes (and of its truth.tum). The table
+(``sweep.md``, ``sweep.json``) gives, per grid point, the mean, sample standard deviation,
+min and max over seeds (or logs) of the evaluation's errors, and one figure per swept key
+(``sweep_KEY.png``, reproduce/sweep_plot.py) draws them against the key's values.
 """
 
 from __future__ import annotations
@@ -23,6 +33,7 @@ import itertools
 import json
 import math
 import os
+import re
 import shutil
 from pathlib import Path
 from typing import Any
@@ -32,6 +43,7 @@ import yaml
 from fuzzyslam import __version__
 from fuzzyslam.config import load_config
 from fuzzyslam.errors import InputError
+from fuzzyslam.fileio import atomic_path
 from fuzzyslam.reproduce.execute import StepResult, execute
 from fuzzyslam.reproduce.plan import Step, _topological
 
@@ -115,10 +127,64 @@ def sweep_steps(points: list[tuple[str, dict]], seeds: list[int]) -> list[Step]:
     return steps
 
 
+def log_units(logs: list[Path]) -> list[str]:
+    """Directory names of the logs in a sweep: ``logJ_STEM`` (J its place in ``logs``), or
+    ``logJ_DIR_STEM`` when two logs have the same file name (``runs/*/log.mcap``)."""
+    clash = len({p.stem for p in logs}) < len(logs)
+    names = [f"{p.parent.name}_{p.stem}" if clash else p.stem for p in logs]
+    return [f"log{j}_{re.sub(r'[^A-Za-z0-9_.-]', '_', n)}" for j, n in enumerate(names)]
+
+
+def log_steps(points: list[tuple[str, dict]], logs: list[Path], truth_topic: str) -> list[Step]:
+    """run (+ evaluate when there is a truth) of every recorded log for every grid point.
+
+    Parameters
+    ----------
+    points : list of (str, dict)
+        The grid (``grid_configs``).
+    logs : list of Path
+        Absolute paths of the recorded logs.
+    truth_topic : str
+        The ground-truth topic of a simulated log (``topics.ground_truth``).
+
+    Returns
+    -------
+    list of Step
+        Per grid point and log: ``gI/logJ_STEM/est`` and, with a truth, ``.../eval``.
+    """
+    from fuzzyslam.streams.reader import LogReader
+
+    truths: list[tuple[str, ...] | None] = []
+    for log in logs:
+        tum = log.parent / "truth.tum"
+        if tum.is_file():
+            truths.append((str(tum), "--align"))
+        elif LogReader(log).counts.get(truth_topic, 0) > 0:
+            truths.append((str(log),))
+        else:
+            truths.append(None)
+    steps = []
+    for i, (cfg, _) in enumerate(points):
+        for log, unit, truth in zip(logs, log_units(logs), truths, strict=True):
+            d = f"g{i}/{unit}"
+            run_call = (("log", str(log)), ("outdir", f"{d}/est"), ("config", cfg))
+            steps.append(Step(f"{d}/est", ("run", str(log), "-o", f"{d}/est", "--config", cfg),
+                              (), 4.0, "run", run_call))  # fmt: skip
+            if truth is not None:
+                argv = ("evaluate", truth[0], f"{d}/est", "-o", f"{d}/eval", *truth[1:])
+                call = (("truth", truth[0]), ("estimate", f"{d}/est"), ("outdir", f"{d}/eval"))
+                if "--align" in truth:
+                    call += (("align", True),)
+                steps.append(Step(f"{d}/eval", argv, (f"{d}/est",), 5.0, "evaluate", call))
+    return steps
+
+
 def step_hashes(steps: list[Step], root: Path) -> dict[str, str]:
     """Content hash of each step: its command, the text of the config files it names,
+    the bytes of the input files outside the sweep it names (recorded logs, truths),
     the fuzzyslam version and the hashes of its dependencies."""
     out: dict[str, str] = {}
+    files: dict[str, str] = {}
     for s in _topological(steps):
         h = hashlib.sha256()
         h.update(json.dumps([__version__, list(s.argv)]).encode())
@@ -127,6 +193,11 @@ def step_hashes(steps: list[Step], root: Path) -> dict[str, str]:
                 h.update((root / a).read_bytes())
                 if (root / "base.yaml").is_file():
                     h.update((root / "base.yaml").read_bytes())
+            elif os.path.isabs(a) and os.path.isfile(a):
+                if a not in files:
+                    with open(a, "rb") as f:
+                        files[a] = hashlib.file_digest(f, "sha256").hexdigest()
+                h.update(files[a].encode())
         for d in sorted(s.deps):
             h.update(out[d].encode())
         out[s.key] = h.hexdigest()
@@ -157,8 +228,11 @@ def sweep(
     outdir: str | os.PathLike,
     jobs: int | None = None,
     scheduler: str | None = None,
+    logs: list[str | os.PathLike] | None = None,
+    ship: bool = False,
 ) -> dict[str, Any]:
-    """Run the grid x seeds into ``outdir`` (resumable); return the stdout summary.
+    """Run the grid x seeds (or x recorded logs) into ``outdir`` (resumable); return the
+    stdout summary.
 
     Parameters
     ----------
@@ -167,16 +241,21 @@ def sweep(
     sets : list of (str, list)
         Swept keys (dotted config paths) and their values; the grid is their product.
     seeds : list of int
-        Seeds of every grid point.
+        Seeds of every grid point (ignored with ``logs``).
     outdir : path
         Output directory; kept between runs (its finished steps are skipped).
     jobs, scheduler
         As for ``reproduce``.
+    logs : list of path or None
+        Recorded logs: each is run (and evaluated, given a truth) at every grid point
+        instead of simulating seeds.
+    ship : bool
+        Send the steps' files with their tasks (workers without a shared filesystem).
 
     Returns
     -------
     dict
-        The stdout summary: table path, steps run and skipped, the table.
+        The stdout summary: table and figure paths, steps run and skipped, the table.
     """
     root = Path(outdir)
     if not sets:
@@ -187,7 +266,14 @@ def sweep(
         raise InputError(root, f"parent directory {root.resolve().parent} does not exist")
     (root / ".sweep").mkdir(parents=True, exist_ok=True)
     points = grid_configs(config, sets, root)
-    steps = sweep_steps(points, seeds)
+    if logs:
+        log_paths = [Path(p).resolve() for p in logs]
+        units = log_units(log_paths)
+        topic = load_config(str(root / points[0][0])).topics.ground_truth
+        steps = log_steps(points, log_paths, topic)
+    else:
+        units = [f"seed{s}" for s in seeds]
+        steps = sweep_steps(points, seeds)
     hashes = step_hashes(steps, root)
     skipped: dict[str, StepResult] = {}
     for s in steps:
@@ -211,26 +297,43 @@ def sweep(
         os.replace(tmp, _record(root, step.key))
 
     if todo:
-        execute(todo, root, jobs, label="sweep", scheduler=scheduler, on_done=remember)
-    rows = []
-    for i, (_, overrides) in enumerate(points):
-        row: dict[str, Any] = {"point": i, "values": overrides, "measures": {}}
-        for name, (a, b), scale, unit in MEASURES:
-            vals = []
-            for s in seeds:
-                m = json.loads((root / f"g{i}/seed{s}/eval/metrics.json").read_text())
-                v = m["phases"]["overall"].get(a, {}).get(b)
-                if v is not None:
-                    vals.append(scale * v)
-            row["measures"][f"{name} ({unit})"] = _stats(vals)
-        rows.append(row)
-    info = {"config": config, "sets": [[k, v] for k, v in sets], "seeds": seeds,
+        execute(todo, root, jobs, label="sweep", scheduler=scheduler, on_done=remember,
+                ship=ship)  # fmt: skip
+    rows = [_row(root, i, overrides, units) for i, (_, overrides) in enumerate(points)]
+    info = {"config": config, "sets": [[k, v] for k, v in sets],
+            "seeds": [] if logs else seeds, "logs": [str(p) for p in log_paths] if logs else [],
             "steps": len(steps), "ran": len(todo), "skipped": len(skipped)}  # fmt: skip
-    (root / "sweep.json").write_text(json.dumps({"info": info, "rows": rows}, indent=2,
-                                                sort_keys=True, default=str) + "\n")  # fmt: skip
+    text = json.dumps({"info": info, "rows": rows}, indent=2, sort_keys=True, default=str)
+    with atomic_path(root / "sweep.json") as tmp:
+        tmp.write_text(text + "\n", encoding="utf-8")
     _write_table(root / "sweep.md", rows, info)
+    from fuzzyslam.reproduce.sweep_plot import plot_sweep
+
+    figures = plot_sweep(root, rows, [k for k, _ in sets], len(units),
+                         "logs" if logs else "seeds")  # fmt: skip
     return {"command": "sweep", "table": str(root / "sweep.md"),
-            "results": str(root / "sweep.json"), **info, "rows": rows}  # fmt: skip
+            "results": str(root / "sweep.json"), "figures": [str(f) for f in figures],
+            **info, "rows": rows}  # fmt: skip
+
+
+def _row(root: Path, i: int, overrides: dict[str, Any], units: list[str]) -> dict[str, Any]:
+    """One grid point: each run's measures (``runs``, unit -> measure -> value; a log
+    without an evaluation is absent) and their statistics (``measures``)."""
+    runs: dict[str, dict[str, float | None]] = {}
+    for u in units:
+        path = root / f"g{i}/{u}/eval/metrics.json"
+        if not path.is_file():
+            continue
+        overall = json.loads(path.read_text(encoding="utf-8"))["phases"]["overall"]
+        runs[u] = {}
+        for name, (a, b), scale, unit in MEASURES:
+            v = overall.get(a, {}).get(b)
+            runs[u][f"{name} ({unit})"] = None if v is None else scale * v
+    measures = {}
+    for name, _, _, unit in MEASURES:
+        m = f"{name} ({unit})"
+        measures[m] = _stats([r[m] for r in runs.values() if r[m] is not None])
+    return {"point": i, "values": overrides, "measures": measures, "runs": runs}
 
 
 def _fmt(v: float | None) -> str:
@@ -241,12 +344,15 @@ def _write_table(path: Path, rows: list[dict], info: dict) -> None:
     keys = [k for k, _ in info["sets"]]
     measures = list(rows[0]["measures"]) if rows else []
     head = [*keys, *(f"{m}: mean, sd [min, max]" for m in measures)]
+    over = (f"Seeds {', '.join(map(str, info['seeds']))}" if info["seeds"] else
+            f"{len(info['logs'])} recorded logs")  # fmt: skip
+    truth = ("the truth beside each log (truth.tum, aligned) or in it" if info["logs"] else
+             "the simulator's ground truth")  # fmt: skip
     lines = [
         f"# Sweep of {info['config']}",
         "",
-        f"Seeds {', '.join(map(str, info['seeds']))}; {info['steps']} steps, "
-        f"{info['ran']} run, {info['skipped']} skipped (unchanged). Errors over the whole "
-        "log against the simulator's ground truth.",
+        f"{over}; {info['steps']} steps, {info['ran']} run, {info['skipped']} skipped "
+        f"(unchanged). Errors over the whole log against {truth}.",
         "",
         "| " + " | ".join(head) + " |",
         "|" + "---|" * len(head),
@@ -258,4 +364,5 @@ def _write_table(path: Path, rows: list[dict], info: dict) -> None:
             cells.append(f"{_fmt(st['mean'])}, {_fmt(st['sd'])} [{_fmt(st['min'])}, "
                          f"{_fmt(st['max'])}]")  # fmt: skip
         lines.append("| " + " | ".join(cells) + " |")
-    path.write_text("\n".join(lines) + "\n", encoding="utf-8")
+    with atomic_path(path) as tmp:
+        tmp.write_text("\n".join(lines) + "\n", encoding="utf-8")

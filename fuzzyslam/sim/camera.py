@@ -60,16 +60,30 @@ def coverage(cam: CeilingCamera, uv: np.ndarray, radius_px: float, k: int) -> np
     """(H, W) float32 area coverage in [0, 1] of discs centred at pixels ``uv`` (N, 2)."""
     w, h = cam.width, cam.height_px
     canvas = np.zeros((h * k, w * k), dtype=np.uint8)
+    out = np.zeros((h, w), dtype=np.float32)
     scale = float(1 << SHIFT)
     r = max(round((k * radius_px - AA_RADIUS_EXCESS) * scale), 1)
+    boxes = []
     for u, v in np.asarray(uv, dtype=float).reshape(-1, 2):
         if not (-radius_px - 1 < u < w + radius_px and -radius_px - 1 < v < h + radius_px):
             continue
         centre = (round((k * (u + 0.5) - 0.5) * scale), round((k * (v + 0.5) - 0.5) * scale))
         cv2.circle(canvas, centre, r, 255, thickness=-1, lineType=cv2.LINE_AA, shift=SHIFT)
-    if k == 1:
-        return canvas.astype(np.float32) / 255.0
-    return cv2.resize(canvas.astype(np.float32), (w, h), interpolation=cv2.INTER_AREA) / 255.0
+        # the output pixels the disc (and its anti-aliased rim) can touch, 2 px to spare
+        lo = [max(int((c - r) // scale) // k - 2, 0) for c in centre]
+        hi = [int((c + r) // scale) // k + 3 for c in centre]
+        boxes.append((slice(lo[1], min(hi[1], h)), slice(lo[0], min(hi[0], w))))
+    # only the blocks under a disc: elsewhere the coverage is 0 (block sums of whole
+    # numbers are exact in float32, so a block's mean is the same in a part or the whole)
+    for by, bx in boxes:
+        if by.start >= by.stop or bx.start >= bx.stop:
+            continue
+        part = canvas[by.start * k : by.stop * k, bx.start * k : bx.stop * k].astype(np.float32)
+        if k > 1:
+            part = cv2.resize(part, (bx.stop - bx.start, by.stop - by.start),
+                              interpolation=cv2.INTER_AREA)  # fmt: skip
+        out[by, bx] = part / 255.0
+    return out
 
 
 def render(

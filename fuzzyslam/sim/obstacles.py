@@ -58,7 +58,7 @@ class Track:
         s = np.mod(self.speed * max(t - self.t0, 0.0), 2 * total)
         s = s if s <= total else 2 * total - s  # triangle wave: there and back
         cum = np.concatenate([[0.0], np.cumsum(lens)])
-        i = int(np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(lens) - 1))
+        i = min(max(int(np.searchsorted(cum, s, side="right")) - 1, 0), len(lens) - 1)
         return self.path[i] + seg[i] * ((s - cum[i]) / max(lens[i], 1e-12))
 
 

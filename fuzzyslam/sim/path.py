@@ -29,7 +29,7 @@ import numpy as np
 
 from fuzzyslam.se2 import wrap_angle_scalar
 from fuzzyslam.sim.params import Bump, RobotParams, ScenarioParams
-from fuzzyslam.sim.world import loop_length, point_at
+from fuzzyslam.sim.world import Loop, loop_length, point_at
 from fuzzyslam.streams.logmeta import Event
 
 K_OMEGA = 2.0
@@ -86,6 +86,7 @@ def drive(
     for bp in sorted(scenario.bumps, key=lambda bp: (bp.run, bp.fraction)):
         bumps.setdefault(bp.run, []).append(bp)
     pose = start_pose(centre, scenario)
+    loop = Loop(centre)
     x, y, th = (float(v) for v in pose)
     ts, poses, dts, drs, bmp = [0.0], [(x, y, th)], [], [], []
     events = [Event(t=0.0, kind="run_start", run=1, direction=1)]
@@ -101,7 +102,7 @@ def drive(
             raise RuntimeError(f"the drive did not finish within {max_duration} s")
         v = w = 0.0
         if turning:
-            g, _ = point_at(centre, np.array([s0 + direction * (sigma + robot.lookahead)]))
+            g, _ = loop.at(np.array([s0 + direction * (sigma + robot.lookahead)]))
             e = wrap_angle_scalar(math.atan2(g[0, 1] - y, g[0, 0] - x) - th)
             if abs(e) < ALIGNED:
                 turning = False
@@ -110,9 +111,9 @@ def drive(
                 w = max(-robot.max_turn_rate, min(robot.max_turn_rate, K_OMEGA * e))
         if not turning:
             cand = np.clip(sigma + SEARCH, 0.0, lap)
-            pts, _ = point_at(centre, s0 + direction * cand)
+            pts, _ = loop.at(s0 + direction * cand)
             sigma = float(cand[np.argmin(np.hypot(pts[:, 0] - x, pts[:, 1] - y))])
-            end, _ = point_at(centre, np.array([s0 + direction * lap]))
+            end, _ = loop.at(np.array([s0 + direction * lap]))
             to_end = math.hypot(end[0, 0] - x, end[0, 1] - y)
             if lap - sigma < 0.5 and to_end < STOP_DISTANCE:
                 events.append(Event(t=t, kind="run_end", run=run))
@@ -128,7 +129,7 @@ def drive(
                 bmp.append(0.0)
                 continue
             s_aim = min(sigma + robot.lookahead, lap)
-            g, tg = point_at(centre, np.array([s0 + direction * s_aim]))
+            g, tg = loop.at(np.array([s0 + direction * s_aim]))
             if rng is not None:
                 offset = a_ou * offset + b_ou * float(rng.standard_normal())
             fade = min(1.0, sigma, max(lap - s_aim, 0.0))

@@ -44,15 +44,29 @@ def loop_length(pts: np.ndarray) -> float:
     return float(np.sum(np.linalg.norm(np.roll(pts, -1, axis=0) - pts, axis=1)))
 
 
+class Loop:
+    """A closed polyline (N, 2) with its edges, their lengths and the cumulative arc
+    length at each vertex, computed once for many ``at`` queries (the drive)."""
+
+    def __init__(self, pts: np.ndarray) -> None:
+        self.pts = pts
+        self.edges = np.roll(pts, -1, axis=0) - pts
+        self.lens = np.linalg.norm(self.edges, axis=1)
+        self.cum = np.concatenate([[0.0], np.cumsum(self.lens)])
+
+    def at(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Points (N, 2) and unit tangents (N, 2) at arc lengths ``s`` (mod the length)."""
+        cum = self.cum
+        s = np.mod(np.asarray(s, dtype=float), cum[-1])
+        # integer indices: minimum(maximum()) is np.clip without its call overhead
+        i = np.minimum(np.maximum(np.searchsorted(cum, s, side="right") - 1, 0), len(self.pts) - 1)
+        tang = self.edges[i] / self.lens[i, None]
+        return self.pts[i] + tang * (s - cum[i])[:, None], tang
+
+
 def point_at(pts: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     """Points (N, 2) and unit tangents (N, 2) at arc lengths ``s`` (mod the loop length)."""
-    edges = np.roll(pts, -1, axis=0) - pts
-    lens = np.linalg.norm(edges, axis=1)
-    cum = np.concatenate([[0.0], np.cumsum(lens)])
-    s = np.mod(np.asarray(s, dtype=float), cum[-1])
-    i = np.clip(np.searchsorted(cum, s, side="right") - 1, 0, len(pts) - 1)
-    tang = edges[i] / lens[i, None]
-    return pts[i] + tang * (s - cum[i])[:, None], tang
+    return Loop(pts).at(s)
 
 
 def even_lamps(pts: np.ndarray, count: int) -> np.ndarray:

@@ -1,4 +1,4 @@
-"""Little-endian CDR decoders of the frequent ROS 2 messages, and one block encoder.
+"""Little-endian CDR decoders of the frequent ROS 2 messages (encoders: cdr_encode.py).
 
 The decoders read the few types a log is mostly made of (wheel encoders, frames, sonar,
 odometry, landmark detections, laser scans) 2-4x faster than rosbags' generic
@@ -26,7 +26,11 @@ from typing import Any
 
 import numpy as np
 
-from fuzzyslam.se2 import yaw_to_quaternion
+# the block encoders of the estimates' log, at home in cdr_encode (imported from here too)
+from fuzzyslam.streams.cdr_encode import (  # noqa: F401
+    encode_pose_with_covariance_block,
+    encode_tf_block,
+)
 from fuzzyslam.streams.cdr_messages import (
     F8,
     Header,
@@ -255,128 +259,3 @@ def decoder(typename: str) -> Callable[[Any], Any]:
         return deserialize(buf, typename)
 
     return decode
-
-
-# -- encoder -------------------------------------------------------------------------------
-
-
-def encode_pose_with_covariance_block(
-    t: np.ndarray, poses: np.ndarray, cov: np.ndarray, frame: str
-) -> list[bytes]:
-    """Little-endian CDR of geometry_msgs/PoseWithCovarianceStamped for N rows at once
-    (the bytes ``typestore.serialize_cdr`` gives for ``messages.pose_with_covariance``,
-    ~10x faster).
-
-    Parameters
-    ----------
-    t : (N,) stamps, s (rounded to ns as ``messages.stamp``)
-    poses : (N, 3) x, y, theta (theta as a yaw quaternion)
-    cov : (N, 6) covariance rows ``pxx pxy pxt pyy pyt ptt``, embedded at rows/columns
-        x, y, yaw of the 6x6 (``messages.cov3_to_cov6``)
-    frame : header.frame_id
-
-    Returns
-    -------
-    N payloads. Layout: header.stamp sec i32, nanosec u32; frame_id u32 length (with
-    NUL) + bytes + NUL; padding to 8; position x y z, orientation x y z w,
-    covariance[36] float64.
-    """
-    name = frame.encode() + b"\0"
-    pad = -(12 + len(name)) % 8
-    dt = np.dtype(
-        [
-            ("encaps", "V4"),
-            ("sec", "<i4"),
-            ("nsec", "<u4"),
-            ("flen", "<u4"),
-            ("frame", f"V{len(name) + pad}"),
-            ("pose", "<f8", (7,)),
-            ("cov", "<f8", (36,)),
-        ]
-    )
-    n = len(t)
-    a = np.zeros(n, dtype=dt)
-    a["encaps"] = b"\x00\x01\x00\x00"
-    ns = [round(v * 1e9) for v in np.asarray(t, dtype=float).tolist()]  # messages.stamp
-    a["sec"] = [v // 1_000_000_000 for v in ns]
-    a["nsec"] = [v % 1_000_000_000 for v in ns]
-    a["flen"] = len(name)
-    a["frame"] = name + b"\0" * pad
-    a["pose"][:, :2] = poses[:, :2]
-    a["pose"][:, 3:] = yaw_to_quaternion(poses[:, 2])
-    c6 = a["cov"].reshape(n, 6, 6)
-    c6[:, [0, 0, 0, 1, 1, 1, 5, 5, 5], [0, 1, 5, 0, 1, 5, 0, 1, 5]] = cov[
-        :, [0, 1, 2, 1, 3, 4, 2, 4, 5]
-    ]
-    raw = a.tobytes()
-    size = dt.itemsize
-    return [raw[k * size : (k + 1) * size] for k in range(n)]
-
-
-def encode_tf_block(
-    t: np.ndarray, frames: list[tuple[str, str]], poses: list[np.ndarray]
-) -> list[bytes]:
-    """Little-endian CDR of tf2_msgs/TFMessage for N rows at once: row k holds one planar
-    transform per (parent, child) of ``frames``, each stamped ``t[k]`` (the bytes
-    ``typestore.serialize_cdr`` gives for ``messages.tf_message`` of
-    ``messages.transform_stamped``, ~20x faster).
-
-    Parameters
-    ----------
-    t : (N,) stamps, s (rounded to ns as ``messages.stamp``)
-    frames : (parent, child) frame ids of the transforms, in order
-    poses : one (N, 3) array of x, y, yaw (z = 0) per transform of ``frames``
-
-    Returns
-    -------
-    N payloads. Layout per transform (offsets from the end of the encapsulation header):
-    stamp sec i32, nanosec u32 (aligned to 4); frame_id and child_frame_id as u32 length
-    (with NUL) + bytes + NUL (aligned to 4); translation x y z, rotation x y z w as
-    float64 (aligned to 8); the sequence's u32 count first.
-    """
-    names, formats, offsets = [], [], []
-    pos = 4  # the sequence count
-    for k, (parent, child) in enumerate(frames):
-        pos += -pos % 4
-        names += [f"sec{k}", f"nsec{k}"]
-        formats += ["<i4", "<u4"]
-        offsets += [pos + 4, pos + 8]
-        pos += 8
-        for s in (parent, child):
-            pos += -pos % 4
-            pos += 4 + len(s.encode()) + 1
-        pos += -pos % 8
-        names.append(f"tf{k}")
-        formats.append(("<f8", (7,)))
-        offsets.append(pos + 4)
-        pos += 56
-    size = pos + 4
-    template = bytearray(size)
-    template[:4] = b"\x00\x01\x00\x00"
-    template[4:8] = _U32.pack(len(frames))
-    pos = 4
-    for parent, child in frames:  # the strings and their lengths: the same in every row
-        pos += -pos % 4 + 8
-        for s in (parent, child):
-            pos += -pos % 4
-            b = s.encode() + b"\0"
-            template[pos + 4 : pos + 8] = _U32.pack(len(b))
-            template[pos + 8 : pos + 8 + len(b)] = b
-            pos += 4 + len(b)
-        pos += -pos % 8 + 56
-    dt = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": size})
-    n = len(t)
-    buf = np.frombuffer(bytes(template) * n, dtype=np.uint8).copy()  # padding kept
-    a = buf.view(dt)
-    ns = [round(v * 1e9) for v in np.asarray(t, dtype=float).tolist()]  # messages.stamp
-    sec = [v // 1_000_000_000 for v in ns]
-    nsec = [v % 1_000_000_000 for v in ns]
-    for k, p in enumerate(poses):
-        p = np.asarray(p, dtype=float).reshape(-1, 3)
-        a[f"sec{k}"] = sec
-        a[f"nsec{k}"] = nsec
-        a[f"tf{k}"][:, :2] = p[:, :2]
-        a[f"tf{k}"][:, 2] = 0.0
-        a[f"tf{k}"][:, 3:] = yaw_to_quaternion(p[:, 2])
-    raw = buf.tobytes()
-    return [raw[k * size : (k + 1) * size] for k in range(n)]

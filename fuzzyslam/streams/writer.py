@@ -41,6 +41,7 @@ class LogWriter:
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, tuple[int, str]] = {}
         self._seq: dict[str, int] = {}
+        self._known: dict[tuple[str, str], int] = {}  # (topic, type name as given) -> id
         self.counts: dict[str, int] = {}
 
     def __enter__(self) -> LogWriter:
@@ -83,7 +84,9 @@ class LogWriter:
 
     def write_cdr(self, topic: str, typename: str, data: bytes, t: float) -> None:
         """Write an already CDR-serialised message of type ``typename`` (as ``write``)."""
-        cid = self._channel(topic, typename)
+        cid = self._known.get((topic, typename))
+        if cid is None:
+            cid = self._known[topic, typename] = self._channel(topic, typename)
         ns = sec_to_ns(t)
         self._writer.add_message(
             channel_id=cid, log_time=ns, publish_time=ns, data=data, sequence=self._seq[topic]

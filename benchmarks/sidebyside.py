@@ -1,0 +1,91 @@
+"""Old against new code, side by side in one benchmark run (imported by the bench_*.py).
+
+The old code is a git revision (``--baseline main``) exported with ``git archive`` into a
+temporary directory and put first on PYTHONPATH of its processes; the new code is the
+installed one. Each command runs in a fresh process, alternating old and new ``repeat``
+times, so both see the same load; a process's CPU time (user + sys, from
+``resource.getrusage(RUSAGE_CHILDREN)``) is less sensitive to the load than its wall time.
+"""
+
+from __future__ import annotations
+
+import io
+import os
+import resource
+import statistics
+import subprocess
+import sys
+import tarfile
+import tempfile
+import time
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def export_revision(rev: str) -> Path:
+    """A temporary directory holding ``fuzzyslam/`` of git revision ``rev`` (with its
+    configs placed as the installed package has them: fuzzyslam/configs)."""
+    out = Path(tempfile.mkdtemp(prefix=f"fuzzyslam-{rev.replace('/', '_')}."))
+    for part, dest in (("fuzzyslam", out), ("configs", out / "fuzzyslam")):
+        tar = subprocess.run(["git", "-C", str(ROOT), "archive", rev, part],
+                             check=True, capture_output=True).stdout  # fmt: skip
+        with tarfile.open(fileobj=io.BytesIO(tar)) as t:
+            t.extractall(dest, filter="data")
+    if not any((out / "fuzzyslam" / "configs").glob("*.yaml")):
+        raise RuntimeError(f"no configs in revision {rev}")
+    return out
+
+
+def run_cli(args: list[str], src: Path | None, env: dict[str, str] | None = None,
+            cwd: Path | None = None) -> tuple[float, float]:  # fmt: skip
+    """(wall s, CPU s) of ``python -m fuzzyslam ARGS`` in a fresh process; ``src``: a
+    directory put first on PYTHONPATH (the old code), None: the installed code. Paths
+    in ARGS must be absolute (the process runs in ``cwd``, default the temp directory)."""
+    env = {**os.environ, "FUZZYSLAM_NO_PROGRESS": "1", "MPLBACKEND": "Agg", **(env or {})}
+    if src is not None:
+        env["PYTHONPATH"] = os.pathsep.join([str(src), env.get("PYTHONPATH", "")]).rstrip(
+            os.pathsep)
+    else:
+        env.pop("PYTHONPATH", None)
+    r0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    t0 = time.perf_counter()
+    # not in the repository: ``-m`` puts the working directory first on sys.path
+    p = subprocess.run([sys.executable, "-m", "fuzzyslam", *args], env=env,
+                       cwd=cwd or tempfile.gettempdir(),
+                       stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, text=True)  # fmt: skip
+    wall = time.perf_counter() - t0
+    r1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+    if p.returncode != 0:
+        raise RuntimeError(f"fuzzyslam {' '.join(args)} failed: {p.stderr.strip()[-500:]}")
+    cpu = (r1.ru_utime - r0.ru_utime) + (r1.ru_stime - r0.ru_stime)
+    return wall, cpu
+
+
+def side_by_side(make_args, baseline: Path | None, repeat: int) -> dict[str, dict]:
+    """Run ``make_args(variant)`` (variant "old" or "new"; the command's arguments)
+    alternately ``repeat`` times each; per variant the best and median wall and CPU s."""
+    times: dict[str, list[tuple[float, float]]] = {"old": [], "new": []}
+    variants = (["old"] if baseline is not None else []) + ["new"]
+    for _ in range(repeat):
+        for v in variants:
+            times[v].append(run_cli(make_args(v), baseline if v == "old" else None))
+    out = {}
+    for v in variants:
+        walls, cpus = [t[0] for t in times[v]], [t[1] for t in times[v]]
+        out[v] = {"wall_best_s": round(min(walls), 2),
+                  "wall_median_s": round(statistics.median(walls), 2),
+                  "cpu_best_s": round(min(cpus), 2),
+                  "cpu_median_s": round(statistics.median(cpus), 2)}  # fmt: skip
+    if baseline is not None:
+        out["speedup_cpu_median"] = round(out["old"]["cpu_median_s"] /
+                                          out["new"]["cpu_median_s"], 2)  # fmt: skip
+        out["speedup_wall_median"] = round(out["old"]["wall_median_s"] /
+                                           out["new"]["wall_median_s"], 2)  # fmt: skip
+    return out
+
+
+def load() -> str:
+    """The machine's load averages and cores, for the printed figures."""
+    a, b, c = os.getloadavg()
+    return f"load average {a:.2f} {b:.2f} {c:.2f} on {os.cpu_count()} cores"
