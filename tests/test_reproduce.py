@@ -246,14 +246,16 @@ def test_paper_only_plan_is_the_paper_phases_subset():
 
 def test_reference_angle_rows_read_the_map_summary():
     """Errors -0.2, 0.1, 0.05 deg: mean of |e| 0.35 / 3, largest 0.2; a seed without a map
-    summary gives None."""
-    from fuzzyslam.reproduce.table import reference_error
+    summary gives None; a map summary without reference_truth is an error, not a blank."""
+    from fuzzyslam.reproduce.table import MissingMetric, SeedResult, reference_error
 
     truth = [{"error_deg": -0.2}, {"error_deg": 0.1}, {"error_deg": 0.05}]
-    r = {"map": {"fgm": {"reference_truth": truth}}}
+    r = SeedResult(0, map={"fgm": {"reference_truth": truth}})
     assert reference_error("mean")(r) == pytest.approx(0.35 / 3)
     assert reference_error("max")(r) == pytest.approx(0.2)
-    assert reference_error("max")({"map": {}}) is None
+    assert reference_error("max")(SeedResult(0)) is None
+    with pytest.raises(MissingMetric):
+        reference_error("max")(SeedResult(0, map={"fgm": {"references": []}}))
 
 
 def test_no_row_text_breaks_the_markdown_table():
