@@ -93,6 +93,16 @@ def _parse_pose(_ctx, _param, value: str | None) -> tuple[float, float, float] |
     help="Estimate the detection noise from the log's innovations in a first pass and run "
     "again with it (logs with PoseArray detections; not with --map).",
 )
+@click.option(
+    "--calibration",
+    "calibration",
+    type=click.Path(readable=False, path_type=Path),
+    default=None,
+    metavar="FILE",
+    help="Start the odometry self-calibration from FILE (a run's calibration.yaml; implies "
+    "slam.calibrate). Default with --map and slam.calibrate: the map's calibration.yaml "
+    "(the calibration at its freeze time) when it has one.",
+)
 @seed_option
 def run_command(
     log: Path,
@@ -104,6 +114,7 @@ def run_command(
     ranges,
     start_pose,
     adapt_noise,
+    calibration,
     seed,
 ) -> None:
     """EKF-SLAM on ceiling lamps over the recorded LOG (MCAP), written into OUTDIR.
@@ -128,10 +139,20 @@ def run_command(
 
     cfg = load_config(config, seed)
     aids = _build_aids(map_dir, fix, cfg, log, fix_from)
+    if calibration is None and map_dir is not None and cfg.slam.calibrate:
+        found = Path(map_dir) / "calibration.yaml"  # maps/build.py: at the freeze time
+        calibration = found if found.is_file() else None
     if adapt_noise and aids:
         raise click.UsageError("--adapt-noise cannot be combined with heading or pose fixes")
     emit(
         run_stage(
-            log, outdir, cfg, aids, adapt_noise=adapt_noise, ranges=ranges, start_pose=start_pose
+            log,
+            outdir,
+            cfg,
+            aids,
+            adapt_noise=adapt_noise,
+            ranges=ranges,
+            start_pose=start_pose,
+            calibration=calibration,
         )
     )
