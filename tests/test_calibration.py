@@ -198,9 +198,7 @@ def test_known_factors_reproduce_the_filter_without_calibration():
     np.testing.assert_allclose(runner.ekf.calib, [1.0, 1.0, 1.0], atol=1e-9)
 
 
-@pytest.mark.parametrize(
-    "kind,c_true", [("wheels", (1.004, 0.996, 1.03)), ("odom", (0.97, 1.04))]
-)
+@pytest.mark.parametrize("kind,c_true", [("wheels", (1.004, 0.996, 1.03)), ("odom", (0.97, 1.04))])
 def test_factors_converge_to_the_truth_within_two_sigma(kind, c_true):
     rng = np.random.default_rng(5)
     sig = [0.01, 0.01, 0.05] if kind == "wheels" else [0.05, 0.05]
@@ -295,7 +293,7 @@ def test_heading_fixes_on_a_straight_line_freeze_the_translation_scale(kind, c_t
     # without the freeze the same fixes move the translation direction (cross-covariance
     # through the pose): the freeze is what holds it
     ekf2 = EkfSlam(np.zeros(3), np.diag([1e-6] * 3), NOISE, calib=m.factors, calib_cov=m.cov)
-    ekf2._p[2, 3:3 + k] = ekf2._p[3:3 + k, 2] = 0.3 * np.sqrt(1e-6) * np.array(sig)
+    ekf2._p[2, 3 : 3 + k] = ekf2._p[3 : 3 + k, 2] = 0.3 * np.sqrt(1e-6) * np.array(sig)
     ekf2.update_robot([0.01], [[sh**2]], [2])
     assert abs(u @ ekf2.calib - u @ np.ones(k)) > 1e-6
     ekf2.heading_frozen = cal.HEADING_FROZEN[kind]
