@@ -308,7 +308,7 @@ def test_streamed_outputs_equal_the_in_memory_path(quick_log, tmp_path, monkeypa
     same messages (payload bytes, times, sequence numbers), the summary the same rows."""
     from fuzzyslam.slam.io import StreamingOutputs, open_inputs, write_result
     from fuzzyslam.slam.runner import SlamRunner
-    from fuzzyslam.slam.stage import run_stage
+    from fuzzyslam.slam.stage import calibration_model, run_stage
 
     cfg = load_config("quick")
     monkeypatch.setattr(StreamingOutputs, "rows_block", 7)
@@ -316,7 +316,14 @@ def test_streamed_outputs_equal_the_in_memory_path(quick_log, tmp_path, monkeypa
     summary = run_stage(quick_log, tmp_path / "streamed", cfg)
 
     inputs = open_inputs(quick_log, cfg)
-    runner = SlamRunner(cfg.slam, inputs.start_pose, [], inputs.mounts, cfg.slam.landmarks_period)
+    runner = SlamRunner(
+        cfg.slam,
+        inputs.start_pose,
+        [],
+        inputs.mounts,
+        cfg.slam.landmarks_period,
+        calibration=calibration_model(inputs, cfg, None),  # the config's self-calibration
+    )
     res = runner.run(inputs.events(), t0=inputs.start)
     (tmp_path / "memory").mkdir()
     write_result(tmp_path / "memory", res, cfg)
