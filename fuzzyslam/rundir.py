@@ -29,7 +29,10 @@ HEADING_FIXES = "heading_fixes.csv"
 POSE_FIXES = "pose_fixes.csv"
 CHANGES = "changes.csv"
 # files a run writes only with some options: an old one would be mixed with a new run
-OPTIONAL_OUTPUTS = (HEADING_FIXES, POSE_FIXES, CHANGES, "changes.png")
+# files a run writes only with some options: an old one would be mixed with a new run
+OPTIONAL_OUTPUTS = (
+    HEADING_FIXES, POSE_FIXES, CHANGES, "changes.png", "calibration.csv", "calibration.yaml"
+)
 
 
 def landmarks_dict(lamps: Iterable[Any]) -> dict:

@@ -79,6 +79,16 @@ def _parse_pose(_ctx, _param, value: str | None) -> tuple[float, float, float] |
     help="Estimate the detection noise from the log's innovations in a first pass and run "
     "again with it (logs with PoseArray detections; not with --map).",
 )
+@click.option(
+    "--calibration",
+    "calibration",
+    type=click.Path(readable=False, path_type=Path),
+    default=None,
+    metavar="FILE",
+    help="Start the odometry self-calibration from FILE (a run's calibration.yaml; implies "
+    "slam.calibrate). Default with --map and slam.calibrate: the map's calibration.yaml "
+    "(the calibration at its freeze time) when it has one.",
+)
 @seed_option
 def run_command(
     log: Path,
@@ -90,6 +100,7 @@ def run_command(
     ranges,
     start_pose,
     adapt_noise,
+    calibration,
     seed,
 ) -> None:
     """EKF-SLAM on ceiling lamps over the recorded LOG (MCAP), written into OUTDIR.
@@ -125,5 +136,6 @@ def run_command(
             ranges,
             start_pose,
             adapt_noise,
+            calibration,
         )
     )

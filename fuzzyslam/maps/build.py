@@ -28,6 +28,7 @@ from fuzzyslam.maps.quality import wall_quality
 from fuzzyslam.maps.references import Reference, extract_references
 from fuzzyslam.progress import Progress
 from fuzzyslam.se2 import interpolate_poses, wrap_angle_period
+from fuzzyslam.slam import calibration
 from fuzzyslam.streams.logmeta import World, read_scenario, read_world
 from fuzzyslam.streams.ranges import open_ranges
 from fuzzyslam.streams.reader import LogReader
@@ -289,8 +290,16 @@ def build_map(
         "build_seconds": build_s,
         "log_damage": reader.damage(),
     }
-    with OutputDir(outdir, owns=("fgm.png", "conflict.png", "hough.png")) as tmp:
+    # the odometry calibration of the trajectory's run at the freeze time (run --map starts
+    # from it: slam/calibration.py), when that run had one
+    calib = calibration.at_time(Path(traj_path).parent / "calibration.csv", t_end)
+    if calib is not None:
+        summary["calibration"] = calib
+    owns = ("fgm.png", "conflict.png", "hough.png", "calibration.yaml")
+    with OutputDir(outdir, owns=owns) as tmp:
         mapio.save_fgm(tmp / "fgm.npz", fgm, True, t_end, log_id)
+        if calib is not None:
+            calibration.write_yaml(tmp / "calibration.yaml", calib)
         mapio.save_nav2(tmp / "fgm.yaml", tmp / "fgm.pgm", fgm)
         mapio.save_references(tmp / "references.yaml", [r.to_dict() for r in refs])
         _write_viewer_log(tmp / "fgm.mcap", fgm, refs, float(reader.start), cfg)

@@ -1,9 +1,11 @@
 """Augmented-state EKF-SLAM with point landmarks (ceiling lamps) in the plane.
 
-State ``x = (x, y, theta, l1x, l1y, ..., lnx, lny)`` and covariance ``P``
+State ``x = (x, y, theta, c_1..c_k, l1x, l1y, ..., lnx, lny)`` and covariance ``P``
 (docs/models.md sec. 4; Thrun, Burgard, Fox, Probabilistic Robotics (2005), ch. 10;
-the paper sec. 2). Costs: ``predict`` O(n) (robot block and robot-map rows only),
-``update_*`` O(n^2) (one rank-2k correction of P), ``add_lamp`` O(n).
+the paper sec. 2). ``c`` are the k odometry calibration factors (k = 0 without
+self-calibration; slam/calibration.py, docs/models.md sec. 4b). Costs: ``predict``
+O(n) (robot block and robot-map rows only), ``update_*`` O(n^2) (one rank-2k
+correction of P), ``add_lamp`` O(n).
 
 Storage is preallocated and grows by doubling, so adding a lamp does not copy
 the whole matrix each time; ``x`` and ``P`` are views of the used part.
@@ -180,15 +182,26 @@ class Preintegrator:
 class EkfSlam:
     """EKF-SLAM state and covariance with O(n) prediction and Joseph-form updates."""
 
-    def __init__(self, pose, pose_cov, noise, capacity: int = 16) -> None:
-        cap = 3 + 2 * max(int(capacity), 1)
+    def __init__(
+        self, pose, pose_cov, noise, capacity: int = 16, calib=None, calib_cov=None
+    ) -> None:
+        k = 0 if calib is None else len(calib)
+        self.k = k  # calibration factors, right after the pose
+        self.m0 = 3 + k  # index of the first lamp
+        cap = self.m0 + 2 * max(int(capacity), 1)
         self._x = np.zeros(cap)
         self._p = np.zeros((cap, cap))
         self._x[:3] = np.asarray(pose, dtype=float)
         self._x[2] = wrap_angle(self._x[2])
         self._p[:3, :3] = np.asarray(pose_cov, dtype=float)
+        if k:
+            self._x[3 : self.m0] = np.asarray(calib, dtype=float)
+            self._p[3 : self.m0, 3 : self.m0] = np.asarray(calib_cov, dtype=float).reshape(k, k)
+        # directions (j, k) of calibration space that a heading-only update cannot inform:
+        # its gain along them is projected out (calibration.freeze_gain)
+        self.heading_frozen = np.zeros((0, k))
         self.noise = odometry_noise_tuple(noise)
-        self.dim = 3
+        self.dim = self.m0
         # (idx, UpdateResult) of every update_robot call, drained by the runner (updates.csv)
         self.robot_updates: list[tuple[tuple[int, ...], UpdateResult]] = []
         # numerical guards (slam/health.py): near-singular S regularised, P repaired
@@ -218,21 +231,31 @@ class EkfSlam:
         return self._p[:3, :3].copy()
 
     @property
+    def calib(self) -> np.ndarray:
+        """Calibration factors (k,), a copy."""
+        return self._x[3 : self.m0].copy()
+
+    @property
+    def calib_cov(self) -> np.ndarray:
+        """Calibration covariance (k, k), a copy."""
+        return self._p[3 : self.m0, 3 : self.m0].copy()
+
+    @property
     def n_lamps(self) -> int:
-        return (self.dim - 3) // 2
+        return (self.dim - self.m0) // 2
 
     @property
     def lamps(self) -> np.ndarray:
         """(n, 2) lamp positions (a view)."""
-        return self._x[3 : self.dim].reshape(-1, 2)
+        return self._x[self.m0 : self.dim].reshape(-1, 2)
 
     def lamp_cov(self, i: int) -> np.ndarray:
-        j = 3 + 2 * i
+        j = self.m0 + 2 * i
         return self._p[j : j + 2, j : j + 2].copy()
 
     def lamp_covs(self) -> np.ndarray:
         """(n, 2, 2) marginal covariances of all lamps (O(n), no loop in Python)."""
-        idx = 3 + 2 * np.arange(self.n_lamps)
+        idx = self.m0 + 2 * np.arange(self.n_lamps)
         rows = idx[:, None, None] + np.array([0, 1])[None, :, None]
         cols = idx[:, None, None] + np.array([0, 1])[None, None, :]
         return self._p[rows, cols]
@@ -260,14 +283,24 @@ class EkfSlam:
             p[:3, 3:n] = cross
             p[3:n, :3] = cross.T
 
-    def predict_relative(self, delta: np.ndarray, q_delta: np.ndarray) -> None:
+    def predict_relative(
+        self, delta: np.ndarray, q_delta: np.ndarray, d_calib: np.ndarray | None = None
+    ) -> None:
         """Prediction with a preintegrated relative motion delta (robot frame) of covariance Q:
 
         x_r' = x_r (+) delta;  P_rr' = J_a P_rr J_a^T + J_b Q J_b^T;  P_rm' = J_a P_rm,
         with J_a, J_b the Jacobians of SE(2) composition (se2.jacobians_compose). Equal
         to a sequence of ``predict`` calls (the midpoint step is the composition with
         (dt cos(dr/2), dt sin(dr/2), dr), and these Jacobians compose), but O(n) once.
+
+        With calibration factors c, ``d_calib`` (3, k) is d delta / d c and the pose rows
+        take T = [J_a, J_b D] over (pose, c) (``calibration.predict_calibrated``).
         """
+        if self.k and d_calib is not None:
+            from fuzzyslam.slam.calibration import predict_calibrated
+
+            predict_calibrated(self, delta, q_delta, d_calib)
+            return
         pose = self._x[:3].copy()
         ja, jb = jacobians_compose(pose, delta)
         self._x[:3] = compose(pose, delta)
@@ -301,6 +334,7 @@ class EkfSlam:
         hc: np.ndarray,
         v: np.ndarray,
         r: np.ndarray,
+        frozen: np.ndarray | None = None,
     ) -> None:
         """Kalman correction with H nonzero only on columns ``cols`` (H[:, cols] = hc).
 
@@ -310,6 +344,10 @@ class EkfSlam:
            = P + X Y^T + Y X^T,  X = K, Y = K S / 2 - P H^T,
         one (n x 4k)(4k x n) matrix product: O(n^2 k), applied by row blocks to the upper
         triangle and mirrored, so P stays exactly symmetric (``_add_symmetric_update``).
+
+        ``frozen`` (j, k): calibration directions this measurement cannot observe; the
+        gain along them is projected out (``calibration.freeze_gain``; the Joseph form
+        keeps P the covariance of the suboptimal gain, those directions unchanged).
         """
         n = self.dim
         p = self._p[:n, :n]
@@ -319,6 +357,10 @@ class EkfSlam:
         kt, reg = solve_spd(s, pht.T)  # S near-singular: regularised (and counted)
         self.guards["s_regularised"] += reg
         k = kt.T
+        if frozen is not None and len(frozen):
+            from fuzzyslam.slam.calibration import freeze_gain
+
+            k = freeze_gain(k, frozen, 3, self.m0)
         self._x[:n] += k @ v
         self._x[2] = wrap_angle(self._x[2])
         y = 0.5 * (k @ s) - pht
@@ -359,7 +401,7 @@ class EkfSlam:
         x = self._x
         c, s = math.cos(x[2]), math.sin(x[2])
         rt = np.array([[c, s], [-s, c]])
-        j = 3 + 2 * ids
+        j = self.m0 + 2 * ids
         h = (x[np.column_stack([j, j + 1])] - x[:2]) @ rt.T  # (k, 2)
         hc = np.zeros((2 * k, 3 + 2 * k))
         rows = np.arange(k)
@@ -412,7 +454,8 @@ class EkfSlam:
         if gate_chi2 is not None and not nis <= gate_chi2:
             res = UpdateResult(False, nis, v)
         else:
-            self._correct(cols, hc, v, r)
+            heading_only = bool(np.all(cols == 2))
+            self._correct(cols, hc, v, r, self.heading_frozen if heading_only else None)
             res = UpdateResult(True, nis, v)
         self.robot_updates.append((tuple(int(c) for c in cols), res))
         return res
@@ -475,7 +518,7 @@ class EkfSlam:
         w = pxx - (pt[None, :, None] * dp[:, None, :] + dp[:, :, None] * pt[None, None, :])
         w += qtt * dp[:, :, None] * dp[:, None, :]
         # G P_rl = -P_rl[:2] + dp P_rl[2]  (each 2x2); P_rl rows 0..2, lamp columns
-        prl = p[:3, 3:end].reshape(3, n, 2)  # [row, lamp, col]
+        prl = p[:3, self.m0 : end].reshape(3, n, 2)  # [row, lamp, col]
         gpl = -prl[:2].transpose(1, 0, 2) + dp[:, :, None] * prl[2][:, None, :]  # (n, 2, 2)
         w += gpl + gpl.transpose(0, 2, 1)
         w += self.lamp_covs()

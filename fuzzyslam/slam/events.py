@@ -152,6 +152,7 @@ class SlamResult:
     # and the detection noise the innovations imply (slam/noise.py)
     health: dict = field(default_factory=dict)
     noise_estimate: DetectionNoiseEstimate | None = None
+    calibration: dict | None = None  # the summary's entry (slam/stage.py)
 
     def mean_nis(self, kind: str = "lamp") -> float:
         """Mean NIS of the accepted updates of ``kind`` (expected value: their dof)."""

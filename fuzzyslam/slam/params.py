@@ -35,6 +35,20 @@ class SlamParams:
     rot_var_per_rad: float = field(default=3e-5, metadata={"min": 0.0, "max": 1.0})
     rot_var_per_m: float = field(default=6.65e-5, metadata={"min": 0.0, "max": 1.0})
     use_encoders: bool = True
+    # odometry self-calibration (slam/calibration.py, docs/models.md sec. 4b): scale factors
+    # in the filter state, wheels (left, right, base) for encoders, (translation,
+    # rotation) for Odometry poses; prior sigmas around 1 and a random walk of each
+    # factor per metre and per radian of motion (factor^2/m, factor^2/rad)
+    calibrate: bool = False
+    # (wheel radii measured to 0.1 mm on a 5 cm wheel: 0.2 %; a wider prior on each wheel is
+    # a prior heading drift of sqrt(2) sigma / b per metre, 35 mrad/m at 1 % on a 40 cm base,
+    # that the EKF's linearisation does not survive: tests/test_calibration.py, NEES)
+    calib_wheel_sigma: float = field(default=0.002, metadata={"min": 1e-6, "max": 0.5})
+    calib_base_sigma: float = field(default=0.02, metadata={"min": 1e-6, "max": 0.5})
+    calib_trans_sigma: float = field(default=0.05, metadata={"min": 1e-6, "max": 0.5})
+    calib_rot_sigma: float = field(default=0.05, metadata={"min": 1e-6, "max": 0.5})
+    calib_var_per_m: float = field(default=1e-9, metadata={"min": 0.0, "max": 1e-2})
+    calib_var_per_rad: float = field(default=1e-9, metadata={"min": 0.0, "max": 1e-2})
     # start pose (x, y, theta) when the log carries none, and its standard deviation
     start_pose: list[float] = field(
         default_factory=lambda: [0.0, 0.0, 0.0], metadata={"min": -1e6, "max": 1e6, "len": 3}

@@ -25,6 +25,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fuzzyslam.robot import integrate
+from fuzzyslam.slam import calibration as cal
 from fuzzyslam.slam.association import (
     Association,
     TentativeLamps,
@@ -50,6 +51,8 @@ from fuzzyslam.slam.events import (
 from fuzzyslam.slam.health import DivergenceMonitor
 from fuzzyslam.slam.noise import DetectionNoiseEstimator
 from fuzzyslam.slam.params import SlamParams
+
+CALIB_PERIOD_S = 1.0  # calibration.csv: a row at most this often (s)
 
 # the loop's data (slam/events.py), importable from here as before
 __all__ = [
@@ -77,14 +80,30 @@ class SlamRunner:
     mounts: np.ndarray | None = None
     snapshot_period: float | None = None  # default: params.landmarks_period
     sink: RowSink | None = None  # default: a MemorySink
+    # odometry self-calibration (slam/calibration.py): None, or the model and its prior
+    calibration: cal.Calibration | None = None
 
     def __post_init__(self) -> None:
         p = self.params
         if self.snapshot_period is None:
             self.snapshot_period = p.landmarks_period
         self.start_pose = np.asarray(self.start_pose, dtype=float)
-        self.ekf = EkfSlam(self.start_pose, np.diag(np.square(p.start_sigma)), p.odometry_noise)
-        self.preint = Preintegrator(p.odometry_noise)
+        cm = self.calibration
+        self.ekf = EkfSlam(
+            self.start_pose,
+            np.diag(np.square(p.start_sigma)),
+            p.odometry_noise,
+            calib=None if cm is None else cm.factors,
+            calib_cov=None if cm is None else cm.cov,
+        )
+        if cm is None:
+            self.preint = Preintegrator(p.odometry_noise)
+        else:
+            self.preint = cal.CalibratedPreintegrator(p.odometry_noise, cm)
+            self.ekf.heading_frozen = cal.HEADING_FROZEN[cm.kind]
+        # calibration.csv rows (t, factors, sigmas, correlations), one per CALIB_PERIOD_S
+        self.calib_rows: list[list[str]] = []
+        self._last_calib = -np.inf
         self.health = DivergenceMonitor()  # NIS and association-rate windows (health.py)
         self.noise = DetectionNoiseEstimator()  # the detection noise the innovations imply
         self.tentative = TentativeLamps(
@@ -140,6 +159,9 @@ class SlamRunner:
             self._n_rows += 1
         self._pending = (t, self.ekf.pose, row)
         self._last_record = t
+        if self.calibration is not None and t - self._last_calib >= CALIB_PERIOD_S:
+            self.calib_rows.append(cal.csv_row(t, self.ekf.calib, self.ekf.calib_cov))
+            self._last_calib = t
         if self._n_rows % 50 == 0:
             self.ekf.check_covariance()  # O(n^3), every 50 rows (health.repair_covariance)
         if t - self._last_snapshot >= self.snapshot_period:
@@ -151,13 +173,24 @@ class SlamRunner:
 
     def flush(self) -> None:
         """Apply the odometry preintegrated since the last flush (one O(n) prediction)."""
-        if self.preint.steps:
-            self.ekf.predict_relative(self.preint.delta, self.preint.q)
-            self.preint.reset()
+        pre = self.preint
+        if not pre.steps:
+            return
+        if self.calibration is None:
+            self.ekf.predict_relative(pre.delta, pre.q)
+            pre.reset()
+            return
+        # x' = x (+) delta(c), D = d delta / dc; then the factors' random walk
+        self.ekf.predict_relative(pre.delta, pre.q, pre.d_calib)
+        cm = self.calibration
+        cal.diffuse(self.ekf, cm.var_per_m * pre.dist + cm.var_per_rad * pre.turn)
+        pre.reset(self.ekf.calib)
 
     def odometry(self, ev: Odom) -> None:
         """Odometry increment: preintegrated (applied at the next flush), and dead reckoning."""
         self._last_odometry = ev.t
+        if self.calibration is not None and not self.preint.steps:
+            self.preint.reset(self.ekf.calib)  # the factors as the last update left them
         self.preint.add(ev.d_trans, ev.d_rot)
         self.sink.odometry(ev.t, ev.d_trans, ev.d_rot)  # type: ignore[union-attr]
         self.counts["odometry"] += 1

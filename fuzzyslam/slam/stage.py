@@ -18,6 +18,7 @@ from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, check_outputs
 from fuzzyslam.progress import Progress, note
 from fuzzyslam.rundir import OPTIONAL_OUTPUTS
+from fuzzyslam.slam import calibration as cal
 from fuzzyslam.slam.health import orphan_landmarks
 from fuzzyslam.slam.inputs import open_inputs
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
@@ -59,6 +60,8 @@ def make_summary(
     est = res.noise_estimate
     if inputs.lamp_source == "detections":
         out["noise_estimate"] = est.as_dict() if est is not None else None
+    if res.calibration is not None:
+        out["calibration"] = res.calibration
     if aids:
         out["aids"] = {type(a).__name__: a.summary() for a in aids}
         out["rings"] = inputs.ring_stats.as_dict()
@@ -105,6 +108,7 @@ def run_stage(
     adapt_noise: bool = False,
     ranges: str | None = None,
     start_pose: tuple[float, float, float] | None = None,
+    calibration: str | os.PathLike | None = None,
 ) -> dict:
     """Run EKF-SLAM on ``log`` and write docs/contracts.md sec. 2 files into ``outdir``.
 
@@ -118,12 +122,14 @@ def run_stage(
     contradict is told on stderr in one line (which keys to change, to what).
 
     ``ranges`` (sonar|scan) chooses the aids' range sensor, ``start_pose`` overrides the
-    start pose (slam/inputs.py). A log without lamps and without aids is dead reckoning: a
-    one-line note on stderr says so."""
+    start pose (slam/inputs.py). ``calibration``: a calibration.yaml whose factors and
+    covariance start the odometry self-calibration (slam/calibration.py; implies it).
+    A log without lamps and without aids is dead reckoning: a one-line note on stderr
+    says so."""
     if adapt_noise:
         if aids:
             raise ValueError("adapt_noise: the aids of a first pass cannot be reused")
-        first = _run_once(log, outdir, cfg, [], True, ranges, start_pose)
+        first = _run_once(log, outdir, cfg, [], True, ranges, start_pose, calibration)
         est = first.get("noise_estimate")
         if est:
             cfg = copy.deepcopy(cfg)
@@ -134,11 +140,11 @@ def run_stage(
             ):
                 if est[key] is not None:  # None: not measurable (slam.noise)
                     setattr(cfg.slam, key, float(est[key]))
-        summary = _run_once(log, outdir, cfg, [], True, ranges, start_pose)
+        summary = _run_once(log, outdir, cfg, [], True, ranges, start_pose, calibration)
         summary["noise_adapted"] = est
         _tell(summary)
         return summary
-    return _run_once(log, outdir, cfg, aids, False, ranges, start_pose)
+    return _run_once(log, outdir, cfg, aids, False, ranges, start_pose, calibration)
 
 
 def _tell(summary: dict, cfg: Config | None = None) -> None:
@@ -173,6 +179,7 @@ def _run_once(
     _quiet: bool,
     ranges: str | None = None,
     start_pose: tuple[float, float, float] | None = None,
+    calibration: str | os.PathLike | None = None,
 ) -> dict:
     aids = list(aids or [])
     wall0 = time.perf_counter()
@@ -184,9 +191,10 @@ def _run_once(
             f"topics.detections {cfg.topics.detections}) and no map: the estimate is dead "
             "reckoning (give --map FGMDIR --fix pose|heading)"
         )
+    model = calibration_model(inputs, cfg, calibration)
     staged = OutputDir(outdir, owns=OPTIONAL_OUTPUTS)
     with staged as tmp, StreamingOutputs(tmp, cfg, inputs.start_pose, inputs.frames) as streamed:
-        res = _run_filter(inputs, cfg, aids, streamed)
+        res = _run_filter(inputs, cfg, aids, streamed, model)
         for aid in aids:
             aid.write(tmp)
         extra = [  # the aids' messages for estimates.mcap (/map stamped at the log's start)
@@ -201,10 +209,28 @@ def _run_once(
     return summary
 
 
-def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs) -> SlamResult:
-    """The filter over the log's events (rows to ``sink``), its health, input checks."""
+def calibration_model(inputs, cfg: Config, path) -> cal.Calibration | None:
+    """The run's odometry calibration (slam/calibration.py): None when ``slam.calibrate``
+    is off and no file is given; else the model of the log's odometry (``wheels`` for
+    encoders, ``odom`` for Odometry poses) from the config's prior or from ``path``."""
+    if not cfg.slam.calibrate and path is None:
+        return None
+    kind = "wheels" if inputs.odom_source == "encoders" else "odom"
+    model = cal.prior(kind, cfg.slam, cfg.robot.wheel_base)
+    return model if path is None else cal.load(path, model)
+
+
+def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs, model=None) -> SlamResult:
+    """The filter over the log's events (rows to ``sink``), its health, input checks;
+    with ``model``, the calibration files into the sink's directory."""
     runner = SlamRunner(
-        cfg.slam, inputs.start_pose, aids, inputs.mounts, cfg.slam.landmarks_period, sink
+        cfg.slam,
+        inputs.start_pose,
+        aids,
+        inputs.mounts,
+        cfg.slam.landmarks_period,
+        sink,
+        calibration=model,
     )
     # frames are tiny: OpenCV's thread pool only costs here (OpenCV is not even loaded
     # for logs whose lamps come as detections and that have no aids: 0.3 s of start-up)
@@ -225,6 +251,8 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs) -> Slam
         if cv2 is not None:
             cv2.setNumThreads(threads)
     res.ekf.check_covariance()
+    if model is not None:
+        res.calibration = _write_calibration(runner, model, sink.tmp)
     res.noise_estimate = runner.noise.estimate()
     res.health = {  # numerical guards and the divergence tests (slam/health.py)
         **res.ekf.guards,
@@ -249,3 +277,24 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs) -> Slam
         problem = inputs.first_problem or "no frames"
         raise InputError(inputs.reader.path, f"no usable camera frame ({problem})")
     return res
+
+
+def _write_calibration(runner: SlamRunner, model: cal.Calibration, outdir) -> dict:
+    """calibration.csv (the factors over time, a last row at the end) and calibration.yaml
+    (the final factors and covariance: ``run --calibration`` reads it); the summary entry."""
+    ekf = runner.ekf
+    c, cov = ekf.calib, ekf.calib_cov
+    t_end = runner._last_t
+    rows = runner.calib_rows
+    if not rows or float(rows[-1][0]) < t_end:
+        rows.append(cal.csv_row(t_end, c, cov))
+    cal.write_csv(Path(outdir) / "calibration.csv", model, rows)
+    final = cal.as_dict(model, t_end, c, cov)
+    cal.write_yaml(Path(outdir) / "calibration.yaml", final)
+    prior = model.factors
+    return {
+        "model": model.kind,
+        "start": model.source,
+        "start_factors": [float(v) for v in prior],
+        **{k: final[k] for k in ("names", "factors", "sigma")},
+    }

@@ -1,0 +1,294 @@
+"""Odometry self-calibration: scale factors of the odometry in the EKF state.
+
+The filter state carries k calibration factors ``c`` right after the pose
+(slam/ekf.py; docs/models.md sec. 4b), after Roy and Thrun, "Online self-calibration
+for mobile robots" (ICRA 1999) and Martinelli, Tomatis and Siegwart, "Simultaneous
+localization and odometry self calibration for mobile robot" (Autonomous Robots 22,
+2007). Two models:
+
+- ``wheels`` (wheel encoders; c = (s_L, s_R, s_B)): true wheel radii r s_L, r s_R and
+  base b s_B. From the nominal increment (dt_n, dr_n) (nominal r and b) the nominal
+  wheel arcs are a_L = dt_n - b dr_n / 2, a_R = dt_n + b dr_n / 2, and::
+
+      dt = (s_L a_L + s_R a_R) / 2,    dr = (s_R a_R - s_L a_L) / (b s_B)
+
+- ``odom`` (nav_msgs/Odometry pose increments; c = (s_T, s_W)): dt = s_T dt_n,
+  dr = s_W dr_n.
+
+Observability (docs/models.md sec. 4b): a lamp sighting or a pose fix measures position
+and heading, so every factor; a heading fix measures heading only, which the
+translation scale does not enter on a straight line and which on turns cannot
+separate it from the base (or rotation) factor. The heading-only update's gain along the
+translation direction (s_L + s_R for ``wheels``, s_T for ``odom``) is therefore projected
+out (:func:`freeze_gain`), so the translation scale keeps its value and variance through
+a dark stretch corrected by heading fixes alone. Each factor also takes a random walk
+per metre and per radian of motion (``slam.calib_var_per_m``, ``calib_var_per_rad``).
+"""
+
+from __future__ import annotations
+
+import csv
+import io
+import math
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import yaml
+
+from fuzzyslam.errors import InputError
+from fuzzyslam.se2 import compose, jacobians_compose
+from fuzzyslam.slam.ekf import Preintegrator
+from fuzzyslam.stamps import format_time
+
+NAMES = {
+    "wheels": ("left_scale", "right_scale", "base_scale"),
+    "odom": ("trans_scale", "rot_scale"),
+}
+# directions of calibration space that a heading-only measurement cannot inform (module doc)
+HEADING_FROZEN = {"wheels": np.array([[1.0, 1.0, 0.0]]), "odom": np.array([[1.0, 0.0]])}
+
+
+@dataclass
+class Calibration:
+    """The calibration model of a run, its prior (or starting) factors and covariance."""
+
+    kind: str  # "wheels" | "odom"
+    wheel_base: float  # nominal b (m), ``wheels`` only
+    factors: np.ndarray  # (k,)
+    cov: np.ndarray  # (k, k)
+    var_per_m: float = 0.0  # random walk of each factor, factor^2 per metre
+    var_per_rad: float = 0.0  # and per radian
+    source: str = "prior"
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return NAMES[self.kind]
+
+    @property
+    def k(self) -> int:
+        return len(self.names)
+
+
+def prior(kind: str, slam, wheel_base: float) -> Calibration:
+    """The config's prior: factors 1, sigmas ``slam.calib_*_sigma`` (independent)."""
+    if kind == "wheels":
+        s = [slam.calib_wheel_sigma, slam.calib_wheel_sigma, slam.calib_base_sigma]
+    else:
+        s = [slam.calib_trans_sigma, slam.calib_rot_sigma]
+    return Calibration(
+        kind,
+        float(wheel_base),
+        np.ones(len(s)),
+        np.diag(np.square(s)),
+        slam.calib_var_per_m,
+        slam.calib_var_per_rad,
+    )
+
+
+def calibrated_increment(kind: str, b: float, c, dt_n: float, dr_n: float):
+    """Calibrated increment (dt, dr) and its Jacobian F = d(dt, dr)/dc as two row tuples.
+
+    wheels: F = [[a_L/2, a_R/2, 0], [-a_L/(b s_B), a_R/(b s_B), -dr/s_B]];
+    odom:   F = [[dt_n, 0], [0, dr_n]] (module docstring).
+    """
+    if kind == "wheels":
+        sl, sr, sb = c
+        al, ar = dt_n - 0.5 * b * dr_n, dt_n + 0.5 * b * dr_n
+        dt = 0.5 * (sl * al + sr * ar)
+        bs = b * sb
+        dr = (sr * ar - sl * al) / bs
+        return dt, dr, (0.5 * al, 0.5 * ar, 0.0), (-al / bs, ar / bs, -dr / sb)
+    st, sw = c
+    return st * dt_n, sw * dr_n, (dt_n, 0.0), (0.0, dr_n)
+
+
+class CalibratedPreintegrator(Preintegrator):
+    """:class:`Preintegrator` of calibrated increments, with D = d delta / d c (3, k).
+
+    delta' = delta (+) m(u(c)):  D' = A D + B G_u F,  A, B G_u as in ``Preintegrator.add``
+    and F the Jacobian of :func:`calibrated_increment` (the chain rule through the
+    composition). The factors are those of the filter at the last ``reset``.
+    """
+
+    def __init__(self, noise, model: Calibration) -> None:
+        self.kind, self.b = model.kind, model.wheel_base
+        self.c = tuple(float(v) for v in model.factors)
+        super().__init__(noise)
+
+    def reset(self, factors=None) -> None:
+        super().reset()
+        if factors is not None:
+            self.c = tuple(float(v) for v in factors)
+        k = len(self.c)
+        self._d = [[0.0] * k for _ in range(3)]
+        self.dist = self.turn = 0.0  # |dt| and |dr| summed: the random walk's clock
+
+    def add(self, d_trans: float, d_rot: float) -> None:
+        dt, dr, f0, f1 = calibrated_increment(self.kind, self.b, self.c, d_trans, d_rot)
+        h = 0.5 * dr
+        mx, my = dt * math.cos(h), dt * math.sin(h)
+        c, s = math.cos(self.dth), math.sin(self.dth)
+        a = -s * mx - c * my  # A = [[1, 0, a], [0, 1, b], [0, 0, 1]]
+        b = c * mx - s * my
+        ch, sh, kk = math.cos(self.dth + h), math.sin(self.dth + h), 0.5 * dt
+        d0, d1, d2 = self._d  # B G_u = [[ch, -kk sh], [sh, kk ch], [0, 1]]
+        self._d = [
+            [d0[j] + a * d2[j] + ch * f0[j] - kk * sh * f1[j] for j in range(len(f0))],
+            [d1[j] + b * d2[j] + sh * f0[j] + kk * ch * f1[j] for j in range(len(f0))],
+            [d2[j] + f1[j] for j in range(len(f0))],
+        ]
+        self.dist += abs(dt)
+        self.turn += abs(dr)
+        super().add(dt, dr)
+
+    @property
+    def d_calib(self) -> np.ndarray:
+        """D = d delta / d c, (3, k)."""
+        return np.array(self._d)
+
+
+def predict_calibrated(ekf, delta: np.ndarray, q: np.ndarray, d: np.ndarray) -> None:
+    """Prediction over (pose, c) with the preintegrated delta(c) (Jacobian D = d delta/dc).
+
+    x_r' = x_r (+) delta;  T = [J_a, J_b D] (3, 3 + k) on the rows of (pose, c):
+    P_r,x' = T P_(r,c),x for every column x but the pose's;  P_rr' = T P_(r,c),(r,c) T^T
+    + J_b Q J_b^T; c and its covariance unchanged (the random walk is added by the
+    runner, ``EkfSlam.diffuse``). O(n).
+    """
+    m0, n = ekf.m0, ekf.dim
+    p = ekf._p
+    pose = ekf._x[:3].copy()
+    ja, jb = jacobians_compose(pose, delta)
+    t = np.hstack([ja, jb @ d])  # (3, m0)
+    ekf._x[:3] = compose(pose, delta)
+    ekf.odometry_pose = compose(ekf.odometry_pose, delta)
+    rows = t @ p[:m0, :n]  # (3, n)
+    prr = rows[:, :m0] @ t.T + jb @ q @ jb.T
+    rows[:, :3] = 0.5 * (prr + prr.T)
+    p[:3, :n] = rows
+    p[3:n, :3] = rows[:, 3:].T
+
+
+def diffuse(ekf, var: float) -> None:
+    """Random walk of the factors: P_cc' = P_cc + var I."""
+    if var > 0.0:
+        i = np.arange(3, ekf.m0)
+        ekf._p[i, i] += var
+
+
+def freeze_gain(k: np.ndarray, frozen: np.ndarray, c0: int, c1: int) -> np.ndarray:
+    """The gain K (n, m) with the calibration rows c0:c1 projected so that u^T K_c = 0
+    for every frozen direction u (rows of ``frozen``, (j, k)): K_c' = (I - U (U^T U)^-1
+    U^T) K_c, U = frozen^T. Then u^T c and u^T P_cc u are unchanged by the update (the
+    Joseph form holds for any gain)."""
+    u = np.asarray(frozen, dtype=float).T  # (k, j)
+    k = k.copy()
+    kc = k[c0:c1]
+    k[c0:c1] = kc - u @ np.linalg.solve(u.T @ u, u.T @ kc)
+    return k
+
+
+# -- files ---------------------------------------------------------------------------------
+
+
+def csv_header(model: Calibration) -> list[str]:
+    names = model.names
+    corr = [f"corr_{a}_{b}" for i, a in enumerate(names) for b in names[i + 1 :]]
+    return ["t", *names, *(f"sigma_{n}" for n in names), *corr]
+
+
+def csv_row(t: float, c: np.ndarray, cov: np.ndarray) -> list[str]:
+    """One calibration.csv row: t (9 decimals), factors, sigmas, correlations."""
+    sig = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    k = len(c)
+    corr = [
+        cov[i, j] / (sig[i] * sig[j]) if sig[i] * sig[j] > 0 else 0.0
+        for i in range(k)
+        for j in range(i + 1, k)
+    ]
+    return [format_time(t), *(f"{v:.9g}" for v in (*c, *sig, *corr))]
+
+
+def write_csv(path: Path, model: Calibration, rows: list[list[str]]) -> None:
+    buf = io.StringIO()
+    w = csv.writer(buf, lineterminator="\n")
+    w.writerow(csv_header(model))
+    w.writerows(rows)
+    path.write_text(buf.getvalue())  # into an OutputDir's staging directory
+
+
+def as_dict(model: Calibration, t: float | None, c: np.ndarray, cov: np.ndarray) -> dict:
+    sig = np.sqrt(np.maximum(np.diag(cov), 0.0))
+    out = {
+        "model": model.kind,
+        "names": list(model.names),
+        "factors": [float(v) for v in c],
+        "sigma": [float(v) for v in sig],
+        "covariance": [[float(v) for v in row] for row in cov],
+    }
+    if model.kind == "wheels":
+        out["wheel_base_nominal"] = float(model.wheel_base)
+    if t is not None:
+        out["t"] = float(t)
+    return out
+
+
+def write_yaml(path: Path, d: dict) -> None:
+    path.write_text(yaml.safe_dump(d, sort_keys=False))  # staged, as write_csv
+
+
+def load(path: str | Path, model: Calibration) -> Calibration:
+    """``model`` started from the factors and covariance of a calibration.yaml (a run's,
+    or a map directory's: the calibration at the map's freeze time)."""
+    path = Path(path)
+    try:
+        d = yaml.safe_load(path.read_text())
+        kind = d["model"]
+        c = np.asarray(d["factors"], dtype=float)
+        cov = np.asarray(d["covariance"], dtype=float)
+    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as exc:
+        raise InputError(path, f"not a calibration file ({exc})") from None
+    if kind != model.kind:
+        raise InputError(
+            path, f"calibration model '{kind}', but this log's odometry needs '{model.kind}'"
+        )
+    k = model.k
+    ok = c.shape == (k,) and cov.shape == (k, k) and np.all(np.isfinite(cov))
+    if not ok or not np.all(np.isfinite(c)) or np.any(c <= 0):
+        raise InputError(path, f"needs {k} positive factors and a {k}x{k} covariance")
+    if np.linalg.eigvalsh(0.5 * (cov + cov.T)).min() <= 0:
+        raise InputError(path, "the covariance is not positive definite")
+    return Calibration(
+        kind, model.wheel_base, c, 0.5 * (cov + cov.T), model.var_per_m, model.var_per_rad,
+        str(path),
+    )  # fmt: skip
+
+
+def at_time(csv_path: Path, t_end: float) -> dict | None:
+    """The calibration of a run's calibration.csv at time ``t_end`` (its last row at or
+    before it) as a calibration.yaml dict; None without the file or such a row."""
+    if not csv_path.is_file():
+        return None
+    with csv_path.open(newline="") as f:
+        rows = list(csv.reader(f))
+    if len(rows) < 2:
+        return None
+    head = rows[0]
+    k = (math.isqrt(8 * (len(head) - 1) + 9) - 3) // 2  # 1 + 2k + k(k-1)/2 columns
+    names = tuple(head[1 : 1 + k])
+    kind = next((m for m, n in NAMES.items() if n == names), None)
+    best = [r for r in rows[1:] if float(r[0]) <= t_end]
+    if kind is None or not best:
+        return None
+    r = [float(v) for v in best[-1]]
+    c, sig, corr = np.array(r[1 : 1 + k]), np.array(r[1 + k : 1 + 2 * k]), r[1 + 2 * k :]
+    cm = np.eye(k)
+    iu = np.triu_indices(k, 1)
+    cm[iu] = corr
+    cm.T[iu] = corr
+    cov = cm * np.outer(sig, sig)
+    model = Calibration(kind, 0.0, c, cov)
+    d = as_dict(model, r[0], c, cov)
+    d.pop("wheel_base_nominal", None)
+    return d
