@@ -343,13 +343,15 @@ def test_calibration_at_time_reads_back_the_csv(tmp_path):
 
 @pytest.mark.slow
 def test_run_map_run_carry_the_calibration(tmp_path):
-    """quick.yaml end to end: the run learns the wheel factors within 2 sigma of the
+    """quick.yaml, calibrating, end to end: the run learns the wheel factors within 2 sigma of the
     simulator's (the base factor: comment below), the map keeps those of its freeze time,
     and run --map starts from them."""
     log = tmp_path / "q.mcap"
+    conf = tmp_path / "quick_calibrated.yaml"  # the presets leave it off
+    conf.write_text("extends: quick.yaml\nslam:\n  calibrate: true\n")
     inv = CliRunner().invoke
     assert inv(cli, ["simulate", "quick", "-o", str(log), "--seed", "1"]).exit_code == 0
-    res = inv(cli, ["run", str(log), "-o", str(tmp_path / "AB"), "--config", "quick"])
+    res = inv(cli, ["run", str(log), "-o", str(tmp_path / "AB"), "--config", str(conf)])
     assert res.exit_code == 0, res.output
     summary = json.loads(res.stdout)
     from fuzzyslam.config import load_config
@@ -365,11 +367,11 @@ def test_run_map_run_carry_the_calibration(tmp_path):
     rows = np.loadtxt(tmp_path / "AB" / "calibration.csv", delimiter=",", skiprows=1)
     assert rows.shape[1] == 10 and np.all(np.diff(rows[:, 0]) > 0)
     res = inv(cli, ["map", str(log), "--trajectory", str(tmp_path / "AB" / "trajectory.tum"),
-                    "-o", str(tmp_path / "fgm"), "--config", "quick"])  # fmt: skip
+                    "-o", str(tmp_path / "fgm"), "--config", str(conf)])  # fmt: skip
     assert res.exit_code == 0, res.output
     fgm = yaml.safe_load((tmp_path / "fgm" / "calibration.yaml").read_text())
     assert fgm["t"] <= json.loads(res.stdout)["freeze_time"] < fgm["t"] + 1.0 + 1e-9
-    res = inv(cli, ["run", str(log), "-o", str(tmp_path / "C"), "--config", "quick",
+    res = inv(cli, ["run", str(log), "-o", str(tmp_path / "C"), "--config", str(conf),
                     "--map", str(tmp_path / "fgm"), "--fix", "heading"])  # fmt: skip
     assert res.exit_code == 0, res.output
     start = json.loads(res.stdout)["calibration"]

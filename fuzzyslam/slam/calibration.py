@@ -157,11 +157,12 @@ def predict_calibrated(ekf, delta: np.ndarray, q: np.ndarray, d: np.ndarray) -> 
     runner, ``EkfSlam.diffuse``). O(n).
     """
     m0, n = ekf.m0, ekf.dim
-    p = ekf._p
-    pose = ekf._x[:3].copy()
+    p = ekf.P  # views of the filter's arrays: updated in place
+    x = ekf.x
+    pose = x[:3].copy()
     ja, jb = jacobians_compose(pose, delta)
     t = np.hstack([ja, jb @ d])  # (3, m0)
-    ekf._x[:3] = compose(pose, delta)
+    x[:3] = compose(pose, delta)
     ekf.odometry_pose = compose(ekf.odometry_pose, delta)
     rows = t @ p[:m0, :n]  # (3, n)
     prr = rows[:, :m0] @ t.T + jb @ q @ jb.T
@@ -174,7 +175,7 @@ def diffuse(ekf, var: float) -> None:
     """Random walk of the factors: P_cc' = P_cc + var I."""
     if var > 0.0:
         i = np.arange(3, ekf.m0)
-        ekf._p[i, i] += var
+        ekf.P[i, i] += var
 
 
 def freeze_gain(k: np.ndarray, frozen: np.ndarray, c0: int, c1: int) -> np.ndarray:

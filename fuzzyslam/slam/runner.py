@@ -138,6 +138,11 @@ class SlamRunner:
         self._last_snapshot = -np.inf
 
     @property
+    def last_time(self) -> float:
+        """Time (s) of the last event handled."""
+        return self._last_t
+
+    @property
     def updates(self) -> list[UpdateRow]:
         """The update attempts so far (a :class:`MemorySink` only)."""
         return self.sink.updates  # type: ignore[union-attr]

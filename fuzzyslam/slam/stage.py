@@ -81,12 +81,15 @@ def run(
     ranges: str | None = None,
     start_pose: tuple[float, float, float] | None = None,
     adapt_noise: bool = False,
+    calibration: str | os.PathLike | None = None,
 ) -> dict:
     """The ``run`` stage on ``log`` into ``outdir``: the config ``config`` (a YAML path or
     an embedded name; default paper.yaml) with ``seed``; with ``map_dir``, the fixes
     ``fix`` (heading|pose|none; default the config's ``fixes.mode``) from ``fix_from``
-    (``fixes.aids.aids_for_log``, the plug-ins loaded on demand). Returns the JSON
-    summary; UsageError for options that do not go together."""
+    (``fixes.aids.aids_for_log``, the plug-ins loaded on demand); ``calibration``: a
+    run's calibration.yaml to start the odometry self-calibration from (default with a
+    map and ``slam.calibrate``: the map's, its calibration at the freeze time). Returns
+    the JSON summary; UsageError for options that do not go together."""
     from fuzzyslam.config import load_config
     from fuzzyslam.errors import UsageError
     from fuzzyslam.fixes.aids import aids_for_log  # the plug-ins (fixes/) sit above slam/
@@ -95,8 +98,18 @@ def run(
     aids = aids_for_log(Path(map_dir) if map_dir is not None else None, fix, cfg, log, fix_from)
     if adapt_noise and aids:
         raise UsageError("--adapt-noise cannot be combined with heading or pose fixes")
+    if calibration is None and map_dir is not None and cfg.slam.calibrate:
+        found = Path(map_dir) / "calibration.yaml"  # maps/build.py: at the freeze time
+        calibration = found if found.is_file() else None
     return run_stage(
-        log, outdir, cfg, aids, adapt_noise=adapt_noise, ranges=ranges, start_pose=start_pose
+        log,
+        outdir,
+        cfg,
+        aids,
+        adapt_noise=adapt_noise,
+        ranges=ranges,
+        start_pose=start_pose,
+        calibration=calibration,
     )
 
 
@@ -284,7 +297,7 @@ def _write_calibration(runner: SlamRunner, model: cal.Calibration, outdir) -> di
     (the final factors and covariance: ``run --calibration`` reads it); the summary entry."""
     ekf = runner.ekf
     c, cov = ekf.calib, ekf.calib_cov
-    t_end = runner._last_t
+    t_end = runner.last_time
     rows = runner.calib_rows
     if not rows or float(rows[-1][0]) < t_end:
         rows.append(cal.csv_row(t_end, c, cov))
