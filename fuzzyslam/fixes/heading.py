@@ -67,82 +67,35 @@ plausible), ``gated``.
 
 from __future__ import annotations
 
-import csv
 import math
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
-from typing import Any, Protocol
+from typing import Any
 
 import numpy as np
 
-from fuzzyslam.fileio import atomic_path
+from fuzzyslam.fixes.heading_measure import (  # the paper's measurement; re-exported here
+    HEADING_FIELDS,
+    FlmSource,
+    HeadingDecision,
+    WallLike,
+    decide_heading_fix,
+    nearest_candidate,
+    select_corridor,
+    write_heading_fixes,
+)
 from fuzzyslam.fixes.params import FixParams
-from fuzzyslam.fixes.references import Reference, corridors_at, corridors_near
+from fuzzyslam.fixes.references import Reference
 from fuzzyslam.maps.flm import RecentRings
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import wrap_angle, wrap_angle_period
 from fuzzyslam.slam.health import chi2_quantile
-from fuzzyslam.stamps import format_time
 
-HEADING_FIELDS = ("t", "corridor", "measured", "predicted", "accepted", "reason", "strength")
-
-
-class WallLike(Protocol):
-    """What the FLM's Hough gives (``maps.hough.WallDirection``)."""
-
-    angle: float
-    strength: float
-    ambiguous: bool
-
-
-@dataclass(frozen=True)
-class HeadingDecision:
-    """One ring's heading fix: measured theta (nan when not formed), why (not) applied."""
-
-    t: float
-    corridor: int
-    measured: float
-    predicted: float
-    accepted: bool
-    reason: str
-    strength: float
-    nis: float = math.nan
-    sigma: float = math.nan  # standard deviation (rad) of the measurement when formed
-    # the dead-reckoning heading at the ring (EkfSlam.odometry_pose; the filter's when
-    # absent): the bump recovery's reference for the measurements' consistency
-    odometry: float = math.nan
-    # at an oblique junction (candidate corridors not at right angles): no bump evidence
-    oblique: bool = False
-    # the filter's position at the ring, before the fix (where a viewer draws it)
-    x: float = math.nan
-    y: float = math.nan
-
-    def row(self) -> list[str]:
-        def num(v: float) -> str:
-            return "" if not np.isfinite(v) else f"{v:.9g}"
-
-        return [
-            format_time(self.t),
-            str(self.corridor),
-            num(self.measured),
-            num(self.predicted),
-            str(int(self.accepted)),
-            self.reason,
-            num(self.strength),
-        ]
-
-
-def nearest_candidate(theta0: float, predicted: float, period: float) -> tuple[float, float, float]:
-    """Among theta0 + k * period, the candidate nearest ``predicted``.
-
-    Returns (theta, d1, d2): the candidate wrapped to (-pi, pi], its distance to the
-    prediction (|d1| <= period / 2) and the distance of the second nearest (period - |d1|).
-    """
-    d = float(wrap_angle_period(theta0 - predicted, period))
-    theta = float(wrap_angle(predicted + d))
-    return theta, abs(d), period - abs(d)
+__all__ = ["HEADING_FIELDS", "FlmSource", "HeadingDecision", "HeadingFixAid", "WallLike",
+           "decide_heading_fix", "nearest_candidate", "select_corridor",
+           "write_heading_fixes"]  # fmt: skip
 
 
 def _formed(d: HeadingDecision) -> bool:
@@ -169,110 +122,6 @@ def _streak_offset(rings: Sequence[HeadingDecision]) -> tuple[float, float, floa
     mean = float(np.sum(w * rel) / np.sum(w))
     scatter = float(np.sum(w * (rel - mean) ** 2))
     return float(wrap_angle(u[0] + mean)), float(1.0 / math.sqrt(float(np.sum(w)))), scatter
-
-
-def select_corridor(
-    xy: Sequence[float], refs: Sequence[Reference], period: float, junction_margin: float = 0.0
-) -> tuple[list[Reference], str]:
-    """The candidate corridors at ``xy``: (references, "" | "junction" | why none).
-
-    Inside one region, or overlapping regions whose reference angles agree mod
-    ``period`` within 1 degree: the strongest one (``ambiguous_reference`` if the map
-    stage flagged it). Regions that disagree (a junction): ``ambiguous_corridor``, or,
-    with ``junction_margin`` > 0, all of them ("junction"). Outside every region:
-    ``no_corridor``, or, with ``junction_margin`` > 0, the regions within that distance
-    (a corner, "junction"), all of whose angles then compete in :func:`decide_heading_fix`.
-    """
-    inside = corridors_at(xy, refs)
-    if not inside:
-        near = corridors_near(xy, refs, junction_margin) if junction_margin > 0 else []
-        near = [r for r in near if not r.ambiguous]
-        return (near, "junction") if near else ([], "no_corridor")
-    if len(inside) > 1:
-        a0 = inside[0].angle
-        spread = [abs(float(wrap_angle_period(r.angle - a0, period))) for r in inside]
-        if max(spread) > math.radians(1.0):
-            if junction_margin > 0:
-                good = [r for r in inside if not r.ambiguous]
-                return (good, "junction") if good else ([], "ambiguous_reference")
-            return [], "ambiguous_corridor"
-    best = max(inside, key=lambda r: r.strength)
-    if best.ambiguous:
-        return [], "ambiguous_reference"
-    return [best], ""
-
-
-def decide_heading_fix(
-    t: float,
-    wall: WallLike | None,
-    refs: Sequence[Reference],
-    pose: np.ndarray,
-    pose_cov: np.ndarray,
-    params: FixParams,
-    sigmas_deg: tuple[float, float] | None = None,
-) -> HeadingDecision:
-    """Form, check and gate the heading measurement of one ring (module docstring).
-
-    With several candidate corridors (a corner, ``fixes.junction_margin`` > 0) every
-    reference's comb t_ref - t_local + k period competes: the candidate nearest the
-    prediction is taken, refused as ``ambiguous_heading`` when the next one (of any
-    comb) is also within ``ambiguity_sigmas`` sqrt(P_tt + R); such a fix has the
-    (larger, measured) noise ``sigma_junction_deg``. The decision's ``sigma`` is the R used.
-    ``sigmas_deg``: (corridor, junction) standard deviations replacing
-    (``sigma_heading_deg``, ``sigma_junction_deg``), e.g. for a multi-ring FLM.
-    """
-    predicted = float(pose[2])
-    if wall is None or not np.isfinite(wall.angle):
-        return HeadingDecision(t, -1, math.nan, predicted, False, "no_wall", math.nan)
-    strength = float(wall.strength)
-    if strength < params.min_strength:
-        return HeadingDecision(t, -1, math.nan, predicted, False, "weak_peak", strength)
-    period = math.pi / 2 if params.right_angles else math.pi
-    cands, why = select_corridor(pose[:2], refs, period, params.junction_margin)
-    # two wall directions in one FLM (a corner) disqualify it, unless the corner's
-    # corridors all compete (junction_walls): the strongest wall is then one of theirs
-    if wall.ambiguous and not (why == "junction" and params.junction_walls):
-        return HeadingDecision(t, -1, math.nan, predicted, False, "ambiguous_wall", strength)
-    if not cands:
-        return HeadingDecision(t, -1, math.nan, predicted, False, why, strength)
-    if sigmas_deg is None:
-        sigmas_deg = (params.sigma_heading_deg, params.sigma_junction_deg)
-    sig = sigmas_deg[1] if why == "junction" else sigmas_deg[0]
-    sigma = math.radians(sig)
-    # every candidate corridor's nearest comb member, sorted by distance to the prediction
-    combs = sorted(
-        ((nearest_candidate(r.angle - float(wall.angle), predicted, period), r) for r in cands),
-        key=lambda c: c[0][1],
-    )
-    (theta, d1, d2), ref = combs[0]
-    for (th, dk, _), _r in combs[1:]:
-        if abs(float(wrap_angle(th - theta))) > math.radians(1.0):
-            d2 = min(d2, dk)  # a different heading another corridor would give
-    var = float(pose_cov[2, 2]) + sigma**2
-    nis = d1 * d1 / var
-    if d2 < params.ambiguity_sigmas * math.sqrt(var):
-        why = "ambiguous_heading"
-    elif nis > params.gate_chi2:
-        why = "gated"
-    else:
-        why = "ok"
-    return HeadingDecision(t, ref.id, theta, predicted, why == "ok", why, strength, nis, sigma)
-
-
-class FlmSource:
-    """Builds the FLM of a ring once, shared by every aid that needs it on that ring."""
-
-    def __init__(self, build: Callable[[Any, np.ndarray], BeliefMap]) -> None:
-        self._build = build
-        self._key: tuple[int, float] | None = None
-        self._flm: BeliefMap | None = None
-
-    def __call__(self, ring: Any, mounts: np.ndarray) -> BeliefMap:
-        key = (id(ring), float(ring.t))
-        if key != self._key or self._flm is None:
-            self._flm = self._build(ring, mounts)
-            self._key = key
-        return self._flm
 
 
 class HeadingFixAid:
@@ -563,11 +412,3 @@ class HeadingFixAid:
 
     def write(self, outdir: Path) -> None:
         write_heading_fixes(Path(outdir) / "heading_fixes.csv", self.decisions)
-
-
-def write_heading_fixes(path: Path, decisions: Sequence[HeadingDecision]) -> None:
-    """heading_fixes.csv: ``t,corridor,measured,predicted,accepted,reason,strength``."""
-    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(HEADING_FIELDS)
-        w.writerows(d.row() for d in decisions)
