@@ -13,7 +13,15 @@ from pathlib import Path
 import pytest
 
 from fuzzyslam.reproduce.execute import StepFailed, execute
-from fuzzyslam.reproduce.plan import EVALUATIONS, FULL, QUICK, Step, build_plan, critical_path
+from fuzzyslam.reproduce.plan import (
+    EVALUATIONS,
+    FULL,
+    QUICK,
+    Step,
+    build_plan,
+    compare_label,
+    critical_path,
+)
 from fuzzyslam.reproduce.table import ROWS, Row, aggregate, phase_stat, run_labels
 
 pytestmark = pytest.mark.slow  # end to end: the quick reproduce fixture runs every stage
@@ -212,10 +220,11 @@ def test_quick_reproduce_table_agrees_with_the_evaluations(quick_run):
     # (evaluate --compare), each row the same as the estimate's own evaluation
     dark = json.loads((out / "seed0" / "eval_dark_pose" / "metrics.json").read_text())
     cmp = {r["label"]: r["phases"]["after"]["position_mean_m"] for r in dark["comparison"]}
-    assert list(cmp)[1:] == ["dark_heading", "dark_none"]
-    for other in ("dark_heading", "dark_none"):
+    labels = [compare_label(o) for o in ("dark_heading", "dark_none")]  # not folder names
+    assert list(cmp)[1:] == labels
+    for other, label in zip(("dark_heading", "dark_none"), labels, strict=True):
         own = json.loads((out / "seed0" / f"eval_{other}" / "metrics.json").read_text())
-        assert cmp[other] == pytest.approx(own["phases"]["after"]["position_m"]["mean"])
+        assert cmp[label] == pytest.approx(own["phases"]["after"]["position_m"]["mean"])
     assert "## Side by side" in (out / "seed0" / "eval_dark_pose" / "report.md").read_text()
 
 
