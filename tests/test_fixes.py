@@ -158,48 +158,23 @@ def corridor():
 # --- a 3-state EKF standing in for fuzzyslam.slam's ----------------------------------------
 
 
-class ToyEkf:
-    """x = (x, y, theta), Joseph-form direct measurements of components idx."""
+class SmallEkf(EkfSlam):
+    """The real EkfSlam with no lamps (state x = (x, y, theta)), counting its accepted
+    robot updates; ``move`` is its relative prediction (EkfSlam.predict_relative)."""
 
     def __init__(self, pose, cov):
-        self.x = np.asarray(pose, float).copy()
-        self.P = np.asarray(cov, float).copy()
+        super().__init__(np.asarray(pose, float), np.asarray(cov, float), (0.0, 0.0, 0.0, 0.0))
         self.updates = 0
 
-    @property
-    def pose(self):
-        return self.x.copy()
-
-    @property
-    def pose_cov(self):
-        return self.P.copy()
-
     def update_robot(self, z, r, idx, gate_chi2=None):
-        idx = np.asarray(idx)
-        h = np.eye(3)[idx]
-        v = np.asarray(z, float) - self.x[idx]
-        v[idx == 2] = wrap_angle(v[idx == 2])
-        s = h @ self.P @ h.T + np.atleast_2d(r)
-        nis = float(v @ np.linalg.solve(s, v))
-        if gate_chi2 is not None and nis > gate_chi2:
-            return SimpleNamespace(accepted=False, nis=nis, innovation=v)
-        k = self.P @ h.T @ np.linalg.inv(s)
-        self.x = self.x + k @ v
-        self.x[2] = wrap_angle(self.x[2])
-        ikh = np.eye(3) - k @ h
-        self.P = ikh @ self.P @ ikh.T + k @ np.atleast_2d(r) @ k.T
-        self.updates += 1
-        return SimpleNamespace(accepted=True, nis=nis, innovation=v)
-
-    def inflate_robot(self, q):
-        self.P = self.P + q
+        res = super().update_robot(z, r, idx, gate_chi2)
+        self.updates += int(res.accepted)
+        return res
 
     def move(self, d_fwd: float, q: np.ndarray, d_rot: float = 0.0):
-        """Odometry step (forward, then turn): x' = x (+) (d, 0, dr), P' = F P F^T + Q."""
-        c, sn = math.cos(self.x[2]), math.sin(self.x[2])
-        f = np.array([[1.0, 0.0, -d_fwd * sn], [0.0, 1.0, d_fwd * c], [0.0, 0.0, 1.0]])
-        self.x = compose(self.x, [d_fwd, 0.0, d_rot])
-        self.P = f @ self.P @ f.T + q
+        """Odometry step (forward, then turn): x' = x (+) (d, 0, dr) with the motion's
+        covariance q (3, 3) in the robot frame."""
+        self.predict_relative(np.array([d_fwd, 0.0, d_rot]), np.asarray(q, float))
 
 
 def ring(t):
@@ -310,12 +285,12 @@ def test_ambiguous_corridor_fix_is_skipped_not_applied():
     off), or, with junctions on, applied only when the prediction picks one corridor."""
     refs = [corridor_ref(0.0, 0), corridor_ref(math.radians(70), 1)]
     wall = SimpleNamespace(angle=0.05, strength=3.0, ambiguous=False)
-    ekf = ToyEkf([0.0, 0.0, -0.05], np.diag([0.01, 0.01, (5 * DEG) ** 2]))
+    ekf = SmallEkf([0.0, 0.0, -0.05], np.diag([0.01, 0.01, (5 * DEG) ** 2]))
     off = FixParams(junction_margin=0.0)
     aid = HeadingFixAid(refs, off, lambda r, m: None, lambda flm: wall, 0.0)
     aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
     assert aid.decisions[-1].reason == "ambiguous_corridor"
-    assert ekf.updates == 0 and ekf.x[2] == -0.05
+    assert ekf.updates == 0 and ekf.x[2] == pytest.approx(-0.05, abs=1e-15)
     # junctions on: 70 degrees apart, the prediction (sigma 5 deg) picks corridor 0,
     # and the fix has the junction noise
     p = FixParams(junction_margin=1.0)
@@ -326,7 +301,7 @@ def test_ambiguous_corridor_fix_is_skipped_not_applied():
     assert d.sigma == pytest.approx(math.radians(p.sigma_junction_deg))
     # two corridors 8 degrees apart: both candidates lie within 3 sigma, refused
     close = [corridor_ref(0.0, 0), corridor_ref(math.radians(8), 1)]
-    ekf = ToyEkf([0.0, 0.0, -0.05], np.diag([0.01, 0.01, (3 * DEG) ** 2]))
+    ekf = SmallEkf([0.0, 0.0, -0.05], np.diag([0.01, 0.01, (3 * DEG) ** 2]))
     aid = HeadingFixAid(close, p, lambda r, m: None, lambda flm: wall, 0.0)
     aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
     assert aid.decisions[-1].reason == "ambiguous_heading" and ekf.updates == 0
@@ -335,7 +310,7 @@ def test_ambiguous_corridor_fix_is_skipped_not_applied():
     two = SimpleNamespace(angle=0.05, strength=3.0, ambiguous=True)
     for refs_k, jw, want in ((refs[:1], True, "ambiguous_wall"), (refs, True, "ok"),
                              (refs, False, "ambiguous_wall")):  # fmt: skip
-        ekf = ToyEkf([0.0, 0.0, -0.05], np.diag([0.01, 0.01, (5 * DEG) ** 2]))
+        ekf = SmallEkf([0.0, 0.0, -0.05], np.diag([0.01, 0.01, (5 * DEG) ** 2]))
         q = FixParams(junction_margin=1.0, junction_walls=jw)
         aid = HeadingFixAid(refs_k, q, lambda r, m: None, lambda flm: two, 0.0)
         aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
@@ -343,12 +318,12 @@ def test_ambiguous_corridor_fix_is_skipped_not_applied():
     # a corner just outside both regions counts as a junction; far away: no corridor
     r0 = corridor_ref(0.0, 0)
     for xy, want in (([20.5, 0.0], "ok"), ([23.0, 0.0], "no_corridor")):
-        ekf = ToyEkf([*xy, -0.05], np.diag([0.01, 0.01, (3 * DEG) ** 2]))
+        ekf = SmallEkf([*xy, -0.05], np.diag([0.01, 0.01, (3 * DEG) ** 2]))
         aid = HeadingFixAid([r0], p, lambda r, m: None, lambda flm: wall, 0.0)
         aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
         assert aid.decisions[-1].reason == want
     # a prediction too uncertain to pick among the mod-pi candidates is refused too
-    ekf = ToyEkf([0.0, 0.0, 0.2], np.diag([0.01, 0.01, (60 * DEG) ** 2]))
+    ekf = SmallEkf([0.0, 0.0, 0.2], np.diag([0.01, 0.01, (60 * DEG) ** 2]))
     aid = HeadingFixAid(refs[:1], FixParams(), lambda r, m: None, lambda flm: wall, 0.0)
     aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
     assert aid.decisions[-1].reason == "ambiguous_heading" and ekf.updates == 0
@@ -371,7 +346,7 @@ def _drive_with_heading_fixes(theta_err: float, sigma_pred: float, rings: int):
     walls = corridor_walls(angle)
     ref = corridor_ref(angle)
     true = np.array([*(rot(angle) @ [-6.0, 0.2]), angle + 0.05])
-    ekf = ToyEkf(true + np.array([0.0, 0.0, theta_err]), np.diag([1e-4, 1e-4, sigma_pred**2]))
+    ekf = SmallEkf(true + np.array([0.0, 0.0, theta_err]), np.diag([1e-4, 1e-4, sigma_pred**2]))
     src = {}
 
     def flm_source(r, m):
@@ -508,7 +483,7 @@ def test_pose_match_covariance_elongated_along_corridor(corridor, kind):
 
 def _drive_with_pose_fixes(fgm, walls, start, kind, rings=30):
     true = np.array(start)
-    ekf = ToyEkf(
+    ekf = SmallEkf(
         true + np.array([0.15, -0.1, 2.5 * DEG]), np.diag([0.1**2, 0.1**2, (2 * DEG) ** 2])
     )
     src = {}
@@ -647,8 +622,8 @@ def test_change_detector_plugin_writes_csv(room, tmp_path):
     pose = np.array([1.5, 1.2, 0.3])
     src = {"flm": flm_at(pose, np.vstack([walls, box]))}
     det = ChangeDetector(fgm, FixParams(), lambda r, m: src["flm"], 0.0)
-    det.on_ring(1.0, ring(1.0), MOUNTS, ToyEkf(pose, np.eye(3) * 1e-4))
-    det.on_ring(2.0, ring(2.0), MOUNTS, ToyEkf(pose, np.eye(3) * 1.0))  # too uncertain
+    det.on_ring(1.0, ring(1.0), MOUNTS, SmallEkf(pose, np.eye(3) * 1e-4))
+    det.on_ring(2.0, ring(2.0), MOUNTS, SmallEkf(pose, np.eye(3) * 1.0))  # too uncertain
     assert det.summary()["skipped_uncertain"] == 1 and det.summary()["detections"] >= 1
     det.write(tmp_path)
     rows = list(csv.DictReader(open(tmp_path / "changes.csv")))
@@ -691,7 +666,7 @@ def test_make_aids_loads_and_checks_map_dir(room, tmp_path):
     aids = aids[1:]
     # the plug-in protocol end to end, with the maps stage's FLM builder behind it
     pose = np.array([1.5, 1.2, 0.3])
-    ekf = ToyEkf(pose + np.array([0.05, 0.0, 0.01]), np.diag([0.01, 0.01, 1e-3]))
+    ekf = SmallEkf(pose + np.array([0.05, 0.0, 0.01]), np.diag([0.01, 0.01, 1e-3]))
     for t in (4.0, 6.0, 6.25):
         r = Ring(t, raycast(pose, walls), np.full(16, MAXR), FOV)
         for a in [aid, *aids]:
@@ -777,16 +752,7 @@ def test_multi_ring_flm_measures_the_wall_direction_better_than_one_ring():
     assert len(unplaced) < len(multi) or unplaced.mean() > 1.5 * multi.mean()
 
 
-class OdoEkf(ToyEkf):
-    """ToyEkf that also keeps its dead reckoning (slam.ekf.EkfSlam.odometry_pose)."""
-
-    def __init__(self, pose, cov):
-        super().__init__(pose, cov)
-        self.odometry_pose = np.asarray(pose, float).copy()
-
-    def move(self, d_fwd: float, q: np.ndarray, d_rot: float = 0.0):
-        super().move(d_fwd, q, d_rot)
-        self.odometry_pose = compose(self.odometry_pose, [d_fwd, 0.0, d_rot])
+OdoEkf = SmallEkf  # the real filter keeps its dead reckoning (EkfSlam.odometry_pose)
 
 
 def sonar_ring(t: float):
@@ -1023,7 +989,7 @@ def test_heading_aid_flags_suspect_pose_until_a_fix_agrees():
     wall = SimpleNamespace(angle=0.0, strength=3.0, ambiguous=False)
     refs = [corridor_ref(0.0, 0)]
     p = FixParams(recover_after=0)
-    ekf = ToyEkf([0.0, 0.0, math.radians(10)], np.diag([1e-4, 1e-4, (0.5 * DEG) ** 2]))
+    ekf = SmallEkf([0.0, 0.0, math.radians(10)], np.diag([1e-4, 1e-4, (0.5 * DEG) ** 2]))
     aid = HeadingFixAid(refs, p, lambda r, m: None, lambda flm: wall, 0.0)
     aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
     assert aid.decisions[-1].reason == "gated" and aid.pose_suspect
@@ -1064,7 +1030,7 @@ def test_ring_without_a_fix_leaves_the_pose_unconfirmed():
     from the pose until a ring's fix agrees again (the camera can see a bump first)."""
     walls = [SimpleNamespace(angle=0.0, strength=3.0, ambiguous=False), None]
     refs = [corridor_ref(0.0, 0)]
-    ekf = ToyEkf([0.0, 0.0, 0.0], np.diag([1e-4, 1e-4, (0.5 * DEG) ** 2]))
+    ekf = SmallEkf([0.0, 0.0, 0.0], np.diag([1e-4, 1e-4, (0.5 * DEG) ** 2]))
     state = {"wall": walls[0]}
     aid = HeadingFixAid(refs, FixParams(flm_rings=1), lambda r, m: None, lambda f: state["wall"])
     assert not aid.pose_suspect  # before the aid's first ring: lamp-only SLAM
@@ -1083,7 +1049,7 @@ def test_pose_fix_skipped_while_filter_knows_better_than_the_map(room):
     pose = np.array([1.5, 1.2, 0.3])
     flm = flm_at(pose, walls)
     for sigma, want in ((0.005, "prior_better"), (0.05, "ok")):
-        ekf = ToyEkf(
+        ekf = SmallEkf(
             pose + np.array([0.02, -0.01, 0.0]), np.diag([sigma**2, sigma**2, (0.5 * DEG) ** 2])
         )
         aid = PoseFixAid(fgm, FixParams(pose_map_sigma=0.02), lambda r, m: flm, 0.0)

@@ -33,6 +33,7 @@ from fuzzyslam.fileio import atomic_path
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import transform_points
+from fuzzyslam.slam.events import FilterView
 from fuzzyslam.stamps import format_time
 
 CHANGE_FIELDS = ("t", "x", "y", "size", "cells")
@@ -142,7 +143,7 @@ class ChangeDetector:
         self.rings = 0
         self.uncertain = 0
 
-    def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: Any) -> None:
+    def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
         if t < self.start_time:
             return
         self.rings += 1

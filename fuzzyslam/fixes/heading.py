@@ -91,6 +91,7 @@ from fuzzyslam.fixes.references import Reference
 from fuzzyslam.maps.flm import RecentRings
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import wrap_angle, wrap_angle_period
+from fuzzyslam.slam.events import FilterView
 from fuzzyslam.slam.health import chi2_quantile
 
 __all__ = ["HEADING_FIELDS", "FlmSource", "HeadingDecision", "HeadingFixAid", "WallLike",
@@ -170,14 +171,12 @@ class HeadingFixAid:
         self._single: list[HeadingDecision] = []  # single-ring decisions (the watchdog)
         self.multi_formed = 0
 
-    def _push(self, t: float, ring: Any, ekf: Any) -> None:
+    def _push(self, t: float, ring: Any, ekf: FilterView) -> None:
         """Add the ring to the window with its dead-reckoning pose (module docstring)."""
         assert self.recent is not None
-        pose = getattr(ekf, "odometry_pose", None)
-        pose = ekf.pose if pose is None else pose
-        self.recent.push(t, pose, ring.ranges, ring.max_range, ring.fov)
+        self.recent.push(t, ekf.odometry_pose, ring.ranges, ring.max_range, ring.fov)
 
-    def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: Any) -> None:
+    def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
         if t < self.start_time:
             self.before_start += 1
             return
@@ -186,8 +185,7 @@ class HeadingFixAid:
             self._since_fix += 1
         pose = ekf.pose
         x0, y0 = float(pose[0]), float(pose[1])
-        odo = getattr(ekf, "odometry_pose", None)
-        odo_heading = float(pose[2] if odo is None else odo[2])
+        odo_heading = float(ekf.odometry_pose[2])
         period = math.pi / 2 if self.params.right_angles else math.pi
         cands, why = select_corridor(pose[:2], self.refs, period, self.params.junction_margin)
         if not cands:  # no FLM or Hough needed (junctions, open space)
@@ -203,7 +201,7 @@ class HeadingFixAid:
         d = decide_heading_fix(t, wall, self.refs, pose, ekf.pose_cov, self.params)
         d = replace(d, odometry=odo_heading, oblique=why == "junction" and _oblique(cands))
         history = self._single if self.recent is not None else self.decisions
-        recover = d.reason == "gated" and hasattr(ekf, "inflate_robot")
+        recover = d.reason == "gated"
         streak = self._recovery_streak(d, history) if recover else []
         if streak:
             # consistent gated fixes: the filter, not the map, is wrong (an unseen bump).
@@ -297,7 +295,7 @@ class HeadingFixAid:
         self.pose_suspect = self._disagreed or not self._agrees(single)
 
     def _multi_decision(
-        self, t: float, single: HeadingDecision, mounts: np.ndarray, ekf: Any
+        self, t: float, single: HeadingDecision, mounts: np.ndarray, ekf: FilterView
     ) -> HeadingDecision:
         """The multi-ring fix when one is due (every ``fix_every`` rings, a window at least
         half full), else the single-ring decision as a row that is not applied."""

@@ -43,6 +43,7 @@ from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.pose_match import PoseMatch, PoseMatcher
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import between, compose, wrap_angle
+from fuzzyslam.slam.events import FilterView
 from fuzzyslam.stamps import format_time
 
 
@@ -176,7 +177,7 @@ class PoseFixAid:
                 return False
         return True
 
-    def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: Any) -> None:
+    def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
         if t < self.start_time:
             self.before_start += 1
             return
@@ -192,8 +193,7 @@ class PoseFixAid:
                 PoseDecision(t, False, "prior_better", nan3, np.full((3, 3), np.nan), 0, math.nan)
             )
             return
-        odo = getattr(ekf, "odometry_pose", None)
-        odo = ekf.pose if odo is None else odo
+        odo = ekf.odometry_pose
         travel, turn = math.inf, math.inf
         if self._last_odo is not None:
             travel = float(np.hypot(*(odo[:2] - self._last_odo[:2])))

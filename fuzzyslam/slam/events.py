@@ -16,7 +16,7 @@ from typing import Protocol
 
 import numpy as np
 
-from fuzzyslam.slam.ekf import EkfSlam
+from fuzzyslam.slam.ekf import EkfSlam, UpdateResult
 from fuzzyslam.slam.noise import DetectionNoiseEstimate
 from fuzzyslam.streams.sonar import Ring
 
@@ -44,12 +44,33 @@ class RingEvent:
 Event = Odom | Frame | RingEvent
 
 
+class FilterView(Protocol):
+    """What a fix plug-in reads from the filter and does to it (``slam.ekf.EkfSlam``):
+    the pose (3,) and its covariance (3, 3), the dead reckoning of the same odometry, a
+    direct measurement of pose components ``idx`` (Joseph form, gated), and covariance
+    inflation of the robot block."""
+
+    odometry_pose: np.ndarray
+
+    @property
+    def pose(self) -> np.ndarray: ...
+
+    @property
+    def pose_cov(self) -> np.ndarray: ...
+
+    def update_robot(
+        self, z: np.ndarray, r: np.ndarray, idx: np.ndarray, gate_chi2: float | None = None
+    ) -> UpdateResult: ...
+
+    def inflate_robot(self, q: np.ndarray) -> None: ...
+
+
 class Aid(Protocol):
     """A plug-in that corrects the filter from sonar rings (heading or pose fixes)."""
 
     start_time: float
 
-    def on_ring(self, t: float, ring: Ring, mounts: np.ndarray, ekf: EkfSlam) -> None: ...
+    def on_ring(self, t: float, ring: Ring, mounts: np.ndarray, ekf: FilterView) -> None: ...
 
     def summary(self) -> dict: ...
 
