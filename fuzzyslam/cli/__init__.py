@@ -243,6 +243,24 @@ def main(argv: list[str] | None = None) -> None:
     sys.exit(code)
 
 
+def entry() -> None:
+    """The process entry (``fuzzyslam`` and ``python -m fuzzyslam``): :func:`main`, and an
+    interrupted run (exit 130 or 143) leaves the process at once, after flushing, without
+    the interpreter's finalisation: a second KeyboardInterrupt raised there (a signal
+    arriving late, or one left pending by a C extension) would otherwise turn the exit
+    status into death by SIGINT (-2) after the one-line message was already written.
+    Every temporary output is removed before :func:`main` returns (context managers)."""
+    try:
+        main()
+    except SystemExit as exc:
+        if exc.code in (EXIT_INTERRUPTED, EXIT_TERMINATED):
+            for f in (sys.stdout, sys.stderr):
+                with contextlib.suppress(Exception):
+                    f.flush()
+            os._exit(int(exc.code))
+        raise
+
+
 def _internal(exc: BaseException) -> None:
     msg = _one_line(str(exc).splitlines()[0]) if str(exc).strip() else type(exc).__name__
     click.echo(
