@@ -48,6 +48,7 @@ import subprocess
 import sys
 import tempfile
 import time
+from collections.abc import Iterator
 from pathlib import Path
 
 import numpy as np
@@ -91,17 +92,12 @@ def clean_truth(truth: Path) -> tuple[np.ndarray, np.ndarray, int]:
     return t[keep], p[keep], int((~keep).sum())
 
 
-def laser_wall_direction(
-    log: Path, truth: Path, near: float | None = None, window: int = 9
-) -> float:
-    """Dominant wall direction (rad, mod pi) of the laser end points in world coordinates
-    (module docstring); with ``near``, the dominant one within 45 deg of it (the same
-    family of walls as a direction measured otherwise: the two families of a building are
-    not exactly at right angles)."""
+def scan_end_points(log: Path, truth: Path) -> Iterator[tuple[np.ndarray, np.ndarray]]:
+    """Per /scan message taken at a pose the truth covers: the world x, y (M,) of its
+    beams' end points in beam order, NaN where a beam has no valid return (out of its
+    limits, or beyond 20 m)."""
     t_tr, p_tr, _ = clean_truth(truth)
-    reader = LogReader(log)
-    angles, weights = [], []
-    for m in reader.messages(["/scan"]):
+    for m in LogReader(log).messages(["/scan"]):
         msg = m.msg
         t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
         pose = interpolate_poses(t_tr, p_tr, [t])[0]
@@ -110,9 +106,20 @@ def laser_wall_direction(
         r = np.asarray(msg.ranges, dtype=float)
         a = msg.angle_min + np.arange(len(r)) * msg.angle_increment + pose[2]
         ok = np.isfinite(r) & (r >= msg.range_min) & (r < min(msg.range_max, 20.0))
-        x = np.where(ok, pose[0] + r * np.cos(a), np.nan)
-        y = np.where(ok, pose[1] + r * np.sin(a), np.nan)
-        if len(r) < window:
+        yield (np.where(ok, pose[0] + r * np.cos(a), np.nan),
+               np.where(ok, pose[1] + r * np.sin(a), np.nan))  # fmt: skip
+
+
+def laser_wall_direction(
+    log: Path, truth: Path, near: float | None = None, window: int = 9
+) -> float:
+    """Dominant wall direction (rad, mod pi) of the laser end points in world coordinates
+    (module docstring); with ``near``, the dominant one within 45 deg of it (the same
+    family of walls as a direction measured otherwise: the two families of a building are
+    not exactly at right angles)."""
+    angles, weights = [], []
+    for x, y in scan_end_points(log, truth):
+        if len(x) < window:
             continue
         wx = np.lib.stride_tricks.sliding_window_view(x, window)
         wy = np.lib.stride_tricks.sliding_window_view(y, window)
@@ -147,20 +154,8 @@ def laser_line_direction(log: Path, truth: Path, cell: float = 0.05, min_hits: i
     """Dominant wall direction (rad, [0, pi)) of the laser end points in world
     coordinates (module docstring): cells of ``cell`` m hit by at least ``min_hits``
     returns, each a point at its returns' centroid, through the maps' line estimator."""
-    t_tr, p_tr, _ = clean_truth(truth)
-    xs, ys = [], []
-    for m in LogReader(log).messages(["/scan"]):
-        msg = m.msg
-        t = msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9
-        pose = interpolate_poses(t_tr, p_tr, [t])[0]
-        if not np.all(np.isfinite(pose)):
-            continue
-        r = np.asarray(msg.ranges, dtype=float)
-        a = msg.angle_min + np.arange(len(r)) * msg.angle_increment + pose[2]
-        ok = np.isfinite(r) & (r >= msg.range_min) & (r < min(msg.range_max, 20.0))
-        xs.append(pose[0] + r[ok] * np.cos(a[ok]))
-        ys.append(pose[1] + r[ok] * np.sin(a[ok]))
-    x, y = np.concatenate(xs), np.concatenate(ys)
+    pts = [(x[np.isfinite(x)], y[np.isfinite(y)]) for x, y in scan_end_points(log, truth)]
+    x, y = np.concatenate([p[0] for p in pts]), np.concatenate([p[1] for p in pts])
     ix, iy = np.floor(x / cell).astype(np.int64), np.floor(y / cell).astype(np.int64)
     key = (ix - ix.min()) * (iy.max() - iy.min() + 1) + (iy - iy.min())
     _, inv, cnt = np.unique(key, return_inverse=True, return_counts=True)

@@ -93,3 +93,15 @@ def read_landmarks(path: str | os.PathLike) -> tuple[np.ndarray, list[int]]:
     except (KeyError, TypeError, ValueError, AttributeError) as exc:
         raise InputError(p, f"malformed landmark entry: {exc}") from None
     return xy, ids
+
+
+def split_label(spec: str | os.PathLike) -> tuple[str | None, str | os.PathLike]:
+    """``LABEL=PATH`` -> (LABEL, PATH); a plain path (or one that exists as written, even
+    with a '=' in it) -> (None, path). A label holds no path separator."""
+    text = os.fspath(spec)
+    label, sep, path = text.partition("=")
+    if not sep or not label or not path or "/" in label or os.sep in label:
+        return None, spec
+    if os.path.exists(text):
+        return None, spec
+    return label, path

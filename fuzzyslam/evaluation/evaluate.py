@@ -30,6 +30,7 @@ from fuzzyslam.evaluation.params import EvalParams
 from fuzzyslam.fileio import OutputDir, check_input_file, check_outputs
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.progress import Progress, note
+from fuzzyslam.rundir import split_label  # LABEL=PATH of --compare
 from fuzzyslam.streams.logmeta import read_scenario, read_world
 from fuzzyslam.streams.messages import pose_of
 from fuzzyslam.streams.reader import MCAP_MAGIC, LogReader
@@ -202,18 +203,6 @@ def read_landmark_history(path: Path, topic: str) -> list[tuple[float, np.ndarra
         xy = np.array([[m.pose.position.x, m.pose.position.y] for m in lamps], dtype=float)
         out.append((lm.t, xy.reshape(-1, 2)))
     return out
-
-
-def split_label(spec: str | os.PathLike) -> tuple[str | None, str | os.PathLike]:
-    """``LABEL=PATH`` -> (LABEL, PATH); a plain path (or one that exists as written, even
-    with a '=' in it) -> (None, path). A label holds no path separator."""
-    text = os.fspath(spec)
-    label, sep, path = text.partition("=")
-    if not sep or not label or not path or "/" in label or os.sep in label:
-        return None, spec
-    if os.path.exists(text):
-        return None, spec
-    return label, path
 
 
 def read_estimate(path: str | os.PathLike, label: str | None = None) -> Estimate:

@@ -18,6 +18,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
+from fuzzyslam.rundir import split_label
+
 OUTPUT_OPTIONS = ("-o", "--output", "--truth-tum", "--preview")
 
 
@@ -40,8 +42,8 @@ def rewrite_call(call: tuple, argv: tuple[str, ...], shipped: tuple[str, ...]) -
         if isinstance(v, str):
             if v in names:
                 return names[v]
-            label, sep, path = v.partition("=")
-            return f"{label}={names[path]}" if sep and path in names else v
+            label, path = split_label(v)
+            return f"{label}={names[path]}" if label is not None and path in names else v
         if isinstance(v, tuple):
             return tuple(one(x) for x in v)
         return v
@@ -60,11 +62,11 @@ def pack_inputs(argv: tuple[str, ...], root: Path) -> tuple[tuple[str, ...], dic
             continue
         a, prefix = arg, ""
         p = Path(a) if os.path.isabs(a) else root / a
-        if not p.exists() and "=" in arg:  # LABEL=PATH (evaluate --compare)
-            label, _, a = arg.partition("=")
-            prefix = f"{label}="
+        if not p.exists():  # LABEL=PATH (evaluate --compare)
+            label, a = split_label(arg)
+            prefix = "" if label is None else f"{label}="
             p = Path(a) if os.path.isabs(a) else root / a
-        if not a or not p.exists():
+        if not p.exists():
             continue
         rel = Path(a) if not os.path.isabs(a) else Path("_in", str(j), p.name)
         new[j] = prefix + str(rel)
