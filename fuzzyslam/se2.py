@@ -16,10 +16,14 @@ import numpy as np
 from numpy.typing import ArrayLike, NDArray
 
 Array = NDArray[np.float64]
+_TAU = 2.0 * math.pi  # the period of wrap_angle, the same float as 2.0 * np.pi
 
 
 def wrap_angle(a: ArrayLike) -> Array | float:
     """Wrap angles to the half-open interval (-pi, pi]."""
+    if isinstance(a, float):  # one float (np.float64 too): the same floats without numpy
+        w = math.pi - (math.pi - float(a)) % _TAU
+        return w + _TAU if w <= -math.pi else w
     arr = np.asarray(a, dtype=float)
     w = np.pi - np.mod(np.pi - arr, 2.0 * np.pi)
     # np.mod may round up to the period itself (a just above pi): -pi belongs to pi
@@ -61,6 +65,10 @@ def compose(a: ArrayLike, b: ArrayLike) -> Array:
     """Pose composition a (+) b: b expressed in a's parent frame."""
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
+    if a.shape == b.shape == (3,):  # two poses: the same arithmetic on floats (per step)
+        (ax, ay, at), (bx, by, bt) = a.tolist(), b.tolist()
+        c, s = math.cos(at), math.sin(at)
+        return np.array([ax + c * bx - s * by, ay + s * bx + c * by, wrap_angle(at + bt)])
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
@@ -108,13 +116,13 @@ def inverse_transform_points(pose: ArrayLike, pts: ArrayLike) -> Array:
 
 def jacobians_compose(a: ArrayLike, b: ArrayLike) -> tuple[Array, Array]:
     """Jacobians of compose(a, b) with respect to a and to b (each 3x3)."""
-    a = np.asarray(a, dtype=float)
-    b = np.asarray(b, dtype=float)
-    c, s = np.cos(a[2]), np.sin(a[2])
+    bx, by = float(b[0]), float(b[1])
+    at = float(a[2])
+    c, s = math.cos(at), math.sin(at)
     ja = np.array(
         [
-            [1.0, 0.0, -s * b[0] - c * b[1]],
-            [0.0, 1.0, c * b[0] - s * b[1]],
+            [1.0, 0.0, -s * bx - c * by],
+            [0.0, 1.0, c * bx - s * by],
             [0.0, 0.0, 1.0],
         ]
     )

@@ -22,19 +22,15 @@ from __future__ import annotations
 import os
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 import numpy as np
 
 from fuzzyslam.errors import InputError, UsageError
-from fuzzyslam.fixes.changes import ChangeDetector
-from fuzzyslam.fixes.heading import FlmSource, HeadingFixAid
-from fuzzyslam.fixes.pose_aid import PoseFixAid
-from fuzzyslam.maps.grid import BeliefMap
-from fuzzyslam.maps.mapio import load_fgm, log_identity
 from fuzzyslam.references import Reference, read_references
-from fuzzyslam.streams.logmeta import read_world
-from fuzzyslam.streams.reader import LogReader
+
+if TYPE_CHECKING:  # the plug-ins and the maps stage load with a map only (lazy below):
+    from fuzzyslam.maps.grid import BeliefMap  # a run without --map does not import them
 
 MODES = ("none", "heading", "pose")
 
@@ -59,6 +55,8 @@ def load_frozen_map(
     another log or world (``log_id`` differs from ``expect_log_id`` when given), a
     malformed references.yaml (or a missing one when ``need_references``: heading fixes).
     """
+    from fuzzyslam.maps.mapio import load_fgm
+
     fgm_dir = Path(fgm_dir)
     if not fgm_dir.is_dir():
         raise InputError(fgm_dir, "map directory does not exist")
@@ -109,6 +107,9 @@ def make_aids(
 
 def aids_for_map(fm: FrozenMap, mode: str, cfg: Any, start_time: float | None = None) -> list:
     """The plug-ins for an already loaded map (pure: no I/O)."""
+    from fuzzyslam.fixes.changes import ChangeDetector
+    from fuzzyslam.fixes.heading import FlmSource, HeadingFixAid
+    from fuzzyslam.fixes.pose_aid import PoseFixAid
     from fuzzyslam.maps.flm import build_flm
     from fuzzyslam.maps.hough import flm_wall_direction
 
@@ -163,6 +164,10 @@ def aids_for_log(
         return []
     if map_dir is None:
         raise UsageError(f"--fix {mode} needs --map FGMDIR (a frozen map from 'map')")
+    from fuzzyslam.maps.mapio import log_identity
+    from fuzzyslam.streams.logmeta import read_world
+    from fuzzyslam.streams.reader import LogReader
+
     world = read_world(LogReader(log))  # the identity the map stage recorded (maps/build.py)
     world_dict = world.to_dict() if world is not None else None
     return make_aids(

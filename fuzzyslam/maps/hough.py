@@ -27,6 +27,7 @@ Reference: Golub & Van Loan, "Matrix computations", sec. 12.3 (TLS); K. Kanatani
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 
 import numpy as np
 
@@ -88,33 +89,61 @@ def wall_weights(bm: BeliefMap, threshold: float) -> np.ndarray:
     return np.where(m_o >= threshold, m_o, 0.0)
 
 
+@lru_cache(maxsize=8)
+def _theta_table(theta_step: float) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The accumulator's normal angles [0, pi) in ``theta_step`` and their cos and sin
+    (read-only; one table per step, not one per ring)."""
+    thetas = np.arange(0.0, np.pi, theta_step)
+    out = (thetas, np.cos(thetas), np.sin(thetas))
+    for a in out:
+        a.flags.writeable = False
+    return out
+
+
 def hough_accumulator(
     x: np.ndarray, y: np.ndarray, w: np.ndarray, theta_step: float, rho_step: float
 ) -> HoughPlane:
     """Weighted Hough accumulator A(rho, t) = sum_i w_i K(rho - x_i cos t - y_i sin t),
-    K the linear (tent) kernel of one rho bin; points centred on their weighted centroid."""
+    K the linear (tent) kernel of one rho bin; points centred on their weighted centroid.
+
+    Parameters
+    ----------
+    x, y, w : array_like, shape (N,)
+        Point coordinates (m) and weights.
+    theta_step, rho_step : float
+        Bin sizes of the normal angle (rad) and of the distance (m).
+
+    Returns
+    -------
+    HoughPlane
+        The accumulator (n_rho, n_theta), its angles, distances and the centre (2,).
+    """
     x, y, w = (np.asarray(a, dtype=float).ravel() for a in (x, y, w))
-    thetas = np.arange(0.0, np.pi, theta_step)
-    centre = (
-        np.array([np.average(x, weights=w), np.average(y, weights=w)])
-        if w.sum() > 0
-        else (np.zeros(2))
-    )
+    thetas, cos_t, sin_t = _theta_table(float(theta_step))
+    sw = w.sum()
+    # the weighted centroid, as np.average computes it: sum(x w) / sum(w)
+    centre = np.array([(x * w).sum() / sw, (y * w).sum() / sw]) if sw > 0 else np.zeros(2)
     xc, yc = x - centre[0], y - centre[1]
     rmax = float(np.max(np.hypot(xc, yc))) + 2 * rho_step if len(x) else rho_step
     nr = int(np.ceil(2 * rmax / rho_step)) + 1
     rhos = -rmax + np.arange(nr) * rho_step
-    r = xc[:, None] * np.cos(thetas)[None, :] + yc[:, None] * np.sin(thetas)[None, :] + rmax
+    r = xc[:, None] * cos_t[None, :] + yc[:, None] * sin_t[None, :] + rmax
     u = r / rho_step
-    i0 = np.floor(u).astype(np.int64)
-    f = u - i0
+    fl = np.floor(u)
+    i0 = fl.astype(np.int64)
+    f = u - fl  # the fractional part: rho between bins i0 and i0 + 1
     nt = len(thetas)
-    cols = np.broadcast_to(np.arange(nt), i0.shape)
-    ww = np.broadcast_to(w[:, None], i0.shape)
-    i0c = np.clip(i0, 0, nr - 1)
-    i1c = np.clip(i0 + 1, 0, nr - 1)
-    acc = np.bincount((i0c * nt + cols).ravel(), weights=(ww * (1 - f)).ravel(), minlength=nr * nt)
-    acc += np.bincount((i1c * nt + cols).ravel(), weights=(ww * f).ravel(), minlength=nr * nt)
+    cols = np.arange(nt)
+    # bins i0 and i0 + 1 clipped to [0, nr - 1], flattened with the angle's column
+    i0c = np.minimum(np.maximum(i0, 0), nr - 1)
+    i0c *= nt
+    i0c += cols
+    i1c = np.minimum(np.maximum(i0 + 1, 0), nr - 1)
+    i1c *= nt
+    i1c += cols
+    wc = w[:, None]
+    acc = np.bincount(i0c.ravel(), weights=(wc * (1 - f)).ravel(), minlength=nr * nt)
+    acc += np.bincount(i1c.ravel(), weights=(wc * f).ravel(), minlength=nr * nt)
     return HoughPlane(acc.reshape(nr, nt), thetas, rhos, centre)
 
 

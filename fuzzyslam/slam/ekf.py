@@ -68,6 +68,7 @@ def lamp_init(pose: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, ...]:
 
 
 _BLOCK = 256
+_POSE_COLS = np.arange(3)  # the robot pose's columns of H
 
 
 def _add_symmetric_update(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:
@@ -163,11 +164,15 @@ class EkfSlam:
         return self._p[j : j + 2, j : j + 2].copy()
 
     def lamp_covs(self) -> np.ndarray:
-        """(n, 2, 2) marginal covariances of all lamps (O(n), no loop in Python)."""
-        idx = self.m0 + 2 * np.arange(self.n_lamps)
-        rows = idx[:, None, None] + np.array([0, 1])[None, :, None]
-        cols = idx[:, None, None] + np.array([0, 1])[None, None, :]
-        return self._p[rows, cols]
+        """(n, 2, 2) marginal covariances of all lamps (O(n), no loop in Python): a copy of
+        the 2x2 diagonal blocks, read through a strided view of P."""
+        m0 = self.m0
+        blk = self._p[m0 : self.dim, m0 : self.dim]
+        s0, s1 = blk.strides
+        view = np.lib.stride_tricks.as_strided(
+            blk, shape=(self.n_lamps, 2, 2), strides=(2 * (s0 + s1), s0, s1), writeable=False
+        )
+        return view.copy()
 
     # -- prediction ---------------------------------------------------------------------
 
@@ -275,7 +280,7 @@ class EkfSlam:
         y = 0.5 * (k @ s) - pht
         _add_symmetric_update(p, np.hstack([k, y]), np.hstack([y, k]))
         d = np.diagonal(p)
-        if not (np.all(np.isfinite(d)) and np.all(d > 0.0)):  # O(n) check; full one below
+        if not 0.0 < d.min() <= d.max() < np.inf:  # finite and > 0 (NaN fails): O(n)
             self.check_covariance()
 
     def check_covariance(self) -> bool:
@@ -311,7 +316,10 @@ class EkfSlam:
         c, s = math.cos(x[2]), math.sin(x[2])
         rt = np.array([[c, s], [-s, c]])
         j = self.m0 + 2 * ids
-        h = (x[np.column_stack([j, j + 1])] - x[:2]) @ rt.T  # (k, 2)
+        jj = np.empty((k, 2), dtype=int)  # the lamps' (x, y) indices
+        jj[:, 0] = j
+        jj[:, 1] = j + 1
+        h = (x[jj] - x[:2]) @ rt.T  # (k, 2)
         hc = np.zeros((2 * k, 3 + 2 * k))
         rows = np.arange(k)
         hv = hc.reshape(k, 2, 3 + 2 * k)
@@ -320,7 +328,7 @@ class EkfSlam:
         hv[:, 1, 2] = -h[:, 0]
         hv[rows, :, 3 + 2 * rows] = rt[:, 0]
         hv[rows, :, 4 + 2 * rows] = rt[:, 1]
-        cols = np.concatenate([[0, 1, 2], np.column_stack([j, j + 1]).reshape(-1)])
+        cols = np.concatenate([_POSE_COLS, jj.reshape(-1)])
         return h.reshape(-1), cols, hc
 
     def update_lamps(
@@ -420,7 +428,9 @@ class EkfSlam:
         c, s = math.cos(x[2]), math.sin(x[2])
         rmat = np.array([[c, -s], [s, c]])
         d = self.lamps - x[:2]  # (n, 2)
-        dp = np.column_stack([d[:, 1], -d[:, 0]])  # d^perp
+        dp = np.empty_like(d)  # d^perp = (d_y, -d_x)
+        dp[:, 0] = d[:, 1]
+        dp[:, 1] = -d[:, 0]
         end = self.dim
         # G P_rr G^T = Pxx - (p_t dp^T + dp p_t^T) + q_tt dp dp^T
         pxx, pt, qtt = p[:2, :2], p[:2, 2], p[2, 2]
