@@ -98,5 +98,10 @@ def render(
     uv = cam.project(lamps_robot)
     cov = coverage(cam, uv, cam.radius_px(lamp_radius), params.supersample)
     img = bg * (1.0 - cov) + np.float32(params.lamp_level) * cov
-    img += np.float32(params.noise_sigma) * rng.standard_normal(img.shape, dtype=np.float32)
-    return np.clip(np.rint(img), 0, 255).astype(np.uint8)
+    noise = rng.standard_normal(img.shape, dtype=np.float32)
+    noise *= np.float32(params.noise_sigma)
+    img += noise
+    # rint, then clip to [0, 255], in place (float32 throughout: the same values)
+    np.rint(img, out=img)
+    np.minimum(np.maximum(img, 0, out=img), 255, out=img)
+    return img.astype(np.uint8)

@@ -165,14 +165,10 @@ class EkfSlam:
 
     def lamp_covs(self) -> np.ndarray:
         """(n, 2, 2) marginal covariances of all lamps (O(n), no loop in Python): a copy of
-        the 2x2 diagonal blocks, read through a strided view of P."""
-        m0 = self.m0
-        blk = self._p[m0 : self.dim, m0 : self.dim]
-        s0, s1 = blk.strides
-        view = np.lib.stride_tricks.as_strided(
-            blk, shape=(self.n_lamps, 2, 2), strides=(2 * (s0 + s1), s0, s1), writeable=False
-        )
-        return view.copy()
+        the 2x2 diagonal blocks of the lamp block, read through a (n, 2, n, 2) view."""
+        n, m0 = self.n_lamps, self.m0
+        blocks = self._p[m0 : self.dim, m0 : self.dim].reshape(n, 2, n, 2)
+        return np.diagonal(blocks, axis1=0, axis2=2).transpose(2, 0, 1).copy()
 
     # -- prediction ---------------------------------------------------------------------
 
@@ -447,7 +443,9 @@ class EkfSlam:
             rw = np.repeat(rw, len(z), axis=0)
         zw = z @ rmat.T  # R z_j
         v = zw[:, None, :] - d[None, :, :]  # R (z_j - h_i) = R z_j - d_i
-        stot = w[None, :, :, :] + rw[:, None, :, :]  # (m, n, 2, 2)
-        a, b, dd = stot[..., 0, 0], stot[..., 0, 1], stot[..., 1, 1]
+        # the entries (a, b; b, dd) of S_ij = W_i + R R_j R^T, each (m, n)
+        a = w[None, :, 0, 0] + rw[:, None, 0, 0]
+        b = w[None, :, 0, 1] + rw[:, None, 0, 1]
+        dd = w[None, :, 1, 1] + rw[:, None, 1, 1]
         det = a * dd - b * b
         return (dd * v[..., 0] ** 2 - 2 * b * v[..., 0] * v[..., 1] + a * v[..., 1] ** 2) / det

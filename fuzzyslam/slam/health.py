@@ -45,11 +45,11 @@ def solve_spd(
     units of S: 1e-15 m^2 or rad^2), e grown tenfold until the factorisation succeeds.
     """
     s = 0.5 * (s + s.T)
-    if not (np.all(np.isfinite(s)) and np.all(np.isfinite(b))):
+    if not (np.isfinite(s).all() and np.isfinite(b).all()):
         raise np.linalg.LinAlgError("innovation covariance or innovation is not finite")
     try:
         c = np.linalg.cholesky(s)
-        d = np.diagonal(c) ** 2
+        d = c.diagonal() ** 2
         if d.min() > rel_eps * d.max():
             return np.linalg.solve(s, b), False
     except np.linalg.LinAlgError:

@@ -53,6 +53,8 @@ from fuzzyslam.slam.noise import DetectionNoiseEstimator
 from fuzzyslam.slam.params import SlamParams
 
 CALIB_PERIOD_S = 1.0  # calibration.csv: a row at most this often (s)
+# the upper triangle of the pose covariance, row by row (a trajectory row's covariance)
+_COV_ROWS, _COV_COLS = np.triu_indices(3)
 
 # the loop's data (slam/events.py), importable from here as before
 __all__ = [
@@ -155,8 +157,7 @@ class SlamRunner:
     def _record(self, t: float) -> None:
         """Record the current pose and covariance (replacing a row of the same time)."""
         self.flush()
-        p = self.ekf.P
-        row = np.array([p[0, 0], p[0, 1], p[0, 2], p[1, 1], p[1, 2], p[2, 2]], dtype=float)
+        row = self.ekf.P[_COV_ROWS, _COV_COLS]  # pxx pxy pxt pyy pyt ptt (covariance.csv)
         pending = self._pending
         if pending is None or pending[0] != t:
             if pending is not None:
