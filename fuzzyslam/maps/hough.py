@@ -134,6 +134,17 @@ def hough_accumulator(
     f = u - fl  # the fractional part: rho between bins i0 and i0 + 1
     nt = len(thetas)
     cols = np.arange(nt)
+    wc = w[:, None]
+    if len(x) and i0.min() >= 0 and i0.max() + 1 <= nr - 1:
+        # no clipping (rmax leaves two bins to spare): bin i0 + 1 of a point is bin i0
+        # moved one rho row, so the second sum is the first index's bincount shifted by
+        # nt (the same terms in the same order: the same floats)
+        i0 *= nt
+        i0 += cols
+        idx = i0.ravel()
+        acc = np.bincount(idx, weights=(wc * (1 - f)).ravel(), minlength=nr * nt)
+        acc[nt:] += np.bincount(idx, weights=(wc * f).ravel(), minlength=nr * nt)[:-nt]
+        return HoughPlane(acc.reshape(nr, nt), thetas, rhos, centre)
     # bins i0 and i0 + 1 clipped to [0, nr - 1], flattened with the angle's column
     i0c = np.minimum(np.maximum(i0, 0), nr - 1)
     i0c *= nt
@@ -141,7 +152,6 @@ def hough_accumulator(
     i1c = np.minimum(np.maximum(i0 + 1, 0), nr - 1)
     i1c *= nt
     i1c += cols
-    wc = w[:, None]
     acc = np.bincount(i0c.ravel(), weights=(wc * (1 - f)).ravel(), minlength=nr * nt)
     acc += np.bincount(i1c.ravel(), weights=(wc * f).ravel(), minlength=nr * nt)
     return HoughPlane(acc.reshape(nr, nt), thetas, rhos, centre)

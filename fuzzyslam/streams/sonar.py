@@ -20,6 +20,7 @@ reads NaN. Glitches are made explicit and counted, never silently used:
 
 from __future__ import annotations
 
+import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
@@ -120,7 +121,7 @@ def group_rings(
         hi = float(m.msg.max_range)
         lo = float(m.msg.min_range)
         f = float(m.msg.field_of_view)
-        if np.isfinite(f) and 0 < f <= MAX_PLAUSIBLE_FOV:
+        if math.isfinite(f) and 0 < f <= MAX_PLAUSIBLE_FOV:  # floats: math, not numpy
             fov = f
         else:
             st.bad_fov += 1
@@ -129,11 +130,11 @@ def group_rings(
             st.implausible += 1
             rmax[i] = np.nan
             ranges[i] = np.nan
-        elif not (np.isfinite(hi) and hi > 0):
+        elif not (math.isfinite(hi) and hi > 0):
             st.invalid += 1  # no usable max range: the reading cannot be interpreted
             rmax[i] = np.nan
             ranges[i] = np.nan
-        elif not np.isfinite(r) or r < 0 or r < lo:
+        elif not math.isfinite(r) or r < 0 or r < lo:
             st.invalid += 1
             rmax[i] = hi
             ranges[i] = np.nan
