@@ -88,10 +88,13 @@ class JointTable:
 
     def nis(self, pairs: list[tuple[int, int]]) -> float:
         """Joint NIS of ``pairs`` (all in the table)."""
-        k = np.array([self.index[p] for p in pairs])
-        rows = np.column_stack([2 * k, 2 * k + 1]).reshape(-1)
-        v = self.v[rows]
-        return float(v @ np.linalg.solve(self.s[np.ix_(rows, rows)], v))
+        rows = []  # the two rows of each pair in v and S
+        for p in pairs:
+            k = 2 * self.index[p]
+            rows += (k, k + 1)
+        idx = np.array(rows)
+        v = self.v[idx]
+        return float(v @ np.linalg.solve(self.s[idx[:, None], idx], v))  # S_H = S[H, H]
 
 
 def candidates(d2: np.ndarray, gate_chi2: float) -> list[list[int]]:

@@ -27,6 +27,7 @@
 
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field
 from functools import lru_cache
 
@@ -153,7 +154,7 @@ class DivergenceMonitor:
         """One update's NIS (``dof`` its degrees of freedom)."""
         if self._n == 0:
             self._t0 = t
-        self._sum += nis if np.isfinite(nis) else 1e6
+        self._sum += nis if math.isfinite(nis) else 1e6
         self._dof += dof
         self._n += 1
         if self._n >= self.window:

@@ -186,7 +186,7 @@ class LogInputs:
         p, q = msg.pose.pose.position, msg.pose.pose.orientation
         yaw = math.atan2(2.0 * (q.w * q.z + q.x * q.y), 1.0 - 2.0 * (q.y * q.y + q.z * q.z))
         pose = (float(p.x), float(p.y), yaw)
-        if not all(math.isfinite(v) for v in pose):
+        if not (math.isfinite(pose[0]) and math.isfinite(pose[1]) and math.isfinite(yaw)):
             self.warn("nan_odometry", f"NaN odometry pose at t={t:.3f} s")
             return None, prev
         status = self._gate.step(t, pose)
