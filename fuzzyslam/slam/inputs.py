@@ -106,27 +106,30 @@ class LogInputs:
         last_t = {self.odom_topic: -np.inf, self.lamp_topic: -np.inf}
         prev = None
         topics = [self.odom_topic, self.lamp_topic] if self.lamp_topic else [self.odom_topic]
+        odom_topic = self.odom_topic
         for m in self.reader.messages(topics):
-            t = M.stamp_to_sec(m.msg.header.stamp)
-            if t < last_t[m.topic]:
-                self.warn("out_of_order", f"{m.topic}: header stamp {t:.3f} s goes back in time")
-                if m.topic == self.lamp_topic:
+            topic, msg = m.topic, m.msg
+            t = M.stamp_to_sec(msg.header.stamp)
+            before = last_t[topic]
+            if t < before:
+                self.warn("out_of_order", f"{topic}: header stamp {t:.3f} s goes back in time")
+                if topic == self.lamp_topic:
                     continue
-                t = last_t[m.topic]  # an odometry increment is still motion: keep it
-            elif t == last_t[m.topic]:
+                t = before  # an odometry increment is still motion: keep it
+            elif t == before:
                 # a repeated stamp: a duplicated message; odometry is cumulative (wheel
                 # angles, poses), so the next message still carries any motion in it
-                self.warn("duplicate_stamps", f"{m.topic}: header stamp {t:.3f} s repeated")
+                self.warn("duplicate_stamps", f"{topic}: header stamp {t:.3f} s repeated")
                 continue
-            elif m.topic == self.odom_topic and ODOM_GAP_S < t - last_t[m.topic] < np.inf:
-                gap = t - last_t[m.topic]
-                self.warn("odometry_gaps", f"{m.topic}: silent for {gap:.2f} s before {t:.3f} s")
+            elif topic == odom_topic and ODOM_GAP_S < t - before < np.inf:
+                gap = t - before
+                self.warn("odometry_gaps", f"{topic}: silent for {gap:.2f} s before {t:.3f} s")
                 self.gap_seconds += gap
-            last_t[m.topic] = t
-            if m.topic == self.odom_topic:
-                ev, prev = odo(t, m.msg, prev)
+            last_t[topic] = t
+            if topic == odom_topic:
+                ev, prev = odo(t, msg, prev)
             else:
-                ev = lamp(t, m.msg)
+                ev = lamp(t, msg)
             if ev is not None:
                 yield ev
 

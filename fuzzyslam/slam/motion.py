@@ -72,7 +72,8 @@ class Preintegrator:
         mr = k_rr * adr + k_rt * adt
         h = 0.5 * d_rot
         mx, my = d_trans * math.cos(h), d_trans * math.sin(h)
-        c, s = math.cos(self.dth), math.sin(self.dth)
+        dth = self.dth
+        c, s = math.cos(dth), math.sin(dth)
         # A = [[1, 0, a], [0, 1, b], [0, 0, 1]]: A Q A^T
         a = -s * mx - c * my
         b = c * mx - s * my
@@ -85,7 +86,7 @@ class Preintegrator:
             q12 + b * q22,
         )
         # B G_u = [[ch, -k sh], [sh, k ch], [0, 1]], k = dt / 2: + B G_u diag(mt, mr) (B G_u)^T
-        ch, sh, k = math.cos(self.dth + h), math.sin(self.dth + h), 0.5 * d_trans
+        ch, sh, k = math.cos(dth + h), math.sin(dth + h), 0.5 * d_trans
         kk = k * k * mr
         self._q = [
             q00 + ch * ch * mt + kk * sh * sh,
@@ -97,7 +98,7 @@ class Preintegrator:
         ]
         self.dx += c * mx - s * my
         self.dy += s * mx + c * my
-        self.dth += d_rot
+        self.dth = dth + d_rot
         self.steps += 1
 
     @property
