@@ -84,9 +84,7 @@ def measure_heading(
     for r in refs:
         for off in offsets:
             t_ref = r.angle + off
-            fam = family_direction(
-                segs, t_ref - predicted, gate, wall, p.scan_line_min_support
-            )
+            fam = family_direction(segs, t_ref - predicted, gate, wall, p.scan_line_min_support)
             if fam is None:
                 continue
             theta, _, _ = nearest_candidate(t_ref - fam.angle, predicted, math.pi)

@@ -10,7 +10,9 @@ beam, so the walls can be fitted directly:
 2. a point is *straight* when the ``scan_line_points`` consecutive linked end points
    centred on it (neighbours closer than ``scan_line_gap`` m) have a principal axis
    whose spread across, sqrt(lambda_min), is below ``scan_line_tolerance`` m; runs of
-   straight points whose local directions change by less than 5 deg are one segment;
+   straight points whose local directions change by less than 15 deg (a corner makes
+   the windows across it not straight; noise turns a short window by a few degrees) are
+   one segment;
 3. each segment is fitted by total least squares (principal axis of its points,
    Pearson 1901): direction phi_j, residual variance across
    s2_j = n lambda_min / (n - 2), and the direction's variance
@@ -97,7 +99,7 @@ def fit_segments(
     tolerance: float = 0.03,
     gap: float = 0.5,
     min_length: float = 0.5,
-    turn_deg: float = 5.0,
+    turn_deg: float = 15.0,
 ) -> Segments:
     """Straight segments of the ordered end points ``points`` (M, 2) (NaN: no echo), by
     the module docstring's steps 2-3. Returns :class:`Segments` (S,)."""
@@ -131,16 +133,17 @@ def fit_segments(
         return empty
     lab = label[idx]
     s = int(lab.max()) + 1
-    n = np.bincount(lab, minlength=s).astype(float)
     x, y = p[idx, 0], p[idx, 1]
-    mx, my = np.bincount(lab, x, s) / n, np.bincount(lab, y, s) / n
-    dx, dy = x - mx[lab], y - my[lab]
-    sxx = np.bincount(lab, dx * dx, s) / n
-    syy = np.bincount(lab, dy * dy, s) / n
-    sxy = np.bincount(lab, dx * dy, s) / n
-    ang, lam_max, lam_min = _principal(sxx, syy, sxy)
+    ang, n, lam_max, lam_min, across = _fit_labels(lab, x, y, s)
+    # one refit without the points beyond 3 robust sigmas of their line (a corner's
+    # points: the windows centred next to it can still pass the straightness test)
+    scale = 1.4826 * _median_by_label(np.abs(across), lab, s)
+    good = np.abs(across) <= np.maximum(3.0 * scale[lab], 1e-3)
+    lab, x, y = lab[good], x[good], y[good]
+    ang, n, lam_max, lam_min, across = _fit_labels(lab, x, y, s)
     # extent along the line: max - min of the projections
-    u = dx * np.cos(ang[lab]) + dy * np.sin(ang[lab])
+    c, sn = np.cos(ang[lab]), np.sin(ang[lab])
+    u = x * c + y * sn
     lo = np.full(s, np.inf)
     hi = np.full(s, -np.inf)
     np.minimum.at(lo, lab, u)
@@ -151,6 +154,35 @@ def fit_segments(
         s2 = n * np.maximum(lam_min, 0.0) / np.maximum(n - 2, 1.0)
         var = s2 / (n * lam_max)
     return Segments(ang[keep], np.sqrt(var[keep]), length[keep], n[keep])
+
+
+def _fit_labels(lab: np.ndarray, x: np.ndarray, y: np.ndarray, s: int):
+    """Per label (s labels): TLS direction, point count, eigenvalues of the scatter, and
+    each point's signed distance across its label's line."""
+    n = np.bincount(lab, minlength=s).astype(float)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        mx, my = np.bincount(lab, x, s) / n, np.bincount(lab, y, s) / n
+        dx, dy = x - mx[lab], y - my[lab]
+        sxx = np.bincount(lab, dx * dx, s) / n
+        syy = np.bincount(lab, dy * dy, s) / n
+        sxy = np.bincount(lab, dx * dy, s) / n
+    ang, lam_max, lam_min = _principal(sxx, syy, sxy)
+    across = -dx * np.sin(ang[lab]) + dy * np.cos(ang[lab])
+    return ang, n, lam_max, lam_min, across
+
+
+def _median_by_label(v: np.ndarray, lab: np.ndarray, s: int) -> np.ndarray:
+    """The median of ``v`` per label (s,) (0 for a label without values)."""
+    order = np.lexsort((v, lab))
+    v, lab = v[order], lab[order]
+    n = np.bincount(lab, minlength=s)
+    first = np.concatenate([[0], np.cumsum(n)[:-1]])
+    out = np.zeros(s)
+    has = n > 0
+    lo = first[has] + (n[has] - 1) // 2
+    hi = first[has] + n[has] // 2
+    out[has] = 0.5 * (v[lo] + v[hi])
+    return out
 
 
 def family_direction(
