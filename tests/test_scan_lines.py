@@ -84,37 +84,52 @@ def test_family_direction_refuses_walls_outside_its_gate_and_short_support():
 
 
 @pytest.mark.slow
-def test_real_excerpt_scan_line_heading_fixes(tmp_path, capsys):
-    """60 s of fr079 with heading fixes from the scan lines against the FGM built from
-    truth: most scans give a fix, and the heading stays within 1.2 deg mean of truth
-    (measured 0.76 deg; dead reckoning from the same start pose drifts to 1.6 deg)."""
+def test_real_excerpt_scan_line_heading_against_truth():
+    """60 s of fr079 (real scans, data/carmen_fr079_excerpt): the heading each scan
+    measures from its wall lines against the building's wall direction, from a prediction
+    2 deg off, is within 1.6 deg median and 2 deg mean of truth (measured 1.21 / 1.46 deg
+    on 81 of the 274 scans, the others in rooms or seeing no wall of the family; the whole
+    logs scatter by 1.3-1.4 deg std), and the sigma it reports is not overconfident (mean
+    of (error / sigma)^2 below 2; measured 1.25). The reference is the benchmark's
+    independent estimate: the laser end points in world coordinates (truth poses, 5 cm
+    cells, maps.hough), not this module's fit."""
+    import sys
+
+    from fuzzyslam.config import load_config
     from fuzzyslam.evaluation.metrics import interpolate_poses
-    from fuzzyslam.slam.odom_gate import first_plausible_pose, plausible_mask
+    from fuzzyslam.fixes.scan_heading import measure_heading, scan_segments
+    from fuzzyslam.references import Reference
+    from fuzzyslam.slam.odom_gate import plausible_mask
+    from fuzzyslam.streams.ranges import open_ranges
+    from fuzzyslam.streams.reader import LogReader
+    from fuzzyslam.streams.sonar import RingStats
     from fuzzyslam.streams.tum import read_tum
-    from tests.test_ranges import _errors, run_cli
+
+    sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+    from bench_buildings import laser_line_direction
 
     log, truth = EXCERPT / "log.mcap", EXCERPT / "truth.tum"
-    cfg = "real_building_scan.yaml"
-    fgm = tmp_path / "fgm"
-    code, _, err = run_cli(
-        ["map", str(log), "--trajectory", str(truth), "--config", cfg, "--no-figures",
-         "-o", str(fgm)], capsys,
-    )  # fmt: skip
-    assert code == 0, err
+    cfg = load_config("real_building_scan.yaml")
+    ref = Reference(0, "building", laser_line_direction(log, truth), 10.0, np.zeros((3, 2)))
     tt, pt = read_tum(truth)
-    start = ",".join(f"{v:.6f}" for v in first_plausible_pose(tt, pt)[1])
-    code, s, err = run_cli(
-        ["run", str(log), "--config", cfg, "--map", str(fgm), "--fix", "heading",
-         "--fix-from", "0", "--start-pose", start, "-o", str(tmp_path / "h")],
-        capsys,
-    )  # fmt: skip
-    assert code == 0, err
-    aid = s["aids"]["ScanLineHeadingAid"]
-    assert aid["accepted"] > 0.3 * aid["rings"]
-    t, est = read_tum(tmp_path / "h" / "trajectory.tum")
     keep = plausible_mask(tt, pt)
-    tru = interpolate_poses(tt[keep], pt[keep], t)
-    ok = np.all(np.isfinite(tru), axis=1)
-    dh = np.rad2deg(np.abs((est[ok, 2] - tru[ok, 2] + np.pi) % (2 * np.pi) - np.pi))
-    assert dh.mean() < 1.2
-    assert _errors(tmp_path / "h" / "trajectory.tum", truth).mean() < 1.0
+    reader = LogReader(log)
+    sensor = open_ranges(reader, cfg, "scan")
+    errs, sig, n = [], [], 0
+    offset = math.radians(2.0)
+    for ring in sensor.rings(reader.messages(sensor.topics), RingStats()):
+        pose = interpolate_poses(tt[keep], pt[keep], [ring.t])[0]
+        if not np.all(np.isfinite(pose)):
+            continue
+        n += 1
+        segs = scan_segments(ring, sensor.mounts, cfg.fixes)
+        theta, sigma, _, _, why = measure_heading(
+            segs, [ref], pose[2] + offset, offset**2, cfg.fixes
+        )
+        if why == "ok":
+            errs.append((theta - pose[2] + math.pi) % (2 * math.pi) - math.pi)
+            sig.append(sigma)
+    e, s = np.degrees(np.abs(errs)), np.degrees(sig)
+    assert len(e) > 0.2 * n
+    assert np.median(e) < 1.6 and e.mean() < 2.0
+    assert np.mean((e / s) ** 2) < 2.0

@@ -109,6 +109,13 @@ class ScanLineHeadingAid(HeadingFixAid):
     def __init__(self, refs: Sequence[Reference], params: FixParams, start_time: float = 0.0):
         super().__init__(refs, params, None, None, start_time)  # type: ignore[arg-type]
 
+    def segments(
+        self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView
+    ) -> tuple[Segments | None, float]:
+        """The segments a fix is measured on at this ring (None: no fix due) and the
+        factor on the fix's sigma: here the scan's own segments, every scan."""
+        return scan_segments(ring, mounts, self.params), 1.0
+
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
         if t < self.start_time:
             self.before_start += 1
@@ -118,12 +125,21 @@ class ScanLineHeadingAid(HeadingFixAid):
         cov = np.asarray(ekf.pose_cov, dtype=float)
         predicted = float(pose[2])
         odo = float(ekf.odometry_pose[2])
+        x0, y0 = float(pose[0]), float(pose[1])
+        segs, scale = self.segments(t, ring, mounts, ekf)
+        if segs is None:  # no fix due on this ring
+            self.decisions.append(
+                HeadingDecision(
+                    t, -1, math.nan, predicted, False, "between_fixes", math.nan, odometry=odo,
+                    x=x0, y=y0,
+                )
+            )  # fmt: skip
+            return
         refs = candidate_references(pose[:2], cov[:2, :2], self.refs, p.junction_margin)
-        segs = scan_segments(ring, mounts, p)
         theta, sigma, ref, fam, why = measure_heading(segs, refs, predicted, cov[2, 2], p)
+        sigma *= scale
         strength = fam.support if fam is not None else math.nan
         rid = ref.id if ref is not None else -1
-        x0, y0 = float(pose[0]), float(pose[1])
         if why != "ok":
             self.decisions.append(
                 HeadingDecision(
