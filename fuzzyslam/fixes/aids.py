@@ -123,10 +123,6 @@ def aids_for_map(fm: FrozenMap, mode: str, cfg: Any, start_time: float | None = 
             from fuzzyslam.fixes.scan_heading import ScanLineHeadingAid
 
             return ScanLineHeadingAid(fm.references, cfg.fixes, t0)
-        if cfg.fixes.heading_source == "echo_tracks":
-            from fuzzyslam.fixes.echo_tracks import EchoTrackHeadingAid
-
-            return EchoTrackHeadingAid(fm.references, cfg.fixes, t0)
         return HeadingFixAid(
             fm.references,
             cfg.fixes,

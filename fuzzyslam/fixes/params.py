@@ -98,12 +98,8 @@ class FixParams:
     # --- the wall direction a heading fix measures (docs/models.md sec. 9) ---
     # flm: the paper's Hough peak of the fuzzy local map (sonar, and the paper scenario);
     # scan_lines: straight segments fitted to a laser scan's end points, one fix per scan
-    # (fixes.scan_lines, fixes.scan_heading; a log read with --ranges scan); echo_tracks:
-    # the same line fit on each sonar's echoes over the last metres of travel
-    # (fixes.echo_tracks; a sonar ring)
-    heading_source: str = field(
-        default="flm", metadata={"choices": ["flm", "scan_lines", "echo_tracks"]}
-    )
+    # (fixes.scan_lines, fixes.scan_heading; a log read with --ranges scan)
+    heading_source: str = field(default="flm", metadata={"choices": ["flm", "scan_lines"]})
     # points per local line test, and the largest spread across (m) of a straight run
     scan_line_points: int = field(default=5, metadata={"min": 3, "max": 64})
     scan_line_tolerance: float = field(default=0.03, metadata={"min": 0.001, "max": 1.0})
@@ -118,13 +114,6 @@ class FixParams:
     scan_line_sigma_deg: float = field(default=1.2, metadata={"min": 0.0, "max": 10.0})
     # least half-width (deg) of the window around the expected wall direction
     scan_line_gate_deg: float = field(default=3.0, metadata={"min": 0.1, "max": 45.0})
-    # echo_tracks: the travel (m, dead reckoning) and the time (s) the tracks span, the
-    # travel between fixes (R inflated by sqrt(window / travel) for shared rings), and the
-    # largest step (m) between successive echoes of one sonar on one wall
-    track_window_m: float = field(default=4.0, metadata={"min": 0.1, "max": 100.0})
-    track_window_s: float = field(default=60.0, metadata={"min": 0.1, "max": 3600.0})
-    track_fix_travel: float = field(default=2.0, metadata={"min": 0.01, "max": 100.0})
-    track_gap: float = field(default=1.0, metadata={"min": 0.01, "max": 10.0})
 
     # --- full-pose fixes (docs/models.md sec. 10) ---
     # also apply the Hough heading fixes in pose mode (the match leaves the heading free)
