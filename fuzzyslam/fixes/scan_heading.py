@@ -109,13 +109,6 @@ class ScanLineHeadingAid(HeadingFixAid):
     def __init__(self, refs: Sequence[Reference], params: FixParams, start_time: float = 0.0):
         super().__init__(refs, params, None, None, start_time)  # type: ignore[arg-type]
 
-    def segments(
-        self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView
-    ) -> tuple[Segments | None, float]:
-        """The segments a fix is measured on at this ring (None: no fix due) and the
-        factor on the fix's sigma: here the scan's own segments, every scan."""
-        return scan_segments(ring, mounts, self.params), 1.0
-
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
         if t < self.start_time:
             self.before_start += 1
@@ -126,18 +119,9 @@ class ScanLineHeadingAid(HeadingFixAid):
         predicted = float(pose[2])
         odo = float(ekf.odometry_pose[2])
         x0, y0 = float(pose[0]), float(pose[1])
-        segs, scale = self.segments(t, ring, mounts, ekf)
-        if segs is None:  # no fix due on this ring
-            self.decisions.append(
-                HeadingDecision(
-                    t, -1, math.nan, predicted, False, "between_fixes", math.nan, odometry=odo,
-                    x=x0, y=y0,
-                )
-            )  # fmt: skip
-            return
+        segs = scan_segments(ring, mounts, p)
         refs = candidate_references(pose[:2], cov[:2, :2], self.refs, p.junction_margin)
         theta, sigma, ref, fam, why = measure_heading(segs, refs, predicted, cov[2, 2], p)
-        sigma *= scale
         strength = fam.support if fam is not None else math.nan
         rid = ref.id if ref is not None else -1
         if why != "ok":
@@ -148,12 +132,14 @@ class ScanLineHeadingAid(HeadingFixAid):
             )
             self.pose_suspect = True
             return
+        # NIS = (theta - theta_pred)^2 / (P_tt + R), R = sigma^2 (chi-square, 1 dof)
         var = float(cov[2, 2]) + sigma * sigma
         nis = float(wrap_angle(theta - predicted)) ** 2 / var
         accepted, reason = True, "ok"
         if nis > p.gate_chi2:
             accepted, reason = False, "gated"
         else:
+            # h(x) = theta, H = [0 0 1 0 ...] (docs/models.md sec. 9)
             res = ekf.update_robot([theta], [[sigma * sigma]], [2], gate_chi2=p.gate_chi2)
             nis = float(res.nis)
             if not res.accepted:

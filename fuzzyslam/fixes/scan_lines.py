@@ -68,8 +68,18 @@ class FamilyDirection:
 def scan_end_points(
     ranges: np.ndarray, max_range: np.ndarray | float, mounts: np.ndarray
 ) -> np.ndarray:
-    """(M, 2) end points in the robot frame of the beams (M,) at ``mounts`` (M, 3), in beam
-    order; NaN where a beam has no echo (NaN range, or at or beyond its max range)."""
+    """End points of one scan in the robot frame (module docstring, step 1).
+
+    Parameters
+    ----------
+    ranges : (M,) ranges of the kept beams (m; NaN: invalid)
+    max_range : scalar or (M,) the beams' max ranges (m): a range there is no echo
+    mounts : (M, 3) the beams' poses (x, y, angle) in base_link
+
+    Returns
+    -------
+    (M, 2) end points in beam order, NaN where a beam has no echo.
+    """
     r = np.asarray(ranges, dtype=float)
     rmax = np.broadcast_to(np.asarray(max_range, dtype=float), r.shape)
     with np.errstate(invalid="ignore"):
@@ -101,8 +111,22 @@ def fit_segments(
     min_length: float = 0.5,
     turn_deg: float = 5.0,
 ) -> Segments:
-    """Straight segments of the ordered end points ``points`` (M, 2) (NaN: no echo), by
-    the module docstring's steps 2-3. Returns :class:`Segments` (S,)."""
+    """Straight segments of one scan's ordered end points (module docstring, steps 2-3).
+
+    Parameters
+    ----------
+    points : (M, 2) end points in beam order (NaN: no echo)
+    window : points per local straightness test (``scan_line_points``)
+    tolerance : largest spread across (m) of a straight window (``scan_line_tolerance``)
+    gap : largest step (m) between linked neighbours (``scan_line_gap``)
+    min_length : shortest segment kept (m) (``scan_line_min_length``)
+    turn_deg : largest turn (deg) between successive straight points of one segment
+
+    Returns
+    -------
+    :class:`Segments` with S entries: direction (S,) mod pi, its sigma (S,), length (S,),
+    points (S,).
+    """
     p = np.asarray(points, dtype=float)
     m = len(p)
     empty = Segments(*(np.zeros(0) for _ in range(4)))
@@ -188,8 +212,21 @@ def _median_by_label(v: np.ndarray, lab: np.ndarray, s: int) -> np.ndarray:
 def family_direction(
     segs: Segments, expected: float, gate: float, wall_sigma: float, min_support: float = 1.0
 ) -> FamilyDirection | None:
-    """The direction of the walls within ``gate`` (rad) of ``expected`` (mod pi) (module
-    docstring, step 4), or None when they hold less than ``min_support`` m of wall."""
+    """The direction of one family of walls (module docstring, step 4).
+
+    Parameters
+    ----------
+    segs : the scan's segments (S,)
+    expected : expected wall direction (rad, mod pi), t_ref - theta_pred
+    gate : half-width (rad) of the window around ``expected``
+    wall_sigma : straightness of a real wall (rad), added to each segment's variance
+    min_support : least metres of wall in the window
+
+    Returns
+    -------
+    :class:`FamilyDirection` (direction mod pi in [0, pi), sigma, segments, support), or
+    None when the window holds less than ``min_support`` m of wall.
+    """
     if not len(segs):
         return None
     d = np.mod(segs.angle - expected + np.pi / 2, np.pi) - np.pi / 2
