@@ -8,13 +8,16 @@ MRCLAM logs; skipped when absent). For each log it runs ``fuzzyslam run`` and
 ``fuzzyslam evaluate --landmarks-truth`` and prints: APE RMSE after a rigid 2-D alignment
 (SLAM and dead reckoning), true landmarks with an estimate within 0.5 m, estimates left
 over after the one-to-one matching, NEES mean (3 dof, against the aligned truth),
-time with NEES above 100, what filter_health says, and the real-time factor.
+time with NEES above 100, what filter_health says, the real-time factor (log duration over
+wall time, as the summary gives it, and over the process's CPU time: the figure to read
+on a loaded machine), and the odometry latency the bearings imply.
 """
 
 from __future__ import annotations
 
 import argparse
 import json
+import resource
 import subprocess
 import sys
 import tempfile
@@ -43,13 +46,16 @@ def main() -> None:
         print(f"no landmark logs under {a.data}: skipped")
         return
     print(f"{'log':16s} {'APE m':>6s} {'DR m':>6s} {'found':>5s} {'left':>4s} {'NEES':>6s} "
-          f"{'NEES>100 s':>10s} {'diverged':>8s} {'RTF':>6s}")
+          f"{'NEES>100 s':>10s} {'diverged':>8s} {'RTF':>6s} {'CPU RTF':>7s} {'lag s':>6s}")
     with tempfile.TemporaryDirectory() as tmp:
         for log in logs:
             run = Path(tmp) / log.name
             extra = ["--adapt-noise"] if a.adapt_noise else []
+            c0 = resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime
             s = fuzzyslam("run", log / "log.mcap", "--config", "real_detections.yaml",
                           "-o", run, *extra)
+            cpu = resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime - c0
+            lag = (s.get("odometry_delay_estimate") or {}).get("delay_s")
             ev = Path(tmp) / f"{log.name}_ev"
             h = fuzzyslam("evaluate", log / "truth.tum", run, "--landmarks-truth",
                           log / "landmarks_truth.yaml", "-o", ev)
@@ -62,7 +68,8 @@ def main() -> None:
                   f"{h['lamps_true_within_0.5_m']:5d} {h['lamps_left_over']:4d} "
                   f"{h['nees_mean']:6.2f} "
                   f"{'' if over is None else f'{over * (cov[-1, 0] - cov[0, 0]):.0f}':>10s} "
-                  f"{s['filter_health']['diverged']!s:>8s} {s['real_time_factor']:6.1f}")
+                  f"{s['filter_health']['diverged']!s:>8s} {s['real_time_factor']:6.1f} "
+                  f"{s['log_duration_s'] / cpu:7.1f} {'' if lag is None else f'{lag:.3f}':>6s}")
 
 
 if __name__ == "__main__":

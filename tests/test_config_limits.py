@@ -1,5 +1,6 @@
 """Configs that hung or exhausted memory (issue 14, class 5): every one is exit 3 with
-one short line naming the config, in well under a second."""
+one short line naming the config, in well under a second of CPU time (CPU, not wall
+time: a loaded machine must not fail it)."""
 
 from __future__ import annotations
 
@@ -50,9 +51,9 @@ def test_bad_config_is_refused_fast(kind: str, tmp_path: Path) -> None:
     (tmp_path / "outside.yaml").write_text("name: outside\n", encoding="utf-8")
     cfg = d / "bad.yaml"
     cfg.write_text(BAD[kind], encoding="utf-8")
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     code, out, err = cli("simulate", cfg, "-o", tmp_path / "x.mcap")
-    took = time.perf_counter() - t0
+    took = time.process_time() - t0
     lines = error_lines(err)
     assert code == EXIT_INPUT, err[:500]
     assert len(lines) == 1 and lines[0].startswith(f"fuzzyslam: error: {cfg}: "), err[:500]
@@ -66,10 +67,10 @@ def test_long_extends_chain_is_refused(tmp_path: Path) -> None:
     for i in range(1200):
         (tmp_path / f"c{i}.yaml").write_text(f"extends: c{i + 1}.yaml\n", encoding="utf-8")
     (tmp_path / "c1200.yaml").write_text("extends: quick.yaml\n", encoding="utf-8")
-    t0 = time.perf_counter()
+    t0 = time.process_time()
     code, _, err = cli("simulate", tmp_path / "c0.yaml", "-o", tmp_path / "x.mcap")
     assert code == EXIT_INPUT and "'extends' chain longer" in err, err[:500]
-    assert time.perf_counter() - t0 < 1.0
+    assert time.process_time() - t0 < 1.0
 
 
 def test_extends_below_and_embedded_still_work(tmp_path: Path) -> None:

@@ -120,6 +120,10 @@ def aids_for_map(fm: FrozenMap, mode: str, cfg: Any, start_time: float | None = 
     )
 
     def heading_aid() -> HeadingFixAid:
+        if cfg.fixes.heading_source == "scan_lines":
+            from fuzzyslam.fixes.scan_heading import ScanLineHeadingAid
+
+            return ScanLineHeadingAid(fm.references, cfg.fixes, t0)
         return HeadingFixAid(
             fm.references,
             cfg.fixes,

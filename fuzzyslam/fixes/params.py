@@ -95,6 +95,26 @@ class FixParams:
     # sigma is at least 0.35 deg, above 0.7 for 10 % of the windows, whose errors are larger)
     flm_fit_sigma: bool = True
 
+    # --- the wall direction a heading fix measures (docs/models.md sec. 9) ---
+    # flm: the paper's Hough peak of the fuzzy local map (sonar, and the paper scenario);
+    # scan_lines: straight segments fitted to a laser scan's end points, one fix per scan
+    # (fixes.scan_lines, fixes.scan_heading; a log read with --ranges scan)
+    heading_source: str = field(default="flm", metadata={"choices": ["flm", "scan_lines"]})
+    # points per local line test, and the largest spread across (m) of a straight run
+    scan_line_points: int = field(default=5, metadata={"min": 3, "max": 64})
+    scan_line_tolerance: float = field(default=0.03, metadata={"min": 0.001, "max": 1.0})
+    # neighbouring end points farther apart than this (m) are not on one wall
+    scan_line_gap: float = field(default=0.5, metadata={"min": 0.01, "max": 10.0})
+    # shortest segment (m), and the least wall (m) a family must hold to give a fix
+    scan_line_min_length: float = field(default=0.5, metadata={"min": 0.0, "max": 20.0})
+    scan_line_min_support: float = field(default=1.0, metadata={"min": 0.0, "max": 100.0})
+    # straightness of a real wall (deg, per segment), added to the fit's own variance
+    scan_line_wall_sigma_deg: float = field(default=0.5, metadata={"min": 0.0, "max": 10.0})
+    # scatter of one scan's wall direction that its segments share (deg), added to R
+    scan_line_sigma_deg: float = field(default=1.2, metadata={"min": 0.0, "max": 10.0})
+    # least half-width (deg) of the window around the expected wall direction
+    scan_line_gate_deg: float = field(default=3.0, metadata={"min": 0.1, "max": 45.0})
+
     # --- full-pose fixes (docs/models.md sec. 10) ---
     # also apply the Hough heading fixes in pose mode (the match leaves the heading free)
     pose_with_heading: bool = True

@@ -12,13 +12,16 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
+from typing import TYPE_CHECKING, Protocol
 
 import numpy as np
 
 from fuzzyslam.slam.ekf import EkfSlam, UpdateResult
 from fuzzyslam.slam.noise import DetectionNoiseEstimate
 from fuzzyslam.streams.sonar import Ring
+
+if TYPE_CHECKING:  # slam/latency.py reads the events defined here
+    from fuzzyslam.slam.latency import DelayEstimate
 
 
 @dataclass(slots=True)
@@ -173,6 +176,7 @@ class SlamResult:
     # and the detection noise the innovations imply (slam/noise.py)
     health: dict = field(default_factory=dict)
     noise_estimate: DetectionNoiseEstimate | None = None
+    delay_estimate: DelayEstimate | None = None  # the odometry latency (slam/latency.py)
     calibration: dict | None = None  # the summary's entry (slam/stage.py)
 
     def mean_nis(self, kind: str = "lamp") -> float:

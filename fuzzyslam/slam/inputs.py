@@ -46,6 +46,7 @@ from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.robot import WHEEL_NAMES
 from fuzzyslam.slam.events import Event, Frame, Odom, RingEvent, TfFrames
+from fuzzyslam.slam.latency import delay_odometry
 from fuzzyslam.slam.odom_gate import REANCHOR, OdomGate, first_plausible_pose, within_speed
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.logmeta import read_scenario
@@ -96,6 +97,9 @@ class LogInputs:
         """All events in time order (rings merged in only when ``rings``, from
         ``ring_start`` on when given: the aids' start, e.g. the map's freeze time)."""
         main = self._main_events()
+        delay = self.cfg.slam.odometry_delay_s
+        if delay:
+            main = delay_odometry(main, delay)  # stamps lead the motion (slam/latency.py)
         if not rings:
             return main
         return heapq.merge(main, self._ring_events(ring_start), key=lambda e: e.t)

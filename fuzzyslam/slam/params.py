@@ -85,6 +85,9 @@ class SlamParams:
     # used (counted: frames_stale_odometry): the robot may have moved since the last
     # increment, so its detections would be compared with a stale pose (duplicates)
     odometry_stale_s: float = field(default=1.0, metadata={"min": 0.01, "max": 1000.0})
+    # odometry latency (s): the motion of an increment stamped t happens at t + this
+    # (commanded or filtered wheel velocities lead the wheels; slam/latency.py)
+    odometry_delay_s: float = field(default=0.0, metadata={"min": 0.0, "max": 5.0})
     # outputs: trajectory rows at least this far apart (s) between camera updates
     record_period: float = field(default=0.2, metadata={"min": 0.0})
     # /slam/landmarks MarkerArray period in estimates.mcap (s)

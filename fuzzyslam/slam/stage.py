@@ -21,6 +21,7 @@ from fuzzyslam.rundir import OPTIONAL_OUTPUTS
 from fuzzyslam.slam import calibration as cal
 from fuzzyslam.slam.health import orphan_landmarks
 from fuzzyslam.slam.inputs import open_inputs
+from fuzzyslam.slam.latency import MotionTap, delay_note
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
 from fuzzyslam.slam.outputs import StreamingOutputs, write_outputs, write_summary
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
@@ -60,6 +61,8 @@ def make_summary(
     est = res.noise_estimate
     if inputs.lamp_source == "detections":
         out["noise_estimate"] = est.as_dict() if est is not None else None
+        delay = res.delay_estimate
+        out["odometry_delay_estimate"] = delay.as_dict() if delay is not None else None
     if res.calibration is not None:
         out["calibration"] = res.calibration
     if aids:
@@ -169,6 +172,11 @@ def _tell(summary: dict, cfg: Config | None = None) -> None:
             f"({', '.join(health.get('reasons', [])) or 'NIS or association windows'}; see "
             "the summary's filter_health): do not trust this estimate"
         )
+    delay = summary.get("odometry_delay_estimate")
+    if cfg is not None and delay:
+        line = delay_note(delay["delay_s"], cfg.slam.odometry_delay_s)
+        if line:
+            note(line)
     est = summary.get("noise_estimate")
     if cfg is not None and est:
         line = suggestion(
@@ -255,10 +263,10 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs, model=N
         with Progress(max(inputs.end - inputs.start, 1e-6), "run: EKF-SLAM") as bar:
             t0 = inputs.start
             ring_start = min((a.start_time for a in aids), default=None)
+            events = inputs.events(rings=bool(aids), ring_start=ring_start)
+            tap = MotionTap(events) if inputs.lamp_source == "detections" else None
             res = runner.run(
-                inputs.events(rings=bool(aids), ring_start=ring_start),
-                lambda t: bar.update_to(t - t0),
-                t0=t0,
+                events if tap is None else iter(tap), lambda t: bar.update_to(t - t0), t0=t0
             )
     finally:
         if cv2 is not None:
@@ -267,6 +275,8 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs, model=N
     if model is not None:
         res.calibration = _write_calibration(runner, model, sink.tmp)
     res.noise_estimate = runner.noise.estimate()
+    if tap is not None:  # the odometry latency the bearings imply (slam/latency.py)
+        res.delay_estimate = tap.estimate(cfg.slam.odometry_delay_s)
     res.health = {  # numerical guards and the divergence tests (slam/health.py)
         **res.ekf.guards,
         **runner.health.summary(),

@@ -1,0 +1,254 @@
+"""Odometry latency: odometry stamps that lead the motion they describe.
+
+A robot whose odometry integrates commanded (or filtered) wheel velocities stamps each
+increment when the command is sent, and the wheels follow one actuation lag later
+(0.1-0.3 s on small robots): the odometry pose at stamp t is the true pose at t + d. A
+camera stamps its frames when they are exposed. Fed as stamped, the filter predicts the
+turn d seconds before it happens, and every detection made while turning at rate w is
+compared with a heading w d ahead of the true one (0.2 s at 0.5 rad/s is 6 deg, against
+a bearing noise of 1 deg): wrong pairings and a wobbling map (docs/models.md sec. 2b).
+
+``delay_odometry`` moves every odometry increment to t + d and restores the time order
+of the event stream with a heap; the other events keep their stamps. The time offset
+between sensors is the temporal calibration of Li and Mourikis, "Online temporal
+calibration for camera-IMU systems", IJRR 33(7), 2014, here a constant from the config.
+
+``estimate_odometry_delay`` measures the lag from the log itself, with no truth: the
+bearing of a landmark seen in two consecutive frames changes as the odometry, read d
+earlier, says the robot turned and moved; the lag that explains the changes best is the
+estimate (``run`` reports it, ``odometry_delay_estimate`` in the summary).
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+from collections.abc import Iterable, Iterator
+from dataclasses import dataclass
+
+import numpy as np
+
+from fuzzyslam.se2 import wrap_angle
+from fuzzyslam.slam.events import Event, Frame, Odom
+
+
+def delay_odometry(events: Iterable[Event], delay: float) -> Iterator[Event]:
+    """The events with every ``Odom`` restamped t + ``delay``, in time order.
+
+    Parameters
+    ----------
+    events : iterable of Event
+        Events in the order of their stamps (as read from the log).
+    delay : float
+        Odometry latency d >= 0 (s): the motion of an increment stamped t happens at t + d.
+
+    Returns
+    -------
+    iterator of Event
+        The same events, odometry restamped, ordered by time; events with equal times keep
+        their input order. An event is released once an event read later has a stamp at
+        least as late, so at most ``delay`` seconds of odometry is held back.
+    """
+    if not delay >= 0.0:
+        raise ValueError(f"odometry delay must be >= 0 s, got {delay}")
+    heap: list[tuple[float, int, Event]] = []
+    order = itertools.count()
+    for ev in events:
+        stamp = ev.t
+        if isinstance(ev, Odom):
+            ev = Odom(stamp + delay, ev.d_trans, ev.d_rot)
+        heapq.heappush(heap, (ev.t, next(order), ev))
+        while heap and heap[0][0] <= stamp:
+            yield heapq.heappop(heap)[2]
+    while heap:
+        yield heapq.heappop(heap)[2]
+
+
+MIN_PAIRS = 100  # pairs of sightings below which no estimate is given
+MAX_FRAME_GAP_S = 0.5  # consecutive frames further apart than this are not paired
+UNIQUE_DEG = 2.0  # the second-nearest bearing must be this much (and 3x) further away
+MAX_RANGE_STEP_M = 0.5
+DELAY_NOTE_S = 0.05  # an estimate this far from the configured delay is told (stderr)
+
+
+def delay_note(estimate: float, configured: float) -> str:
+    """The one-line advice when the estimated latency differs from the configured one by
+    more than ``DELAY_NOTE_S``; else ''."""
+    if abs(estimate - configured) <= DELAY_NOTE_S:
+        return ""
+    advice = max(round(estimate, 2), 0.0)
+    return (
+        f"odometry_delay_estimate: the detections' bearings say the odometry leads the "
+        f"motion by {estimate:.3f} s (slam.odometry_delay_s is {configured:g}): set "
+        f"slam.odometry_delay_s: {advice:g} in your config"
+    )
+
+
+@dataclass
+class DelayEstimate:
+    """The odometry latency the log's own bearings imply (``estimate_odometry_delay``)."""
+
+    delay_s: float  # configured delay + the residual lag found
+    pairs: int  # sightings of one landmark in consecutive frames that were used
+    residual_deg: float  # robust scale of the bearing-change residuals at the estimate
+    residual_at_configured_deg: float  # the same at the configured delay
+
+    def as_dict(self) -> dict:
+        """The summary's ``odometry_delay_estimate``."""
+        return {
+            "delay_s": round(self.delay_s, 3),
+            "pairs": self.pairs,
+            "residual_deg": round(self.residual_deg, 3),
+            "residual_at_configured_deg": round(self.residual_at_configured_deg, 3),
+        }
+
+
+class MotionTap:
+    """Passes events through unchanged, keeping what ``estimate_odometry_delay`` needs:
+    the odometry's stamps and cumulative distance and turn, and each frame's detections."""
+
+    def __init__(self, events: Iterable[Event]) -> None:
+        self._events = events
+        self.odo: list[tuple[float, float, float]] = []
+        self.frames: list[tuple[float, np.ndarray]] = []
+
+    def __iter__(self) -> Iterator[Event]:
+        odo, frames = self.odo, self.frames
+        for ev in self._events:
+            if isinstance(ev, Odom):
+                odo.append((ev.t, ev.d_trans, ev.d_rot))
+            elif isinstance(ev, Frame):
+                frames.append((ev.t, ev.z))
+            yield ev
+
+    def estimate(self, configured: float, min_pairs: int = MIN_PAIRS) -> DelayEstimate | None:
+        """``estimate_odometry_delay`` on what passed (stamps as the filter saw them, so
+        the lag found is added to ``configured``); None with fewer than ``min_pairs``."""
+        if len(self.odo) < 2 or len(self.frames) < 2:
+            return None
+        t, dt, dr = np.asarray(self.odo, dtype=float).T
+        pairs = consecutive_sightings(self.frames)
+        if len(pairs) < min_pairs:
+            return None
+        lag, scale, scale0 = estimate_odometry_delay(t, np.cumsum(dt), np.cumsum(dr), pairs)
+        return DelayEstimate(configured + lag, len(pairs), scale, scale0)
+
+
+def consecutive_sightings(frames: list[tuple[float, np.ndarray]]) -> np.ndarray:
+    """Detections of one landmark in two consecutive frames, paired by nearest bearing.
+
+    A detection of frame k is paired with the detection of frame k + 1 nearest in
+    bearing, when that one is unique (the next nearest is more than three times as far
+    and ``UNIQUE_DEG`` further) and the ranges differ by less than ``MAX_RANGE_STEP_M``;
+    frames more than ``MAX_FRAME_GAP_S`` apart are not paired.
+
+    Parameters
+    ----------
+    frames : list of (float, ndarray (m, 2))
+        Frame stamps and detections (x, y in the robot frame), in time order.
+
+    Returns
+    -------
+    ndarray (k, 5)
+        Per pair: t0, t1, bearing change b1 - b0 (rad, wrapped), mean bearing (rad),
+        mean range (m).
+    """
+    rows = []
+    for (t0, z0), (t1, z1) in itertools.pairwise(frames):
+        z0 = np.asarray(z0, dtype=float).reshape(-1, 2)
+        z1 = np.asarray(z1, dtype=float).reshape(-1, 2)
+        if not len(z0) or not len(z1) or t1 - t0 > MAX_FRAME_GAP_S:
+            continue
+        b0, r0 = np.arctan2(z0[:, 1], z0[:, 0]), np.hypot(z0[:, 0], z0[:, 1])
+        b1, r1 = np.arctan2(z1[:, 1], z1[:, 0]), np.hypot(z1[:, 0], z1[:, 1])
+        db = wrap_angle(b1[None, :] - b0[:, None])  # (m0, m1)
+        cost = np.abs(db)
+        j = np.argmin(cost, axis=1)
+        k = np.arange(len(z0))
+        best = cost[k, j]
+        if cost.shape[1] > 1:
+            second = np.partition(cost, 1, axis=1)[:, 1]
+            unique = second >= 3.0 * best + np.radians(UNIQUE_DEG)
+        else:
+            unique = np.ones(len(z0), dtype=bool)
+        ok = unique & (np.abs(r1[j] - r0) <= MAX_RANGE_STEP_M)
+        for a in np.nonzero(ok)[0]:
+            b = j[a]
+            mean_b = b0[a] + 0.5 * db[a, b]
+            rows.append((t0, t1, db[a, b], mean_b, 0.5 * (r0[a] + r1[b])))
+    return np.asarray(rows, dtype=float).reshape(-1, 5)
+
+
+def estimate_odometry_delay(
+    t: np.ndarray,
+    cum_trans: np.ndarray,
+    cum_rot: np.ndarray,
+    pairs: np.ndarray,
+    lags: np.ndarray | None = None,
+) -> tuple[float, float, float]:
+    """The lag d that best explains the landmarks' bearing changes by the odometry.
+
+    A static landmark at bearing b and range r, seen by a robot moving forward at v and
+    turning at w, has db/dt = -w + v sin(b) / r (the robot frame's rotation and the
+    parallax of its translation). Between two frames at t0 and t1 the odometry, read
+    ``d`` earlier (an increment stamped t is motion at t + d), predicts
+
+        db_pred(d) = -(R(t1 - d) - R(t0 - d)) + (S(t1 - d) - S(t0 - d)) sin(b) / r
+
+    with S, R the cumulative distance and turn interpolated at those times. The estimate
+    is the lag on the grid ``lags`` whose residuals db - db_pred have the smallest robust
+    scale (the root mean square of the residuals clipped at three robust sigmas of those
+    at lag 0: a truncated quadratic loss, so that wrong pairings or moving landmarks
+    cost at most the clip), refined by a parabola through the minimum and its two
+    neighbours. The idea is the temporal calibration of Li and Mourikis, "Online temporal
+    calibration for camera-IMU systems", IJRR 33(7), 2014, here as a batch search.
+
+    Parameters
+    ----------
+    t : ndarray (n,)
+        Odometry stamps, increasing (s).
+    cum_trans, cum_rot : ndarray (n,)
+        Cumulative distance (m) and signed turn (rad) at those stamps.
+    pairs : ndarray (k, 5)
+        ``consecutive_sightings``: t0, t1, bearing change, bearing, range.
+    lags : ndarray (g,), optional
+        Candidate lags (s), evenly spaced; default -0.2 to 0.6 s by 0.025 s.
+
+    Returns
+    -------
+    lag : float
+        The residual odometry latency (s) relative to the stamps given.
+    scale : float
+        Robust scale (clipped root mean square) of the residuals at ``lag`` (deg).
+    scale_at_zero : float
+        The same at lag 0 (deg): the improvement the lag brings.
+    """
+    grid = np.arange(-0.2, 0.6 + 1e-9, 0.025) if lags is None else np.asarray(lags, float)
+    t0, t1, db, b, r = pairs.T
+    coef = np.sin(b) / np.maximum(r, 1e-3)
+
+    def residuals(lag: np.ndarray) -> np.ndarray:
+        """(g, k) residuals db - db_pred for each lag of ``lag`` (g,)."""
+        a = t0[None, :] - lag[:, None]
+        c = t1[None, :] - lag[:, None]
+        turn = np.interp(c, t, cum_rot) - np.interp(a, t, cum_rot)
+        dist = np.interp(c, t, cum_trans) - np.interp(a, t, cum_trans)
+        return db[None, :] - (-turn + dist * coef[None, :])
+
+    # truncated quadratic loss, clipped at 3 robust sigmas of the residuals at lag 0:
+    # smooth in the lag (a median is not), and a wrong pairing costs at most the clip
+    clip = 3.0 * 1.4826 * float(np.median(np.abs(residuals(np.zeros(1)))))
+
+    def scale(lag: np.ndarray) -> np.ndarray:
+        """Robust residual scale (rad) for each lag of ``lag`` (g,)."""
+        return np.sqrt(np.mean(np.minimum(residuals(lag) ** 2, clip**2), axis=1))
+
+    s = scale(grid)
+    i = int(np.argmin(s))
+    lag = float(grid[i])
+    if 0 < i < len(grid) - 1:  # vertex of the parabola through the three grid points
+        den = s[i - 1] - 2.0 * s[i] + s[i + 1]
+        if den > 0:
+            lag += 0.5 * (s[i - 1] - s[i + 1]) / den * (grid[1] - grid[0])
+    at = scale(np.array([lag, 0.0]))
+    return float(lag), float(np.degrees(at[0])), float(np.degrees(at[1]))
