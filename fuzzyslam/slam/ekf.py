@@ -69,6 +69,7 @@ def lamp_init(pose: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, ...]:
 
 _BLOCK = 256
 _POSE_COLS = np.arange(3)  # the robot pose's columns of H
+_XY = np.arange(2)  # a lamp's x, y offsets in the state
 
 
 def _add_symmetric_update(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:
@@ -312,9 +313,7 @@ class EkfSlam:
         c, s = math.cos(x[2]), math.sin(x[2])
         rt = np.array([[c, s], [-s, c]])
         j = self.m0 + 2 * ids
-        jj = np.empty((k, 2), dtype=int)  # the lamps' (x, y) indices
-        jj[:, 0] = j
-        jj[:, 1] = j + 1
+        jj = j[:, None] + _XY  # the lamps' (x, y) indices (k, 2)
         h = (x[jj] - x[:2]) @ rt.T  # (k, 2)
         hc = np.zeros((2 * k, 3 + 2 * k))
         rows = np.arange(k)
