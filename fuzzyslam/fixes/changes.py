@@ -19,7 +19,6 @@ centroid; size is the component's larger bounding-box side (m). The plug-in writ
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -30,6 +29,7 @@ import cv2
 import numpy as np
 
 from fuzzyslam.fileio import atomic_path
+from fuzzyslam.fixes.base import FixAid
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import transform_points
@@ -121,10 +121,13 @@ def detect_changes(
     ]
 
 
-class ChangeDetector:
-    """Plug-in of ``fuzzyslam run``: change detections per ring, written to changes.csv."""
+class ChangeDetector(FixAid):
+    """Plug-in of ``fuzzyslam run``: change detections per ring, written to changes.csv
+    (its ``decisions`` are the detections, :class:`Change`)."""
 
     kind = "changes"
+    csv_name = "changes.csv"
+    csv_fields = CHANGE_FIELDS
 
     def __init__(
         self,
@@ -133,18 +136,17 @@ class ChangeDetector:
         flm_source: Callable[[Any, np.ndarray], BeliefMap],
         start_time: float = 0.0,
     ) -> None:
+        super().__init__(params, start_time)
         self.grid = fgm.grid
         self.fgm = fgm
-        self.params = params
         self.free = free_space(fgm, params.change_erode_cells)
         self.flm_source = flm_source
-        self.start_time = float(start_time)
-        self.changes: list[Change] = []
+        self.decisions: list[Change] = []
         self.rings = 0
         self.uncertain = 0
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
-        if t < self.start_time:
+        if not self.started(t):
             return
         self.rings += 1
         cov = ekf.pose_cov
@@ -152,7 +154,7 @@ class ChangeDetector:
             self.uncertain += 1
             return
         flm = self.flm_source(ring, mounts)
-        self.changes += detect_changes(
+        self.decisions += detect_changes(
             t,
             flm,
             ekf.pose,
@@ -167,13 +169,14 @@ class ChangeDetector:
         return {
             "rings": self.rings,
             "skipped_uncertain": self.uncertain,
-            "detections": len(self.changes),
-            "rings_with_detections": len({c.t for c in self.changes}),
+            "detections": len(self.decisions),
+            "rings_with_detections": len({c.t for c in self.decisions}),
         }
 
     def write(self, outdir: Path) -> None:
-        write_changes(Path(outdir) / "changes.csv", self.changes)
-        draw_changes(Path(outdir) / "changes.png", self.fgm, self.changes)
+        """changes.csv (:class:`FixAid`) and changes.png (:func:`draw_changes`)."""
+        super().write(outdir)
+        draw_changes(Path(outdir) / "changes.png", self.fgm, self.decisions)
 
     def messages(
         self, topics: Any, start: float | None = None
@@ -181,7 +184,7 @@ class ChangeDetector:
         """``/slam/changes`` (topics.slam_changes) for estimates.mcap: one MarkerArray per
         ring with detections, a red cylinder per detection (diameter = its size); ``start``
         is unused (the aids' common signature)."""
-        return change_messages(self.changes, topics.slam_changes)
+        return change_messages(self.decisions, topics.slam_changes)
 
 
 def change_messages(changes: Sequence[Change], topic: str) -> list[tuple[str, str, Any, float]]:
@@ -230,9 +233,3 @@ def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change]) -> None:
     plt.close(fig)
 
 
-def write_changes(path: Path, changes: Sequence[Change]) -> None:
-    """changes.csv: ``t,x,y,size,cells``."""
-    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(CHANGE_FIELDS)
-        w.writerows(c.row() for c in changes)

@@ -71,11 +71,11 @@ import math
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from fuzzyslam.fixes.base import FixAid
 from fuzzyslam.fixes.heading_measure import (  # the paper's measurement; re-exported here
     HEADING_FIELDS,
     FlmSource,
@@ -125,7 +125,7 @@ def _streak_offset(rings: Sequence[HeadingDecision]) -> tuple[float, float, floa
     return float(wrap_angle(u[0] + mean)), float(1.0 / math.sqrt(float(np.sum(w)))), scatter
 
 
-class HeadingFixAid:
+class HeadingFixAid(FixAid):
     """Plug-in of ``fuzzyslam run``: a heading fix per sonar ring from ``start_time`` on.
 
     ``flm_source(ring, mounts) -> BeliefMap`` (robot frame) and ``wall_direction(flm) ->
@@ -136,7 +136,8 @@ class HeadingFixAid:
     """
 
     kind = "heading"
-    viewer_map: Any = None  # (FGM, references) this aid shows in estimates.mcap (aids.py)
+    csv_name = "heading_fixes.csv"
+    csv_fields = HEADING_FIELDS
 
     def __init__(
         self,
@@ -147,13 +148,11 @@ class HeadingFixAid:
         start_time: float = 0.0,
         rings_flm: Callable[[RecentRings, np.ndarray], BeliefMap] | None = None,
     ) -> None:
+        super().__init__(params, start_time)
         self.refs = list(refs)
-        self.params = params
         self.flm_source = flm_source
         self.wall_direction = wall_direction
-        self.start_time = float(start_time)
         self.decisions: list[HeadingDecision] = []
-        self.before_start = 0
         self.recoveries = 0
         self._last_ok_xy: np.ndarray | None = None  # position at the last accepted fix
         # the last formed fix disagreed with the prediction (NIS above suspect_chi2, or
@@ -177,8 +176,7 @@ class HeadingFixAid:
         self.recent.push(t, ekf.odometry_pose, ring.ranges, ring.max_range, ring.fov)
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
-        if t < self.start_time:
-            self.before_start += 1
+        if not self.started(t):
             return
         if self.recent is not None:
             self._push(t, ring, ekf)
@@ -407,6 +405,3 @@ class HeadingFixAid:
         angles = {r.id: r.angle for r in self.refs}
         fixes = heading_fix_messages(self.decisions, angles, topics.heading_fixes)
         return map_messages(self.viewer_map, topics, start) + fixes
-
-    def write(self, outdir: Path) -> None:
-        write_heading_fixes(Path(outdir) / "heading_fixes.csv", self.decisions)

@@ -27,18 +27,16 @@ covariance is inflated by the innovation (P_rr += diag(v^2), fading memory: Simo
 
 from __future__ import annotations
 
-import csv
 import itertools
 import math
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fuzzyslam.fileio import atomic_path
+from fuzzyslam.fixes.base import FixAid
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.pose_match import PoseMatch, PoseMatcher
 from fuzzyslam.maps.grid import BeliefMap
@@ -111,11 +109,12 @@ class PoseDecision:
         ]
 
 
-class PoseFixAid:
+class PoseFixAid(FixAid):
     """Plug-in of ``fuzzyslam run``: full-pose fixes update_robot(z, R, idx=[0, 1, 2])."""
 
     kind = "pose"
-    viewer_map: Any = None  # (FGM, references) this aid shows in estimates.mcap (aids.py)
+    csv_name = "pose_fixes.csv"
+    csv_fields = POSE_FIELDS
 
     def __init__(
         self,
@@ -124,12 +123,10 @@ class PoseFixAid:
         flm_source: Callable[[Any, np.ndarray], BeliefMap],
         start_time: float = 0.0,
     ) -> None:
+        super().__init__(params, start_time)
         self.matcher = PoseMatcher(fgm, params)
-        self.params = params
         self.flm_source = flm_source
-        self.start_time = float(start_time)
         self.decisions: list[PoseDecision] = []
-        self.before_start = 0
         self._count = 0
         self._last_odo: np.ndarray | None = None  # dead-reckoning pose at the last applied match
         # gated matches since the last applied one: (measured pose, covariance, odometry)
@@ -178,8 +175,7 @@ class PoseFixAid:
         return True
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
-        if t < self.start_time:
-            self.before_start += 1
+        if not self.started(t):
             return
         self._count += 1
         if (self._count - 1) % self.params.pose_every:
@@ -285,14 +281,3 @@ class PoseFixAid:
 
         fixes = pose_fix_messages(self.decisions, topics.pose_fixes)
         return map_messages(self.viewer_map, topics, start) + fixes
-
-    def write(self, outdir: Path) -> None:
-        write_pose_fixes(Path(outdir) / "pose_fixes.csv", self.decisions)
-
-
-def write_pose_fixes(path: Path, decisions: list[PoseDecision]) -> None:
-    """pose_fixes.csv: ``t,accepted,reason,x,y,theta,sxx,syy,stt,degenerate,nis``."""
-    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(POSE_FIELDS)
-        w.writerows(d.row() for d in decisions)
