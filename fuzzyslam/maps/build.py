@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -34,6 +34,7 @@ from fuzzyslam.streams.ranges import open_ranges
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.sonar import RingStats
 from fuzzyslam.streams.tum import read_tum
+from fuzzyslam.summary import OMIT, as_json
 
 
 @dataclass
@@ -48,6 +49,71 @@ class MapOptions:
     explicit_config: bool = False
     ranges: str | None = None
     sort: bool = False
+
+
+@dataclass(frozen=True, kw_only=True)
+class ReferenceEntry:
+    """A corridor reference in the map summary (the map stage's ``Reference``)."""
+
+    id: int
+    name: str
+    angle_deg: float
+    strength: float
+    ambiguous: bool
+
+
+@dataclass(frozen=True, kw_only=True)
+class ReferenceTruth:
+    """A reference against the nearest true corridor axis (simulated logs)."""
+
+    id: int
+    true_corridor: str
+    true_axis_deg: float
+    error_deg: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class WallQuality:
+    """The frozen map's walls against the true walls (maps/quality.py)."""
+
+    precision: float
+    recall: float
+    map_cells: int
+    true_cells: int
+
+
+@dataclass(frozen=True, kw_only=True)
+class MapSummary:
+    """The ``map`` stage's JSON summary (stdout and summary.json, docs/contracts.md
+    sec. 3); ``calibration`` is absent (:data:`~fuzzyslam.summary.OMIT`) when the
+    trajectory's run had no odometry calibration."""
+
+    log: str
+    trajectory: str
+    output: str
+    log_id: str
+    cells: int
+    shape: list[int]
+    origin: list[float]
+    resolution: float
+    rings_used: int
+    readings_used: int
+    readings_skipped: int
+    rings_skipped: int
+    sonar_stats: dict[str, Any]
+    range_sensor: dict[str, Any]
+    trajectory_repeats_dropped: int
+    cell_updates: int
+    cells_touched: int
+    freeze_time: float
+    freeze_rule: str
+    references: list[ReferenceEntry]
+    reference_truth: list[ReferenceTruth]
+    wall_quality: WallQuality | None
+    build_seconds: float
+    log_damage: dict[str, Any]
+    calibration: dict[str, Any] = OMIT
+    wall_seconds: float = OMIT
 
 
 def covered(tq: np.ndarray, t: np.ndarray, max_gap: float) -> np.ndarray:
@@ -158,7 +224,7 @@ def read_rings_compact(
     return times, rr, rmax, fov, mounts, stats
 
 
-def reference_truth(refs: list[Reference], world: World | None) -> list[dict[str, Any]]:
+def reference_truth(refs: list[Reference], world: World | None) -> list[ReferenceTruth]:
     """Each reference against the nearest true corridor axis (by centre-line distance)."""
     if world is None or not world.corridors:
         return []
@@ -174,12 +240,12 @@ def reference_truth(refs: list[Reference], world: World | None) -> list[dict[str
                 best, bd = cor, d
         err = float(wrap_angle_period(ref.angle - best.axis, np.pi))
         out.append(
-            {
-                "id": ref.id,
-                "true_corridor": best.name,
-                "true_axis_deg": float(np.rad2deg(best.axis)),
-                "error_deg": float(np.rad2deg(err)),
-            }
+            ReferenceTruth(
+                id=ref.id,
+                true_corridor=best.name,
+                true_axis_deg=float(np.rad2deg(best.axis)),
+                error_deg=float(np.rad2deg(err)),
+            )
         )
     return out
 
@@ -200,7 +266,8 @@ def _write_viewer_log(path: Path, fgm, refs: list[Reference], t: float, cfg: Con
 def build_map(
     log_path: str | Path, traj_path: str | Path, outdir: str | Path, cfg: Config, opts: MapOptions
 ) -> dict[str, Any]:
-    """Run the map stage; returns the JSON summary (also written as summary.json)."""
+    """Run the map stage; returns the JSON summary (:class:`MapSummary` as JSON, also
+    written as summary.json)."""
     wall0 = time.perf_counter()
     params: MapParams = cfg.fgm
     outdir = Path(outdir)
@@ -249,52 +316,51 @@ def build_map(
     quality = None
     if world is not None:
         q = wall_quality(fgm, world.wall_array)
-        quality = {
-            "precision": q.precision,
-            "recall": q.recall,
-            "map_cells": q.map_cells,
-            "true_cells": q.true_cells,
-        }
-    summary: dict[str, Any] = {
-        "log": str(log_path),
-        "trajectory": str(traj_path),
-        "output": str(outdir),
-        "log_id": log_id,
-        "cells": int(np.prod(fgm.grid.shape)),
-        "shape": list(fgm.grid.shape),
-        "origin": list(fgm.grid.origin),
-        "resolution": fgm.grid.resolution,
-        "rings_used": builder.rings,
-        "readings_used": builder.readings,
-        "readings_skipped": skipped_readings,
-        "rings_skipped": int((~ok).sum()),
-        "sonar_stats": stats.as_dict(),
-        "range_sensor": sensor.describe(),
-        "trajectory_repeats_dropped": tum_dropped,
-        "cell_updates": builder.cell_updates,
-        "cells_touched": int((fgm.m_t < 1.0).sum()),
-        "freeze_time": t_end,
-        "freeze_rule": how,
-        "references": [
-            {
-                "id": r.id,
-                "name": r.name,
-                "angle_deg": float(np.rad2deg(r.angle)),
-                "strength": r.strength,
-                "ambiguous": r.ambiguous,
-            }
-            for r in refs
-        ],
-        "reference_truth": truth,
-        "wall_quality": quality,
-        "build_seconds": build_s,
-        "log_damage": reader.damage(),
-    }
+        quality = WallQuality(
+            precision=q.precision,
+            recall=q.recall,
+            map_cells=q.map_cells,
+            true_cells=q.true_cells,
+        )
     # the odometry calibration of the trajectory's run at the freeze time (run --map starts
     # from it: slam/calibration.py), when that run had one
     calib = calibration.at_time(Path(traj_path).parent / "calibration.csv", t_end)
-    if calib is not None:
-        summary["calibration"] = calib
+    summary = MapSummary(
+        log=str(log_path),
+        trajectory=str(traj_path),
+        output=str(outdir),
+        log_id=log_id,
+        cells=int(np.prod(fgm.grid.shape)),
+        shape=list(fgm.grid.shape),
+        origin=list(fgm.grid.origin),
+        resolution=fgm.grid.resolution,
+        rings_used=builder.rings,
+        readings_used=builder.readings,
+        readings_skipped=skipped_readings,
+        rings_skipped=int((~ok).sum()),
+        sonar_stats=stats.as_dict(),
+        range_sensor=sensor.describe(),
+        trajectory_repeats_dropped=tum_dropped,
+        cell_updates=builder.cell_updates,
+        cells_touched=int((fgm.m_t < 1.0).sum()),
+        freeze_time=t_end,
+        freeze_rule=how,
+        references=[
+            ReferenceEntry(
+                id=r.id,
+                name=r.name,
+                angle_deg=float(np.rad2deg(r.angle)),
+                strength=r.strength,
+                ambiguous=r.ambiguous,
+            )
+            for r in refs
+        ],
+        reference_truth=truth,
+        wall_quality=quality,
+        build_seconds=build_s,
+        log_damage=reader.damage(),
+        calibration=calib if calib is not None else OMIT,
+    )
     owns = ("fgm.png", "conflict.png", "hough.png", "calibration.yaml")
     with OutputDir(outdir, owns=owns) as tmp:
         mapio.save_fgm(tmp / "fgm.npz", fgm, True, t_end, log_id)
@@ -320,8 +386,8 @@ def build_map(
                 mounts,
                 params,
             )
-        summary["wall_seconds"] = time.perf_counter() - wall0
+        out = as_json(replace(summary, wall_seconds=time.perf_counter() - wall0))
         (tmp / "summary.json").write_text(
-            json.dumps(summary, indent=2, sort_keys=True) + "\n", encoding="utf-8"
+            json.dumps(out, indent=2, sort_keys=True) + "\n", encoding="utf-8"
         )
-    return summary
+    return out

@@ -70,6 +70,19 @@ class Calibration:
         return len(self.names)
 
 
+@dataclass(frozen=True, kw_only=True)
+class CalibrationEntry:
+    """The summary's ``calibration``: the odometry self-calibration's model, where it
+    started (``start``: the prior or a file) and its final factors (slam/stage.py)."""
+
+    model: str
+    start: str
+    start_factors: list[float]
+    names: list[str]
+    factors: list[float]
+    sigma: list[float]
+
+
 def prior(kind: str, slam, wheel_base: float) -> Calibration:
     """The config's prior: factors 1, sigmas ``slam.calib_*_sigma`` (independent)."""
     if kind == "wheels":

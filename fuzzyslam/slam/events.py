@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Protocol
+from typing import Any, Protocol
 
 import numpy as np
 
@@ -173,7 +173,7 @@ class SlamResult:
     # and the detection noise the innovations imply (slam/noise.py)
     health: dict = field(default_factory=dict)
     noise_estimate: DetectionNoiseEstimate | None = None
-    calibration: dict | None = None  # the summary's entry (slam/stage.py)
+    calibration: Any = None  # the summary's entry, calibration.CalibrationEntry (slam/stage.py)
 
     def mean_nis(self, kind: str = "lamp") -> float:
         """Mean NIS of the accepted updates of ``kind`` (expected value: their dof)."""

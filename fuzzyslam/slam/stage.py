@@ -9,7 +9,9 @@ import copy
 import importlib
 import os
 import time
+from dataclasses import dataclass, replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -24,50 +26,104 @@ from fuzzyslam.slam.inputs import open_inputs
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
 from fuzzyslam.slam.outputs import StreamingOutputs, write_outputs, write_summary
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
+from fuzzyslam.summary import OMIT, as_json
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunSummary:
+    """The ``run`` stage's JSON summary (stdout and summary.json, docs/contracts.md
+    sec. 2). Fields left :data:`~fuzzyslam.summary.OMIT` are absent from the JSON:
+    ``first_warning`` (no input problem), ``noise_estimate`` (lamps from frames),
+    ``calibration`` (off), ``aids``, ``rings``, ``range_sensor`` (no fixes),
+    ``noise_adapted`` (without ``--adapt-noise``)."""
+
+    command: str = "run"
+    log: str
+    odometry_source: str
+    lamp_source: str
+    start_pose: list[float]
+    log_duration_s: float
+    counts: dict[str, int]
+    filter_health: dict[str, Any]
+    lamps: int
+    duplicates_guarded: int
+    mean_nis_lamp: float | None
+    mean_nis_lamp_dof: int = 2
+    final_pose: list[float] | None
+    final_pose_sigma: list[float] | None
+    trajectory_rows: int
+    warnings: dict[str, int]
+    truncated_log: bool
+    log_damage: dict[str, Any]
+    wall_time_s: float
+    real_time_factor: float | None
+    first_warning: str = OMIT
+    noise_estimate: dict[str, Any] | None = OMIT
+    calibration: cal.CalibrationEntry = OMIT
+    aids: dict[str, dict[str, Any]] = OMIT
+    rings: dict[str, Any] = OMIT
+    range_sensor: dict[str, Any] = OMIT
+    noise_adapted: dict[str, Any] | None = OMIT
 
 
 def make_summary(
     res: SlamResult, inputs, wall: float, aids: list, streamed: StreamingOutputs
-) -> dict:
-    """The JSON summary (stdout and summary.json); row statistics from ``streamed``."""
+) -> RunSummary:
+    """The run's summary (stdout and summary.json); row statistics from ``streamed``.
+
+    Parameters
+    ----------
+    res : SlamResult
+        The filter's result (slam/runner.py), with its health and calibration.
+    inputs : slam.inputs.Inputs
+        The opened log (sources, start pose, warnings, damage, ring statistics).
+    wall : float
+        Wall-clock seconds of the run.
+    aids : list
+        The fix plug-ins (their ``summary()`` under ``aids``).
+    streamed : StreamingOutputs
+        The written rows (trajectory rows, the lamps' mean NIS).
+
+    Returns
+    -------
+    RunSummary
+    """
     duration = max(inputs.end - inputs.start, 0.0)
-    out = {
-        "command": "run",
-        "log": str(inputs.reader.path),
-        "odometry_source": f"{inputs.odom_source} ({inputs.odom_topic})",
-        "lamp_source": f"{inputs.lamp_source} ({inputs.lamp_topic})",
-        "start_pose": [float(v) for v in inputs.start_pose],
-        "log_duration_s": round(duration, 3),
-        "counts": res.counts,
-        "filter_health": res.health,
-        "lamps": len(res.lamps),
-        "duplicates_guarded": res.counts["duplicates_guarded"],
-        "mean_nis_lamp": streamed.lamp_nis.mean(),
-        "mean_nis_lamp_dof": 2,
-        "final_pose": [float(v) for v in res.poses[-1]] if len(res.poses) else None,
-        "final_pose_sigma": (
+    est = res.noise_estimate
+    return RunSummary(
+        log=str(inputs.reader.path),
+        odometry_source=f"{inputs.odom_source} ({inputs.odom_topic})",
+        lamp_source=f"{inputs.lamp_source} ({inputs.lamp_topic})",
+        start_pose=[float(v) for v in inputs.start_pose],
+        log_duration_s=round(duration, 3),
+        counts=res.counts,
+        filter_health=res.health,
+        lamps=len(res.lamps),
+        duplicates_guarded=res.counts["duplicates_guarded"],
+        mean_nis_lamp=streamed.lamp_nis.mean(),
+        final_pose=[float(v) for v in res.poses[-1]] if len(res.poses) else None,
+        final_pose_sigma=(
             [float(np.sqrt(res.cov[-1][k])) for k in (0, 3, 5)] if len(res.cov) else None
         ),
-        "trajectory_rows": streamed.rows,
-        "warnings": dict(sorted(inputs.warnings.items())),
-        "truncated_log": inputs.reader.damage()["truncated"],
-        "log_damage": inputs.reader.damage(),
-        "wall_time_s": round(wall, 3),
-        "real_time_factor": round(duration / wall, 1) if wall > 0 else None,
-    }
-    if inputs.first_problem:
-        out["first_warning"] = inputs.first_problem
-    est = res.noise_estimate
-    if inputs.lamp_source == "detections":
-        out["noise_estimate"] = est.as_dict() if est is not None else None
-    if res.calibration is not None:
-        out["calibration"] = res.calibration
-    if aids:
-        out["aids"] = {type(a).__name__: a.summary() for a in aids}
-        out["rings"] = inputs.ring_stats.as_dict()
-        if inputs.ranges is not None:
-            out["range_sensor"] = inputs.ranges.describe()
-    return out
+        trajectory_rows=streamed.rows,
+        warnings=dict(sorted(inputs.warnings.items())),
+        truncated_log=inputs.reader.damage()["truncated"],
+        log_damage=inputs.reader.damage(),
+        wall_time_s=round(wall, 3),
+        real_time_factor=round(duration / wall, 1) if wall > 0 else None,
+        first_warning=inputs.first_problem or OMIT,
+        noise_estimate=(
+            (est.as_dict() if est is not None else None)
+            if inputs.lamp_source == "detections"
+            else OMIT
+        ),
+        calibration=res.calibration if res.calibration is not None else OMIT,
+        aids={type(a).__name__: a.summary() for a in aids} if aids else OMIT,
+        rings=inputs.ring_stats.as_dict() if aids else OMIT,
+        range_sensor=(
+            inputs.ranges.describe() if aids and inputs.ranges is not None else OMIT
+        ),
+    )
 
 
 def run(
@@ -89,7 +145,8 @@ def run(
     (``fixes.aids.aids_for_log``, the plug-ins loaded on demand); ``calibration``: a
     run's calibration.yaml to start the odometry self-calibration from (default with a
     map and ``slam.calibrate``: the map's, its calibration at the freeze time). Returns
-    the JSON summary; UsageError for options that do not go together."""
+    the JSON summary (:class:`RunSummary` as JSON); UsageError for options that do not
+    go together."""
     from fuzzyslam.config import load_config
     from fuzzyslam.errors import UsageError
     from fuzzyslam.fixes.aids import aids_for_log  # the plug-ins (fixes/) sit above slam/
@@ -122,7 +179,7 @@ def run_stage(
     ranges: str | None = None,
     start_pose: tuple[float, float, float] | None = None,
     calibration: str | os.PathLike | None = None,
-) -> dict:
+) -> dict[str, Any]:
     """Run EKF-SLAM on ``log`` and write docs/contracts.md sec. 2 files into ``outdir``.
 
     The rows are streamed into the staging directory of ``OutputDir`` as they come
@@ -143,7 +200,7 @@ def run_stage(
         if aids:
             raise ValueError("adapt_noise: the aids of a first pass cannot be reused")
         first = _run_once(log, outdir, cfg, [], True, ranges, start_pose, calibration)
-        est = first.get("noise_estimate")
+        est = first.noise_estimate or None
         if est:
             cfg = copy.deepcopy(cfg)
             for key in (
@@ -154,22 +211,22 @@ def run_stage(
                 if est[key] is not None:  # None: not measurable (slam.noise)
                     setattr(cfg.slam, key, float(est[key]))
         summary = _run_once(log, outdir, cfg, [], True, ranges, start_pose, calibration)
-        summary["noise_adapted"] = est
+        summary = replace(summary, noise_adapted=est)
         _tell(summary)
-        return summary
-    return _run_once(log, outdir, cfg, aids, False, ranges, start_pose, calibration)
+        return as_json(summary)
+    return as_json(_run_once(log, outdir, cfg, aids, False, ranges, start_pose, calibration))
 
 
-def _tell(summary: dict, cfg: Config | None = None) -> None:
+def _tell(summary: RunSummary, cfg: Config | None = None) -> None:
     """The one-line notes on stderr: the filter in trouble, the noise to change."""
-    health = summary.get("filter_health", {})
+    health = summary.filter_health
     if health.get("diverged"):
         note(
             f"filter_health: the filter looks inconsistent from t = {health['diverged_at']:.3f} s "
             f"({', '.join(health.get('reasons', [])) or 'NIS or association windows'}; see "
             "the summary's filter_health): do not trust this estimate"
         )
-    est = summary.get("noise_estimate")
+    est = summary.noise_estimate
     if cfg is not None and est:
         line = suggestion(
             DetectionNoiseEstimate(
@@ -193,7 +250,7 @@ def _run_once(
     ranges: str | None = None,
     start_pose: tuple[float, float, float] | None = None,
     calibration: str | os.PathLike | None = None,
-) -> dict:
+) -> RunSummary:
     aids = list(aids or [])
     wall0 = time.perf_counter()
     check_outputs([log], [outdir])
@@ -216,7 +273,7 @@ def _run_once(
         ]  # fmt: skip
         write_outputs(tmp, streamed, res, extra)
         summary = make_summary(res, inputs, time.perf_counter() - wall0, aids, streamed)
-        write_summary(tmp, summary)
+        write_summary(tmp, as_json(summary))
     if not _quiet:
         _tell(summary, cfg)
     return summary
@@ -292,7 +349,7 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs, model=N
     return res
 
 
-def _write_calibration(runner: SlamRunner, model: cal.Calibration, outdir) -> dict:
+def _write_calibration(runner: SlamRunner, model: cal.Calibration, outdir) -> cal.CalibrationEntry:
     """calibration.csv (the factors over time, a last row at the end) and calibration.yaml
     (the final factors and covariance: ``run --calibration`` reads it); the summary entry."""
     ekf = runner.ekf
@@ -305,9 +362,9 @@ def _write_calibration(runner: SlamRunner, model: cal.Calibration, outdir) -> di
     final = cal.as_dict(model, t_end, c, cov)
     cal.write_yaml(Path(outdir) / "calibration.yaml", final)
     prior = model.factors
-    return {
-        "model": model.kind,
-        "start": model.source,
-        "start_factors": [float(v) for v in prior],
+    return cal.CalibrationEntry(
+        model=model.kind,
+        start=model.source,
+        start_factors=[float(v) for v in prior],
         **{k: final[k] for k in ("names", "factors", "sigma")},
-    }
+    )
