@@ -117,7 +117,15 @@ def test_committed_reports_have_no_broken_link():
 # --- numpydoc on the public functions of the cores (issue 15 step 6) -----------------------
 
 CORE_PACKAGES = ("slam", "maps", "fixes", "sim")
-CORE_MODULES = ("evaluation.core", "evaluation.metrics", "se2", "polygons")
+CORE_MODULES = (
+    "evaluation.core",
+    "evaluation.metrics",
+    "evaluation.consistency",
+    "evaluation.lamps",
+    "evaluation.results",
+    "se2",
+    "polygons",
+)
 # Public functions exempt from the rule, with the reason.
 EXEMPT = {
     # protocols: their implementations carry the documentation

@@ -11,6 +11,8 @@ from numpy.typing import NDArray
 from fuzzyslam.evaluation import metrics as M
 from fuzzyslam.evaluation import results as R
 from fuzzyslam.evaluation.align import umeyama
+from fuzzyslam.evaluation.consistency import consistency, nees
+from fuzzyslam.evaluation.lamps import LampMatch, found_within, match_lamps
 from fuzzyslam.evaluation.params import EvalParams
 from fuzzyslam.se2 import wrap_angle
 from fuzzyslam.streams.logmeta import Scenario, World
@@ -92,9 +94,9 @@ class Evaluation:
     sigma: Array | None  # (N, 3) 1-sigma of x, y, heading from the covariance, or None
     nees: Array | None  # (N,)
     phases: list[M.Phase]
-    lamp_match: M.LampMatch | None
+    lamp_match: LampMatch | None
     # lamp matches of the map as it stood at the end of each run (from landmark_history)
-    lamp_match_by_run: dict[int, M.LampMatch] = field(default_factory=dict)
+    lamp_match_by_run: dict[int, LampMatch] = field(default_factory=dict)
     fix_t: Array | None = None
     fix_err: Array | None = None
 
@@ -132,7 +134,7 @@ def _phase_block(
         u = est.updates
         um = ph.mask(u.t) & u.accepted
         nis = {
-            f"{k}_dof{d}": M.consistency(u.nis[um & (u.kind == k) & (u.dof == d)], int(d))
+            f"{k}_dof{d}": consistency(u.nis[um & (u.kind == k) & (u.dof == d)], int(d))
             for k, d in sorted(
                 {(str(k), int(d)) for k, d in zip(u.kind[um], u.dof[um], strict=True)}
             )
@@ -166,7 +168,7 @@ def _phase_block(
             delta_m=r.delta_m, trans_m_per_m=r.trans_per_m, rot_deg_per_m=r.rot_deg_per_m
         ),
         distance_m=float(M.path_length(assoc.truth[m, :2])[-1]),
-        nees=M.consistency(nees_v[m], 3) if nees_v is not None else OMIT,
+        nees=consistency(nees_v[m], 3) if nees_v is not None else OMIT,
         nis=nis,
         updates=updates,
         heading_fix=heading_fix,
@@ -177,7 +179,23 @@ def align_estimate(est: Estimate, truth: Truth, params: EvalParams) -> tuple[Est
     """The estimate moved onto the truth by one rigid 2-D motion (Umeyama, as evo's
     ``--align``), found from the positions paired in time: poses, dead reckoning and
     landmarks are mapped by it, covariances rotated (C' = A C A^T, A = diag(R, 1)).
-    For real logs, whose map frame is the robot's start and not the truth's frame."""
+    For real logs, whose map frame is the robot's start and not the truth's frame.
+
+    Parameters
+    ----------
+    est : Estimate
+        The estimate.
+    truth : Truth
+        The truth.
+    params : EvalParams
+        ``max_dt_s`` for pairing.
+
+    Returns
+    -------
+    Estimate, dict
+        The moved estimate (``est`` itself with fewer than two pairs), and the motion
+        (tx_m, ty_m, theta_deg; empty without one).
+    """
     assoc = M.associate(est.t, est.poses, truth.t, truth.poses, params.max_dt_s)
     if len(assoc) < 2:
         return est, {}
@@ -209,6 +227,22 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
     (:func:`align_estimate`), so that errors, NEES and landmarks are taken in the truth's
     frame up to that motion. Raises SpanError when fewer than two estimate samples overlap
     the truth in time.
+
+    Parameters
+    ----------
+    truth : Truth
+        Ground truth: times (N,), poses (N, 3), world and scenario when simulated.
+    est : Estimate
+        The run's estimate: times (M,), poses (M, 3), covariances (M, 3, 3), ...
+    params : EvalParams
+        The ``eval:`` section.
+    align : bool
+        First move the estimate onto the truth.
+
+    Returns
+    -------
+    Evaluation
+        The typed metrics (``typed``; ``metrics``: metrics.json) and the figures' series.
     """
     alignment = None
     if align:
@@ -224,7 +258,7 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
     if est.cov is not None:
         c = est.cov[assoc.index]
         sigma = np.sqrt(np.clip(np.diagonal(c, axis1=1, axis2=2), 0.0, None))
-        nees_v = M.nees(err, c)
+        nees_v = nees(err, c)
     fix_t = fix_err = fix_ok = None
     if est.heading_fixes is not None and est.heading_fixes.t.size:
         hf = est.heading_fixes
@@ -244,17 +278,17 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
     lamps = OMIT
     true_lm = truth.landmark_array
     if est.landmarks is not None and true_lm is not None:
-        lamp_match = M.match_lamps(est.landmarks, true_lm, params.lamp_max_dist_m)
+        lamp_match = match_lamps(est.landmarks, true_lm, params.lamp_max_dist_m)
         lamps = R.LampMetrics(
             **lamp_match.summary(),
             estimated=int(est.landmarks.shape[0]),
             true=int(true_lm.shape[0]),
             left_over=len(lamp_match.duplicates) + len(lamp_match.spurious),
             # true landmarks with an estimate this near (not one to one)
-            true_within_0_3_m=M.found_within(est.landmarks, true_lm, 0.3),
-            true_within_0_5_m=M.found_within(est.landmarks, true_lm, 0.5),
+            true_within_0_3_m=found_within(est.landmarks, true_lm, 0.3),
+            true_within_0_5_m=found_within(est.landmarks, true_lm, 0.5),
         )
-    by_run: dict[int, M.LampMatch] = {}
+    by_run: dict[int, LampMatch] = {}
     lamps_by_run = OMIT
     if est.landmark_history and truth.world is not None:
         snap_t = np.array([t for t, _ in est.landmark_history])
@@ -264,7 +298,7 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
             if k < 0:
                 continue
             snap = est.landmark_history[k][1]
-            by_run[r] = M.match_lamps(snap, truth.world.lamp_array, params.lamp_max_dist_m)
+            by_run[r] = match_lamps(snap, truth.world.lamp_array, params.lamp_max_dist_m)
             lamps_by_run[f"run{r}"] = R.RunLampMetrics(
                 t=float(snap_t[k]), estimated=int(snap.shape[0]), **by_run[r].summary()
             )
@@ -279,7 +313,7 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
                 heading_deg=M.stats(oe[:, 2]).scaled(180.0 / np.pi),
             )
     coverage = truth_coverage(truth, est, len(assoc))
-    warnings = evaluation_warnings(coverage, truth.log_damage)
+    warnings = R.evaluation_warnings(coverage, truth.log_damage)
     typed = R.Metrics(
         label=est.label,
         truth=truth.source,
@@ -297,7 +331,7 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
         truth_coverage=coverage,
         log_damage=truth.log_damage,
         warnings=warnings,
-        headline=headline(blocks, coverage, truth.log_damage, warnings, lamps),
+        headline=R.headline(blocks, coverage, truth.log_damage, warnings, lamps),
     )
     return Evaluation(
         typed, assoc, err, sigma, nees_v, phases, lamp_match, by_run, fix_t, fix_err
@@ -328,98 +362,4 @@ def truth_coverage(truth: Truth, est: Estimate, compared: int) -> R.TruthCoverag
         estimate_samples=n,
         estimate_span_s=[float(est.t[0]), float(est.t[-1])] if n else None,
         truth_span_s=[float(truth.t[0]), float(truth.t[-1])],
-    )
-
-
-COVERAGE_WARN = 0.99  # below this fraction of the estimate compared, the summary says so
-
-
-def evaluation_warnings(cov: R.TruthCoverage, dmg: dict[str, Any] | None) -> list[str]:
-    """What the numbers do not cover, in words: a truth covering only part of the
-    estimate, a damaged truth log.
-
-    Parameters
-    ----------
-    cov : TruthCoverage
-        The truth's coverage of the estimate (:func:`truth_coverage`).
-    dmg : dict or None
-        The truth log's damage report (``LogReader.damage()``).
-
-    Returns
-    -------
-    list of str
-        One sentence per problem.
-    """
-    out = []
-    if cov.fraction < COVERAGE_WARN:
-        t0, t1 = cov.truth_span_s
-        out.append(
-            f"the truth covers only {100 * cov.fraction:.1f} % of the estimate's samples "
-            f"({t0:.1f}-{t1:.1f} s); the rest is not evaluated"
-        )
-    if dmg and (dmg.get("truncated") or dmg.get("lost_bytes") or dmg.get("damaged_records")):
-        out.append(
-            f"the truth log is damaged ({dmg.get('lost_bytes', 0)} bytes lost); ground truth "
-            "is missing where it was"
-        )
-    return out
-
-
-def headline(
-    phases: dict[str, R.PhaseMetrics],
-    coverage: R.TruthCoverage,
-    log_damage: dict[str, Any] | None,
-    warnings: list[str],
-    lamps: R.LampMetrics,
-) -> R.Headline:
-    """The few numbers printed on stdout and shown first in the report.
-
-    Parameters
-    ----------
-    phases : dict of str to PhaseMetrics
-        The phases' metrics (``overall`` always; ``A`` and ``after`` when present).
-    coverage : TruthCoverage
-        The truth's coverage of the estimate.
-    log_damage : dict or None
-        The truth log's damage report.
-    warnings : list of str
-        :func:`evaluation_warnings`.
-    lamps : LampMetrics or OMIT
-        The final map's lamps against the truth (OMIT: no landmarks to compare).
-
-    Returns
-    -------
-    Headline
-    """
-    ov = phases["overall"]
-
-    def position(name: str) -> float:
-        ph = phases.get(name)
-        return ph.position_m.mean if ph is not None and ph.position_m is not OMIT else OMIT
-
-    has_lamps = lamps is not OMIT
-    has_nees = ov.nees is not OMIT
-    fix = ov.heading_fix.error_deg if ov.heading_fix is not OMIT else None
-    return R.Headline(
-        position_mean_m=ov.position_m.mean,
-        heading_mean_deg=ov.heading_deg.mean,
-        ape_rmse_m=ov.ape_m.raw.rmse,
-        ape_aligned_rmse_m=ov.ape_m.aligned.rmse,
-        rpe_m_per_m=ov.rpe.trans_m_per_m.mean,
-        truth_coverage=coverage.fraction,
-        log_damage=log_damage,
-        warnings=warnings,
-        phase_A_position_mean_m=position("A"),
-        after_position_mean_m=position("after"),
-        nees_mean=ov.nees.mean if has_nees else OMIT,
-        nees_in_band=ov.nees.in_band if has_nees else OMIT,
-        lamps_true_within_0_5_m=lamps.true_within_0_5_m if has_lamps else OMIT,
-        lamps_left_over=lamps.left_over if has_lamps else OMIT,
-        lamp_error_mean_m=lamps.error_m["mean"] if has_lamps else OMIT,
-        lamps_duplicated=lamps.duplicates if has_lamps else OMIT,
-        lamps_missed=lamps.missed if has_lamps else OMIT,
-        lamps_spurious=lamps.spurious if has_lamps else OMIT,
-        lamps_estimated=lamps.estimated if has_lamps else OMIT,
-        heading_fix_error_mean_deg=fix.mean if fix is not None else OMIT,
-        heading_fix_error_std_deg=fix.std if fix is not None else OMIT,
     )

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fuzzyslam.evaluation.core import Estimate, Evaluation, Truth
-from fuzzyslam.evaluation.metrics import LampMatch
+from fuzzyslam.evaluation.lamps import LampMatch
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.streams.logmeta import World
 

@@ -1,5 +1,6 @@
 """metrics.json, typed: the dataclasses :func:`fuzzyslam.evaluation.core.evaluate`
-fills (one per section), written by :func:`fuzzyslam.summary.as_json`.
+fills (one per section), written by :func:`fuzzyslam.summary.as_json`; the warnings and
+the headline drawn from them.
 
 A metric renamed or left out where it is computed is a ``TypeError`` there, not a key
 missing from metrics.json (the experiment's table would then raise ``MissingMetric``).
@@ -14,7 +15,8 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from fuzzyslam.evaluation.metrics import Consistency, Stats
+from fuzzyslam.evaluation.consistency import Consistency
+from fuzzyslam.evaluation.metrics import Stats
 from fuzzyslam.summary import OMIT, key
 
 
@@ -201,3 +203,97 @@ class Metrics:
     headline: Headline
     comparison: list[ComparisonRow] = OMIT  # evaluate --compare
     change_detection: dict[str, Any] = OMIT  # evaluation/changes.py (--fix pose, obstacles)
+
+
+COVERAGE_WARN = 0.99  # below this fraction of the estimate compared, the summary says so
+
+
+def evaluation_warnings(cov: TruthCoverage, dmg: dict[str, Any] | None) -> list[str]:
+    """What the numbers do not cover, in words: a truth covering only part of the
+    estimate, a damaged truth log.
+
+    Parameters
+    ----------
+    cov : TruthCoverage
+        The truth's coverage of the estimate (:func:`truth_coverage`).
+    dmg : dict or None
+        The truth log's damage report (``LogReader.damage()``).
+
+    Returns
+    -------
+    list of str
+        One sentence per problem.
+    """
+    out = []
+    if cov.fraction < COVERAGE_WARN:
+        t0, t1 = cov.truth_span_s
+        out.append(
+            f"the truth covers only {100 * cov.fraction:.1f} % of the estimate's samples "
+            f"({t0:.1f}-{t1:.1f} s); the rest is not evaluated"
+        )
+    if dmg and (dmg.get("truncated") or dmg.get("lost_bytes") or dmg.get("damaged_records")):
+        out.append(
+            f"the truth log is damaged ({dmg.get('lost_bytes', 0)} bytes lost); ground truth "
+            "is missing where it was"
+        )
+    return out
+
+
+def headline(
+    phases: dict[str, PhaseMetrics],
+    coverage: TruthCoverage,
+    log_damage: dict[str, Any] | None,
+    warnings: list[str],
+    lamps: LampMetrics,
+) -> Headline:
+    """The few numbers printed on stdout and shown first in the report.
+
+    Parameters
+    ----------
+    phases : dict of str to PhaseMetrics
+        The phases' metrics (``overall`` always; ``A`` and ``after`` when present).
+    coverage : TruthCoverage
+        The truth's coverage of the estimate.
+    log_damage : dict or None
+        The truth log's damage report.
+    warnings : list of str
+        :func:`evaluation_warnings`.
+    lamps : LampMetrics or OMIT
+        The final map's lamps against the truth (OMIT: no landmarks to compare).
+
+    Returns
+    -------
+    Headline
+    """
+    ov = phases["overall"]
+
+    def position(name: str) -> float:
+        ph = phases.get(name)
+        return ph.position_m.mean if ph is not None and ph.position_m is not OMIT else OMIT
+
+    has_lamps = lamps is not OMIT
+    has_nees = ov.nees is not OMIT
+    fix = ov.heading_fix.error_deg if ov.heading_fix is not OMIT else None
+    return Headline(
+        position_mean_m=ov.position_m.mean,
+        heading_mean_deg=ov.heading_deg.mean,
+        ape_rmse_m=ov.ape_m.raw.rmse,
+        ape_aligned_rmse_m=ov.ape_m.aligned.rmse,
+        rpe_m_per_m=ov.rpe.trans_m_per_m.mean,
+        truth_coverage=coverage.fraction,
+        log_damage=log_damage,
+        warnings=warnings,
+        phase_A_position_mean_m=position("A"),
+        after_position_mean_m=position("after"),
+        nees_mean=ov.nees.mean if has_nees else OMIT,
+        nees_in_band=ov.nees.in_band if has_nees else OMIT,
+        lamps_true_within_0_5_m=lamps.true_within_0_5_m if has_lamps else OMIT,
+        lamps_left_over=lamps.left_over if has_lamps else OMIT,
+        lamp_error_mean_m=lamps.error_m["mean"] if has_lamps else OMIT,
+        lamps_duplicated=lamps.duplicates if has_lamps else OMIT,
+        lamps_missed=lamps.missed if has_lamps else OMIT,
+        lamps_spurious=lamps.spurious if has_lamps else OMIT,
+        lamps_estimated=lamps.estimated if has_lamps else OMIT,
+        heading_fix_error_mean_deg=fix.mean if fix is not None else OMIT,
+        heading_fix_error_std_deg=fix.std if fix is not None else OMIT,
+    )
