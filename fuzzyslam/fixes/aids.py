@@ -13,7 +13,8 @@ the plug-ins for the chosen mode, sharing one FLM per ring:
   :class:`HeadingFixAid`, which measures the heading the match leaves free) and, with
   ``fixes.detect_changes``, :class:`ChangeDetector`.
 
-Each aid has ``start_time``, ``on_ring(t, ring, mounts, ekf)``, ``summary()`` and
+Each aid (a :class:`fuzzyslam.fixes.base.FixAid`) has ``start_time``, ``on_ring(t, ring,
+mounts, ekf)``, ``summary()`` and
 ``write(outdir)``. ``start_time`` defaults to the map's freeze time.
 """
 
