@@ -94,6 +94,13 @@ class PoseDecision:
     innovation: np.ndarray | None = None  # z - h(x) when the EKF was asked (3,)
 
     def row(self) -> list[str]:
+        """The row of pose_fixes.csv.
+
+        Returns
+        -------
+        list of str
+            t, accepted, reason, x, y, theta, sxx, syy, stt, degenerate, nis.
+        """
         def num(v: float) -> str:
             return "" if not np.isfinite(v) else f"{v:.9g}"
 
@@ -175,6 +182,20 @@ class PoseFixAid(FixAid):
         return True
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
+        """Match the ring's FLM against the FGM around the prediction; apply the match
+        (module docstring).
+
+        Parameters
+        ----------
+        t : float
+            The ring's log time (s).
+        ring : Ring
+            The sonar ring (ranges (M,), max ranges (M,), fov).
+        mounts : ndarray, shape (M, 3)
+            The sonars' poses in base_link.
+        ekf : FilterView
+            The filter (its pose, covariance, dead reckoning, ``update_robot``).
+        """
         if not self.started(t):
             return
         self._count += 1
@@ -241,7 +262,13 @@ class PoseFixAid(FixAid):
         )
 
     def update_rows(self) -> list[dict[str, Any]]:
-        """The EKF update attempts, as rows of run's updates.csv (docs/contracts.md sec. 2)."""
+        """The EKF update attempts, as rows of run's updates.csv (docs/contracts.md sec. 2).
+
+        Returns
+        -------
+        list of dict
+            t, kind, id, dof, nis, accepted, v0, v1, v2 of each match the filter was asked about.
+        """
         return [
             {
                 "t": d.t,
@@ -259,6 +286,14 @@ class PoseFixAid(FixAid):
         ]
 
     def summary(self) -> dict[str, Any]:
+        """The aid's entry in the run summary.
+
+        Returns
+        -------
+        dict
+            rings, before_start, accepted, reasons, degenerate, mean_nis, recoveries,
+            wide_searches, near_last_match, recentred_searches.
+        """
         reasons = Counter(d.reason for d in self.decisions)
         acc = [d for d in self.decisions if d.accepted]
         return {
@@ -276,7 +311,19 @@ class PoseFixAid(FixAid):
 
     def messages(self, topics: Any, start: float | None = None) -> list:
         """The pose matches for estimates.mcap (``topics.pose_fixes``, fixes/viewer.py),
-        and the map (``viewer_map``, stamped ``start``) when this aid shows it."""
+        and the map (``viewer_map``, stamped ``start``) when this aid shows it.
+
+        Parameters
+        ----------
+        topics : Topics
+            The config's topics (the aid's own and the map's).
+        start : float or None
+            The log's start (the map's stamp); None: no map.
+
+        Returns
+        -------
+        list of (str, str, message, float)
+        """
         from fuzzyslam.fixes.viewer import map_messages, pose_fix_messages
 
         fixes = pose_fix_messages(self.decisions, topics.pose_fixes)
