@@ -146,7 +146,38 @@ def run(
     run's calibration.yaml to start the odometry self-calibration from (default with a
     map and ``slam.calibrate``: the map's, its calibration at the freeze time). Returns
     the JSON summary (:class:`RunSummary` as JSON); UsageError for options that do not
-    go together."""
+    go together.
+
+    Parameters
+    ----------
+    log : path
+        The MCAP log.
+    outdir : path
+        The output directory.
+    config : str or None
+        A YAML path or an embedded name.
+    seed : int or None
+        Overrides the config's.
+    map_dir : path or None
+        ``--map``.
+    fix : str or None
+        ``--fix``.
+    fix_from : float or None
+        ``--fix-from``.
+    ranges : str or None
+        ``--ranges`` (sonar|scan).
+    start_pose : (float, float, float) or None
+        ``--start-pose``.
+    adapt_noise : bool
+        ``--adapt-noise``.
+    calibration : path or None
+        ``--calibration``.
+
+    Returns
+    -------
+    dict
+        The JSON summary.
+    """
     from fuzzyslam.config import load_config
     from fuzzyslam.errors import UsageError
     from fuzzyslam.fixes.aids import aids_for_log  # the plug-ins (fixes/) sit above slam/
@@ -195,7 +226,32 @@ def run_stage(
     start pose (slam/inputs.py). ``calibration``: a calibration.yaml whose factors and
     covariance start the odometry self-calibration (slam/calibration.py; implies it).
     A log without lamps and without aids is dead reckoning: a one-line note on stderr
-    says so."""
+    says so.
+
+    Parameters
+    ----------
+    log : path
+        The MCAP log.
+    outdir : path
+        The output directory.
+    cfg : Config
+        The loaded config.
+    aids : list of FixAid, optional
+        The fix plug-ins.
+    adapt_noise : bool
+        Two passes, the second with the estimated detection noise.
+    ranges : str or None
+        The aids' range sensor.
+    start_pose : (float, float, float) or None
+        Overrides the log's start pose.
+    calibration : path or None
+        A calibration.yaml to start from.
+
+    Returns
+    -------
+    dict
+        The JSON summary (:class:`RunSummary` as JSON).
+    """
     if adapt_noise:
         if aids:
             raise ValueError("adapt_noise: the aids of a first pass cannot be reused")
@@ -282,7 +338,21 @@ def _run_once(
 def calibration_model(inputs, cfg: Config, path) -> cal.Calibration | None:
     """The run's odometry calibration (slam/calibration.py): None when ``slam.calibrate``
     is off and no file is given; else the model of the log's odometry (``wheels`` for
-    encoders, ``odom`` for Odometry poses) from the config's prior or from ``path``."""
+    encoders, ``odom`` for Odometry poses) from the config's prior or from ``path``.
+
+    Parameters
+    ----------
+    inputs : Inputs
+        The opened log (its odometry source).
+    cfg : Config
+        The run's config (``slam.calibrate`` and the priors).
+    path : path or None
+        A calibration.yaml to start from.
+
+    Returns
+    -------
+    Calibration or None
+    """
     if not cfg.slam.calibrate and path is None:
         return None
     kind = "wheels" if inputs.odom_source == "encoders" else "odom"
