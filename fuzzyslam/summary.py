@@ -2,7 +2,7 @@
 one text on the consuming side.
 
 Each stage builds its summary as a dataclass (``slam.stage.RunSummary``,
-``maps.build.MapSummary``, ``evaluation.core.Metrics``, ``reproduce.report.Results``;
+``maps.summary.MapSummary``, ``evaluation.results.Metrics``, ``reproduce.report.Results``;
 nested dataclasses for their sections), so that a metric renamed or left out is a
 ``TypeError`` where it is made, not a blank where it is read. :func:`as_json` turns
 such a tree into the JSON object every file and stdout carry (``summary_text``)."""

@@ -26,6 +26,7 @@ from fuzzyslam.maps.fgm import FgmBuilder
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.quality import wall_quality
 from fuzzyslam.maps.references import Reference, extract_references
+from fuzzyslam.maps.summary import MapSummary, ReferenceEntry, ReferenceTruth, WallQuality
 from fuzzyslam.progress import Progress
 from fuzzyslam.se2 import interpolate_poses, wrap_angle_period
 from fuzzyslam.slam import calibration
@@ -51,74 +52,23 @@ class MapOptions:
     sort: bool = False
 
 
-@dataclass(frozen=True, kw_only=True)
-class ReferenceEntry:
-    """A corridor reference in the map summary (the map stage's ``Reference``)."""
-
-    id: int
-    name: str
-    angle_deg: float
-    strength: float
-    ambiguous: bool
-
-
-@dataclass(frozen=True, kw_only=True)
-class ReferenceTruth:
-    """A reference against the nearest true corridor axis (simulated logs)."""
-
-    id: int
-    true_corridor: str
-    true_axis_deg: float
-    error_deg: float
-
-
-@dataclass(frozen=True, kw_only=True)
-class WallQuality:
-    """The frozen map's walls against the true walls (maps/quality.py)."""
-
-    precision: float
-    recall: float
-    map_cells: int
-    true_cells: int
-
-
-@dataclass(frozen=True, kw_only=True)
-class MapSummary:
-    """The ``map`` stage's JSON summary (stdout and summary.json, docs/contracts.md
-    sec. 3); ``calibration`` is absent (:data:`~fuzzyslam.summary.OMIT`) when the
-    trajectory's run had no odometry calibration."""
-
-    log: str
-    trajectory: str
-    output: str
-    log_id: str
-    cells: int
-    shape: list[int]
-    origin: list[float]
-    resolution: float
-    rings_used: int
-    readings_used: int
-    readings_skipped: int
-    rings_skipped: int
-    sonar_stats: dict[str, Any]
-    range_sensor: dict[str, Any]
-    trajectory_repeats_dropped: int
-    cell_updates: int
-    cells_touched: int
-    freeze_time: float
-    freeze_rule: str
-    references: list[ReferenceEntry]
-    reference_truth: list[ReferenceTruth]
-    wall_quality: WallQuality | None
-    build_seconds: float
-    log_damage: dict[str, Any]
-    calibration: dict[str, Any] = OMIT
-    wall_seconds: float = OMIT
-
-
 def covered(tq: np.ndarray, t: np.ndarray, max_gap: float) -> np.ndarray:
     """Whether each query time lies within the trajectory, between samples at most
-    ``max_gap`` seconds apart (or within max_gap/2 of a sample)."""
+    ``max_gap`` seconds apart (or within max_gap/2 of a sample).
+
+    Parameters
+    ----------
+    tq : ndarray, shape (K,)
+        Query times (s).
+    t : ndarray, shape (N,)
+        The trajectory's times (sorted).
+    max_gap : float
+        Largest gap (s) between samples.
+
+    Returns
+    -------
+    ndarray of bool, shape (K,)
+    """
     tq = np.asarray(tq, dtype=float)
     j = np.searchsorted(t, tq)
     lo = t[np.clip(j - 1, 0, len(t) - 1)]
@@ -136,7 +86,24 @@ def _gaps(tq: np.ndarray, ok: np.ndarray) -> list[tuple[float, float]]:
 
 
 def freeze_time(reader: LogReader, cfg: Config, opts: MapOptions) -> tuple[float, str]:
-    """The window's end and how it was chosen."""
+    """The window's end and how it was chosen.
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log (its scenario).
+    cfg : Config
+        ``fgm.freeze_run``.
+    opts : MapOptions
+        ``--until``, ``--until-run``.
+
+    Returns
+    -------
+    t : float
+        The freeze time (s).
+    how : str
+        How it was chosen.
+    """
     if opts.until is not None:
         return float(opts.until), "--until"
     scenario = read_scenario(reader)
@@ -196,7 +163,19 @@ class _RingTable:
 
 
 def read_rings(reader: LogReader, cfg: Config, t_end: float, ranges: str | None = None):
-    """(times (N,), ranges (N, M), max ranges (N, M), fov, mounts (M, 3), stats)."""
+    """(times (N,), ranges (N, M), max ranges (N, M), fov, mounts (M, 3), stats).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    cfg : Config
+        Topics and range sensor.
+    t_end : float
+        The window's end (s).
+    ranges : str or None
+        sonar|scan (None: the config's).
+    """
     times, rr, rmax, *rest = read_rings_compact(reader, cfg, t_end, ranges)
     return times, rr.astype(float), rmax.astype(float), *rest
 
@@ -207,7 +186,21 @@ def read_rings_compact(
     """``read_rings`` with ranges and max ranges as float32 (the exact values of the
     Range and LaserScan messages, a quarter of the memory of lists of float64 rings;
     _RingTable). The range sensor is ``sensor`` or the log's (``open_ranges``, with
-    ``ranges`` = sonar|scan|None overriding ``ranges.source``)."""
+    ``ranges`` = sonar|scan|None overriding ``ranges.source``).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    cfg : Config
+        Topics and range sensor.
+    t_end : float
+        The window's end (s).
+    ranges : str or None
+        sonar|scan (None: the config's).
+    sensor : RangeSensor, optional
+        An opened range sensor.
+    """
     if sensor is None:
         sensor = open_ranges(reader, cfg, ranges)
     mounts = sensor.mounts
@@ -225,7 +218,19 @@ def read_rings_compact(
 
 
 def reference_truth(refs: list[Reference], world: World | None) -> list[ReferenceTruth]:
-    """Each reference against the nearest true corridor axis (by centre-line distance)."""
+    """Each reference against the nearest true corridor axis (by centre-line distance).
+
+    Parameters
+    ----------
+    refs : list of Reference
+        The map's references.
+    world : World or None
+        The simulated world.
+
+    Returns
+    -------
+    list of ReferenceTruth
+    """
     if world is None or not world.corridors:
         return []
     out = []
@@ -267,7 +272,26 @@ def build_map(
     log_path: str | Path, traj_path: str | Path, outdir: str | Path, cfg: Config, opts: MapOptions
 ) -> dict[str, Any]:
     """Run the map stage; returns the JSON summary (:class:`MapSummary` as JSON, also
-    written as summary.json)."""
+    written as summary.json).
+
+    Parameters
+    ----------
+    log_path : path
+        The log.
+    traj_path : path
+        The TUM trajectory.
+    outdir : path
+        The map directory.
+    cfg : Config
+        The loaded config.
+    opts : MapOptions
+        The command's choices.
+
+    Returns
+    -------
+    dict
+        The JSON summary.
+    """
     wall0 = time.perf_counter()
     params: MapParams = cfg.fgm
     outdir = Path(outdir)
