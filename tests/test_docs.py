@@ -139,6 +139,10 @@ EXEMPT = {
         f"fuzzyslam.slam.events.MemorySink.{m}": "implements RowSink (slam/events.py)"
         for m in ("row", "odometry_start", "odometry", "update", "snapshot")
     },
+    **{
+        f"fuzzyslam.slam.outputs.StreamingOutputs.{m}": "implements RowSink (slam/events.py)"
+        for m in ("row", "odometry_start", "odometry", "update", "snapshot")
+    },
 }
 # Functions documented before this rule, still without the sections: the list may only
 # shrink (a function in it that gains them must leave it; a new function must have them).
