@@ -25,9 +25,7 @@ from fuzzyslam.cli import _register, cli
 from fuzzyslam.evaluation import figures as eval_figures
 from fuzzyslam.maps import figures as map_figures
 
-# end to end: a simulated log, a run, a map, an evaluation;
-# one worker builds the module's fixture (pyproject's --dist loadgroup)
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("figures")]
+pytestmark = pytest.mark.slow  # end to end: a simulated log, a run, a map, an evaluation
 
 _register()
 

@@ -24,9 +24,7 @@ from fuzzyslam.reproduce.plan import (
 )
 from fuzzyslam.reproduce.table import ROWS, Row, aggregate, phase_stat, run_labels
 
-# end to end: the quick reproduce fixture runs every stage;
-# one worker builds the module's fixture (pyproject's --dist loadgroup)
-pytestmark = [pytest.mark.slow, pytest.mark.xdist_group("reproduce")]
+pytestmark = pytest.mark.slow  # end to end: the quick reproduce fixture runs every stage
 
 
 def cli(*args: object, cwd: Path | None = None) -> subprocess.CompletedProcess:

@@ -155,7 +155,6 @@ def _tf_tree(tf_msgs, pose_msgs) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("viewer")  # one worker builds ``chain``
 def test_run_estimates_have_a_connected_tf_tree(chain) -> None:
     # the log's sensors hang under base_link (/tf_static): with /tf the tree is
     # map -> odom -> base_link -> sonar_NN, ceiling_camera
@@ -178,7 +177,6 @@ def test_run_estimates_have_a_connected_tf_tree(chain) -> None:
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("viewer")  # one worker builds ``chain``
 def test_run_with_a_map_shows_map_and_fixes(chain) -> None:
     nav2 = yaml.safe_load((chain / "fgm" / "fgm.yaml").read_text())
     pgm = mapio.read_pgm(chain / "fgm" / nav2["image"])
@@ -210,7 +208,6 @@ def csv_rows(path: Path):
 
 
 @pytest.mark.slow
-@pytest.mark.xdist_group("viewer")  # one worker builds ``chain``
 def test_map_writes_fgm_mcap(chain) -> None:
     nav2 = yaml.safe_load((chain / "fgm" / "fgm.yaml").read_text())
     pgm = mapio.read_pgm(chain / "fgm" / nav2["image"])
