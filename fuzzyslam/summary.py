@@ -1,7 +1,7 @@
 """The JSON summaries and result files of the stages: typed on the producing side,
 one text on the consuming side.
 
-Each stage builds its summary as a dataclass (``slam.stage.RunSummary``,
+Each stage builds its summary as a dataclass (``slam.summary.RunSummary``,
 ``maps.summary.MapSummary``, ``evaluation.results.Metrics``, ``reproduce.report.Results``;
 nested dataclasses for their sections), so that a metric renamed or left out is a
 ``TypeError`` where it is made, not a blank where it is read. :func:`as_json` turns

@@ -9,7 +9,7 @@ import copy
 import importlib
 import os
 import time
-from dataclasses import dataclass, replace
+from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
@@ -26,44 +26,8 @@ from fuzzyslam.slam.inputs import open_inputs
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
 from fuzzyslam.slam.outputs import StreamingOutputs, write_outputs, write_summary
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
+from fuzzyslam.slam.summary import RunSummary
 from fuzzyslam.summary import OMIT, as_json
-
-
-@dataclass(frozen=True, kw_only=True)
-class RunSummary:
-    """The ``run`` stage's JSON summary (stdout and summary.json, docs/contracts.md
-    sec. 2). Fields left :data:`~fuzzyslam.summary.OMIT` are absent from the JSON:
-    ``first_warning`` (no input problem), ``noise_estimate`` (lamps from frames),
-    ``calibration`` (off), ``aids``, ``rings``, ``range_sensor`` (no fixes),
-    ``noise_adapted`` (without ``--adapt-noise``)."""
-
-    command: str = "run"
-    log: str
-    odometry_source: str
-    lamp_source: str
-    start_pose: list[float]
-    log_duration_s: float
-    counts: dict[str, int]
-    filter_health: dict[str, Any]
-    lamps: int
-    duplicates_guarded: int
-    mean_nis_lamp: float | None
-    mean_nis_lamp_dof: int = 2
-    final_pose: list[float] | None
-    final_pose_sigma: list[float] | None
-    trajectory_rows: int
-    warnings: dict[str, int]
-    truncated_log: bool
-    log_damage: dict[str, Any]
-    wall_time_s: float
-    real_time_factor: float | None
-    first_warning: str = OMIT
-    noise_estimate: dict[str, Any] | None = OMIT
-    calibration: cal.CalibrationEntry = OMIT
-    aids: dict[str, dict[str, Any]] = OMIT
-    rings: dict[str, Any] = OMIT
-    range_sensor: dict[str, Any] = OMIT
-    noise_adapted: dict[str, Any] | None = OMIT
 
 
 def make_summary(
