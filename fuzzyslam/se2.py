@@ -20,7 +20,18 @@ _TAU = 2.0 * math.pi  # the period of wrap_angle, the same float as 2.0 * np.pi
 
 
 def wrap_angle(a: ArrayLike) -> Array | float:
-    """Wrap angles to the half-open interval (-pi, pi]."""
+    """Wrap angles to the half-open interval (-pi, pi].
+
+    Parameters
+    ----------
+    a : array_like, shape (...)
+        Angles (rad).
+
+    Returns
+    -------
+    float or ndarray, shape (...)
+        The wrapped angles (a float for a scalar).
+    """
     if isinstance(a, float):  # one float (np.float64 too): the same floats without numpy
         w = math.pi - (math.pi - float(a)) % _TAU
         return w + _TAU if w <= -math.pi else w
@@ -34,7 +45,20 @@ def wrap_angle(a: ArrayLike) -> Array | float:
 
 
 def wrap_angle_period(a: ArrayLike, period: float) -> Array | float:
-    """Wrap angles to (-period/2, period/2]; period pi for undirected lines."""
+    """Wrap angles to (-period/2, period/2]; period pi for undirected lines.
+
+    Parameters
+    ----------
+    a : array_like, shape (...)
+        Angles (rad).
+    period : float
+        The period (rad), e.g. pi or pi/2.
+
+    Returns
+    -------
+    float or ndarray, shape (...)
+        The wrapped angles (a float for a scalar).
+    """
     arr = np.asarray(a, dtype=float)
     half = period / 2.0
     w = half - np.mod(half - arr, period)
@@ -45,24 +69,68 @@ def wrap_angle_period(a: ArrayLike, period: float) -> Array | float:
 
 
 def wrap_angle_scalar(a: float) -> float:
-    """:func:`wrap_angle` of one float (the hot loops of the simulator: no array)."""
+    """:func:`wrap_angle` of one float (the hot loops of the simulator: no array).
+
+    Parameters
+    ----------
+    a : float
+        An angle (rad).
+
+    Returns
+    -------
+    float
+        The angle in (-pi, pi].
+    """
     return math.pi - (math.pi - a) % (2.0 * math.pi)
 
 
 def direction_mod_pi(a: ArrayLike) -> Array | float:
-    """The direction of an undirected line, angles taken mod pi into [0, pi)."""
+    """The direction of an undirected line, angles taken mod pi into [0, pi).
+
+    Parameters
+    ----------
+    a : array_like, shape (...)
+        Angles (rad).
+
+    Returns
+    -------
+    float or ndarray, shape (...)
+        The directions in [0, pi).
+    """
     w = np.mod(a, np.pi)
     return float(w) if np.ndim(w) == 0 else w
 
 
 def rot(theta: float) -> Array:
-    """2x2 rotation matrix R(theta)."""
+    """2x2 rotation matrix R(theta).
+
+    Parameters
+    ----------
+    theta : float
+        The angle (rad).
+
+    Returns
+    -------
+    ndarray, shape (2, 2)
+        [[cos, -sin], [sin, cos]].
+    """
     c, s = np.cos(theta), np.sin(theta)
     return np.array([[c, -s], [s, c]])
 
 
 def compose(a: ArrayLike, b: ArrayLike) -> Array:
-    """Pose composition a (+) b: b expressed in a's parent frame."""
+    """Pose composition a (+) b: b expressed in a's parent frame.
+
+    Parameters
+    ----------
+    a, b : array_like, shape (3,) or (N, 3)
+        Poses (x, y, theta); stacks compose row by row (or broadcast).
+
+    Returns
+    -------
+    ndarray, shape (3,) or (N, 3)
+        a (+) b, heading wrapped to (-pi, pi].
+    """
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
     if a.shape == b.shape == (3,):  # two poses: the same arithmetic on floats (per step)
@@ -77,7 +145,18 @@ def compose(a: ArrayLike, b: ArrayLike) -> Array:
 
 
 def inverse(a: ArrayLike) -> Array:
-    """Pose inverse (-)a, so that compose(a, inverse(a)) is the identity."""
+    """Pose inverse (-)a, so that compose(a, inverse(a)) is the identity.
+
+    Parameters
+    ----------
+    a : array_like, shape (3,) or (N, 3)
+        Poses (x, y, theta).
+
+    Returns
+    -------
+    ndarray, shape (3,) or (N, 3)
+        The inverse poses.
+    """
     a = np.asarray(a, dtype=float)
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = -c * a[..., 0] - s * a[..., 1]
@@ -86,12 +165,36 @@ def inverse(a: ArrayLike) -> Array:
 
 
 def between(a: ArrayLike, b: ArrayLike) -> Array:
-    """Relative pose (-)a (+) b: b expressed in a's frame."""
+    """Relative pose (-)a (+) b: b expressed in a's frame.
+
+    Parameters
+    ----------
+    a, b : array_like, shape (3,) or (N, 3)
+        Poses (x, y, theta) in the same parent frame.
+
+    Returns
+    -------
+    ndarray, shape (3,) or (N, 3)
+        b seen from a.
+    """
     return compose(inverse(a), b)
 
 
 def transform_points(pose: ArrayLike, pts: ArrayLike) -> Array:
-    """Map points (N, 2) from the pose's child frame into its parent frame."""
+    """Map points from the pose's child frame into its parent frame: R p + t.
+
+    Parameters
+    ----------
+    pose : array_like, shape (3,)
+        The pose (x, y, theta).
+    pts : array_like, shape (N, 2) or (2,)
+        Points in the child frame.
+
+    Returns
+    -------
+    ndarray, shape of ``pts``
+        The points in the parent frame.
+    """
     pose = np.asarray(pose, dtype=float)
     pts = np.asarray(pts, dtype=float)
     c, s = np.cos(pose[2]), np.sin(pose[2])
@@ -102,7 +205,20 @@ def transform_points(pose: ArrayLike, pts: ArrayLike) -> Array:
 
 
 def inverse_transform_points(pose: ArrayLike, pts: ArrayLike) -> Array:
-    """Map points (N, 2) from the parent frame into the pose's child frame: R^T (p - t)."""
+    """Map points from the parent frame into the pose's child frame: R^T (p - t).
+
+    Parameters
+    ----------
+    pose : array_like, shape (3,)
+        The pose (x, y, theta).
+    pts : array_like, shape (N, 2) or (2,)
+        Points in the parent frame.
+
+    Returns
+    -------
+    ndarray, shape of ``pts``
+        The points in the child frame.
+    """
     pose = np.asarray(pose, dtype=float)
     pts = np.asarray(pts, dtype=float)
     c, s = np.cos(pose[2]), np.sin(pose[2])
@@ -115,7 +231,18 @@ def inverse_transform_points(pose: ArrayLike, pts: ArrayLike) -> Array:
 
 
 def jacobians_compose(a: ArrayLike, b: ArrayLike) -> tuple[Array, Array]:
-    """Jacobians of compose(a, b) with respect to a and to b (each 3x3)."""
+    """Jacobians of compose(a, b) with respect to a and to b (Blanco 2010, sec. 2).
+
+    Parameters
+    ----------
+    a, b : array_like, shape (3,)
+        Poses (x, y, theta).
+
+    Returns
+    -------
+    ja, jb : ndarray, shape (3, 3)
+        d(a (+) b)/da and d(a (+) b)/db.
+    """
     bx, by = float(b[0]), float(b[1])
     at = float(a[2])
     c, s = math.cos(at), math.sin(at)
@@ -131,14 +258,36 @@ def jacobians_compose(a: ArrayLike, b: ArrayLike) -> tuple[Array, Array]:
 
 
 def yaw_to_quaternion(theta: ArrayLike) -> Array:
-    """Yaw-only quaternion (qx, qy, qz, qw) for heading theta."""
+    """Yaw-only quaternion (qx, qy, qz, qw) for heading theta.
+
+    Parameters
+    ----------
+    theta : array_like, shape (...)
+        Headings (rad).
+
+    Returns
+    -------
+    ndarray, shape (..., 4)
+        (0, 0, sin(theta/2), cos(theta/2)).
+    """
     th = np.asarray(theta, dtype=float)
     z = np.zeros_like(th)
     return np.stack([z, z, np.sin(th / 2.0), np.cos(th / 2.0)], axis=-1)
 
 
 def quaternion_to_yaw(q: ArrayLike) -> Array | float:
-    """Yaw (rotation about z) of quaternion(s) (qx, qy, qz, qw)."""
+    """Yaw (rotation about z) of quaternion(s) (qx, qy, qz, qw).
+
+    Parameters
+    ----------
+    q : array_like, shape (4,) or (N, 4)
+        Quaternions (qx, qy, qz, qw).
+
+    Returns
+    -------
+    float or ndarray, shape (N,)
+        Yaw in (-pi, pi].
+    """
     q = np.asarray(q, dtype=float)
     x, y, z, w = q[..., 0], q[..., 1], q[..., 2], q[..., 3]
     yaw = np.arctan2(2.0 * (w * z + x * y), 1.0 - 2.0 * (y * y + z * z))

@@ -1,14 +1,104 @@
-"""The JSON summary every stage returns (and the CLI prints on stdout)."""
+"""The JSON summaries and result files of the stages: typed on the producing side,
+one text on the consuming side.
+
+Each stage builds its summary as a dataclass (``slam.summary.RunSummary``,
+``maps.summary.MapSummary``, ``evaluation.results.Metrics``, ``reproduce.report.Results``;
+nested dataclasses for their sections), so that a metric renamed or left out is a
+``TypeError`` where it is made, not a blank where it is read. :func:`as_json` turns
+such a tree into the JSON object every file and stdout carry (``summary_text``)."""
 
 from __future__ import annotations
 
 import json
+from dataclasses import fields, is_dataclass
 from typing import Any
+
+
+class _Omitted:
+    """The type of :data:`OMIT`."""
+
+    _one: _Omitted | None = None
+
+    def __new__(cls) -> _Omitted:
+        if cls._one is None:
+            cls._one = super().__new__(cls)
+        return cls._one
+
+    def __repr__(self) -> str:
+        return "OMIT"
+
+    def __bool__(self) -> bool:
+        return False
+
+
+OMIT: Any = _Omitted()
+"""The value of a dataclass field whose key is absent from the JSON (an optional
+section the stage did not compute), as opposed to None (the key, written as null)."""
+
+
+def key(name: str) -> dict[str, str]:
+    """Field metadata giving the JSON key of a field whose key is not a Python name
+    (``field(metadata=key("true_within_0.5_m"))``).
+
+    Parameters
+    ----------
+    name : str
+        The key in the JSON.
+
+    Returns
+    -------
+    dict
+        ``{"key": name}``, for ``dataclasses.field(metadata=...)``.
+    """
+    return {"key": name}
+
+
+def as_json(obj: Any) -> Any:
+    """The JSON value of a summary: a dataclass as an object of its fields (in field
+    order, each under its name or its ``key`` metadata, :data:`OMIT` ones left out),
+    dicts, lists and tuples element by element, anything else unchanged (numbers keep
+    their type: the writers choose how to print numpy scalars and NaN).
+
+    Parameters
+    ----------
+    obj : Any
+        A dataclass instance (a summary), or any value inside one.
+
+    Returns
+    -------
+    Any
+        dicts, lists and tuples of the leaves of ``obj``.
+    """
+    if is_dataclass(obj) and not isinstance(obj, type):
+        out = {}
+        for f in fields(obj):
+            v = getattr(obj, f.name)
+            if v is not OMIT:
+                out[f.metadata.get("key", f.name)] = as_json(v)
+        return out
+    if isinstance(obj, dict):
+        return {k: as_json(v) for k, v in obj.items() if v is not OMIT}
+    if isinstance(obj, list):
+        return [as_json(v) for v in obj]
+    if isinstance(obj, tuple):
+        return tuple(as_json(v) for v in obj)
+    return obj
 
 
 def jsonable(obj: Any) -> Any:
     """``json.dumps``'s ``default``: numpy scalars and arrays as Python values, the rest
-    as text."""
+    as text.
+
+    Parameters
+    ----------
+    obj : Any
+        A value ``json`` cannot write.
+
+    Returns
+    -------
+    Any
+        A Python number or list (numpy), else ``str(obj)``.
+    """
     try:
         import numpy as np
 
@@ -22,5 +112,16 @@ def jsonable(obj: Any) -> Any:
 
 
 def summary_text(summary: dict[str, Any]) -> str:
-    """The summary as the CLI prints it: indented JSON, keys sorted."""
-    return json.dumps(summary, indent=2, sort_keys=True, default=jsonable)
+    """The summary as the CLI prints it: indented JSON, keys sorted.
+
+    Parameters
+    ----------
+    summary : dict or dataclass
+        A stage's summary (a dataclass is turned into JSON by :func:`as_json`).
+
+    Returns
+    -------
+    str
+        The JSON text (no final newline).
+    """
+    return json.dumps(as_json(summary), indent=2, sort_keys=True, default=jsonable)

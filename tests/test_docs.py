@@ -112,3 +112,130 @@ def test_committed_reports_have_no_broken_link():
             if not (page.parent / target.split("#")[0]).exists():
                 broken.append(f"{page.relative_to(root)} -> {target}")
     assert not broken, broken
+
+
+# --- numpydoc on the public functions of the cores (issue 15 step 6) -----------------------
+
+CORE_PACKAGES = ("slam", "maps", "fixes", "sim")
+CORE_MODULES = (
+    "evaluation.core",
+    "evaluation.metrics",
+    "evaluation.consistency",
+    "evaluation.lamps",
+    "evaluation.results",
+    "se2",
+    "polygons",
+)
+# Public functions exempt from the rule, with the reason.
+EXEMPT = {
+    # protocols: their implementations carry the documentation
+    "fuzzyslam.slam.events.Aid.on_ring": "protocol (fixes/ implement it)",
+    "fuzzyslam.fixes.scan_heading.ScanLineHeadingAid.on_ring": "implements Aid.on_ring",
+    "fuzzyslam.slam.events.Aid.summary": "protocol (fixes/ implement it)",
+    "fuzzyslam.slam.events.Aid.write": "protocol (fixes/ implement it)",
+    "fuzzyslam.slam.events.RowSink.row": "protocol (slam/outputs.py implements it)",
+    "fuzzyslam.fixes.base.Row.row": "protocol (the decisions implement it)",
+    # a RowSink kept in memory: its methods are those of the protocol, documented there
+    **{
+        f"fuzzyslam.slam.events.MemorySink.{m}": "implements RowSink (slam/events.py)"
+        for m in ("row", "odometry_start", "odometry", "update", "snapshot")
+    },
+    **{
+        f"fuzzyslam.slam.outputs.StreamingOutputs.{m}": "implements RowSink (slam/events.py)"
+        for m in ("row", "odometry_start", "odometry", "update", "snapshot")
+    },
+}
+# Functions documented before this rule, still without the sections: the list may only
+# shrink (a function in it that gains them must leave it; a new function must have them).
+GAPS_FILE = ROOT / "tests" / "numpydoc_gaps.txt"
+
+
+def core_modules() -> list[str]:
+    import importlib
+    import pkgutil
+
+    names = [f"fuzzyslam.{m}" for m in CORE_MODULES]
+    for pkg in CORE_PACKAGES:
+        p = importlib.import_module(f"fuzzyslam.{pkg}")
+        names += [f"fuzzyslam.{pkg}.{m.name}" for m in pkgutil.iter_modules(p.__path__)]
+    return sorted(names)
+
+
+def public_functions() -> list[tuple[str, object]]:
+    """(qualified name, function) of each module-level function and each method of a
+    class defined in a core module, neither starting with an underscore."""
+    import importlib
+    import inspect
+
+    out = []
+    for name in core_modules():
+        mod = importlib.import_module(name)
+        for n, obj in vars(mod).items():
+            if n.startswith("_") or getattr(obj, "__module__", None) != name:
+                continue
+            if inspect.isfunction(obj):
+                out.append((f"{name}.{n}", obj))
+            elif inspect.isclass(obj):
+                for mn, m in vars(obj).items():
+                    if not mn.startswith("_") and inspect.isfunction(m):
+                        out.append((f"{name}.{n}.{mn}", m))
+    return out
+
+
+def missing_sections(fn) -> list[str]:
+    """What the docstring of ``fn`` lacks: a docstring, Parameters (when it takes
+    arguments besides self/cls), Returns or Yields (when it is annotated to return
+    something other than None)."""
+    import inspect
+
+    doc = inspect.getdoc(fn) or ""
+    sig = inspect.signature(fn)
+    args = [p for p in sig.parameters if p not in ("self", "cls")]
+    returns = sig.return_annotation not in (inspect.Signature.empty, None, "None")
+    out = [] if doc else ["docstring"]
+    if args and not re.search(r"^Parameters\n-{3,}", doc, re.M):
+        out.append("Parameters")
+    if returns and not re.search(r"^(Returns|Yields)\n-{3,}", doc, re.M):
+        out.append("Returns")
+    return out
+
+
+def test_section_check_sees_a_missing_section() -> None:
+    def documented(a: int) -> int:
+        """Twice a.
+
+        Parameters
+        ----------
+        a : int
+            A number.
+
+        Returns
+        -------
+        int
+            2 a.
+        """
+        return 2 * a
+
+    def undocumented(a: int) -> int:
+        """Twice a."""
+        return 2 * a
+
+    assert missing_sections(documented) == []
+    assert missing_sections(undocumented) == ["Parameters", "Returns"]
+
+
+def test_public_functions_of_the_cores_have_numpydoc_sections() -> None:
+    funcs = public_functions()
+    assert len(funcs) > 250  # the walk found the cores
+    assert set(EXEMPT) <= {name for name, _ in funcs}, "an exemption names no function"
+    gaps = {
+        line.split()[0]
+        for line in GAPS_FILE.read_text(encoding="utf-8").splitlines()
+        if line.strip() and not line.startswith("#")
+    }
+    lacking = {name: missing_sections(fn) for name, fn in funcs if name not in EXEMPT}
+    lacking = {k: v for k, v in lacking.items() if v}
+    new = sorted(f"{k}: {', '.join(v)}" for k, v in lacking.items() if k not in gaps)
+    assert not new, "public functions without numpydoc sections:\n" + "\n".join(new)
+    done = sorted(gaps - set(lacking))
+    assert not done, f"documented now, remove from {GAPS_FILE.name}:\n" + "\n".join(done)

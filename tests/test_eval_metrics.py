@@ -9,6 +9,8 @@ from scipy.stats import chi2
 
 from fuzzyslam.evaluation import metrics as M
 from fuzzyslam.evaluation.align import umeyama
+from fuzzyslam.evaluation.consistency import consistency, nees
+from fuzzyslam.evaluation.lamps import match_lamps
 from fuzzyslam.se2 import compose, rot, wrap_angle
 
 
@@ -121,15 +123,15 @@ def test_nees_of_consistent_filter_in_band_and_overconfident_out() -> None:
     a = rng.normal(size=(n, 3, 3)) * 0.1
     cov = a @ np.swapaxes(a, 1, 2) + 1e-3 * np.eye(3)
     err = np.einsum("nij,nj->ni", np.linalg.cholesky(cov), rng.normal(size=(n, 3)))
-    v = M.nees(err, cov)
-    c = M.consistency(v, 3)
+    v = nees(err, cov)
+    c = consistency(v, 3)
     assert c.band_lo < 3.0 < c.band_hi
     assert c.in_band
     lo, hi = chi2.ppf([0.025, 0.975], 3 * n) / n
     assert (c.band_lo, c.band_hi) == pytest.approx((lo, hi))
-    assert not M.consistency(M.nees(err, cov / 4.0), 3).in_band
+    assert not consistency(nees(err, cov / 4.0), 3).in_band
     # singular covariance gives NaN, not a crash
-    assert np.isnan(M.nees(err[:1], np.zeros((1, 3, 3)))[0])
+    assert np.isnan(nees(err[:1], np.zeros((1, 3, 3)))[0])
 
 
 LAMPS = np.array([[0.0, 0.0], [2.5, 0.0], [5.0, 0.0], [7.5, 1.0]])
@@ -137,7 +139,7 @@ LAMPS = np.array([[0.0, 0.0], [2.5, 0.0], [5.0, 0.0], [7.5, 1.0]])
 
 def test_lamp_known_displacement() -> None:
     est = LAMPS + np.array([[0.03, 0.04], [0, 0], [0, 0], [0, 0]])
-    m = M.match_lamps(est[::-1], LAMPS, 0.5)
+    m = match_lamps(est[::-1], LAMPS, 0.5)
     assert m.per_true[0] == pytest.approx(0.05)
     np.testing.assert_allclose(m.per_true[1:], 0.0, atol=1e-12)
     assert not m.duplicates and not m.missed and not m.spurious
@@ -145,7 +147,7 @@ def test_lamp_known_displacement() -> None:
 
 def test_lamp_duplicate_counted_once_and_missed() -> None:
     est = np.vstack([LAMPS[:3], LAMPS[1] + [0.2, 0.0], [[20.0, 20.0]]])
-    m = M.match_lamps(est, LAMPS, 0.5)
+    m = match_lamps(est, LAMPS, 0.5)
     assert m.duplicates == [3]
     assert m.spurious == [4]
     assert m.missed == [3]
@@ -158,7 +160,7 @@ def test_lamp_assignment_is_one_to_one_and_optimal() -> None:
     # a greedy nearest match would pair e0 with t1 (0.1) and leave t0 to e1 (0.45)
     truth = np.array([[0.0, 0.0], [0.3, 0.0]])
     est = np.array([[0.2, 0.0], [0.4, 0.0]])
-    m = M.match_lamps(est, truth, 0.5)
+    m = match_lamps(est, truth, 0.5)
     assert m.errors.sum() == pytest.approx(0.2 + 0.1)
     assert sorted(m.pairs[:, 1].tolist()) == [0, 1]
 

@@ -627,7 +627,7 @@ def test_change_detector_plugin_writes_csv(room, tmp_path):
     assert det.summary()["skipped_uncertain"] == 1 and det.summary()["detections"] >= 1
     det.write(tmp_path)
     rows = list(csv.DictReader(open(tmp_path / "changes.csv")))
-    assert list(rows[0]) == ["t", "x", "y", "size", "cells"] and len(rows) == len(det.changes)
+    assert list(rows[0]) == ["t", "x", "y", "size", "cells"] and len(rows) == len(det.decisions)
 
 
 # --- the edge: map directory -> aids -------------------------------------------------------------

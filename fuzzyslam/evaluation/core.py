@@ -9,10 +9,14 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fuzzyslam.evaluation import metrics as M
+from fuzzyslam.evaluation import results as R
 from fuzzyslam.evaluation.align import umeyama
+from fuzzyslam.evaluation.consistency import consistency, nees
+from fuzzyslam.evaluation.lamps import LampMatch, found_within, match_lamps
 from fuzzyslam.evaluation.params import EvalParams
 from fuzzyslam.se2 import wrap_angle
 from fuzzyslam.streams.logmeta import Scenario, World
+from fuzzyslam.summary import OMIT, as_json
 
 Array = NDArray[np.float64]
 
@@ -81,19 +85,25 @@ class Estimate:
 
 @dataclass
 class Evaluation:
-    """Every metric (``metrics``, JSON-ready) and the series the figures draw."""
+    """Every metric (``typed``; ``metrics``: as metrics.json has it) and the series the
+    figures draw."""
 
-    metrics: dict[str, Any]
+    typed: R.Metrics
     assoc: M.Associated
     errors: Array  # (N, 3) x, y, heading errors at assoc.t
     sigma: Array | None  # (N, 3) 1-sigma of x, y, heading from the covariance, or None
     nees: Array | None  # (N,)
     phases: list[M.Phase]
-    lamp_match: M.LampMatch | None
+    lamp_match: LampMatch | None
     # lamp matches of the map as it stood at the end of each run (from landmark_history)
-    lamp_match_by_run: dict[int, M.LampMatch] = field(default_factory=dict)
+    lamp_match_by_run: dict[int, LampMatch] = field(default_factory=dict)
     fix_t: Array | None = None
     fix_err: Array | None = None
+
+    @property
+    def metrics(self) -> dict[str, Any]:
+        """The metrics as metrics.json holds them (:func:`fuzzyslam.summary.as_json`)."""
+        return as_json(self.typed)
 
 
 class SpanError(ValueError):
@@ -110,74 +120,82 @@ def _phase_block(
     fix_err: Array | None,
     fix_ok: NDArray[np.bool_] | None,
     params: EvalParams,
-) -> dict[str, Any]:
+) -> R.PhaseMetrics:
     """Every metric over the samples of one phase (see :func:`evaluate`)."""
     m = ph.mask(assoc.t)
-    out: dict[str, Any] = {
-        "t0": ph.t0,
-        "t1": ph.t1,
-        "runs": list(ph.runs),
-        "samples": int(m.sum()),
-    }
+    span = {"t0": ph.t0, "t1": ph.t1, "runs": list(ph.runs), "samples": int(m.sum())}
     if m.sum() == 0:
-        return out
+        return R.PhaseMetrics(**span)
     e = err[m]
-    out["x_m"] = M.stats(e[:, 0]).to_dict()
-    out["y_m"] = M.stats(e[:, 1]).to_dict()
-    out["heading_deg"] = M.stats(e[:, 2]).scaled(180.0 / np.pi).to_dict()
-    out["position_m"] = M.stats(np.hypot(e[:, 0], e[:, 1])).to_dict()
     a = M.ape(assoc.est[m, :2], assoc.truth[m, :2])
-    out["ape_m"] = {
-        "raw": a.raw.to_dict(),
-        "aligned": a.aligned.to_dict(),
-        "aligned_scale": a.aligned_scale.to_dict(),
-        "alignment": a.alignment,
-    }
     r = M.rpe_per_metre(assoc.est[m], assoc.truth[m], params.rpe_delta_m)
-    out["rpe"] = {
-        "delta_m": r.delta_m,
-        "trans_m_per_m": r.trans_per_m.to_dict(),
-        "rot_deg_per_m": r.rot_deg_per_m.to_dict(),
-    }
-    out["distance_m"] = float(M.path_length(assoc.truth[m, :2])[-1])
-    if nees_v is not None:
-        out["nees"] = M.consistency(nees_v[m], 3).to_dict()
+    nis = updates = heading_fix = OMIT
     if est.updates is not None:
         u = est.updates
         um = ph.mask(u.t) & u.accepted
-        out["nis"] = {
-            f"{k}_dof{d}": M.consistency(u.nis[um & (u.kind == k) & (u.dof == d)], int(d)).to_dict()
+        nis = {
+            f"{k}_dof{d}": consistency(u.nis[um & (u.kind == k) & (u.dof == d)], int(d))
             for k, d in sorted(
                 {(str(k), int(d)) for k, d in zip(u.kind[um], u.dof[um], strict=True)}
             )
         }
         att = ph.mask(u.t)
-        out["updates"] = {
-            "attempted": int(att.sum()),
-            "accepted": int((att & u.accepted).sum()),
-        }
+        updates = R.UpdateCounts(attempted=int(att.sum()), accepted=int((att & u.accepted).sum()))
     if fix_t is not None and fix_err is not None and fix_ok is not None:
         fm = ph.mask(fix_t)
         ok = fm & fix_ok & np.isfinite(fix_err)
-        out["heading_fix"] = {
-            "attempted": int(fm.sum()),
-            "accepted": int((fm & fix_ok).sum()),
-            "error_deg": M.stats(np.degrees(fix_err[ok])).to_dict(),
-            "error_all_deg": M.stats(np.degrees(fix_err[fm & np.isfinite(fix_err)])).to_dict(),
-        }
+        reasons = OMIT
         if est.heading_fixes is not None:
-            reasons, counts = np.unique(est.heading_fixes.reason[fm], return_counts=True)
-            out["heading_fix"]["reasons"] = {
-                str(k): int(n) for k, n in zip(reasons, counts, strict=True)
-            }
-    return out
+            names, counts = np.unique(est.heading_fixes.reason[fm], return_counts=True)
+            reasons = {str(k): int(n) for k, n in zip(names, counts, strict=True)}
+        heading_fix = R.HeadingFixMetrics(
+            attempted=int(fm.sum()),
+            accepted=int((fm & fix_ok).sum()),
+            error_deg=M.stats(np.degrees(fix_err[ok])),
+            error_all_deg=M.stats(np.degrees(fix_err[fm & np.isfinite(fix_err)])),
+            reasons=reasons,
+        )
+    return R.PhaseMetrics(
+        **span,
+        x_m=M.stats(e[:, 0]),
+        y_m=M.stats(e[:, 1]),
+        heading_deg=M.stats(e[:, 2]).scaled(180.0 / np.pi),
+        position_m=M.stats(np.hypot(e[:, 0], e[:, 1])),
+        ape_m=R.ApeMetrics(
+            raw=a.raw, aligned=a.aligned, aligned_scale=a.aligned_scale, alignment=a.alignment
+        ),
+        rpe=R.RpeMetrics(
+            delta_m=r.delta_m, trans_m_per_m=r.trans_per_m, rot_deg_per_m=r.rot_deg_per_m
+        ),
+        distance_m=float(M.path_length(assoc.truth[m, :2])[-1]),
+        nees=consistency(nees_v[m], 3) if nees_v is not None else OMIT,
+        nis=nis,
+        updates=updates,
+        heading_fix=heading_fix,
+    )
 
 
 def align_estimate(est: Estimate, truth: Truth, params: EvalParams) -> tuple[Estimate, dict]:
     """The estimate moved onto the truth by one rigid 2-D motion (Umeyama, as evo's
     ``--align``), found from the positions paired in time: poses, dead reckoning and
     landmarks are mapped by it, covariances rotated (C' = A C A^T, A = diag(R, 1)).
-    For real logs, whose map frame is the robot's start and not the truth's frame."""
+    For real logs, whose map frame is the robot's start and not the truth's frame.
+
+    Parameters
+    ----------
+    est : Estimate
+        The estimate.
+    truth : Truth
+        The truth.
+    params : EvalParams
+        ``max_dt_s`` for pairing.
+
+    Returns
+    -------
+    Estimate, dict
+        The moved estimate (``est`` itself with fewer than two pairs), and the motion
+        (tx_m, ty_m, theta_deg; empty without one).
+    """
     assoc = M.associate(est.t, est.poses, truth.t, truth.poses, params.max_dt_s)
     if len(assoc) < 2:
         return est, {}
@@ -209,6 +227,22 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
     (:func:`align_estimate`), so that errors, NEES and landmarks are taken in the truth's
     frame up to that motion. Raises SpanError when fewer than two estimate samples overlap
     the truth in time.
+
+    Parameters
+    ----------
+    truth : Truth
+        Ground truth: times (N,), poses (N, 3), world and scenario when simulated.
+    est : Estimate
+        The run's estimate: times (M,), poses (M, 3), covariances (M, 3, 3), ...
+    params : EvalParams
+        The ``eval:`` section.
+    align : bool
+        First move the estimate onto the truth.
+
+    Returns
+    -------
+    Evaluation
+        The typed metrics (``typed``; ``metrics``: metrics.json) and the figures' series.
     """
     alignment = None
     if align:
@@ -224,7 +258,7 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
     if est.cov is not None:
         c = est.cov[assoc.index]
         sigma = np.sqrt(np.clip(np.diagonal(c, axis1=1, axis2=2), 0.0, None))
-        nees_v = M.nees(err, c)
+        nees_v = nees(err, c)
     fix_t = fix_err = fix_ok = None
     if est.heading_fixes is not None and est.heading_fixes.t.size:
         hf = est.heading_fixes
@@ -236,131 +270,96 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
     phases = M.phases_from_runs(
         intervals, truth.freeze_run, (float(assoc.t[0]), float(assoc.t[-1]))
     )
-    metrics: dict[str, Any] = {
-        "label": est.label,
-        "truth": truth.source,
-        "estimate": est.source,
-        "samples": len(assoc),
-        "estimate_samples": int(est.t.size),
-        "span_s": [float(assoc.t[0]), float(assoc.t[-1])],
-        "params": asdict(params),
-        "freeze_run": truth.freeze_run,
-        "phases": {
-            ph.name: _phase_block(ph, assoc, err, nees_v, est, fix_t, fix_err, fix_ok, params)
-            for ph in phases
-        },
+    blocks = {
+        ph.name: _phase_block(ph, assoc, err, nees_v, est, fix_t, fix_err, fix_ok, params)
+        for ph in phases
     }
-    if alignment is not None:
-        metrics["aligned_to_truth"] = alignment
     lamp_match = None
+    lamps = OMIT
     true_lm = truth.landmark_array
     if est.landmarks is not None and true_lm is not None:
-        lamp_match = M.match_lamps(est.landmarks, true_lm, params.lamp_max_dist_m)
-        metrics["lamps"] = lamp_match.summary()
-        metrics["lamps"]["estimated"] = int(est.landmarks.shape[0])
-        metrics["lamps"]["true"] = int(true_lm.shape[0])
-        metrics["lamps"]["left_over"] = len(lamp_match.duplicates) + len(lamp_match.spurious)
-        for d in (0.3, 0.5):  # true landmarks with an estimate this near (not one to one)
-            metrics["lamps"][f"true_within_{d:g}_m"] = M.found_within(est.landmarks, true_lm, d)
-    by_run: dict[int, M.LampMatch] = {}
+        lamp_match = match_lamps(est.landmarks, true_lm, params.lamp_max_dist_m)
+        lamps = R.LampMetrics(
+            **lamp_match.summary(),
+            estimated=int(est.landmarks.shape[0]),
+            true=int(true_lm.shape[0]),
+            left_over=len(lamp_match.duplicates) + len(lamp_match.spurious),
+            # true landmarks with an estimate this near (not one to one)
+            true_within_0_3_m=found_within(est.landmarks, true_lm, 0.3),
+            true_within_0_5_m=found_within(est.landmarks, true_lm, 0.5),
+        )
+    by_run: dict[int, LampMatch] = {}
+    lamps_by_run = OMIT
     if est.landmark_history and truth.world is not None:
         snap_t = np.array([t for t, _ in est.landmark_history])
-        metrics["lamps_by_run"] = {}
+        lamps_by_run = {}
         for r, _t0, t1 in intervals:
             k = int(np.searchsorted(snap_t, t1, side="right")) - 1  # last snapshot by run end
             if k < 0:
                 continue
-            lamps = est.landmark_history[k][1]
-            by_run[r] = M.match_lamps(lamps, truth.world.lamp_array, params.lamp_max_dist_m)
-            metrics["lamps_by_run"][f"run{r}"] = {
-                "t": float(snap_t[k]),
-                "estimated": int(lamps.shape[0]),
-                **by_run[r].summary(),
-            }
+            snap = est.landmark_history[k][1]
+            by_run[r] = match_lamps(snap, truth.world.lamp_array, params.lamp_max_dist_m)
+            lamps_by_run[f"run{r}"] = R.RunLampMetrics(
+                t=float(snap_t[k]), estimated=int(snap.shape[0]), **by_run[r].summary()
+            )
+    odometry = OMIT
     if est.odometry is not None:
         ot, op = est.odometry
         oa = M.associate(ot, op, truth.t, truth.poses, params.max_dt_s)
         if len(oa) >= 2:
             oe = M.pose_errors(oa.est, oa.truth)
-            metrics["odometry"] = {
-                "position_m": M.stats(np.hypot(oe[:, 0], oe[:, 1])).to_dict(),
-                "heading_deg": M.stats(oe[:, 2]).scaled(180.0 / np.pi).to_dict(),
-            }
-    metrics["truth_coverage"] = truth_coverage(truth, est, len(assoc))
-    metrics["log_damage"] = truth.log_damage
-    metrics["warnings"] = evaluation_warnings(metrics)
-    metrics["headline"] = headline(metrics)
+            odometry = R.OdometryMetrics(
+                position_m=M.stats(np.hypot(oe[:, 0], oe[:, 1])),
+                heading_deg=M.stats(oe[:, 2]).scaled(180.0 / np.pi),
+            )
+    coverage = truth_coverage(truth, est, len(assoc))
+    warnings = R.evaluation_warnings(coverage, truth.log_damage)
+    typed = R.Metrics(
+        label=est.label,
+        truth=truth.source,
+        estimate=est.source,
+        samples=len(assoc),
+        estimate_samples=int(est.t.size),
+        span_s=[float(assoc.t[0]), float(assoc.t[-1])],
+        params=asdict(params),
+        freeze_run=truth.freeze_run,
+        phases=blocks,
+        aligned_to_truth=alignment if alignment is not None else OMIT,
+        lamps=lamps,
+        lamps_by_run=lamps_by_run,
+        odometry=odometry,
+        truth_coverage=coverage,
+        log_damage=truth.log_damage,
+        warnings=warnings,
+        headline=R.headline(blocks, coverage, truth.log_damage, warnings, lamps),
+    )
     return Evaluation(
-        metrics, assoc, err, sigma, nees_v, phases, lamp_match, by_run, fix_t, fix_err
+        typed, assoc, err, sigma, nees_v, phases, lamp_match, by_run, fix_t, fix_err
     )
 
 
-def truth_coverage(truth: Truth, est: Estimate, compared: int) -> dict[str, Any]:
+def truth_coverage(truth: Truth, est: Estimate, compared: int) -> R.TruthCoverage:
     """How much of the estimate the truth covers: the estimate's samples compared (those
-    with a truth pose within max_dt_s) over all of them, and both time spans."""
+    with a truth pose within max_dt_s) over all of them, and both time spans.
+
+    Parameters
+    ----------
+    truth : Truth
+        The ground truth (its times t (N,)).
+    est : Estimate
+        The estimate (its times t (M,)).
+    compared : int
+        How many of the estimate's samples were paired with the truth.
+
+    Returns
+    -------
+    TruthCoverage
+    """
     n = int(est.t.size)
-    return {
-        "fraction": round(compared / n, 6) if n else 0.0,
-        "compared_samples": int(compared),
-        "estimate_samples": n,
-        "estimate_span_s": [float(est.t[0]), float(est.t[-1])] if n else None,
-        "truth_span_s": [float(truth.t[0]), float(truth.t[-1])],
-    }
-
-
-COVERAGE_WARN = 0.99  # below this fraction of the estimate compared, the summary says so
-
-
-def evaluation_warnings(metrics: dict[str, Any]) -> list[str]:
-    """What the numbers do not cover, in words: a truth covering only part of the
-    estimate, a damaged truth log."""
-    out = []
-    cov = metrics["truth_coverage"]
-    if cov["fraction"] < COVERAGE_WARN:
-        t0, t1 = cov["truth_span_s"]
-        out.append(
-            f"the truth covers only {100 * cov['fraction']:.1f} % of the estimate's samples "
-            f"({t0:.1f}-{t1:.1f} s); the rest is not evaluated"
-        )
-    dmg = metrics.get("log_damage")
-    if dmg and (dmg.get("truncated") or dmg.get("lost_bytes") or dmg.get("damaged_records")):
-        out.append(
-            f"the truth log is damaged ({dmg.get('lost_bytes', 0)} bytes lost); ground truth "
-            "is missing where it was"
-        )
-    return out
-
-
-def headline(metrics: dict[str, Any]) -> dict[str, Any]:
-    """The few numbers printed on stdout and shown first in the report."""
-    ov = metrics["phases"]["overall"]
-    h: dict[str, Any] = {
-        "position_mean_m": ov["position_m"]["mean"],
-        "heading_mean_deg": ov["heading_deg"]["mean"],
-        "ape_rmse_m": ov["ape_m"]["raw"]["rmse"],
-        "ape_aligned_rmse_m": ov["ape_m"]["aligned"]["rmse"],
-        "rpe_m_per_m": ov["rpe"]["trans_m_per_m"]["mean"],
-        "truth_coverage": metrics["truth_coverage"]["fraction"],
-        "log_damage": metrics["log_damage"],
-        "warnings": metrics["warnings"],
-    }
-    if "A" in metrics["phases"] and "position_m" in metrics["phases"]["A"]:
-        h["phase_A_position_mean_m"] = metrics["phases"]["A"]["position_m"]["mean"]
-    if "after" in metrics["phases"] and "position_m" in metrics["phases"]["after"]:
-        h["after_position_mean_m"] = metrics["phases"]["after"]["position_m"]["mean"]
-    if "nees" in ov:
-        h["nees_mean"] = ov["nees"]["mean"]
-        h["nees_in_band"] = ov["nees"]["in_band"]
-    if "lamps" in metrics:
-        lm = metrics["lamps"]
-        h["lamps_true_within_0.5_m"] = lm["true_within_0.5_m"]
-        h["lamps_left_over"] = lm["left_over"]
-        h["lamp_error_mean_m"] = lm["error_m"]["mean"]
-        h["lamps_duplicated"] = lm["duplicates"]
-        h["lamps_missed"] = lm["missed"]
-        h["lamps_spurious"] = lm["spurious"]
-        h["lamps_estimated"] = lm["estimated"]
-    if "heading_fix" in ov:
-        h["heading_fix_error_mean_deg"] = ov["heading_fix"]["error_deg"]["mean"]
-        h["heading_fix_error_std_deg"] = ov["heading_fix"]["error_deg"]["std"]
-    return h
+    return R.TruthCoverage(
+        fraction=round(compared / n, 6) if n else 0.0,
+        compared_samples=int(compared),
+        estimate_samples=n,
+        estimate_span_s=[float(est.t[0]), float(est.t[-1])] if n else None,
+        truth_span_s=[float(truth.t[0]), float(truth.t[-1])],
+    )

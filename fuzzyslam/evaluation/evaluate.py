@@ -9,7 +9,7 @@ from __future__ import annotations
 import csv
 import os
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -27,6 +27,7 @@ from fuzzyslam.evaluation.core import (
     evaluate,
 )
 from fuzzyslam.evaluation.params import EvalParams
+from fuzzyslam.evaluation.results import ComparisonPhase, ComparisonRow
 from fuzzyslam.fileio import OutputDir, check_input_file, check_outputs
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.progress import Progress, note
@@ -36,6 +37,7 @@ from fuzzyslam.streams.messages import pose_of
 from fuzzyslam.streams.reader import MCAP_MAGIC, LogReader
 from fuzzyslam.streams.topics import Topics
 from fuzzyslam.streams.tum import format_tum, read_tum, read_tum_planar
+from fuzzyslam.summary import OMIT
 
 KIND_MCAP = "mcap"
 KIND_TUM = "tum"
@@ -306,12 +308,12 @@ def run_evaluate(
         except SpanError as exc:
             raise InputError(path, str(exc)) from None
     if others:
-        ev.metrics["comparison"] = [comparison_row(e, v) for e, v in evs]
+        ev = replace(ev, typed=replace(ev.typed, comparison=[comparison_row(e, v) for e, v in evs]))
     from fuzzyslam.evaluation.changes import change_metrics
 
     changes = change_metrics(truth_path, estimate_path, truth.t, truth.poses[:, :2])
     if changes is not None:  # --fix pose on a log with obstacles (issue 8)
-        ev.metrics["change_detection"] = changes
+        ev = replace(ev, typed=replace(ev.typed, change_detection=changes))
     with OutputDir(outdir, owns=("fig4_lamps.png", "consistency.png", "compare.png")) as tmp:
         figs = figures.draw_all(tmp, truth, est, ev, fgm)
         if others:
@@ -326,26 +328,38 @@ def run_evaluate(
     return EvaluateResult(ev, Path(outdir), files)
 
 
-def comparison_row(est: Estimate, ev: Evaluation) -> dict[str, Any]:
+def comparison_row(est: Estimate, ev: Evaluation) -> ComparisonRow:
     """One estimate's row of the side-by-side comparison: per phase, position error mean
-    and max (m), heading error mean and max (deg); lamps duplicated."""
+    and max (m), heading error mean and max (deg); lamps duplicated.
+
+    Parameters
+    ----------
+    est : Estimate
+        The estimate (its label and source).
+    ev : Evaluation
+        Its evaluation.
+
+    Returns
+    -------
+    ComparisonRow
+    """
     phases = {
-        name: {
-            "position_mean_m": b["position_m"]["mean"],
-            "position_max_m": b["position_m"]["max"],
-            "heading_mean_deg": b["heading_deg"]["mean"],
-            "heading_max_deg": b["heading_deg"]["max"],
-        }
-        for name, b in ev.metrics["phases"].items()
-        if "position_m" in b
+        name: ComparisonPhase(
+            position_mean_m=b.position_m.mean,
+            position_max_m=b.position_m.max,
+            heading_mean_deg=b.heading_deg.mean,
+            heading_max_deg=b.heading_deg.max,
+        )
+        for name, b in ev.typed.phases.items()
+        if b.position_m is not OMIT
     }
-    lamps = ev.metrics.get("lamps")
-    return {
-        "label": est.label,
-        "estimate": est.source,
-        "phases": phases,
-        "lamps_duplicated": lamps["duplicates"] if lamps else None,
-    }
+    lamps = ev.typed.lamps
+    return ComparisonRow(
+        label=est.label,
+        estimate=est.source,
+        phases=phases,
+        lamps_duplicated=lamps.duplicates if lamps is not OMIT else None,
+    )
 
 
 def summary(res: EvaluateResult) -> dict[str, Any]:

@@ -16,7 +16,7 @@ import numpy as np
 from numpy.typing import NDArray
 
 from fuzzyslam.evaluation.core import Estimate, Evaluation, Truth
-from fuzzyslam.evaluation.metrics import LampMatch
+from fuzzyslam.evaluation.lamps import LampMatch
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.streams.logmeta import World
 
@@ -93,30 +93,16 @@ def fig1_paths(
             label="estimated lamps",
             zorder=6,
         )
-        if lamp_match is not None and lamp_match.spurious:
-            d = est.landmarks[lamp_match.spurious]
-            ax.scatter(
-                d[:, 0],
-                d[:, 1],
-                s=40,
-                marker="x",
-                color="tab:purple",
-                linewidths=1.5,
-                label=f"spurious lamps ({len(d)}, > {lamp_match.max_dist:.2f} m from any)",
-                zorder=7,
-            )
-        if lamp_match is not None and lamp_match.duplicates:
-            d = est.landmarks[lamp_match.duplicates]
-            ax.scatter(
-                d[:, 0],
-                d[:, 1],
-                s=90,
-                marker="x",
-                color="red",
-                linewidths=2.0,
-                label=f"duplicated lamps ({len(d)})",
-                zorder=7,
-            )
+        left = (  # the estimates the matching left over: (indices, size, colour, width, label)
+            (lamp_match.spurious, 40, "tab:purple", 1.5,
+             f"spurious lamps ({{}}, > {lamp_match.max_dist:.2f} m from any)"),
+            (lamp_match.duplicates, 90, "red", 2.0, "duplicated lamps ({})"),
+        ) if lamp_match is not None else ()  # fmt: skip
+        for idx, size, colour, width, label in left:
+            if idx:
+                d = est.landmarks[idx]
+                ax.scatter(d[:, 0], d[:, 1], s=size, marker="x", color=colour,
+                           linewidths=width, label=label.format(len(d)), zorder=7)  # fmt: skip
         if lamp_match is not None and lamp_match.missed and world is not None:
             m = world.lamp_array[lamp_match.missed]
             ax.scatter(

@@ -7,20 +7,18 @@ References:
 - APE / RPE: Sturm et al., "A benchmark for the evaluation of RGB-D SLAM systems", IROS 2012
   (ATE and RPE); Grupp, evo (github.com/MichaelGrupp/evo), whose APE aligns positions with
   Umeyama (1991) and whose RPE can take its delta in metres of travel.
-- NEES / NIS: Bar-Shalom, Li, Kirubarajan, "Estimation with Applications to Tracking and
-  Navigation", 2001, sec. 5.4 (chi-square tests of the average over N samples).
-- Lamp association: Kuhn-Munkres assignment (``scipy.optimize.linear_sum_assignment``).
+
+The filter's consistency (NEES, NIS) is in :mod:`fuzzyslam.evaluation.consistency`, the
+lamps' matching in :mod:`fuzzyslam.evaluation.lamps`.
 """
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass
 from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
-from scipy.optimize import linear_sum_assignment
-from scipy.stats import chi2
 
 from fuzzyslam.evaluation.align import umeyama
 from fuzzyslam.se2 import between, interpolate_poses, wrap_angle
@@ -44,10 +42,28 @@ class Stats:
     median: float
 
     def to_dict(self) -> dict[str, Any]:
+        """The statistics as a dict (field order).
+
+        Returns
+        -------
+        dict of str to float
+            n, mean, rmse, max, std, bias, median.
+        """
         return asdict(self)
 
     def scaled(self, k: float) -> Stats:
-        """The same statistics with the values multiplied by k > 0 (e.g. rad -> deg)."""
+        """The same statistics with the values multiplied by k > 0 (e.g. rad -> deg).
+
+        Parameters
+        ----------
+        k : float
+            The factor (> 0).
+
+        Returns
+        -------
+        Stats
+            The scaled statistics (n unchanged).
+        """
         return Stats(
             self.n,
             self.mean * k,
@@ -65,6 +81,15 @@ def stats(values: ArrayLike) -> Stats:
     mean = (1/n) sum |v_i|, rmse = sqrt((1/n) sum v_i^2), max = max |v_i|,
     std = population std of v (as evo and numpy compute it), bias = (1/n) sum v_i,
     median = median |v_i|.
+
+    Parameters
+    ----------
+    values : array_like, shape (N,)
+        The error series (any shape, flattened).
+
+    Returns
+    -------
+    Stats
     """
     v = np.asarray(values, dtype=float).reshape(-1)
     v = v[np.isfinite(v)]
@@ -87,7 +112,20 @@ def stats(values: ArrayLike) -> Stats:
 
 
 def nearest_gap(t_ref: ArrayLike, t_query: ArrayLike) -> Array:
-    """|t_query - nearest t_ref| for each query time (t_ref sorted)."""
+    """|t_query - nearest t_ref| for each query time (t_ref sorted).
+
+    Parameters
+    ----------
+    t_ref : array_like, shape (N,)
+        Sorted reference times.
+    t_query : array_like, shape (M,)
+        Query times.
+
+    Returns
+    -------
+    ndarray, shape (M,)
+        The gaps (s).
+    """
     t_ref = np.asarray(t_ref, dtype=float)
     tq = np.asarray(t_query, dtype=float).reshape(-1)
     i = np.clip(np.searchsorted(t_ref, tq), 1, max(t_ref.size - 1, 1))
@@ -123,6 +161,24 @@ def associate(
 
     An estimate sample is kept when its time lies inside the truth's span and a truth sample
     lies within ``max_dt`` seconds of it (so no pose is interpolated across a gap in the truth).
+
+    Parameters
+    ----------
+    t_est : array_like, shape (N,)
+        Estimate times.
+    est : array_like, shape (N, 3)
+        Estimated poses.
+    t_truth : array_like, shape (K,)
+        Increasing truth times.
+    truth : array_like, shape (K, 3)
+        True poses.
+    max_dt : float
+        Largest gap (s) to the nearest truth sample.
+
+    Returns
+    -------
+    Associated
+        The kept samples (n <= N): times, estimates, truth (n, 3) and their indices.
     """
     te = np.asarray(t_est, dtype=float).reshape(-1)
     pe = np.asarray(est, dtype=float).reshape(-1, 3)
@@ -135,7 +191,18 @@ def associate(
 
 
 def pose_errors(est: ArrayLike, truth: ArrayLike) -> Array:
-    """Errors (N, 3) in the map frame: x_est - x_true, y_est - y_true, wrap(th_est - th_true)."""
+    """Errors (N, 3) in the map frame: x_est - x_true, y_est - y_true, wrap(th_est - th_true).
+
+    Parameters
+    ----------
+    est, truth : array_like, shape (N, 3)
+        Paired poses.
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+        The errors (m, m, rad).
+    """
     e = np.asarray(est, dtype=float).reshape(-1, 3) - np.asarray(truth, dtype=float).reshape(-1, 3)
     e[:, 2] = np.asarray(wrap_angle(e[:, 2])).reshape(-1)
     return e
@@ -155,7 +222,18 @@ class ApeResult:
 
 
 def ape_translation(est_xy: ArrayLike, truth_xy: ArrayLike) -> Array:
-    """||p_est,i - p_true,i|| per sample (evo's APE, translation part)."""
+    """||p_est,i - p_true,i|| per sample (evo's APE, translation part).
+
+    Parameters
+    ----------
+    est_xy, truth_xy : array_like, shape (N, 2)
+        Paired positions.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        The distances (m).
+    """
     d = np.asarray(est_xy, dtype=float) - np.asarray(truth_xy, dtype=float)
     return np.hypot(d[:, 0], d[:, 1])
 
@@ -165,6 +243,16 @@ def ape(est_xy: ArrayLike, truth_xy: ArrayLike) -> ApeResult:
 
     The alignment maps the estimated positions onto the true ones (as ``evo_ape --align``
     and ``--align --correct_scale`` do) and the error is taken after it.
+
+    Parameters
+    ----------
+    est_xy, truth_xy : array_like, shape (N, 2)
+        Paired positions.
+
+    Returns
+    -------
+    ApeResult
+        Raw, rigidly aligned and similarity-aligned statistics, and the rigid alignment.
     """
     pe = np.asarray(est_xy, dtype=float).reshape(-1, 2)
     pt = np.asarray(truth_xy, dtype=float).reshape(-1, 2)
@@ -188,7 +276,18 @@ def ape(est_xy: ArrayLike, truth_xy: ArrayLike) -> ApeResult:
 
 
 def path_length(xy: ArrayLike) -> Array:
-    """Accumulated path length s_i (s_0 = 0) along positions (N, 2)."""
+    """Accumulated path length s_i (s_0 = 0) along positions (N, 2).
+
+    Parameters
+    ----------
+    xy : array_like, shape (N, 2)
+        Positions.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+        s_i (m).
+    """
     p = np.asarray(xy, dtype=float).reshape(-1, 2)
     if p.shape[0] == 0:
         return np.zeros(0)
@@ -197,7 +296,20 @@ def path_length(xy: ArrayLike) -> Array:
 
 
 def rpe_pairs(truth_xy: ArrayLike, delta_m: float) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Index pairs (i, j): j is the first sample with s_j - s_i >= delta_m along the truth path."""
+    """Index pairs (i, j): j is the first sample with s_j - s_i >= delta_m along the truth path.
+
+    Parameters
+    ----------
+    truth_xy : array_like, shape (N, 2)
+        True positions.
+    delta_m : float
+        The travel (m) between the two samples of a pair.
+
+    Returns
+    -------
+    i, j : ndarray of int, shape (K,)
+        The pairs' indices.
+    """
     s = path_length(truth_xy)
     j = np.searchsorted(s, s + delta_m, side="left")
     i = np.arange(s.size)
@@ -220,6 +332,18 @@ def rpe_per_metre(est: ArrayLike, truth: ArrayLike, delta_m: float) -> RpeResult
     For each pair (i, j) of :func:`rpe_pairs`, with relative motions Q_ij = Q_i^-1 Q_j (truth)
     and P_ij = P_i^-1 P_j (estimate), the error is E_ij = Q_ij^-1 P_ij (Sturm et al. 2012);
     its translation norm and |rotation| are divided by the true path length s_j - s_i.
+
+    Parameters
+    ----------
+    est, truth : array_like, shape (N, 3)
+        Paired poses.
+    delta_m : float
+        The true travel (m) of a pair.
+
+    Returns
+    -------
+    RpeResult
+        Translation (m/m) and rotation (deg/m) error statistics.
     """
     pe = np.asarray(est, dtype=float).reshape(-1, 3)
     pt = np.asarray(truth, dtype=float).reshape(-1, 3)
@@ -237,161 +361,6 @@ def rpe_per_metre(est: ArrayLike, truth: ArrayLike, delta_m: float) -> RpeResult
     )
 
 
-# --- consistency --------------------------------------------------------------------------
-
-
-def chi2_band(dof: int, n: int, p: float = 0.95) -> tuple[float, float]:
-    """Two-sided p band of the average of n chi-square(dof) samples: chi2.ppf(.., dof n) / n."""
-    if n <= 0:
-        return float("nan"), float("nan")
-    a = (1.0 - p) / 2.0
-    lo, hi = chi2.ppf([a, 1.0 - a], dof * n) / n
-    return float(lo), float(hi)
-
-
-def nees(errors: ArrayLike, covs: ArrayLike) -> Array:
-    """Normalised estimation error squared e_k^T P_k^-1 e_k per sample (NaN where P_k is singular
-    or not positive definite). errors (N, d), covs (N, d, d)."""
-    e = np.asarray(errors, dtype=float)
-    p = np.asarray(covs, dtype=float)
-    out = np.full(e.shape[0], np.nan)
-    if e.shape[0] == 0:
-        return out
-    eig = np.linalg.eigvalsh(0.5 * (p + np.swapaxes(p, -1, -2)))
-    ok = np.all(eig > 0.0, axis=1) & np.all(np.isfinite(e), axis=1)
-    if ok.any():
-        x = np.linalg.solve(p[ok], e[ok][..., None])[..., 0]
-        out[ok] = np.einsum("ij,ij->i", e[ok], x)
-    return out
-
-
-@dataclass(frozen=True)
-class Consistency:
-    """Average of chi-square statistics over n samples with its 95 % band."""
-
-    dof: int
-    n: int
-    mean: float
-    band_lo: float
-    band_hi: float
-    in_band: bool
-    frac_within_95: float
-    frac_above_100: float = float("nan")  # share of samples above 100: a filter in trouble
-
-    def to_dict(self) -> dict[str, Any]:
-        return asdict(self)
-
-
-def consistency(values: ArrayLike, dof: int) -> Consistency:
-    """Chi-square consistency test of NEES or NIS samples of ``dof`` degrees of freedom.
-
-    The mean of n samples of chi2(dof) times n is chi2(dof n): the filter is consistent at 95 %
-    when mean lies in chi2.ppf([0.025, 0.975], dof n) / n (Bar-Shalom et al. 2001, sec. 5.4).
-    frac_within_95 is the share of single samples inside chi2.ppf([0.025, 0.975], dof);
-    frac_above_100 the share above 100 (for 3 dof, a 10-sigma error: overconfidence).
-    """
-    v = np.asarray(values, dtype=float).reshape(-1)
-    v = v[np.isfinite(v)]
-    lo, hi = chi2_band(dof, v.size)
-    if v.size == 0:
-        return Consistency(dof, 0, float("nan"), lo, hi, False, float("nan"))
-    m = float(v.mean())
-    slo, shi = chi2.ppf([0.025, 0.975], dof)
-    frac = float(np.mean((v >= slo) & (v <= shi)))
-    above = float(np.mean(v > 100.0))
-    return Consistency(dof, int(v.size), m, lo, hi, bool(lo <= m <= hi), frac, above)
-
-
-# --- lamps --------------------------------------------------------------------------------
-
-
-@dataclass
-class LampMatch:
-    """One-to-one assignment of estimated lamps to true lamps.
-
-    pairs: (k, 2) indices (estimate, truth) of matched lamps; errors: (k,) distances (m);
-    per_true: (n_true,) error of each true lamp's match (NaN if missed); duplicates: estimates
-    left unmatched within max_dist of a matched true lamp; spurious: other unmatched estimates;
-    missed: true lamps never matched.
-    """
-
-    pairs: NDArray[np.int64]
-    errors: Array
-    per_true: Array
-    duplicates: list[int] = field(default_factory=list)
-    spurious: list[int] = field(default_factory=list)
-    missed: list[int] = field(default_factory=list)
-    max_dist: float = 0.0
-
-    def summary(self) -> dict[str, Any]:
-        s = stats(self.errors)
-        return {
-            "matched": int(self.errors.size),
-            "duplicates": len(self.duplicates),
-            "spurious": len(self.spurious),
-            "missed": len(self.missed),
-            "max_dist_m": self.max_dist,
-            "error_m": s.to_dict(),
-            "per_lamp_error_m": [None if not np.isfinite(v) else float(v) for v in self.per_true],
-            "duplicate_ids": list(self.duplicates),
-            "missed_ids": list(self.missed),
-        }
-
-
-def found_within(est_xy: ArrayLike, true_xy: ArrayLike, dist: float) -> int:
-    """How many true landmarks have an estimate within ``dist`` (not one to one)."""
-    e = np.asarray(est_xy, dtype=float).reshape(-1, 2)
-    t = np.asarray(true_xy, dtype=float).reshape(-1, 2)
-    if e.shape[0] == 0 or t.shape[0] == 0:
-        return 0
-    d = np.hypot(e[:, None, 0] - t[None, :, 0], e[:, None, 1] - t[None, :, 1])
-    return int((d.min(axis=0) <= dist).sum())
-
-
-def match_lamps(est_xy: ArrayLike, true_xy: ArrayLike, max_dist: float) -> LampMatch:
-    """Assign estimated lamps to true lamps one to one, minimising the total distance.
-
-    Pairs farther apart than max_dist are forbidden (cost larger than any feasible total), so the
-    assignment first maximises the number of feasible matches, then minimises their distance.
-    An unmatched estimate within max_dist of a matched true lamp is a DUPLICATE of it (the
-    paper's failure mode: an old lamp not recognised); other unmatched estimates are SPURIOUS;
-    true lamps left unmatched are MISSED.
-    """
-    e = np.asarray(est_xy, dtype=float).reshape(-1, 2)
-    t = np.asarray(true_xy, dtype=float).reshape(-1, 2)
-    per_true = np.full(t.shape[0], np.nan)
-    if e.shape[0] == 0 or t.shape[0] == 0:
-        return LampMatch(
-            np.zeros((0, 2), dtype=np.int64),
-            np.zeros(0),
-            per_true,
-            [],
-            list(range(e.shape[0])),
-            list(range(t.shape[0])),
-            max_dist,
-        )
-    d = np.hypot(e[:, None, 0] - t[None, :, 0], e[:, None, 1] - t[None, :, 1])
-    feasible = d <= max_dist
-    big = max_dist * (e.shape[0] + t.shape[0]) + 1.0
-    rows, cols = linear_sum_assignment(np.where(feasible, d, big))
-    ok = feasible[rows, cols]
-    rows, cols = rows[ok], cols[ok]
-    per_true[cols] = d[rows, cols]
-    matched_true = np.zeros(t.shape[0], dtype=bool)
-    matched_true[cols] = True
-    unmatched = np.setdiff1d(np.arange(e.shape[0]), rows)
-    near_matched = (feasible[unmatched] & matched_true[None, :]).any(axis=1)
-    return LampMatch(
-        pairs=np.column_stack([rows, cols]).astype(np.int64),
-        errors=d[rows, cols],
-        per_true=per_true,
-        duplicates=[int(k) for k in unmatched[near_matched]],
-        spurious=[int(k) for k in unmatched[~near_matched]],
-        missed=[int(k) for k in np.flatnonzero(~matched_true)],
-        max_dist=max_dist,
-    )
-
-
 # --- phases -------------------------------------------------------------------------------
 
 
@@ -405,6 +374,17 @@ class Phase:
     runs: tuple[int, ...] = ()
 
     def mask(self, t: ArrayLike) -> NDArray[np.bool_]:
+        """Which times lie in [t0, t1].
+
+        Parameters
+        ----------
+        t : array_like, shape (N,)
+            Times (s).
+
+        Returns
+        -------
+        ndarray of bool, shape (N,)
+        """
         t = np.asarray(t, dtype=float)
         return (t >= self.t0) & (t <= self.t1)
 
@@ -415,7 +395,21 @@ def phases_from_runs(
     t_span: tuple[float, float],
 ) -> list[Phase]:
     """Phases: ``overall`` (t_span), ``A`` = runs 1..freeze_run, ``after`` = runs after
-    freeze_run (when there are such runs), and ``run<r>`` per run."""
+    freeze_run (when there are such runs), and ``run<r>`` per run.
+
+    Parameters
+    ----------
+    run_intervals : list of (int, float, float)
+        (run, start, end) of each run.
+    freeze_run : int or None
+        The last run before the map is frozen.
+    t_span : (float, float)
+        The compared span (overall).
+
+    Returns
+    -------
+    list of Phase
+    """
     out = [Phase("overall", t_span[0], t_span[1], tuple(r for r, _, _ in run_intervals))]
     if freeze_run is not None and run_intervals:
         a = [iv for iv in run_intervals if iv[0] <= freeze_run]

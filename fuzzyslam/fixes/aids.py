@@ -13,7 +13,8 @@ the plug-ins for the chosen mode, sharing one FLM per ring:
   :class:`HeadingFixAid`, which measures the heading the match leaves free) and, with
   ``fixes.detect_changes``, :class:`ChangeDetector`.
 
-Each aid has ``start_time``, ``on_ring(t, ring, mounts, ekf)``, ``summary()`` and
+Each aid (a :class:`fuzzyslam.fixes.base.FixAid`) has ``start_time``, ``on_ring(t, ring,
+mounts, ekf)``, ``summary()`` and
 ``write(outdir)``. ``start_time`` defaults to the map's freeze time.
 """
 
@@ -54,6 +55,19 @@ def load_frozen_map(
     masses that are not finite or do not sum to 1, a map never frozen, a map built from
     another log or world (``log_id`` differs from ``expect_log_id`` when given), a
     malformed references.yaml (or a missing one when ``need_references``: heading fixes).
+
+    Parameters
+    ----------
+    fgm_dir : Path
+        The map directory.
+    expect_log_id : str or None
+        The log's identity the map must have (None: any).
+    need_references : bool
+        references.yaml is required (heading fixes).
+
+    Returns
+    -------
+    FrozenMap
     """
     from fuzzyslam.maps.mapio import load_fgm
 
@@ -96,6 +110,23 @@ def make_aids(
 
     ``expect_log_id``: the log's identity (``maps.mapio.log_identity``); a map built from
     another log or world is refused.
+
+    Parameters
+    ----------
+    fgm_dir : Path
+        The map directory.
+    mode : str
+        none, heading or pose.
+    cfg : Config
+        The run's config (its ``fixes:`` and ``fgm:`` sections).
+    start_time : float or None
+        Log time (s) from which the aids act (None: the map's freeze time).
+    expect_log_id : str or None
+        The log's identity.
+
+    Returns
+    -------
+    list of FixAid
     """
     if mode not in MODES:
         raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
@@ -106,7 +137,23 @@ def make_aids(
 
 
 def aids_for_map(fm: FrozenMap, mode: str, cfg: Any, start_time: float | None = None) -> list:
-    """The plug-ins for an already loaded map (pure: no I/O)."""
+    """The plug-ins for an already loaded map (pure: no I/O).
+
+    Parameters
+    ----------
+    fm : FrozenMap
+        The loaded map.
+    mode : str
+        none, heading or pose.
+    cfg : Config
+        The run's config.
+    start_time : float or None
+        Log time (s) from which the aids act (None: the map's freeze time).
+
+    Returns
+    -------
+    list of FixAid
+    """
     from fuzzyslam.fixes.changes import ChangeDetector
     from fuzzyslam.fixes.heading import FlmSource, HeadingFixAid
     from fuzzyslam.fixes.pose_aid import PoseFixAid
@@ -162,7 +209,26 @@ def aids_for_log(
     """The aids of ``run LOG [--map map_dir] [--fix fix] [--fix-from fix_from]``: the mode
     ``fix``, else the config's ``fixes.mode`` when a map is given, else none; the map must
     be of the log's world (its identity, maps.mapio.log_identity). UsageError for a fix
-    without a map."""
+    without a map.
+
+    Parameters
+    ----------
+    map_dir : Path or None
+        ``--map``.
+    fix : str or None
+        ``--fix`` (None: the config's ``fixes.mode`` with a map).
+    cfg : Config
+        The run's config.
+    log : path
+        The log (its world's identity).
+    fix_from : float or None
+        ``--fix-from``.
+
+    Returns
+    -------
+    list of FixAid
+        Empty for no fixes.
+    """
     mode = fix if fix is not None else ("none" if map_dir is None else cfg.fixes.mode)
     if mode == "none":
         return []

@@ -19,7 +19,6 @@ centroid; size is the component's larger bounding-box side (m). The plug-in writ
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -30,6 +29,7 @@ import cv2
 import numpy as np
 
 from fuzzyslam.fileio import atomic_path
+from fuzzyslam.fixes.base import FixAid
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import transform_points
@@ -51,6 +51,13 @@ class Change:
     conflict: float  # summed conflict mass of the component
 
     def row(self) -> list[str]:
+        """The row of changes.csv.
+
+        Returns
+        -------
+        list of str
+            t, x, y, size, cells.
+        """
         return [
             format_time(self.t),
             f"{self.x:.4f}",
@@ -61,7 +68,19 @@ class Change:
 
 
 def free_space(fgm: BeliefMap, erode_cells: int) -> np.ndarray:
-    """FGM m(E) eroded by ``erode_cells`` (min over the neighbourhood), float32."""
+    """FGM m(E) eroded by ``erode_cells`` (min over the neighbourhood), float32.
+
+    Parameters
+    ----------
+    fgm : BeliefMap
+        The frozen FGM.
+    erode_cells : int
+        The erosion's half-width (cells); 0: none.
+
+    Returns
+    -------
+    ndarray of float32, shape (H, W)
+    """
     m_e = np.ascontiguousarray(fgm.m_e, dtype=np.float32)
     if erode_cells <= 0:
         return m_e
@@ -70,7 +89,23 @@ def free_space(fgm: BeliefMap, erode_cells: int) -> np.ndarray:
 
 
 def conflict_image(flm: BeliefMap, pose: np.ndarray, fgm_grid: Any, free: np.ndarray) -> np.ndarray:
-    """m_O(FLM) * m_E(FGM) on the FLM's grid, FLM placed at ``pose`` (0 off the map)."""
+    """m_O(FLM) * m_E(FGM) on the FLM's grid, FLM placed at ``pose`` (0 off the map).
+
+    Parameters
+    ----------
+    flm : BeliefMap
+        The ring's FLM (robot frame), shape (h, w).
+    pose : ndarray, shape (3,)
+        Where the FLM is placed.
+    fgm_grid : Grid
+        The FGM's grid.
+    free : ndarray, shape (H, W)
+        :func:`free_space`.
+
+    Returns
+    -------
+    ndarray, shape (h, w)
+    """
     xs, ys = flm.grid.centres()
     world = transform_points(pose, np.stack([xs.ravel(), ys.ravel()], axis=1))
     iy, ix = fgm_grid.cell_of(world)
@@ -90,7 +125,31 @@ def detect_changes(
     min_cells: int,
     link: int = 1,
 ) -> list[Change]:
-    """Connected regions of strong conflict between the FLM at ``pose`` and the FGM."""
+    """Connected regions of strong conflict between the FLM at ``pose`` and the FGM.
+
+    Parameters
+    ----------
+    t : float
+        The ring's time (s).
+    flm : BeliefMap
+        The ring's FLM (robot frame).
+    pose : ndarray, shape (3,)
+        The estimated pose.
+    fgm_grid : Grid
+        The FGM's grid.
+    free : ndarray, shape (H, W)
+        :func:`free_space`.
+    min_conflict : float
+        A cell conflicts above it.
+    min_cells : int
+        Smallest component (conflicting cells).
+    link : int
+        Dilation (cells) joining fragments.
+
+    Returns
+    -------
+    list of Change
+    """
     k = conflict_image(flm, np.asarray(pose, float), fgm_grid, free)
     mask = (k > min_conflict).astype(np.uint8)
     if not mask.any():
@@ -121,10 +180,13 @@ def detect_changes(
     ]
 
 
-class ChangeDetector:
-    """Plug-in of ``fuzzyslam run``: change detections per ring, written to changes.csv."""
+class ChangeDetector(FixAid):
+    """Plug-in of ``fuzzyslam run``: change detections per ring, written to changes.csv
+    (its ``decisions`` are the detections, :class:`Change`)."""
 
     kind = "changes"
+    csv_name = "changes.csv"
+    csv_fields = CHANGE_FIELDS
 
     def __init__(
         self,
@@ -133,18 +195,30 @@ class ChangeDetector:
         flm_source: Callable[[Any, np.ndarray], BeliefMap],
         start_time: float = 0.0,
     ) -> None:
+        super().__init__(params, start_time)
         self.grid = fgm.grid
         self.fgm = fgm
-        self.params = params
         self.free = free_space(fgm, params.change_erode_cells)
         self.flm_source = flm_source
-        self.start_time = float(start_time)
-        self.changes: list[Change] = []
+        self.decisions: list[Change] = []
         self.rings = 0
         self.uncertain = 0
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
-        if t < self.start_time:
+        """Detect changes in the ring's FLM, when the position is known well enough.
+
+        Parameters
+        ----------
+        t : float
+            The ring's log time (s).
+        ring : Ring
+            The sonar ring (ranges (M,), max ranges (M,), fov).
+        mounts : ndarray, shape (M, 3)
+            The sonars' poses in base_link.
+        ekf : FilterView
+            The filter (its pose, covariance, dead reckoning, ``update_robot``).
+        """
+        if not self.started(t):
             return
         self.rings += 1
         cov = ekf.pose_cov
@@ -152,7 +226,7 @@ class ChangeDetector:
             self.uncertain += 1
             return
         flm = self.flm_source(ring, mounts)
-        self.changes += detect_changes(
+        self.decisions += detect_changes(
             t,
             flm,
             ekf.pose,
@@ -164,28 +238,66 @@ class ChangeDetector:
         )
 
     def summary(self) -> dict[str, Any]:
+        """The detector's entry in the run summary.
+
+        Returns
+        -------
+        dict
+            rings, skipped_uncertain, detections, rings_with_detections.
+        """
         return {
             "rings": self.rings,
             "skipped_uncertain": self.uncertain,
-            "detections": len(self.changes),
-            "rings_with_detections": len({c.t for c in self.changes}),
+            "detections": len(self.decisions),
+            "rings_with_detections": len({c.t for c in self.decisions}),
         }
 
     def write(self, outdir: Path) -> None:
-        write_changes(Path(outdir) / "changes.csv", self.changes)
-        draw_changes(Path(outdir) / "changes.png", self.fgm, self.changes)
+        """changes.csv (:class:`FixAid`) and changes.png (:func:`draw_changes`).
+
+        Parameters
+        ----------
+        outdir : Path
+            The run's (staging) output directory.
+        """
+        super().write(outdir)
+        draw_changes(Path(outdir) / "changes.png", self.fgm, self.decisions)
 
     def messages(
         self, topics: Any, start: float | None = None
     ) -> list[tuple[str, str, Any, float]]:
         """``/slam/changes`` (topics.slam_changes) for estimates.mcap: one MarkerArray per
         ring with detections, a red cylinder per detection (diameter = its size); ``start``
-        is unused (the aids' common signature)."""
-        return change_messages(self.changes, topics.slam_changes)
+        is unused (the aids' common signature).
+
+        Parameters
+        ----------
+        topics : Topics
+            The config's topics (the aid's own and the map's).
+        start : float or None
+            The log's start (the map's stamp); None: no map.
+
+        Returns
+        -------
+        list of (str, str, MarkerArray, float)
+        """
+        return change_messages(self.decisions, topics.slam_changes)
 
 
 def change_messages(changes: Sequence[Change], topic: str) -> list[tuple[str, str, Any, float]]:
-    """(topic, type, MarkerArray, t) per time with detections, in time order (map frame)."""
+    """(topic, type, MarkerArray, t) per time with detections, in time order (map frame).
+
+    Parameters
+    ----------
+    changes : sequence of Change
+        The detections.
+    topic : str
+        The topic.
+
+    Returns
+    -------
+    list of (str, str, MarkerArray, float)
+    """
     from itertools import groupby
 
     from fuzzyslam.streams import messages as M
@@ -203,7 +315,17 @@ def change_messages(changes: Sequence[Change], topic: str) -> list[tuple[str, st
 
 def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change]) -> None:
     """changes.png: the frozen FGM (pignistic occupancy, grey) with every detection drawn
-    over it (red, coloured by time from light to dark)."""
+    over it (red, coloured by time from light to dark).
+
+    Parameters
+    ----------
+    path : Path
+        The PNG.
+    fgm : BeliefMap
+        The frozen FGM.
+    changes : sequence of Change
+        The detections.
+    """
     import matplotlib
 
     matplotlib.use("Agg")
@@ -230,9 +352,3 @@ def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change]) -> None:
     plt.close(fig)
 
 
-def write_changes(path: Path, changes: Sequence[Change]) -> None:
-    """changes.csv: ``t,x,y,size,cells``."""
-    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(CHANGE_FIELDS)
-        w.writerows(c.row() for c in changes)

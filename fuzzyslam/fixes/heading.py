@@ -23,7 +23,7 @@ corner (measured on paper_bumps.yaml: 40 cm drift, lamps duplicated).
 Bumps [ours]: ``recover_after`` consecutive gated single-ring fixes that agree mean the
 filter, not the map, is wrong: the robot covariance is inflated (heading by v^2,
 position by (v d)^2, d the path since the last accepted fix) and the streak's fix
-applied (``HeadingFixAid._recovery_streak``). A bump is a step between the true and the
+applied (``fixes.bump_recovery.recovery_streak``). A bump is a step between the true and the
 dead-reckoning headings, so the agreement is tested on the offsets measured -
 odometry heading (a constant plus each ring's noise; the filter's own heading moves
 with the lamp updates), by a chi-square test on their weighted scatter
@@ -71,11 +71,12 @@ import math
 from collections import Counter
 from collections.abc import Callable, Sequence
 from dataclasses import replace
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from fuzzyslam.fixes.base import FixAid
+from fuzzyslam.fixes.bump_recovery import oblique, recovery_streak, streak_offset
 from fuzzyslam.fixes.heading_measure import (  # the paper's measurement; re-exported here
     HEADING_FIELDS,
     FlmSource,
@@ -84,48 +85,19 @@ from fuzzyslam.fixes.heading_measure import (  # the paper's measurement; re-exp
     decide_heading_fix,
     nearest_candidate,
     select_corridor,
-    write_heading_fixes,
 )
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.references import Reference
 from fuzzyslam.maps.flm import RecentRings
 from fuzzyslam.maps.grid import BeliefMap
-from fuzzyslam.se2 import wrap_angle, wrap_angle_period
+from fuzzyslam.se2 import wrap_angle
 from fuzzyslam.slam.events import FilterView
-from fuzzyslam.slam.health import chi2_quantile
 
 __all__ = ["HEADING_FIELDS", "FlmSource", "HeadingDecision", "HeadingFixAid", "WallLike",
-           "decide_heading_fix", "nearest_candidate", "select_corridor",
-           "write_heading_fixes"]  # fmt: skip
+           "decide_heading_fix", "nearest_candidate", "select_corridor"]  # fmt: skip
 
 
-def _formed(d: HeadingDecision) -> bool:
-    """A ring whose single-ring fix was formed and compared with the prediction."""
-    return d.reason in ("ok", "gated", "recovered") and math.isfinite(d.measured)
-
-
-def _oblique(refs: Sequence[Reference]) -> bool:
-    """Candidate corridors whose reference angles differ by other than right angles."""
-    a0 = refs[0].angle
-    return any(
-        abs(float(wrap_angle_period(r.angle - a0, math.pi / 2))) > math.radians(1.0) for r in refs
-    )
-
-
-def _streak_offset(rings: Sequence[HeadingDecision]) -> tuple[float, float, float]:
-    """The rings' common offset measured - odometry (rad; weighted mean, weights 1 /
-    sigma_i^2), its sigma 1 / sqrt(sum w_i), and the weighted scatter
-    sum w_i (u_i - mean)^2 (chi-square with len(rings) - 1 dof when they agree).
-    Offsets are taken relative to the first ring's, so no mean straddles +-pi."""
-    u = np.array([x.measured - x.odometry for x in rings], dtype=float)
-    rel = np.asarray(wrap_angle(u - u[0]), dtype=float)
-    w = 1.0 / np.array([x.sigma for x in rings], dtype=float) ** 2
-    mean = float(np.sum(w * rel) / np.sum(w))
-    scatter = float(np.sum(w * (rel - mean) ** 2))
-    return float(wrap_angle(u[0] + mean)), float(1.0 / math.sqrt(float(np.sum(w)))), scatter
-
-
-class HeadingFixAid:
+class HeadingFixAid(FixAid):
     """Plug-in of ``fuzzyslam run``: a heading fix per sonar ring from ``start_time`` on.
 
     ``flm_source(ring, mounts) -> BeliefMap`` (robot frame) and ``wall_direction(flm) ->
@@ -136,7 +108,8 @@ class HeadingFixAid:
     """
 
     kind = "heading"
-    viewer_map: Any = None  # (FGM, references) this aid shows in estimates.mcap (aids.py)
+    csv_name = "heading_fixes.csv"
+    csv_fields = HEADING_FIELDS
 
     def __init__(
         self,
@@ -147,13 +120,11 @@ class HeadingFixAid:
         start_time: float = 0.0,
         rings_flm: Callable[[RecentRings, np.ndarray], BeliefMap] | None = None,
     ) -> None:
+        super().__init__(params, start_time)
         self.refs = list(refs)
-        self.params = params
         self.flm_source = flm_source
         self.wall_direction = wall_direction
-        self.start_time = float(start_time)
         self.decisions: list[HeadingDecision] = []
-        self.before_start = 0
         self.recoveries = 0
         self._last_ok_xy: np.ndarray | None = None  # position at the last accepted fix
         # the last formed fix disagreed with the prediction (NIS above suspect_chi2, or
@@ -177,8 +148,7 @@ class HeadingFixAid:
         self.recent.push(t, ekf.odometry_pose, ring.ranges, ring.max_range, ring.fov)
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
-        if t < self.start_time:
-            self.before_start += 1
+        if not self.started(t):
             return
         if self.recent is not None:
             self._push(t, ring, ekf)
@@ -199,10 +169,10 @@ class HeadingFixAid:
             return
         wall = self.wall_direction(self.flm_source(ring, mounts))
         d = decide_heading_fix(t, wall, self.refs, pose, ekf.pose_cov, self.params)
-        d = replace(d, odometry=odo_heading, oblique=why == "junction" and _oblique(cands))
+        d = replace(d, odometry=odo_heading, oblique=why == "junction" and oblique(cands))
         history = self._single if self.recent is not None else self.decisions
         recover = d.reason == "gated"
-        streak = self._recovery_streak(d, history) if recover else []
+        streak = recovery_streak(d, history, self.params) if recover else []
         if streak:
             # consistent gated fixes: the filter, not the map, is wrong (an unseen bump).
             # The fix applied is the streak's: their common offset from dead reckoning
@@ -214,7 +184,7 @@ class HeadingFixAid:
             # heading was wrong by up to |v| somewhere along the path since the last
             # accepted fix (length d), so the position is off by up to |v| d in an unknown
             # direction: P_xx, P_yy += (v d)^2, which lets the lamps re-associate.
-            offset, sigma, _ = _streak_offset(streak)
+            offset, sigma, _ = streak_offset(streak)
             d = replace(d, measured=float(wrap_angle(d.odometry + offset)), sigma=sigma)
             v = float(wrap_angle(d.measured - d.predicted))
             dist = (
@@ -338,52 +308,6 @@ class HeadingFixAid:
             if d.reason in ("ok", "recovered", "gated")
         ]
 
-    def _recovery_streak(
-        self, d: HeadingDecision, history: Sequence[HeadingDecision]
-    ) -> list[HeadingDecision]:
-        """The rings that call for a recovery at ``d`` (oldest last), or [] when none is
-        due: ``d`` and the previous ``recover_after`` - 1 bump-evidence rings of
-        ``history`` (all within ``recover_window_s``), all gated, whose measurements
-        agree with one another (module docstring, "Bumps").
-
-        Evidence rings are the formed fixes (ok, gated, recovered) outside oblique
-        junctions: a ring that forms no fix (no wall, ambiguous wall or heading, no
-        corridor) is skipped, neither breaking nor extending the streak, and so is a ring
-        at an oblique junction (its fixes can be off by a consistent 7-14 deg for several
-        rings). An ok or recovered evidence ring ends the streak.
-
-        Agreement: a bump is a step between the true and the dead-reckoning headings, so
-        over a streak of about a second the offsets u_i = measured_i - odometry_i are one
-        constant plus each ring's measurement noise (sigma_i, the decision's R), whereas
-        the innovations measured_i - predicted_i also move with the filter (lamp updates
-        drag the heading). The streak agrees when sum((u_i - u_bar)^2 / sigma_i^2), u_bar
-        the weighted mean, is within chi2(k - 1) at ``recover_spread_p``.
-        """
-        k = self.params.recover_after
-        if k <= 0 or d.oblique or d.reason != "gated" or not _formed(d):
-            return []
-        if abs(float(wrap_angle(d.measured - d.predicted))) > math.radians(
-            self.params.recover_max_deg
-        ):
-            return []  # as likely another corridor's walls as a bump (recover_max_deg)
-        last = [d]
-        for x in reversed(history):
-            if len(last) >= k or x.t < d.t - self.params.recover_window_s:
-                break
-            if not _formed(x) or x.oblique:
-                continue
-            if x.reason != "gated":
-                return []
-            last.append(x)
-        if len(last) < k:
-            return []
-        if k == 1:
-            return last
-        _, _, scatter = _streak_offset(last)
-        if not math.isfinite(scatter):
-            return []
-        return last if scatter <= chi2_quantile(self.params.recover_spread_p, k - 1) else []
-
     def summary(self) -> dict[str, Any]:
         reasons = Counter(d.reason for d in self.decisions)
         accepted = [d for d in self.decisions if d.accepted]
@@ -407,6 +331,3 @@ class HeadingFixAid:
         angles = {r.id: r.angle for r in self.refs}
         fixes = heading_fix_messages(self.decisions, angles, topics.heading_fixes)
         return map_messages(self.viewer_map, topics, start) + fixes
-
-    def write(self, outdir: Path) -> None:
-        write_heading_fixes(Path(outdir) / "heading_fixes.csv", self.decisions)

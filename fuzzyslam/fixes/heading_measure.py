@@ -7,16 +7,13 @@ NIS against chi-square with 1 dof), the FLM cache (``FlmSource``) and heading_fi
 
 from __future__ import annotations
 
-import csv
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any, Protocol
 
 import numpy as np
 
-from fuzzyslam.fileio import atomic_path
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.references import Reference, corridors_at, corridors_near
 from fuzzyslam.maps.grid import BeliefMap
@@ -184,11 +181,3 @@ class FlmSource:
             self._flm = self._build(ring, mounts)
             self._key = key
         return self._flm
-
-
-def write_heading_fixes(path: Path, decisions: Sequence[HeadingDecision]) -> None:
-    """heading_fixes.csv: ``t,corridor,measured,predicted,accepted,reason,strength``."""
-    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(HEADING_FIELDS)
-        w.writerows(d.row() for d in decisions)

@@ -44,7 +44,7 @@ class FixParams:
     # single-ring fixes whose measurements agree (recover_spread_p), the heading variance
     # is inflated by the squared innovation (ekf.inflate_robot) and the fix applied; 0:
     # never. Rings forming no fix, and rings at oblique junctions, are skipped
-    # (HeadingFixAid._recovery_streak)
+    # (fixes/bump_recovery.py recovery_streak)
     recover_after: int = field(default=3, metadata={"min": 0})
     # a fix with NIS above this (1 dof, 95 %: 3.84) or gated marks the pose suspect: no
     # new lamp is created until an applied fix agrees again and while the latest ring

@@ -27,18 +27,16 @@ covariance is inflated by the innovation (P_rr += diag(v^2), fading memory: Simo
 
 from __future__ import annotations
 
-import csv
 import itertools
 import math
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Any
 
 import numpy as np
 
-from fuzzyslam.fileio import atomic_path
+from fuzzyslam.fixes.base import FixAid
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.pose_match import PoseMatch, PoseMatcher
 from fuzzyslam.maps.grid import BeliefMap
@@ -96,6 +94,13 @@ class PoseDecision:
     innovation: np.ndarray | None = None  # z - h(x) when the EKF was asked (3,)
 
     def row(self) -> list[str]:
+        """The row of pose_fixes.csv.
+
+        Returns
+        -------
+        list of str
+            t, accepted, reason, x, y, theta, sxx, syy, stt, degenerate, nis.
+        """
         def num(v: float) -> str:
             return "" if not np.isfinite(v) else f"{v:.9g}"
 
@@ -111,11 +116,12 @@ class PoseDecision:
         ]
 
 
-class PoseFixAid:
+class PoseFixAid(FixAid):
     """Plug-in of ``fuzzyslam run``: full-pose fixes update_robot(z, R, idx=[0, 1, 2])."""
 
     kind = "pose"
-    viewer_map: Any = None  # (FGM, references) this aid shows in estimates.mcap (aids.py)
+    csv_name = "pose_fixes.csv"
+    csv_fields = POSE_FIELDS
 
     def __init__(
         self,
@@ -124,12 +130,10 @@ class PoseFixAid:
         flm_source: Callable[[Any, np.ndarray], BeliefMap],
         start_time: float = 0.0,
     ) -> None:
+        super().__init__(params, start_time)
         self.matcher = PoseMatcher(fgm, params)
-        self.params = params
         self.flm_source = flm_source
-        self.start_time = float(start_time)
         self.decisions: list[PoseDecision] = []
-        self.before_start = 0
         self._count = 0
         self._last_odo: np.ndarray | None = None  # dead-reckoning pose at the last applied match
         # gated matches since the last applied one: (measured pose, covariance, odometry)
@@ -178,8 +182,21 @@ class PoseFixAid:
         return True
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
-        if t < self.start_time:
-            self.before_start += 1
+        """Match the ring's FLM against the FGM around the prediction; apply the match
+        (module docstring).
+
+        Parameters
+        ----------
+        t : float
+            The ring's log time (s).
+        ring : Ring
+            The sonar ring (ranges (M,), max ranges (M,), fov).
+        mounts : ndarray, shape (M, 3)
+            The sonars' poses in base_link.
+        ekf : FilterView
+            The filter (its pose, covariance, dead reckoning, ``update_robot``).
+        """
+        if not self.started(t):
             return
         self._count += 1
         if (self._count - 1) % self.params.pose_every:
@@ -245,7 +262,13 @@ class PoseFixAid:
         )
 
     def update_rows(self) -> list[dict[str, Any]]:
-        """The EKF update attempts, as rows of run's updates.csv (docs/contracts.md sec. 2)."""
+        """The EKF update attempts, as rows of run's updates.csv (docs/contracts.md sec. 2).
+
+        Returns
+        -------
+        list of dict
+            t, kind, id, dof, nis, accepted, v0, v1, v2 of each match the filter was asked about.
+        """
         return [
             {
                 "t": d.t,
@@ -263,6 +286,14 @@ class PoseFixAid:
         ]
 
     def summary(self) -> dict[str, Any]:
+        """The aid's entry in the run summary.
+
+        Returns
+        -------
+        dict
+            rings, before_start, accepted, reasons, degenerate, mean_nis, recoveries,
+            wide_searches, near_last_match, recentred_searches.
+        """
         reasons = Counter(d.reason for d in self.decisions)
         acc = [d for d in self.decisions if d.accepted]
         return {
@@ -280,19 +311,20 @@ class PoseFixAid:
 
     def messages(self, topics: Any, start: float | None = None) -> list:
         """The pose matches for estimates.mcap (``topics.pose_fixes``, fixes/viewer.py),
-        and the map (``viewer_map``, stamped ``start``) when this aid shows it."""
+        and the map (``viewer_map``, stamped ``start``) when this aid shows it.
+
+        Parameters
+        ----------
+        topics : Topics
+            The config's topics (the aid's own and the map's).
+        start : float or None
+            The log's start (the map's stamp); None: no map.
+
+        Returns
+        -------
+        list of (str, str, message, float)
+        """
         from fuzzyslam.fixes.viewer import map_messages, pose_fix_messages
 
         fixes = pose_fix_messages(self.decisions, topics.pose_fixes)
         return map_messages(self.viewer_map, topics, start) + fixes
-
-    def write(self, outdir: Path) -> None:
-        write_pose_fixes(Path(outdir) / "pose_fixes.csv", self.decisions)
-
-
-def write_pose_fixes(path: Path, decisions: list[PoseDecision]) -> None:
-    """pose_fixes.csv: ``t,accepted,reason,x,y,theta,sxx,syy,stt,degenerate,nis``."""
-    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
-        w = csv.writer(fh, lineterminator="\n")
-        w.writerow(POSE_FIELDS)
-        w.writerows(d.row() for d in decisions)

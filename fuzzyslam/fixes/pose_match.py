@@ -95,6 +95,18 @@ def olson_blur(m_o: np.ndarray, sigma_cells: float) -> np.ndarray:
 
     Computed as exp of a grey dilation of log m_o with the non-flat structuring element
     -d^2 / (2 sigma^2) (scipy.ndimage.grey_dilation: max over the footprint of input + s).
+
+    Parameters
+    ----------
+    m_o : ndarray, shape (H, W)
+        The FGM's occupied mass.
+    sigma_cells : float
+        The blur's sigma (cells); 0 or less: none.
+
+    Returns
+    -------
+    ndarray of float32, shape (H, W)
+        Ob.
     """
     m = np.asarray(m_o, dtype=np.float64)
     if sigma_cells <= 0:
@@ -109,7 +121,20 @@ def olson_blur(m_o: np.ndarray, sigma_cells: float) -> np.ndarray:
 
 
 def flm_evidence(flm: BeliefMap, min_mass: float) -> tuple[np.ndarray, np.ndarray]:
-    """Robot-frame centres (N, 2) and masses (N, 2) = (m(O), m(E)) of the FLM's evidence cells."""
+    """Robot-frame centres (N, 2) and masses (N, 2) = (m(O), m(E)) of the FLM's evidence cells.
+
+    Parameters
+    ----------
+    flm : BeliefMap
+        The ring's FLM (robot frame).
+    min_mass : float
+        Cells with m(O) or m(E) above it count.
+
+    Returns
+    -------
+    pts : ndarray, shape (N, 2)
+    masses : ndarray, shape (N, 2)
+    """
     xs, ys = flm.grid.centres()
     mask = (flm.m_o > min_mass) | (flm.m_e > min_mass)
     pts = np.stack([xs[mask], ys[mask]], axis=1)
@@ -158,7 +183,25 @@ class PoseMatcher:
     def scores(
         self, pts: np.ndarray, masses: np.ndarray, pose0: np.ndarray, thetas: np.ndarray, w: int
     ) -> np.ndarray:
-        """Scores (n_theta, 2w+1, 2w+1): [k, ty+w, tx+w] is s(x0 + tx res, y0 + ty res, theta_k)."""
+        """Scores (n_theta, 2w+1, 2w+1): [k, ty+w, tx+w] is s(x0 + tx res, y0 + ty res, theta_k).
+
+        Parameters
+        ----------
+        pts : ndarray, shape (N, 2)
+            FLM cell centres (robot frame).
+        masses : ndarray, shape (N, 2)
+            Their (m(O), m(E)).
+        pose0 : ndarray, shape (3,)
+            The search's centre.
+        thetas : ndarray, shape (n_theta,)
+            The headings searched (rad).
+        w : int
+            Half-width of the window (cells).
+
+        Returns
+        -------
+        ndarray, shape (n_theta, 2w+1, 2w+1)
+        """
         res = self.grid.resolution
         c = (np.asarray(pose0[:2], float) - np.asarray(self.grid.origin)) / res - 0.5
         base = np.floor(c).astype(int)

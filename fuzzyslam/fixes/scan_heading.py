@@ -49,7 +49,23 @@ from fuzzyslam.slam.events import FilterView
 
 
 def scan_segments(ring: Any, mounts: np.ndarray, p: FixParams) -> Segments:
-    """The straight segments of one scan (robot frame), with the config's constants."""
+    """The straight segments of one scan (robot frame), with the config's constants.
+
+    Parameters
+    ----------
+    ring : Ring
+        One scan read as a ring of narrow sensors (ranges (N,), max_range).
+    mounts : ndarray, shape (N, 3)
+        The beams' mounts (x, y, angle) in the robot frame.
+    p : FixParams
+        ``scan_line_points``, ``scan_line_tolerance``, ``scan_line_gap``,
+        ``scan_line_min_length``.
+
+    Returns
+    -------
+    Segments
+        The fitted segments (``fixes/scan_lines.py``).
+    """
     pts = scan_end_points(ring.ranges, ring.max_range, mounts)
     return fit_segments(
         pts, p.scan_line_points, p.scan_line_tolerance, p.scan_line_gap, p.scan_line_min_length
@@ -59,7 +75,23 @@ def scan_segments(ring: Any, mounts: np.ndarray, p: FixParams) -> Segments:
 def candidate_references(
     xy: np.ndarray, cov_xy: np.ndarray, refs: Sequence[Reference], margin: float
 ) -> list[Reference]:
-    """The unflagged references within ``margin`` + 3 sigma_xy of ``xy`` (module docstring)."""
+    """The unflagged references within ``margin`` + 3 sigma_xy of ``xy`` (module docstring).
+
+    Parameters
+    ----------
+    xy : ndarray, shape (2,)
+        The predicted position (m).
+    cov_xy : ndarray, shape (2, 2)
+        Its covariance; sigma_xy is the square root of its largest eigenvalue.
+    refs : sequence of Reference
+        The map's corridor references.
+    margin : float
+        Distance (m) added to 3 sigma_xy.
+
+    Returns
+    -------
+    list of Reference
+    """
     sig = math.sqrt(max(float(np.linalg.eigvalsh(np.asarray(cov_xy, dtype=float))[-1]), 0.0))
     return [r for r in corridors_near(xy, refs, margin + 3.0 * sig) if not r.ambiguous]
 
@@ -72,7 +104,26 @@ def measure_heading(
     p: FixParams,
 ) -> tuple[float, float, Reference | None, FamilyDirection | None, str]:
     """(theta, sigma, reference, family, reason) of one scan (module docstring); theta
-    and sigma are NaN, and the reason says why, when no fix is formed."""
+    and sigma are NaN, and the reason says why, when no fix is formed.
+
+    Parameters
+    ----------
+    segs : Segments
+        The scan's segments (robot frame).
+    refs : sequence of Reference
+        The candidate references (``candidate_references``).
+    predicted : float
+        The filter's heading (rad).
+    p_tt : float
+        Its variance (rad^2): the wall search gate is max(gate, 3 sqrt(p_tt)).
+    p : FixParams
+        The scan-line constants.
+
+    Returns
+    -------
+    tuple
+        theta (rad), sigma (rad), the reference used, its wall family, the reason.
+    """
     nan = math.nan
     if not refs:
         return nan, nan, None, None, "no_corridor"
@@ -110,8 +161,7 @@ class ScanLineHeadingAid(HeadingFixAid):
         super().__init__(refs, params, None, None, start_time)  # type: ignore[arg-type]
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
-        if t < self.start_time:
-            self.before_start += 1
+        if not self.started(t):
             return
         p = self.params
         pose = np.asarray(ekf.pose, dtype=float)

@@ -31,7 +31,23 @@ def heading_fix_messages(
 ) -> list[tuple[str, str, Any, float]]:
     """(topic, type, MarkerArray, t) of every formed heading fix (finite measured heading
     and robot position, a known corridor): a line of ``HEADING_LINE_M`` through the robot
-    at reference angle + predicted - measured (module docstring)."""
+    at reference angle + predicted - measured (module docstring).
+
+    Parameters
+    ----------
+    decisions : sequence of HeadingDecision
+        The aid's decisions.
+    ref_angles : dict of int to float
+        Reference angle (rad) of each corridor id.
+    topic : str
+        The topic.
+    frame : str
+        The markers' frame.
+
+    Returns
+    -------
+    list of (str, str, MarkerArray, float)
+    """
     out = []
     for d in decisions:
         ang = ref_angles.get(int(d.corridor))
@@ -52,7 +68,21 @@ def pose_fix_messages(
     decisions: Sequence[Any], topic: str, frame: str = "map"
 ) -> list[tuple[str, str, Any, float]]:
     """(topic, type, MarkerArray, t) of every pose match (finite matched pose): an arrow
-    (0.5 m) at the matched pose, coloured by whether the filter took it."""
+    (0.5 m) at the matched pose, coloured by whether the filter took it.
+
+    Parameters
+    ----------
+    decisions : sequence of PoseDecision
+        The aid's decisions.
+    topic : str
+        The topic.
+    frame : str
+        The markers' frame.
+
+    Returns
+    -------
+    list of (str, str, MarkerArray, float)
+    """
     out = []
     for d in decisions:
         p = np.asarray(d.pose, dtype=float)
@@ -67,7 +97,21 @@ def pose_fix_messages(
 def map_messages(viewer_map: Any, topics: Any, start: float | None) -> list:
     """/map, its conflict layer and references (maps/viewer.py) of the FGM the fixes use,
     stamped ``start`` (the log's start); nothing when ``viewer_map`` or ``start`` is None.
-    ``viewer_map``: (BeliefMap, [(id, name, angle, polygon)])."""
+    ``viewer_map``: (BeliefMap, [(id, name, angle, polygon)]).
+
+    Parameters
+    ----------
+    viewer_map : tuple or None
+        (BeliefMap, [(id, name, angle, polygon (K, 2))]).
+    topics : Topics
+        The config's topics.
+    start : float or None
+        The stamp (s).
+
+    Returns
+    -------
+    list of (str, str, message, float)
+    """
     if viewer_map is None or start is None:
         return []
     from fuzzyslam.maps.viewer import fgm_messages

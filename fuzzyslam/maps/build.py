@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +26,7 @@ from fuzzyslam.maps.fgm import FgmBuilder
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.quality import wall_quality
 from fuzzyslam.maps.references import Reference, extract_references
+from fuzzyslam.maps.summary import MapSummary, ReferenceEntry, ReferenceTruth, WallQuality
 from fuzzyslam.progress import Progress
 from fuzzyslam.se2 import interpolate_poses, wrap_angle_period
 from fuzzyslam.slam import calibration
@@ -34,6 +35,7 @@ from fuzzyslam.streams.ranges import open_ranges
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.sonar import RingStats
 from fuzzyslam.streams.tum import read_tum
+from fuzzyslam.summary import OMIT, as_json
 
 
 @dataclass
@@ -52,7 +54,21 @@ class MapOptions:
 
 def covered(tq: np.ndarray, t: np.ndarray, max_gap: float) -> np.ndarray:
     """Whether each query time lies within the trajectory, between samples at most
-    ``max_gap`` seconds apart (or within max_gap/2 of a sample)."""
+    ``max_gap`` seconds apart (or within max_gap/2 of a sample).
+
+    Parameters
+    ----------
+    tq : ndarray, shape (K,)
+        Query times (s).
+    t : ndarray, shape (N,)
+        The trajectory's times (sorted).
+    max_gap : float
+        Largest gap (s) between samples.
+
+    Returns
+    -------
+    ndarray of bool, shape (K,)
+    """
     tq = np.asarray(tq, dtype=float)
     j = np.searchsorted(t, tq)
     lo = t[np.clip(j - 1, 0, len(t) - 1)]
@@ -70,7 +86,24 @@ def _gaps(tq: np.ndarray, ok: np.ndarray) -> list[tuple[float, float]]:
 
 
 def freeze_time(reader: LogReader, cfg: Config, opts: MapOptions) -> tuple[float, str]:
-    """The window's end and how it was chosen."""
+    """The window's end and how it was chosen.
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log (its scenario).
+    cfg : Config
+        ``fgm.freeze_run``.
+    opts : MapOptions
+        ``--until``, ``--until-run``.
+
+    Returns
+    -------
+    t : float
+        The freeze time (s).
+    how : str
+        How it was chosen.
+    """
     if opts.until is not None:
         return float(opts.until), "--until"
     scenario = read_scenario(reader)
@@ -130,7 +163,19 @@ class _RingTable:
 
 
 def read_rings(reader: LogReader, cfg: Config, t_end: float, ranges: str | None = None):
-    """(times (N,), ranges (N, M), max ranges (N, M), fov, mounts (M, 3), stats)."""
+    """(times (N,), ranges (N, M), max ranges (N, M), fov, mounts (M, 3), stats).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    cfg : Config
+        Topics and range sensor.
+    t_end : float
+        The window's end (s).
+    ranges : str or None
+        sonar|scan (None: the config's).
+    """
     times, rr, rmax, *rest = read_rings_compact(reader, cfg, t_end, ranges)
     return times, rr.astype(float), rmax.astype(float), *rest
 
@@ -141,7 +186,21 @@ def read_rings_compact(
     """``read_rings`` with ranges and max ranges as float32 (the exact values of the
     Range and LaserScan messages, a quarter of the memory of lists of float64 rings;
     _RingTable). The range sensor is ``sensor`` or the log's (``open_ranges``, with
-    ``ranges`` = sonar|scan|None overriding ``ranges.source``)."""
+    ``ranges`` = sonar|scan|None overriding ``ranges.source``).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    cfg : Config
+        Topics and range sensor.
+    t_end : float
+        The window's end (s).
+    ranges : str or None
+        sonar|scan (None: the config's).
+    sensor : RangeSensor, optional
+        An opened range sensor.
+    """
     if sensor is None:
         sensor = open_ranges(reader, cfg, ranges)
     mounts = sensor.mounts
@@ -158,8 +217,20 @@ def read_rings_compact(
     return times, rr, rmax, fov, mounts, stats
 
 
-def reference_truth(refs: list[Reference], world: World | None) -> list[dict[str, Any]]:
-    """Each reference against the nearest true corridor axis (by centre-line distance)."""
+def reference_truth(refs: list[Reference], world: World | None) -> list[ReferenceTruth]:
+    """Each reference against the nearest true corridor axis (by centre-line distance).
+
+    Parameters
+    ----------
+    refs : list of Reference
+        The map's references.
+    world : World or None
+        The simulated world.
+
+    Returns
+    -------
+    list of ReferenceTruth
+    """
     if world is None or not world.corridors:
         return []
     out = []
@@ -174,12 +245,12 @@ def reference_truth(refs: list[Reference], world: World | None) -> list[dict[str
                 best, bd = cor, d
         err = float(wrap_angle_period(ref.angle - best.axis, np.pi))
         out.append(
-            {
-                "id": ref.id,
-                "true_corridor": best.name,
-                "true_axis_deg": float(np.rad2deg(best.axis)),
-                "error_deg": float(np.rad2deg(err)),
-            }
+            ReferenceTruth(
+                id=ref.id,
+                true_corridor=best.name,
+                true_axis_deg=float(np.rad2deg(best.axis)),
+                error_deg=float(np.rad2deg(err)),
+            )
         )
     return out
 
@@ -200,7 +271,27 @@ def _write_viewer_log(path: Path, fgm, refs: list[Reference], t: float, cfg: Con
 def build_map(
     log_path: str | Path, traj_path: str | Path, outdir: str | Path, cfg: Config, opts: MapOptions
 ) -> dict[str, Any]:
-    """Run the map stage; returns the JSON summary (also written as summary.json)."""
+    """Run the map stage; returns the JSON summary (:class:`MapSummary` as JSON, also
+    written as summary.json).
+
+    Parameters
+    ----------
+    log_path : path
+        The log.
+    traj_path : path
+        The TUM trajectory.
+    outdir : path
+        The map directory.
+    cfg : Config
+        The loaded config.
+    opts : MapOptions
+        The command's choices.
+
+    Returns
+    -------
+    dict
+        The JSON summary.
+    """
     wall0 = time.perf_counter()
     params: MapParams = cfg.fgm
     outdir = Path(outdir)
@@ -249,52 +340,51 @@ def build_map(
     quality = None
     if world is not None:
         q = wall_quality(fgm, world.wall_array)
-        quality = {
-            "precision": q.precision,
-            "recall": q.recall,
-            "map_cells": q.map_cells,
-            "true_cells": q.true_cells,
-        }
-    summary: dict[str, Any] = {
-        "log": str(log_path),
-        "trajectory": str(traj_path),
-        "output": str(outdir),
-        "log_id": log_id,
-        "cells": int(np.prod(fgm.grid.shape)),
-        "shape": list(fgm.grid.shape),
-        "origin": list(fgm.grid.origin),
-        "resolution": fgm.grid.resolution,
-        "rings_used": builder.rings,
-        "readings_used": builder.readings,
-        "readings_skipped": skipped_readings,
-        "rings_skipped": int((~ok).sum()),
-        "sonar_stats": stats.as_dict(),
-        "range_sensor": sensor.describe(),
-        "trajectory_repeats_dropped": tum_dropped,
-        "cell_updates": builder.cell_updates,
-        "cells_touched": int((fgm.m_t < 1.0).sum()),
-        "freeze_time": t_end,
-        "freeze_rule": how,
-        "references": [
-            {
-                "id": r.id,
-                "name": r.name,
-                "angle_deg": float(np.rad2deg(r.angle)),
-                "strength": r.strength,
-                "ambiguous": r.ambiguous,
-            }
-            for r in refs
-        ],
-        "reference_truth": truth,
-        "wall_quality": quality,
-        "build_seconds": build_s,
-        "log_damage": reader.damage(),
-    }
+        quality = WallQuality(
+            precision=q.precision,
+            recall=q.recall,
+            map_cells=q.map_cells,
+            true_cells=q.true_cells,
+        )
     # the odometry calibration of the trajectory's run at the freeze time (run --map starts
     # from it: slam/calibration.py), when that run had one
     calib = calibration.at_time(Path(traj_path).parent / "calibration.csv", t_end)
-    if calib is not None:
-        summary["calibration"] = calib
+    summary = MapSummary(
+        log=str(log_path),
+        trajectory=str(traj_path),
+        output=str(outdir),
+        log_id=log_id,
+        cells=int(np.prod(fgm.grid.shape)),
+        shape=list(fgm.grid.shape),
+        origin=list(fgm.grid.origin),
+        resolution=fgm.grid.resolution,
+        rings_used=builder.rings,
+        readings_used=builder.readings,
+        readings_skipped=skipped_readings,
+        rings_skipped=int((~ok).sum()),
+        sonar_stats=stats.as_dict(),
+        range_sensor=sensor.describe(),
+        trajectory_repeats_dropped=tum_dropped,
+        cell_updates=builder.cell_updates,
+        cells_touched=int((fgm.m_t < 1.0).sum()),
+        freeze_time=t_end,
+        freeze_rule=how,
+        references=[
+            ReferenceEntry(
+                id=r.id,
+                name=r.name,
+                angle_deg=float(np.rad2deg(r.angle)),
+                strength=r.strength,
+                ambiguous=r.ambiguous,
+            )
+            for r in refs
+        ],
+        reference_truth=truth,
+        wall_quality=quality,
+        build_seconds=build_s,
+        log_damage=reader.damage(),
+        calibration=calib if calib is not None else OMIT,
+    )
     owns = ("fgm.png", "conflict.png", "hough.png", "calibration.yaml")
     with OutputDir(outdir, owns=owns) as tmp:
         mapio.save_fgm(tmp / "fgm.npz", fgm, True, t_end, log_id)
@@ -320,8 +410,8 @@ def build_map(
                 mounts,
                 params,
             )
-        summary["wall_seconds"] = time.perf_counter() - wall0
+        out = as_json(replace(summary, wall_seconds=time.perf_counter() - wall0))
         (tmp / "summary.json").write_text(
-            json.dumps(summary, indent=2, sort_keys=True) + "\n", encoding="utf-8"
+            json.dumps(out, indent=2, sort_keys=True) + "\n", encoding="utf-8"
         )
-    return summary
+    return out

@@ -52,6 +52,23 @@ def reading_masses(
     """(m(E), m(O)) of cells at (rho, phi) from readings r (echo: bool), elementwise.
 
     The equations are in the module docstring.
+
+    Parameters
+    ----------
+    rho, phi : ndarray, shape (...)
+        Cells' range (m) and bearing (rad) from the sensor's axis.
+    r : ndarray, shape (...)
+        The readings (m).
+    echo : ndarray of bool, shape (...)
+        Whether each reading is an echo (else no echo up to the maximum range).
+    half_angle : float
+        The cone's half-angle (rad).
+    params : MapParams
+        The sonar model's constants.
+
+    Returns
+    -------
+    m_e, m_o : ndarray, shape (...)
     """
     dr = params.range_tolerance
     a = np.clip(1.0 - np.abs(phi / half_angle) ** params.angular_exponent, 0.0, None)
@@ -82,6 +99,21 @@ def cone_cells(
     boxes of the first version, 2.9 with tight boxes). All rows and cells are
     enumerated at once with repeat/arange index arithmetic (no loop over sectors, rows or
     cells; the loop is over the two edge rays).
+
+    Parameters
+    ----------
+    grid : Grid
+        The grid.
+    sensors : ndarray, shape (P, 3)
+        The sensors' poses in the grid's frame.
+    r0, r1 : ndarray, shape (P,)
+        The sectors' inner and outer radii (m).
+    half_angle : float
+        The cone's half-angle (rad).
+
+    Returns
+    -------
+    piece, iy, ix : ndarray of int, shape (C,)
     """
     n = len(sensors)
     if n == 0:
@@ -144,6 +176,17 @@ class BatchEvidence:
     readings: int
 
     def ring(self, k: int) -> RingEvidence:
+        """Ring ``k``'s evidence.
+
+        Parameters
+        ----------
+        k : int
+            The ring (0 <= k < K).
+
+        Returns
+        -------
+        RingEvidence
+        """
         a, b = int(self.ptr[k]), int(self.ptr[k + 1])
         return RingEvidence(
             self.cells[a:b],
@@ -170,6 +213,27 @@ def rings_evidence(
     (overlapping cones) are combined with the conjunctive rule
     (:func:`fuzzyslam.maps.tbm.conjunctive_grouped`). All rings, readings and cells are
     processed in one vectorised pass (no loop).
+
+    Parameters
+    ----------
+    grid : Grid
+        The grid.
+    poses : ndarray, shape (K, 3)
+        The robot's poses.
+    ranges : ndarray, shape (K, M)
+        The readings (NaN: none).
+    max_range : ndarray, shape (K, M), or float
+        The maximum ranges.
+    fov : float
+        The cone's full angle (rad).
+    mounts : ndarray, shape (M, 3)
+        The sensors' poses on the robot.
+    params : MapParams
+        The sonar model's constants.
+
+    Returns
+    -------
+    BatchEvidence
     """
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
     k_rings = len(poses)
@@ -237,7 +301,29 @@ def ring_evidence(
     mounts: np.ndarray,
     params: MapParams,
 ) -> RingEvidence:
-    """Evidence of one ring at robot ``pose``: :func:`rings_evidence` with K = 1."""
+    """Evidence of one ring at robot ``pose``: :func:`rings_evidence` with K = 1.
+
+    Parameters
+    ----------
+    grid : Grid
+        The grid.
+    pose : ndarray, shape (3,)
+        The robot's pose.
+    ranges : ndarray, shape (M,)
+        The readings (NaN: none).
+    max_range : ndarray, shape (M,), or float
+        The maximum ranges.
+    fov : float
+        The cone's full angle (rad).
+    mounts : ndarray, shape (M, 3)
+        The sensors' poses on the robot.
+    params : MapParams
+        The sonar model's constants.
+
+    Returns
+    -------
+    RingEvidence
+    """
     ranges = np.asarray(ranges, dtype=float).reshape(1, -1)
     rmax = np.broadcast_to(np.asarray(max_range, dtype=float), ranges.shape[1:]).reshape(1, -1)
     b = rings_evidence(grid, np.asarray(pose, float)[None], ranges, rmax, fov, mounts, params)

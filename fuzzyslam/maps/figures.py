@@ -36,7 +36,23 @@ def fig_fgm(
     world: World | None,
     landmarks: np.ndarray | None,
 ) -> None:
-    """The paper's Fig. 1: BetP(O) of the FGM, the path, references, lamps."""
+    """The paper's Fig. 1: BetP(O) of the FGM, the path, references, lamps.
+
+    Parameters
+    ----------
+    path : Path
+        The PNG.
+    fgm : BeliefMap
+        The FGM.
+    poses : ndarray, shape (N, 3)
+        The path.
+    refs : list of Reference
+        The corridor references.
+    world : World or None
+        The true walls and lamps (simulated logs).
+    landmarks : ndarray, shape (K, 2), or None
+        Estimated lamps.
+    """
     fig, ax = plt.subplots(figsize=(9, 6))
     im = ax.imshow(
         fgm.pignistic_occupied(),
@@ -68,7 +84,15 @@ def fig_fgm(
 
 
 def fig_conflict(path: Path, fgm: BeliefMap) -> None:
-    """Conflict mass m(emptyset) per cell."""
+    """Conflict mass m(emptyset) per cell.
+
+    Parameters
+    ----------
+    path : Path
+        The PNG.
+    fgm : BeliefMap
+        The FGM.
+    """
     fig, ax = plt.subplots(figsize=(9, 6))
     im = ax.imshow(fgm.m_c, origin="lower", extent=fgm.grid.extent, cmap="magma", vmin=0)
     fig.colorbar(im, ax=ax, label="m(conflict) (mass)")
@@ -128,7 +152,23 @@ def fig_hough(
 ) -> None:
     """The paper's Fig. 2: each corridor segment's wall evidence and an FLM (top) with
     their Hough planes and peaks (bottom); a grid of such pairs, ``HOUGH_COLUMNS`` per
-    row, for buildings with many corridors."""
+    row, for buildings with many corridors.
+
+    Parameters
+    ----------
+    path : Path
+        The PNG.
+    fgm : BeliefMap
+        The FGM.
+    refs : list of Reference
+        The corridor references.
+    flm : BeliefMap or None
+        One ring's FLM.
+    flm_wd : WallDirection or None
+        Its Hough wall direction.
+    params : MapParams
+        The ``fgm:`` section.
+    """
     n = len(refs) + (1 if flm is not None else 0)
     cols = min(max(n, 1), HOUGH_COLUMNS)
     blocks = -(-max(n, 1) // cols)
@@ -182,7 +222,20 @@ def fig_hough(
 
 
 def pick_flm_ring(poses: np.ndarray, refs: list[Reference]) -> int:
-    """A ring in the middle of the longest corridor (for the Fig. 2 FLM)."""
+    """A ring in the middle of the longest corridor (for the Fig. 2 FLM).
+
+    Parameters
+    ----------
+    poses : ndarray, shape (N, 3)
+        The rings' poses.
+    refs : list of Reference
+        The corridor references.
+
+    Returns
+    -------
+    int
+        The ring's index.
+    """
     if not refs:
         return len(poses) // 2
     best = max(refs, key=lambda r: r.stretch.length if r.stretch is not None else 0.0)
@@ -204,7 +257,39 @@ def write_all(
     mounts: np.ndarray,
     params: MapParams,
 ) -> list[str]:
-    """Write fgm.png, conflict.png, hough.png into ``outdir``; returns their names."""
+    """Write fgm.png, conflict.png, hough.png into ``outdir``; returns their names.
+
+    Parameters
+    ----------
+    outdir : Path
+        The (staging) map directory.
+    fgm : BeliefMap
+        The frozen FGM.
+    poses : ndarray, shape (N, 3)
+        The rings' poses.
+    refs : list of Reference
+        The corridor references.
+    world : World or None
+        The true world (simulated logs).
+    landmarks_path : Path or None
+        A run's landmarks.yaml.
+    times : ndarray, shape (N,)
+        The rings' times (s).
+    ranges : ndarray, shape (N, M)
+        Their readings.
+    rmax : ndarray, shape (N, M)
+        Their maximum ranges.
+    fov : float
+        The cone's full angle (rad).
+    mounts : ndarray, shape (M, 3)
+        The sensors' poses on the robot.
+    params : MapParams
+        The ``fgm:`` section.
+
+    Returns
+    -------
+    list of str
+    """
     lm = read_landmarks(landmarks_path)[0] if landmarks_path is not None else None
     fig_fgm(outdir / "fgm.png", fgm, poses, refs, world, lm)
     fig_conflict(outdir / "conflict.png", fgm)

@@ -36,7 +36,17 @@ class LocalMap(BeliefMap):
 
 
 def flm_grid(params: MapParams) -> Grid:
-    """The FLM's grid: ``Grid.centred(flm_cells, resolution)`` in base_link."""
+    """The FLM's grid: ``Grid.centred(flm_cells, resolution)`` in base_link.
+
+    Parameters
+    ----------
+    params : MapParams
+        ``flm_cells`` and ``resolution``.
+
+    Returns
+    -------
+    Grid
+    """
     return Grid.centred(params.flm_cells, params.resolution)
 
 
@@ -48,7 +58,26 @@ def build_flm(
     params: MapParams | None = None,
 ) -> LocalMap:
     """FLM of one ring: ranges (16,) (NaN = missing), max ranges, cone fov (rad), sonar
-    mounts (16, 3) in base_link. Returns a BeliefMap on :func:`flm_grid` (robot frame)."""
+    mounts (16, 3) in base_link. Returns a BeliefMap on :func:`flm_grid` (robot frame).
+
+    Parameters
+    ----------
+    ranges : ndarray, shape (M,)
+        The readings (NaN: missing).
+    max_range : ndarray, shape (M,), or float
+        The maximum ranges.
+    fov : float
+        The cone's full angle (rad).
+    mounts : ndarray, shape (M, 3)
+        The sonars' poses in base_link.
+    params : MapParams, optional
+        The ``fgm:`` section (default values without it).
+
+    Returns
+    -------
+    LocalMap
+        The FLM (masses on :func:`flm_grid`) and its echoes.
+    """
     params = params if params is not None else MapParams()
     grid = flm_grid(params)
     bm = BeliefMap.vacuous(grid)
@@ -76,6 +105,25 @@ def build_flm_rings(
     The echoes of all K rings are kept (placed by ``poses``) for the tangent refinement:
     on the simulated paper log, 8 rings placed by dead reckoning give a wall direction
     within 0.35 deg mean |error| (std 0.44) against 1.18 / 1.57 for one ring.
+
+    Parameters
+    ----------
+    poses : ndarray, shape (K, 3)
+        The rings' poses in the newest ring's robot frame.
+    ranges : ndarray, shape (K, M)
+        The readings (NaN: missing).
+    max_range : ndarray, shape (K, M), or float
+        The maximum ranges.
+    fov : float
+        The cone's full angle (rad).
+    mounts : ndarray, shape (M, 3)
+        The sonars' poses in base_link.
+    params : MapParams, optional
+        The ``fgm:`` section.
+
+    Returns
+    -------
+    LocalMap
     """
     from fuzzyslam.maps.fgm import FgmBuilder
 
@@ -119,6 +167,23 @@ class RecentRings:
         max_range: np.ndarray | float,
         fov: float,
     ) -> None:
+        """Keep a ring (the oldest dropped beyond ``count`` rings or ``window`` s; a ring back in
+
+        time or of another size starts afresh).
+
+        Parameters
+        ----------
+        t : float
+            Log time (s).
+        pose : ndarray, shape (3,)
+            Its dead-reckoning pose.
+        ranges : ndarray, shape (M,)
+            The readings (NaN: missing).
+        max_range : ndarray, shape (M,), or float
+            The maximum ranges.
+        fov : float
+            The cone's full angle (rad).
+        """
         ranges = np.asarray(ranges, dtype=float).ravel()
         if self._t and (t < self._t[-1] or len(ranges) != len(self._ranges[-1])):
             self.clear()  # time went back or the ring changed: start afresh
@@ -132,11 +197,27 @@ class RecentRings:
                 buf.pop(0)
 
     def clear(self) -> None:
+        """Forget every ring.
+
+
+        """
         for buf in (self._t, self._poses, self._ranges, self._rmax):
             buf.clear()
 
     def flm(self, mounts: np.ndarray, params: MapParams | None = None) -> LocalMap:
-        """FLM of the kept rings in the newest ring's robot frame."""
+        """FLM of the kept rings in the newest ring's robot frame.
+
+        Parameters
+        ----------
+        mounts : ndarray, shape (M, 3)
+            The sonars' poses in base_link.
+        params : MapParams, optional
+            The ``fgm:`` section.
+
+        Returns
+        -------
+        LocalMap
+        """
         if not self._t:
             raise ValueError("no rings pushed")
         poses = np.array(self._poses)

@@ -44,17 +44,43 @@ class Grid:
         return cls((float(ox), float(oy)), float(resolution), (max(ny, 1), max(nx, 1)))
 
     def cell_of(self, pts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """(iy, ix) integer indices of points (N, 2); may be out of range."""
+        """(iy, ix) integer indices of points (N, 2); may be out of range.
+
+        Parameters
+        ----------
+        pts : ndarray, shape (N, 2)
+            Points (m).
+
+        Returns
+        -------
+        iy, ix : ndarray of int, shape (N,)
+        """
         p = np.asarray(pts, dtype=float).reshape(-1, 2)
         ix = np.floor((p[:, 0] - self.origin[0]) / self.resolution).astype(np.int64)
         iy = np.floor((p[:, 1] - self.origin[1]) / self.resolution).astype(np.int64)
         return iy, ix
 
     def inside(self, iy: np.ndarray, ix: np.ndarray) -> np.ndarray:
+        """Whether cell indices lie on the grid.
+
+        Parameters
+        ----------
+        iy, ix : ndarray of int, shape (N,)
+            Cell indices.
+
+        Returns
+        -------
+        ndarray of bool, shape (N,)
+        """
         return (iy >= 0) & (iy < self.shape[0]) & (ix >= 0) & (ix < self.shape[1])
 
     def centres(self) -> tuple[np.ndarray, np.ndarray]:
-        """(ny, nx) arrays X, Y of cell-centre coordinates."""
+        """(ny, nx) arrays X, Y of cell-centre coordinates.
+
+        Returns
+        -------
+        X, Y : ndarray, shape (ny, nx)
+        """
         xs = self.origin[0] + (np.arange(self.shape[1]) + 0.5) * self.resolution
         ys = self.origin[1] + (np.arange(self.shape[0]) + 0.5) * self.resolution
         return np.meshgrid(xs, ys)
@@ -83,19 +109,40 @@ class BeliefMap:
         return cls(grid, z.copy(), z.copy(), np.ones(grid.shape, dtype=np.float32), z.copy())
 
     def copy(self) -> BeliefMap:
+        """An independent copy (the grid shared).
+
+        Returns
+        -------
+        BeliefMap
+        """
         return BeliefMap(
             self.grid, self.m_e.copy(), self.m_o.copy(), self.m_t.copy(), self.m_c.copy()
         )
 
     def belief_occupied(self) -> np.ndarray:
-        """bel(O) = m(O)."""
+        """bel(O) = m(O).
+
+        Returns
+        -------
+        ndarray, shape (ny, nx)
+        """
         return self.m_o
 
     def plausibility_occupied(self) -> np.ndarray:
-        """pl(O) = m(O) + m(Theta)."""
+        """pl(O) = m(O) + m(Theta).
+
+        Returns
+        -------
+        ndarray, shape (ny, nx)
+        """
         return self.m_o + self.m_t
 
     def pignistic_occupied(self) -> np.ndarray:
-        """BetP(O) = (m(O) + m(Theta)/2) / (1 - m(emptyset)) (Smets & Kennes 1994)."""
+        """BetP(O) = (m(O) + m(Theta)/2) / (1 - m(emptyset)) (Smets & Kennes 1994).
+
+        Returns
+        -------
+        ndarray, shape (ny, nx)
+        """
         denom = np.maximum(1.0 - self.m_c, 1e-6)
         return (self.m_o + 0.5 * self.m_t) / denom

@@ -52,7 +52,19 @@ class FgmFile:
 def log_identity(world: dict[str, Any] | None, fallback: str = "") -> str:
     """Identity of the world a log was recorded in: ``world-`` + 16 hex digits of the
     SHA-256 of its canonical JSON; for logs without a world record, ``log-`` + the hash
-    of ``fallback`` (e.g. the log's file name). ``run --map`` compares it with its log's."""
+    of ``fallback`` (e.g. the log's file name). ``run --map`` compares it with its log's.
+
+    Parameters
+    ----------
+    world : dict or None
+        The log's world record.
+    fallback : str
+        Used without a world.
+
+    Returns
+    -------
+    str
+    """
     if world is not None:
         text = json.dumps(world, sort_keys=True, separators=(",", ":"))
         return "world-" + hashlib.sha256(text.encode()).hexdigest()[:16]
@@ -62,7 +74,21 @@ def log_identity(world: dict[str, Any] | None, fallback: str = "") -> str:
 def grid_problem(origin: Any, resolution: Any, shape: Any) -> str | None:
     """Why a map's geometry is unusable (None if it is fine): resolution finite within
     [MIN_RESOLUTION, MAX_RESOLUTION], origin two finite numbers within MAX_COORDINATE,
-    shape two positive integers of at most MAX_CELLS cells together."""
+    shape two positive integers of at most MAX_CELLS cells together.
+
+    Parameters
+    ----------
+    origin : Any
+        (x, y) of the grid's corner (m).
+    resolution : Any
+        Cell size (m).
+    shape : Any
+        (ny, nx).
+
+    Returns
+    -------
+    str or None
+    """
     res = np.asarray(resolution, dtype=float)
     org = np.asarray(origin, dtype=float)
     shp = np.asarray(shape)
@@ -80,7 +106,21 @@ def grid_problem(origin: Any, resolution: Any, shape: Any) -> str | None:
 
 def fgm_problem(bm: BeliefMap, frozen: bool, freeze_time: float) -> str | None:
     """Why a map is unusable (None if it is fine): its geometry, masses that are not
-    finite numbers in [0, 1], a frozen map without a finite freeze time."""
+    finite numbers in [0, 1], a frozen map without a finite freeze time.
+
+    Parameters
+    ----------
+    bm : BeliefMap
+        The FGM (masses (ny, nx)).
+    frozen : bool
+        Whether the map is frozen.
+    freeze_time : float
+        Its freeze time (s).
+
+    Returns
+    -------
+    str or None
+    """
     g = bm.grid
     problem = grid_problem(g.origin, g.resolution, g.shape)
     if problem:
@@ -100,7 +140,21 @@ def save_fgm(
     path: str | os.PathLike, bm: BeliefMap, frozen: bool, freeze_time: float, log_id: str
 ) -> None:
     """Write fgm.npz (masses float32 (ny, nx), grid geometry, freeze state, log_id);
-    a map that ``load_fgm`` would refuse is not written (InputError naming ``path``)."""
+    a map that ``load_fgm`` would refuse is not written (InputError naming ``path``).
+
+    Parameters
+    ----------
+    path : path
+        fgm.npz.
+    bm : BeliefMap
+        The FGM (masses (ny, nx)).
+    frozen : bool
+        Whether the map is frozen.
+    freeze_time : float
+        Its freeze time (s).
+    log_id : str
+        :func:`log_identity` of its log.
+    """
     problem = fgm_problem(bm, frozen, freeze_time)
     if problem:
         raise InputError(path, f"refusing to write an unusable map: {problem}")
@@ -121,7 +175,17 @@ def save_fgm(
 
 
 def load_fgm(path: str | os.PathLike) -> FgmFile:
-    """Read fgm.npz; a missing key or inconsistent shape is an InputError naming the file."""
+    """Read fgm.npz; a missing key or inconsistent shape is an InputError naming the file.
+
+    Parameters
+    ----------
+    path : path
+        fgm.npz.
+
+    Returns
+    -------
+    FgmFile
+    """
     p = check_input_file(path, "fuzzy map")
     try:
         with np.load(p, allow_pickle=False) as z:
@@ -166,7 +230,19 @@ def _npz_member_shape(path: Path, key: str) -> tuple[int, ...] | None:
 
 def occupancy_image(bm: BeliefMap, unknown_t: float = 0.9) -> np.ndarray:
     """Trinary PGM pixels (ny, nx), top row = max y: occupied where BetP(O) > 0.65, free
-    where BetP(O) < 0.196, unknown where nothing is known (m(T) > ``unknown_t``) or between."""
+    where BetP(O) < 0.196, unknown where nothing is known (m(T) > ``unknown_t``) or between.
+
+    Parameters
+    ----------
+    bm : BeliefMap
+        The FGM (masses (ny, nx)).
+    unknown_t : float
+        m(Theta) above which a cell is unknown.
+
+    Returns
+    -------
+    ndarray of uint8, shape (ny, nx)
+    """
     betp = bm.pignistic_occupied()
     img = np.full(bm.grid.shape, PGM_UNKNOWN, dtype=np.uint8)
     known = bm.m_t <= unknown_t
@@ -176,7 +252,17 @@ def occupancy_image(bm: BeliefMap, unknown_t: float = 0.9) -> np.ndarray:
 
 
 def save_nav2(yaml_path: str | os.PathLike, pgm_path: str | os.PathLike, bm: BeliefMap) -> None:
-    """Write the nav2 map_server pair (binary PGM P5 + YAML naming it)."""
+    """Write the nav2 map_server pair (binary PGM P5 + YAML naming it).
+
+    Parameters
+    ----------
+    yaml_path : path
+        fgm.yaml.
+    pgm_path : path
+        fgm.pgm.
+    bm : BeliefMap
+        The FGM (masses (ny, nx)).
+    """
     img = occupancy_image(bm)
     ny, nx = img.shape
     with atomic_path(pgm_path) as tmp:
@@ -195,7 +281,17 @@ def save_nav2(yaml_path: str | os.PathLike, pgm_path: str | os.PathLike, bm: Bel
 
 
 def read_pgm(path: str | os.PathLike) -> np.ndarray:
-    """Read a binary (P5, 8-bit) PGM written by :func:`save_nav2`."""
+    """Read a binary (P5, 8-bit) PGM written by :func:`save_nav2`.
+
+    Parameters
+    ----------
+    path : path
+        The PGM.
+
+    Returns
+    -------
+    ndarray of uint8, shape (H, W)
+    """
     p = check_input_file(path, "PGM image")
     data = p.read_bytes()
     parts = data.split(maxsplit=4)

@@ -27,7 +27,19 @@ class WallQuality:
 
 
 def wall_mask(grid: Grid, walls: np.ndarray) -> np.ndarray:
-    """Cells crossed by wall segments (N, 4) x0 y0 x1 y1, sampled every resolution/4."""
+    """Cells crossed by wall segments (N, 4) x0 y0 x1 y1, sampled every resolution/4.
+
+    Parameters
+    ----------
+    grid : Grid
+        The map's grid (ny, nx).
+    walls : ndarray, shape (N, 4)
+        Wall segments.
+
+    Returns
+    -------
+    ndarray of bool, shape (ny, nx)
+    """
     walls = np.asarray(walls, dtype=float).reshape(-1, 4)
     mask = np.zeros(grid.shape, dtype=bool)
     if len(walls) == 0:
@@ -44,12 +56,36 @@ def wall_mask(grid: Grid, walls: np.ndarray) -> np.ndarray:
 
 
 def map_wall_mask(bm: BeliefMap) -> np.ndarray:
-    """Occupied cells of the map (row 0 at the origin's y, like the masses)."""
+    """Occupied cells of the map (row 0 at the origin's y, like the masses).
+
+    Parameters
+    ----------
+    bm : BeliefMap
+        The FGM (masses (ny, nx)).
+
+    Returns
+    -------
+    ndarray of bool, shape (ny, nx)
+    """
     return np.flipud(occupancy_image(bm)) == PGM_OCCUPIED
 
 
 def wall_quality(bm: BeliefMap, walls: np.ndarray, tolerance: int = 1) -> WallQuality:
-    """Precision/recall of the map's wall cells against true walls (module docstring)."""
+    """Precision/recall of the map's wall cells against true walls (module docstring).
+
+    Parameters
+    ----------
+    bm : BeliefMap
+        The FGM (masses (ny, nx)).
+    walls : ndarray, shape (N, 4)
+        True wall segments.
+    tolerance : int
+        Cells a wall may be off.
+
+    Returns
+    -------
+    WallQuality
+    """
     truth = wall_mask(bm.grid, walls)
     found = map_wall_mask(bm)
     k = np.ones((2 * tolerance + 1, 2 * tolerance + 1), np.uint8)

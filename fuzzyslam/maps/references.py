@@ -52,7 +52,17 @@ class Stretch:
         return self.s1 - self.s0
 
     def polygon(self, band: float) -> np.ndarray:
-        """(4, 2) rectangle along the line, ``band`` either side."""
+        """(4, 2) rectangle along the line, ``band`` either side.
+
+        Parameters
+        ----------
+        band : float
+            Half-width (m).
+
+        Returns
+        -------
+        ndarray, shape (4, 2)
+        """
         d = self.direction
         n = np.array([-d[1], d[0]])
         a = self.point + self.s0 * d
@@ -71,7 +81,19 @@ def _fit_line(p: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
 
 
 def resample_path(xy: np.ndarray, step: float) -> np.ndarray:
-    """Points every ``step`` metres of arc length along a polyline (N, 2)."""
+    """Points every ``step`` metres of arc length along a polyline (N, 2).
+
+    Parameters
+    ----------
+    xy : ndarray, shape (N, 2)
+        The polyline.
+    step : float
+        Spacing (m).
+
+    Returns
+    -------
+    ndarray, shape (K, 2)
+    """
     xy = np.asarray(xy, dtype=float).reshape(-1, 2)
     seg = np.hypot(*np.diff(xy, axis=0).T)
     s = np.concatenate([[0.0], np.cumsum(seg)])
@@ -86,7 +108,23 @@ def resample_path(xy: np.ndarray, step: float) -> np.ndarray:
 def straight_stretches(
     xy: np.ndarray, params: MapParams, step: float = 0.1, window: float = 0.5
 ) -> list[Stretch]:
-    """Straight stretches of a path (steps 1-3 of the module docstring)."""
+    """Straight stretches of a path (steps 1-3 of the module docstring).
+
+    Parameters
+    ----------
+    xy : ndarray, shape (N, 2)
+        The path.
+    params : MapParams
+        The stretches' thresholds.
+    step : float
+        Resampling step (m).
+    window : float
+        Half-window (m) of the local direction.
+
+    Returns
+    -------
+    list of Stretch
+    """
     p = resample_path(xy, step)
     k = max(round(window / step), 1)
     if len(p) < 2 * k + 2:
@@ -109,7 +147,19 @@ def straight_stretches(
 
 
 def merge_stretches(stretches: list[Stretch], params: MapParams) -> list[Stretch]:
-    """Merge stretches of the same corridor (step 4 of the module docstring)."""
+    """Merge stretches of the same corridor (step 4 of the module docstring).
+
+    Parameters
+    ----------
+    stretches : list of Stretch
+        :func:`straight_stretches`.
+    params : MapParams
+        The merge thresholds.
+
+    Returns
+    -------
+    list of Stretch
+    """
     merged: list[list[Stretch]] = []
     tol = np.deg2rad(params.segment_turn_deg)
     for st in stretches:  # a few dozen stretches at most
@@ -142,7 +192,21 @@ def merge_stretches(stretches: list[Stretch], params: MapParams) -> list[Stretch
 
 
 def extract_references(fgm: BeliefMap, path_xy: np.ndarray, params: MapParams) -> list[Reference]:
-    """Corridor references of a (frozen) FGM built along ``path_xy`` (module docstring)."""
+    """Corridor references of a (frozen) FGM built along ``path_xy`` (module docstring).
+
+    Parameters
+    ----------
+    fgm : BeliefMap
+        The frozen FGM.
+    path_xy : ndarray, shape (N, 2)
+        The path it was built along.
+    params : MapParams
+        The ``fgm:`` section.
+
+    Returns
+    -------
+    list of Reference
+    """
     stretches = merge_stretches(straight_stretches(path_xy, params), params)
     X, Y = fgm.grid.centres()
     w_all = wall_weights(fgm, params.wall_threshold)

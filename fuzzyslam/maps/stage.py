@@ -27,7 +27,38 @@ def run(
 ) -> dict[str, Any]:
     """The FGM of ``log``'s range readings along ``trajectory`` (TUM) into ``outdir``, frozen
     at the end of run ``until_run`` or at the log time ``until`` (at most one; default the
-    config's ``fgm.freeze_run``). Returns the JSON summary (also summary.json)."""
+    config's ``fgm.freeze_run``). Returns the JSON summary (also summary.json).
+
+    Parameters
+    ----------
+    log : path
+        The log.
+    trajectory : path
+        The TUM trajectory.
+    outdir : path
+        The map directory.
+    config : str or None
+        A YAML path or an embedded name.
+    until_run : int or None
+        ``--until-run``.
+    until : float or None
+        ``--until``.
+    skip_uncovered : bool
+        ``--skip-uncovered``.
+    landmarks : path or None
+        ``--landmarks``.
+    figures : bool
+        Draw the PNGs.
+    ranges : str or None
+        ``--ranges``.
+    sort : bool
+        ``--sort``.
+
+    Returns
+    -------
+    dict
+        The JSON summary (:class:`~fuzzyslam.maps.summary.MapSummary` as JSON).
+    """
     if until is not None and until_run is not None:
         raise UsageError("give at most one of --until-run and --until")
     cfg = load_config(config)

@@ -69,7 +69,26 @@ def readings_in_frame(
     fov: float,
     mounts: np.ndarray,
 ) -> RingReadings:
-    """Echoes of K rings (ranges (K, M)) taken at ``poses`` (K, 3) of one frame."""
+    """Echoes of K rings (ranges (K, M)) taken at ``poses`` (K, 3) of one frame.
+
+    Parameters
+    ----------
+    poses : ndarray, shape (K, 3)
+        The rings' poses in the frame.
+    ranges : ndarray, shape (K, M)
+        The readings (NaN: none).
+    max_range : ndarray, shape (K, M), or float
+        The maximum ranges (readings at or beyond them are not echoes).
+    fov : float
+        The cone's full angle (rad).
+    mounts : ndarray, shape (M, 3)
+        The sensors' poses on the robot.
+
+    Returns
+    -------
+    RingReadings
+        The N echoes: sensor poses (N, 3), ranges (N,).
+    """
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
     mounts = np.asarray(mounts, dtype=float).reshape(-1, 3)
     ranges = np.asarray(ranges, dtype=float).reshape(len(poses), len(mounts))
@@ -99,7 +118,25 @@ class TangentFit:
 def predict_ranges(
     psi: float, c: float, sensors: np.ndarray, half: float
 ) -> tuple[np.ndarray, ...]:
-    """r(psi, c) of every sensor (module docstring) with dr/dpsi, dr/dc, delta, p."""
+    """r(psi, c) of every sensor (module docstring) with dr/dpsi, dr/dc, delta, p.
+
+    Parameters
+    ----------
+    psi : float
+        The wall's normal direction (rad).
+    c : float
+        The wall's offset along the normal (m).
+    sensors : ndarray, shape (N, 3)
+        The sensors' poses (x, y, axis).
+    half : float
+        The cone's half-angle (rad).
+
+    Returns
+    -------
+    r, dr_dpsi, dr_dc, delta, p : ndarray, shape (N,)
+        Predicted ranges, their derivatives, the angle outside the cone, the
+        perpendicular distances.
+    """
     n = np.array([np.cos(psi), np.sin(psi)])
     dn = np.array([-np.sin(psi), np.cos(psi)])
     p = c - sensors[:, :2] @ n
@@ -145,7 +182,31 @@ def fit_walls(
     Wall j has normal psi + walls[j] (default: the two sides of a corridor). Starts at
     ``psi0``; at every iteration each reading is assigned to the wall predicting it best
     if within ``tolerance`` (else an outlier), then one Gauss-Newton step solves the
-    weighted normal equations J^T W J dx = J^T W (r - r_hat)."""
+    weighted normal equations J^T W J dx = J^T W (r - r_hat).
+
+    Parameters
+    ----------
+    rd : RingReadings
+        The echoes (N).
+    psi0 : float
+        The first guess of psi (rad).
+    sigma_frac : float
+        Range noise as a fraction of the range.
+    quantum : float
+        Range quantisation (m).
+    tolerance : float
+        Largest residual (m) of a reading assigned to a wall.
+    delta_max : float
+        Largest angle (rad) outside the cone of a reading's wall.
+    walls : tuple of float
+        The walls' normals relative to psi (rad).
+    iterations : int
+        Gauss-Newton steps.
+
+    Returns
+    -------
+    TangentFit
+    """
     nw = len(walls)
     psi = float(psi0)
     cs = np.array([_initial_offset(psi + w, rd, delta_max, tolerance) for w in walls])

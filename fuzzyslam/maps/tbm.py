@@ -32,6 +32,16 @@ def conjunctive(m1: Masses, m2: Masses) -> Masses:
     The last term pair is the new contradiction between the two bodies of evidence
     (Smets 1990, eq. 2.2). Commutative and associative; the vacuous function
     (m(T) = 1) is its neutral element.
+
+    Parameters
+    ----------
+    m1, m2 : tuple of 4 ndarray, each of one shape (...)
+        m(E), m(O), m(Theta), m(emptyset).
+
+    Returns
+    -------
+    tuple of 4 ndarray, each of one shape (...)
+        m(E), m(O), m(Theta), m(emptyset) of the combination.
     """
     e1, o1, t1, c1 = m1
     e2, o2, t2, c2 = m2
@@ -48,6 +58,18 @@ def discount(m: Masses, alpha: np.ndarray | float) -> Masses:
     m'(A) = alpha m(A) for every A != Theta (the empty set included),
     m'(Theta) = 1 - alpha + alpha m(Theta).
     alpha = 1 keeps m; alpha = 0 gives the vacuous function.
+
+    Parameters
+    ----------
+    m : tuple of 4 ndarray, each of one shape (...)
+        m(E), m(O), m(Theta), m(emptyset).
+    alpha : ndarray, shape (...), or float
+        The reliability in [0, 1].
+
+    Returns
+    -------
+    tuple of 4 ndarray, each of one shape (...)
+        m(E), m(O), m(Theta), m(emptyset).
     """
     e, o, t, c = m
     return alpha * e, alpha * o, 1.0 - alpha + alpha * t, alpha * c
@@ -59,6 +81,18 @@ def forgetting_factor(conflict: np.ndarray, gamma: float) -> np.ndarray:
     A cell whose stored evidence is contradicted (large conflict mass, e.g. because the
     poses that placed it were wrong) keeps only a fraction of it before the next
     combination, so later, better-placed readings overwrite it.
+
+    Parameters
+    ----------
+    conflict : ndarray, shape (...)
+        m(emptyset) per cell.
+    gamma : float
+        The forgetting rate.
+
+    Returns
+    -------
+    ndarray, shape (...)
+        alpha.
     """
     return 1.0 - gamma * np.clip(conflict, 0.0, 1.0)
 
@@ -67,6 +101,16 @@ def commonality(m: Masses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Commonalities q(A) = sum of m(B) over B containing A (Smets 1990, sec. 3).
 
     q(E) = m(E) + m(T), q(O) = m(O) + m(T), q(T) = m(T); q(emptyset) = 1 always.
+
+    Parameters
+    ----------
+    m : tuple of 4 ndarray, each of one shape (...)
+        m(E), m(O), m(Theta), m(emptyset).
+
+    Returns
+    -------
+    q_e, q_o, q_t : ndarray, shape (...)
+        q(E), q(O), q(Theta).
     """
     e, o, t, _c = m
     return e + t, o + t, t
@@ -74,7 +118,18 @@ def commonality(m: Masses) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def from_commonality(q_e: np.ndarray, q_o: np.ndarray, q_t: np.ndarray) -> Masses:
     """Masses of commonalities (Moebius inversion): m(T) = q(T), m(E) = q(E) - q(T),
-    m(O) = q(O) - q(T), m(emptyset) = 1 - q(E) - q(O) + q(T)."""
+    m(O) = q(O) - q(T), m(emptyset) = 1 - q(E) - q(O) + q(T).
+
+    Parameters
+    ----------
+    q_e, q_o, q_t : ndarray, shape (...)
+        q(E), q(O), q(Theta).
+
+    Returns
+    -------
+    tuple of 4 ndarray, each of one shape (...)
+        m(E), m(O), m(Theta), m(emptyset).
+    """
     return q_e - q_t, q_o - q_t, q_t, 1.0 - q_e - q_o + q_t
 
 
@@ -86,6 +141,20 @@ def conjunctive_grouped(m: Masses, groups: np.ndarray, ngroups: int) -> Masses:
     exponentiated sum of logarithms with ``np.bincount`` (no loop over cells). Equivalent
     to folding :func:`conjunctive` over each group in any order (commutativity and
     associativity). Commonalities of zero are handled by counting them separately.
+
+    Parameters
+    ----------
+    m : tuple of 4 ndarray, shape (N,)
+        The mass functions, m(E), m(O), m(Theta), m(emptyset).
+    groups : ndarray of int, shape (N,)
+        Each function's group in [0, ngroups).
+    ngroups : int
+        Number of groups.
+
+    Returns
+    -------
+    tuple of 4 ndarray, shape (ngroups,)
+        The combination per group (vacuous for an empty group).
     """
     out = []
     for q in commonality(m):
@@ -100,7 +169,18 @@ def conjunctive_grouped(m: Masses, groups: np.ndarray, ngroups: int) -> Masses:
 
 def clip_masses(m: Masses) -> Masses:
     """Remove float rounding: clip to [0, 1] and put the residue on the conflict mass so the
-    four masses sum to exactly 1 (up to float precision)."""
+    four masses sum to exactly 1 (up to float precision).
+
+    Parameters
+    ----------
+    m : tuple of 4 ndarray, each of one shape (...)
+        m(E), m(O), m(Theta), m(emptyset).
+
+    Returns
+    -------
+    tuple of 4 ndarray, each of one shape (...)
+        m(E), m(O), m(Theta), m(emptyset), summing to 1.
+    """
     e, o, t, _c = (np.clip(x, 0.0, 1.0) for x in m)
     c = np.clip(1.0 - e - o - t, 0.0, 1.0)
     return e, o, t, c

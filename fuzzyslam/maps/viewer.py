@@ -23,7 +23,17 @@ REFERENCE_COLOUR = (0.0, 0.45, 0.70, 1.0)  # blue (Okabe-Ito), colour-blind safe
 
 def occupancy_values(bm: BeliefMap) -> np.ndarray:
     """(ny, nx) int8 occupancy in percent, 100 BetP(O) rounded; -1 where nothing is known
-    (m(Theta) > ``UNKNOWN_T``, the nav2 PGM's unknown)."""
+    (m(Theta) > ``UNKNOWN_T``, the nav2 PGM's unknown).
+
+    Parameters
+    ----------
+    bm : BeliefMap
+        The FGM (masses (ny, nx)).
+
+    Returns
+    -------
+    ndarray of int8, shape (ny, nx)
+    """
     v = np.rint(100.0 * np.clip(bm.pignistic_occupied(), 0.0, 1.0)).astype(np.int8)
     v[bm.m_t > UNKNOWN_T] = -1
     return v
@@ -31,14 +41,40 @@ def occupancy_values(bm: BeliefMap) -> np.ndarray:
 
 def conflict_values(bm: BeliefMap) -> np.ndarray:
     """(ny, nx) int8 conflict mass m(emptyset) in percent; -1 where no reading ever fell
-    (m(Theta) = 1)."""
+    (m(Theta) = 1).
+
+    Parameters
+    ----------
+    bm : BeliefMap
+        The FGM (masses (ny, nx)).
+
+    Returns
+    -------
+    ndarray of int8, shape (ny, nx)
+    """
     v = np.rint(100.0 * np.clip(bm.m_c, 0.0, 1.0)).astype(np.int8)
     v[bm.m_t >= 1.0 - 1e-12] = -1
     return v
 
 
 def grid_message(bm: BeliefMap, values: np.ndarray, t: float, frame: str = "map") -> Any:
-    """nav_msgs/OccupancyGrid of ``values`` (ny, nx) on the FGM's grid."""
+    """nav_msgs/OccupancyGrid of ``values`` (ny, nx) on the FGM's grid.
+
+    Parameters
+    ----------
+    bm : BeliefMap
+        The FGM (masses (ny, nx)).
+    values : ndarray of int8, shape (ny, nx)
+        The cells' values.
+    t : float
+        The stamp (s).
+    frame : str
+        The frame.
+
+    Returns
+    -------
+    OccupancyGrid
+    """
     g = bm.grid
     return M.occupancy_grid(t, frame, values, g.resolution, (g.origin[0], g.origin[1]))
 
@@ -50,7 +86,21 @@ def reference_markers(
     (rad, mod pi), region polygon (K, 2)): per reference its region (closed line strip,
     namespace ``region``), its reference direction through the region's centroid (a
     line as long as the region's extent along it, ``direction``) and a text label
-    ``name angle deg`` (``label``); marker id = reference id."""
+    ``name angle deg`` (``label``); marker id = reference id.
+
+    Parameters
+    ----------
+    refs : sequence of (int, str, float, ndarray of shape (K, 2))
+        id, name, angle (rad), region polygon.
+    t : float
+        The stamp (s).
+    frame : str
+        The frame.
+
+    Returns
+    -------
+    MarkerArray
+    """
     markers = []
     for rid, name, angle, poly in refs:
         poly = np.asarray(poly, dtype=float).reshape(-1, 2)
@@ -83,7 +133,25 @@ def fgm_messages(
     frame: str = "map",
 ) -> list[tuple[str, str, Any, float]]:
     """(topic, type, message, t) of an FGM: ``topics.map`` (occupancy), ``topics.map_conflict``
-    (the conflict layer), ``topics.map_references`` (the corridor references, when any)."""
+    (the conflict layer), ``topics.map_references`` (the corridor references, when any).
+
+    Parameters
+    ----------
+    bm : BeliefMap
+        The FGM (masses (ny, nx)).
+    refs : sequence of (int, str, float, ndarray of shape (K, 2))
+        The corridor references.
+    t : float
+        The stamp (s).
+    topics : Topics
+        The config's topics.
+    frame : str
+        The frame.
+
+    Returns
+    -------
+    list of (str, str, message, float)
+    """
     out = [
         (topics.map, M.OCCUPANCY_GRID, grid_message(bm, occupancy_values(bm), t, frame), t),
         (topics.map_conflict, M.OCCUPANCY_GRID, grid_message(bm, conflict_values(bm), t, frame),

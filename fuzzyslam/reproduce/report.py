@@ -3,13 +3,71 @@
 from __future__ import annotations
 
 import json
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from fuzzyslam.reproduce.plan import Step, evaluations
-from fuzzyslam.reproduce.table import Aggregate, SeedResult, headline_key, run_labels
+from fuzzyslam.reproduce.table import (
+    Aggregate,
+    RowResult,
+    SeedResult,
+    headline_key,
+    run_labels,
+)
+from fuzzyslam.summary import as_json
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunInfo:
+    """results.json's ``info``: the command, suite, configs, seeds, where the steps ran,
+    and the wall time."""
+
+    command: str
+    suite: str
+    configs: list[str]
+    seeds: list[int]
+    jobs: int
+    engine: str
+    workers: list[str]
+    logs_kept: bool
+    steps: int
+    version: str
+    wall_s: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class StepRecord:
+    """A step of the plan as it ran: its command, seconds, stderr, worker and pid."""
+
+    key: str
+    command: str
+    seconds: float
+    stderr: str
+    worker: str
+    pid: int | None
+
+
+@dataclass(frozen=True, kw_only=True)
+class SeedTime:
+    """A seed's summed step time (s)."""
+
+    seed: int
+    seconds: float | None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Results:
+    """results.json: the run's info, the runs' labels, the table's rows, the seeds'
+    times and every step."""
+
+    info: RunInfo
+    labels: dict[str, str]
+    rows: list[RowResult]
+    seeds: list[SeedTime]
+    steps: list[StepRecord]
 
 
 def fmt(v: float | None, digits: int) -> str:
@@ -145,9 +203,9 @@ def write_report(
     lines = [
         "# fuzzyslam reproduce: the paper's experiment",
         "",
-        f"`{info['command']}`: suite `{info['suite']}` (configs {', '.join(info['configs'])}), "
-        f"seeds {', '.join(map(str, seeds))}, {info['jobs']} worker processes, "
-        f"{info['wall_s']:.0f} s wall time, fuzzyslam {info['version']}.",
+        f"`{info.command}`: suite `{info.suite}` (configs {', '.join(info.configs)}), "
+        f"seeds {', '.join(map(str, seeds))}, {info.jobs} worker processes, "
+        f"{info.wall_s:.0f} s wall time, fuzzyslam {info.version}.",
         "Every number below comes from the `metrics.json` of an `evaluate` step "
         "(`seedN/eval_*/`); `commands.sh` lists every step as a stage command.",
         "",
@@ -217,19 +275,19 @@ def write_results(
     path: Path,
     aggs: list[Aggregate],
     results: list[SeedResult],
-    info: dict,
-    steps: list[dict],
+    info: RunInfo,
+    steps: list[StepRecord],
 ) -> None:
     """results.json: the table (values per seed, mean, std, min, max, target met, the
     headline key with its unit), info, and every step (command, seconds, its stderr)."""
     labels = run_labels(results[0]) if results else {}
-    data = {
-        "info": info,
-        "labels": labels,
-        "rows": [  # each row with its key in the headline JSON (stage.py)
-            {**a.to_dict(), "key": headline_key(a.row, labels) if labels else None} for a in aggs
+    data = Results(
+        info=info,
+        labels=labels,
+        rows=[  # each row with its key in the headline JSON (stage.py)
+            a.result(headline_key(a.row, labels) if labels else None) for a in aggs
         ],
-        "seeds": [{"seed": r.seed, "seconds": r.seconds} for r in map(SeedResult.of, results)],
-        "steps": steps,
-    }
-    path.write_text(json.dumps(data, indent=2, sort_keys=True), encoding="utf-8")
+        seeds=[SeedTime(seed=r.seed, seconds=r.seconds) for r in map(SeedResult.of, results)],
+        steps=steps,
+    )
+    path.write_text(json.dumps(as_json(data), indent=2, sort_keys=True), encoding="utf-8")

@@ -21,7 +21,14 @@ from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, _in_place_only
 from fuzzyslam.reproduce.execute import StepResult, execute
 from fuzzyslam.reproduce.plan import FULL, QUICK, build_plan, evaluations
-from fuzzyslam.reproduce.report import draw_summary, write_commands, write_report, write_results
+from fuzzyslam.reproduce.report import (
+    RunInfo,
+    StepRecord,
+    draw_summary,
+    write_commands,
+    write_report,
+    write_results,
+)
 from fuzzyslam.reproduce.table import SeedResult, aggregate, headline_key, run_labels
 
 
@@ -122,27 +129,27 @@ def reproduce(
         kinds = {st.key: st.kind for st in steps}
         results = [seed_result(tmp, s, done, beyond, kinds) for s in seeds]
         aggs = aggregate(results)
-        info = {
-            "command": "fuzzyslam reproduce"
+        png = "summary.png" if draw_summary(tmp, f"seed{seeds[0]}", tmp / "summary.png") else None
+        info = RunInfo(
+            command="fuzzyslam reproduce"
             + (" --quick" if quick else "")
             + f" --seeds {len(seeds)}"
             + ("" if beyond else " --paper-only"),
-            "suite": "quick" if quick else "paper",
-            "configs": [suite.paper, suite.bumps] + ([suite.dark, suite.people] if beyond else []),
-            "seeds": seeds,
-            "jobs": jobs or (len(workers) if scheduler else os.cpu_count() or 1),
-            "engine": f"dask {scheduler}" if scheduler else "local",
-            "workers": workers,
-            "logs_kept": keep_logs,
-            "steps": len(steps),
-            "version": __version__,
-        }
-        png = "summary.png" if draw_summary(tmp, f"seed{seeds[0]}", tmp / "summary.png") else None
-        info["wall_s"] = time.perf_counter() - t0
+            suite="quick" if quick else "paper",
+            configs=[suite.paper, suite.bumps] + ([suite.dark, suite.people] if beyond else []),
+            seeds=seeds,
+            jobs=jobs or (len(workers) if scheduler else os.cpu_count() or 1),
+            engine=f"dask {scheduler}" if scheduler else "local",
+            workers=workers,
+            logs_kept=keep_logs,
+            steps=len(steps),
+            version=__version__,
+            wall_s=time.perf_counter() - t0,
+        )
         step_log = [
-            {"key": s.key, "command": s.command, "seconds": round(done[s.key].seconds, 2),
-             "stderr": done[s.key].stderr, "worker": done[s.key].worker,
-             "pid": done[s.key].pid}
+            StepRecord(key=s.key, command=s.command, seconds=round(done[s.key].seconds, 2),
+                       stderr=done[s.key].stderr, worker=done[s.key].worker,
+                       pid=done[s.key].pid)
             for s in steps
         ]  # fmt: skip
         write_results(tmp / "results.json", aggs, results, info, step_log)
@@ -159,8 +166,8 @@ def reproduce(
         "results": str(out / "results.json"),
         "commands": str(out / "commands.sh"),
         "seeds": seeds,
-        "suite": info["suite"],
-        "wall_time_s": round(info["wall_s"], 1),
+        "suite": info.suite,
+        "wall_time_s": round(info.wall_s, 1),
         "headline": headline,
     }
 

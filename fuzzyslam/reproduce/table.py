@@ -275,21 +275,52 @@ class Aggregate:
             return None
         return sum(bool(self.row.ok(v)) for v in self.valid), len(self.valid)
 
-    def to_dict(self) -> dict[str, Any]:
+    def result(self, key: str | None) -> RowResult:
+        """The row as results.json holds it, with its ``key`` in the headline JSON.
+
+        Parameters
+        ----------
+        key : str or None
+            :func:`headline_key` of the row (None without run labels).
+
+        Returns
+        -------
+        RowResult
+        """
         v = self.valid
-        return {
-            "group": self.row.group,
-            "measure": self.row.measure,
-            "unit": self.row.unit,
-            "paper": self.row.paper,
-            "target": self.row.target,
-            "values": list(self.values),
-            "mean": self.mean,
-            "std": self.spread,
-            "min": min(v) if v else None,
-            "max": max(v) if v else None,
-            "met": list(self.met) if self.met is not None else None,
-        }
+        return RowResult(
+            group=self.row.group,
+            measure=self.row.measure,
+            unit=self.row.unit,
+            paper=self.row.paper,
+            target=self.row.target,
+            values=list(self.values),
+            mean=self.mean,
+            std=self.spread,
+            min=min(v) if v else None,
+            max=max(v) if v else None,
+            met=list(self.met) if self.met is not None else None,
+            key=key,
+        )
+
+
+@dataclass(frozen=True, kw_only=True)
+class RowResult:
+    """A row of the table in results.json: the paper's figure, the target, the values
+    per seed and their mean, std, min, max, seeds meeting the target, headline key."""
+
+    group: str
+    measure: str
+    unit: str
+    paper: Any
+    target: Any
+    values: list[float | None]
+    mean: float | None
+    std: float | None
+    min: float | None
+    max: float | None
+    met: list[int] | None
+    key: str | None
 
 
 HEADLINE_UNITS = ("cm", "deg", "m", "s", "x", "count", "ratio")

@@ -29,7 +29,17 @@ AA_RADIUS_EXCESS = 0.58
 
 
 def make_camera(params: CameraParams) -> CeilingCamera:
-    """The CeilingCamera of the config."""
+    """The CeilingCamera of the config.
+
+    Parameters
+    ----------
+    params : CameraParams
+        The config's ``camera:`` section.
+
+    Returns
+    -------
+    CeilingCamera
+    """
     return CeilingCamera.from_fov(
         params.width,
         params.height,
@@ -40,14 +50,40 @@ def make_camera(params: CameraParams) -> CeilingCamera:
 
 
 def background(cam: CeilingCamera, params: CameraParams) -> np.ndarray:
-    """(H, W) float32 background: level minus vignetting * (r / r_corner)^2."""
+    """(H, W) float32 background: level minus vignetting * (r / r_corner)^2.
+
+    Parameters
+    ----------
+    cam : CeilingCamera
+        The camera (image size).
+    params : CameraParams
+        Background level and vignetting.
+
+    Returns
+    -------
+    ndarray of float32, shape (H, W)
+    """
     v, u = np.mgrid[0 : cam.height_px, 0 : cam.width].astype(np.float32)
     r2 = ((u - cam.cx) ** 2 + (v - cam.cy) ** 2) / (cam.cx**2 + cam.cy**2)
     return (params.background - params.vignetting * r2).astype(np.float32)
 
 
 def visible(cam: CeilingCamera, uv: np.ndarray, radius_px: float) -> np.ndarray:
-    """Mask of discs whose whole extent lies inside the image."""
+    """Mask of discs whose whole extent lies inside the image.
+
+    Parameters
+    ----------
+    cam : CeilingCamera
+        The camera (image size).
+    uv : ndarray, shape (N, 2)
+        Disc centres (pixels).
+    radius_px : float
+        Disc radius (pixels).
+
+    Returns
+    -------
+    ndarray of bool, shape (N,)
+    """
     return (
         (uv[:, 0] - radius_px >= -0.5)
         & (uv[:, 0] + radius_px <= cam.width - 0.5)
@@ -57,7 +93,23 @@ def visible(cam: CeilingCamera, uv: np.ndarray, radius_px: float) -> np.ndarray:
 
 
 def coverage(cam: CeilingCamera, uv: np.ndarray, radius_px: float, k: int) -> np.ndarray:
-    """(H, W) float32 area coverage in [0, 1] of discs centred at pixels ``uv`` (N, 2)."""
+    """(H, W) float32 area coverage in [0, 1] of discs centred at pixels ``uv`` (N, 2).
+
+    Parameters
+    ----------
+    cam : CeilingCamera
+        The camera (image size).
+    uv : ndarray, shape (N, 2)
+        Disc centres (pixels).
+    radius_px : float
+        Disc radius (pixels).
+    k : int
+        Supersampling factor.
+
+    Returns
+    -------
+    ndarray of float32, shape (H, W)
+    """
     w, h = cam.width, cam.height_px
     canvas = np.zeros((h * k, w * k), dtype=np.uint8)
     out = np.zeros((h, w), dtype=np.float32)
@@ -94,7 +146,27 @@ def render(
     bg: np.ndarray,
     rng: np.random.Generator,
 ) -> np.ndarray:
-    """mono8 frame (H, W) of lit lamps at robot-frame ceiling positions ``lamps_robot``."""
+    """mono8 frame (H, W) of lit lamps at robot-frame ceiling positions ``lamps_robot``.
+
+    Parameters
+    ----------
+    cam : CeilingCamera
+        The camera.
+    lamps_robot : ndarray, shape (N, 2)
+        Lit lamps in the robot frame (m).
+    lamp_radius : float
+        Lamp radius (m).
+    params : CameraParams
+        Levels, supersampling, noise.
+    bg : ndarray, shape (H, W)
+        :func:`background`.
+    rng : numpy.random.Generator
+        The camera's random stream.
+
+    Returns
+    -------
+    ndarray of uint8, shape (H, W)
+    """
     uv = cam.project(lamps_robot)
     cov = coverage(cam, uv, cam.radius_px(lamp_radius), params.supersample)
     img = bg * (1.0 - cov) + np.float32(params.lamp_level) * cov

@@ -42,7 +42,22 @@ class Encoders:
 def true_wheel_increments(
     d_trans: np.ndarray, d_rot: np.ndarray, robot: RobotParams
 ) -> tuple[np.ndarray, np.ndarray]:
-    """Wheel angle increments (rad) of the TRUE wheels for true motion increments."""
+    """Wheel angle increments (rad) of the TRUE wheels for true motion increments.
+
+    Parameters
+    ----------
+    d_trans : ndarray, shape (N,)
+        True translation increments (m).
+    d_rot : ndarray, shape (N,)
+        True rotation increments (rad).
+    robot : RobotParams
+        The true wheel radii and base.
+
+    Returns
+    -------
+    left, right : ndarray, shape (N,)
+        Wheel angle increments (rad).
+    """
     dl, dr = odometry_to_wheel_increments(
         d_trans, d_rot, wheel_radius=1.0, wheel_base=robot.wheel_base * robot.base_scale
     )
@@ -53,13 +68,39 @@ def true_wheel_increments(
 
 
 def noisy_increments(phi: np.ndarray, sigma: float, rng: np.random.Generator) -> np.ndarray:
-    """phi + N(0, sigma^2 |phi|): random encoder error growing with the angle turned."""
+    """phi + N(0, sigma^2 |phi|): random encoder error growing with the angle turned.
+
+    Parameters
+    ----------
+    phi : ndarray, shape (N,)
+        Wheel angle increments (rad).
+    sigma : float
+        sigma_w (rad per sqrt(rad)).
+    rng : numpy.random.Generator
+        The encoders' random stream.
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
     phi = np.asarray(phi, dtype=float)
     return phi + sigma * np.sqrt(np.abs(phi)) * rng.standard_normal(phi.shape)
 
 
 def quantise(angles: np.ndarray, ticks_per_rev: int) -> np.ndarray:
-    """Angles rounded to whole encoder ticks."""
+    """Angles rounded to whole encoder ticks.
+
+    Parameters
+    ----------
+    angles : ndarray, shape (...)
+        Angles (rad).
+    ticks_per_rev : int
+        Encoder ticks per revolution.
+
+    Returns
+    -------
+    ndarray, shape (...)
+    """
     tick = 2.0 * np.pi / ticks_per_rev
     return np.round(np.asarray(angles) / tick) * tick
 
@@ -71,7 +112,26 @@ def simulate_encoders(
     start: np.ndarray,
     rng: np.random.Generator,
 ) -> Encoders:
-    """Encoder readings and dead reckoning for the true increments of a drive."""
+    """Encoder readings and dead reckoning for the true increments of a drive.
+
+    Parameters
+    ----------
+    d_trans : ndarray, shape (N,)
+        True translation increments (m).
+    d_rot : ndarray, shape (N,)
+        True rotation increments (rad).
+    robot : RobotParams
+        True and nominal wheels, noise, ticks.
+    start : ndarray, shape (3,)
+        The start pose (dead reckoning's origin).
+    rng : numpy.random.Generator
+        The encoders' random stream.
+
+    Returns
+    -------
+    Encoders
+        Angles (N+1, 2), nominal increments (N,), dead reckoning (N+1, 3).
+    """
     phi_l, phi_r = true_wheel_increments(d_trans, d_rot, robot)
     noisy = noisy_increments(np.column_stack([phi_l, phi_r]), robot.wheel_noise, rng)
     angles = quantise(np.vstack([np.zeros((1, 2)), np.cumsum(noisy, axis=0)]), robot.ticks_per_rev)

@@ -44,10 +44,32 @@ class Track:
     speed: float
 
     def present(self, t: float) -> bool:
+        """Whether the obstacle is there at time ``t``.
+
+        Parameters
+        ----------
+        t : float
+            Log time (s).
+
+        Returns
+        -------
+        bool
+            t0 <= t <= t1.
+        """
         return self.t0 <= t <= self.t1
 
     def position(self, t: float) -> np.ndarray:
-        """Centre at time t: the box centre, or the disc on its back-and-forth walk."""
+        """Centre at time t: the box centre, or the disc on its back-and-forth walk.
+
+        Parameters
+        ----------
+        t : float
+            Log time (s).
+
+        Returns
+        -------
+        ndarray, shape (2,)
+        """
         if self.kind == "box":
             return self.polygon.mean(axis=0)
         seg = np.diff(self.path, axis=0)
@@ -63,7 +85,21 @@ class Track:
 
 
 def box_polygon(centre, size, angle_deg: float) -> np.ndarray:
-    """Corners (4, 2) of a rectangle of size [length, width] turned by angle_deg."""
+    """Corners (4, 2) of a rectangle of size [length, width] turned by angle_deg.
+
+    Parameters
+    ----------
+    centre : array_like, shape (2,)
+        The box's centre (m).
+    size : array_like, shape (2,)
+        [length, width] (m).
+    angle_deg : float
+        The turn of its length axis (deg).
+
+    Returns
+    -------
+    ndarray, shape (4, 2)
+    """
     a = np.radians(angle_deg)
     r = rot(a)
     half = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * (np.asarray(size, float) / 2)
@@ -71,7 +107,17 @@ def box_polygon(centre, size, angle_deg: float) -> np.ndarray:
 
 
 def plan_tracks(obstacles, run_intervals: dict[int, tuple[float, float]], source: str):
-    """Tracks of the configured obstacles whose runs are simulated (validated)."""
+    """Tracks of the configured obstacles whose runs are simulated (validated).
+
+    Parameters
+    ----------
+    obstacles : list
+        The config's ``scenario.obstacles``.
+    run_intervals : dict of int to (float, float)
+        Start and end (s) of each simulated run.
+    source : str
+        The config's name (for error messages).
+    """
     out = []
     for i, o in enumerate(obstacles):
         where = f"'scenario.obstacles[{i}]'"
@@ -97,7 +143,19 @@ def plan_tracks(obstacles, run_intervals: dict[int, tuple[float, float]], source
 
 
 def box_segments(tracks, t: float) -> np.ndarray:
-    """Faces (K, 4) x0 y0 x1 y1 of the boxes present at t."""
+    """Faces (K, 4) x0 y0 x1 y1 of the boxes present at t.
+
+    Parameters
+    ----------
+    tracks : list of Track
+        :func:`plan_tracks`.
+    t : float
+        Log time (s).
+
+    Returns
+    -------
+    ndarray, shape (K, 4)
+    """
     polys = [tr.polygon for tr in tracks if tr.kind == "box" and tr.present(t)]
     if not polys:
         return np.zeros((0, 4))
@@ -105,13 +163,38 @@ def box_segments(tracks, t: float) -> np.ndarray:
 
 
 def discs_at(tracks, t: float) -> np.ndarray:
-    """Circles (J, 3) x y radius of the people present at t."""
+    """Circles (J, 3) x y radius of the people present at t.
+
+    Parameters
+    ----------
+    tracks : list of Track
+        :func:`plan_tracks`.
+    t : float
+        Log time (s).
+
+    Returns
+    -------
+    ndarray, shape (J, 3)
+    """
     rows = [[*tr.position(t), tr.radius] for tr in tracks if tr.kind == "disc" and tr.present(t)]
     return np.asarray(rows, dtype=float).reshape(-1, 3)
 
 
 def obstacles_record(tracks, ring_times: np.ndarray) -> dict:
-    """The ``fuzzyslam.obstacles`` metadata: shapes, intervals and tracks at ring times."""
+    """The ``fuzzyslam.obstacles`` metadata: shapes, intervals and tracks at ring times.
+
+    Parameters
+    ----------
+    tracks : list of Track
+        :func:`plan_tracks`.
+    ring_times : ndarray, shape (N,)
+        The sonar rings' times (s).
+
+    Returns
+    -------
+    dict
+        The metadata record (JSON-ready).
+    """
     items = []
     for tr in tracks:
         ts = ring_times[(ring_times >= tr.t0) & (ring_times <= tr.t1)]
@@ -145,6 +228,19 @@ def ray_circle_hits(origins: np.ndarray, dirs: np.ndarray, discs: np.ndarray) ->
 
     |p + t d - c|^2 = rho^2  ->  t = -b - sqrt(b^2 - k), b = d.(p - c), k = |p - c|^2 - rho^2;
     a ray starting inside a circle (k < 0) is not counted.
+
+    Parameters
+    ----------
+    origins : ndarray, shape (R, 2)
+        Ray origins.
+    dirs : ndarray, shape (R, 2)
+        Unit directions.
+    discs : ndarray, shape (J, 3)
+        Circles (x, y, radius).
+
+    Returns
+    -------
+    ndarray, shape (R,)
     """
     if len(discs) == 0:
         return np.full(len(origins), np.inf)

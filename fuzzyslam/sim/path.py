@@ -63,7 +63,19 @@ class Drive:
 
 
 def start_pose(centre: np.ndarray, scenario: ScenarioParams) -> np.ndarray:
-    """Start pose on the centre line, facing forward along it."""
+    """Start pose on the centre line, facing forward along it.
+
+    Parameters
+    ----------
+    centre : ndarray, shape (N, 2)
+        The centre-line loop.
+    scenario : ScenarioParams
+        Where on it the robot starts.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+    """
     p, tang = point_at(centre, np.array([scenario.start_offset]))
     return np.array([p[0, 0], p[0, 1], math.atan2(tang[0, 1], tang[0, 0])])
 
@@ -78,6 +90,24 @@ def drive(
     """Drive the runs of ``scenario`` around the centre-line loop ``centre`` (N, 2).
 
     Without ``rng`` the aim point stays on the centre line (no wander).
+
+    Parameters
+    ----------
+    centre : ndarray, shape (N, 2)
+        The centre-line loop.
+    robot : RobotParams
+        Speeds and control rate.
+    scenario : ScenarioParams
+        The runs, bumps and wander.
+    rng : numpy.random.Generator, optional
+        The path's random stream.
+    max_duration : float
+        Longest drive (s).
+
+    Returns
+    -------
+    Drive
+        True poses, increments and events.
     """
     dt = 1.0 / robot.rate_hz
     lap = loop_length(centre) * scenario.lap_fraction

@@ -14,7 +14,17 @@ from fuzzyslam.sim.scenario import Plan, lamps_lit
 
 
 def save_preview(plan: Plan, path: str | os.PathLike, title: str = "") -> None:
-    """Write a PNG of the world and the paths (atomic)."""
+    """Write a PNG of the world and the paths (atomic).
+
+    Parameters
+    ----------
+    plan : Plan
+        The simulation's plan.
+    path : path
+        The PNG.
+    title : str
+        The figure's title.
+    """
     world, dr, enc = plan.world, plan.drive, plan.encoders
     fig, ax = plt.subplots(figsize=(9, 6), dpi=110)
     for x0, y0, x1, y1 in world.wall_array:

@@ -50,13 +50,37 @@ class Stats:
 
 
 def sensor_times(rate_hz: float, duration: float) -> np.ndarray:
-    """Times j / rate for j = 0, 1, ... up to the duration."""
+    """Times j / rate for j = 0, 1, ... up to the duration.
+
+    Parameters
+    ----------
+    rate_hz : float
+        The sensor's rate.
+    duration : float
+        The drive's duration (s).
+
+    Returns
+    -------
+    ndarray, shape (N,)
+    """
     n = int(np.floor(duration * rate_hz + 1e-9)) + 1
     return np.arange(n) / rate_hz
 
 
 def world_markers(world: World, lamp_z: float) -> object:
-    """/sim/world MarkerArray: walls as one LINE_LIST, lamps as CYLINDERs."""
+    """/sim/world MarkerArray: walls as one LINE_LIST, lamps as CYLINDERs.
+
+    Parameters
+    ----------
+    world : World
+        The simulated world.
+    lamp_z : float
+        The lamps' height (m).
+
+    Returns
+    -------
+    MarkerArray
+    """
     walls = world.wall_array
     pts = walls.reshape(-1, 2)
     markers = [
@@ -74,7 +98,19 @@ def world_markers(world: World, lamp_z: float) -> object:
 
 
 def static_transforms(cfg, mounts: np.ndarray) -> object:
-    """/tf_static: base_link -> sonar_NN and -> ceiling_camera."""
+    """/tf_static: base_link -> sonar_NN and -> ceiling_camera.
+
+    Parameters
+    ----------
+    cfg : Config
+        The simulation's config (camera mount).
+    mounts : ndarray, shape (M, 3)
+        The sonars' poses on the robot.
+
+    Returns
+    -------
+    TFMessage
+    """
     tfs = [
         M.transform_stamped(
             0.0, "base_link", sonar_frame(i), m[0], m[1], cfg.sonar.mount_height, m[2]
@@ -91,7 +127,21 @@ def static_transforms(cfg, mounts: np.ndarray) -> object:
 
 
 def schedule(plan: Plan, sonar_rate: float, camera_rate: float) -> list[tuple[float, int, int]]:
-    """(t, kind, index) of everything to write, in log-time order."""
+    """(t, kind, index) of everything to write, in log-time order.
+
+    Parameters
+    ----------
+    plan : Plan
+        The simulation's plan.
+    sonar_rate : float
+        Sonar rings per second.
+    camera_rate : float
+        Frames per second.
+
+    Returns
+    -------
+    list of (float, int, int)
+    """
     T = plan.drive.duration
     parts = [
         (plan.drive.t, ROBOT),
@@ -109,7 +159,15 @@ def schedule(plan: Plan, sonar_rate: float, camera_rate: float) -> list[tuple[fl
 def write_truth_tum(plan: Plan, path: str | os.PathLike) -> None:
     """The true trajectory of a simulation (the poses of /ground_truth/odom, at the robot
     rate) as a TUM file (``streams.tum.format_tum``), written atomically: the truth evo
-    and ``evaluate`` read, beside the log."""
+    and ``evaluate`` read, beside the log.
+
+    Parameters
+    ----------
+    plan : Plan
+        The simulation's plan.
+    path : path
+        The TUM file.
+    """
     from fuzzyslam.fileio import atomic_path
     from fuzzyslam.streams.tum import format_tum
 
@@ -120,7 +178,19 @@ def write_truth_tum(plan: Plan, path: str | os.PathLike) -> None:
 def robot_payloads(plan: Plan, block: int = 1024) -> Iterator[tuple[bytes, bytes, bytes]]:
     """CDR of (/joint_states, /odom, /ground_truth/odom) at every robot step, in order,
     encoded ``block`` steps at a time: the wheel angles, the dead reckoning and the true
-    pose, with the velocities of the step before (0 at the first)."""
+    pose, with the velocities of the step before (0 at the first).
+
+    Parameters
+    ----------
+    plan : Plan
+        The simulation's plan.
+    block : int
+        Steps encoded at once.
+
+    Returns
+    -------
+    iterator of (bytes, bytes, bytes)
+    """
     dr, enc = plan.drive, plan.encoders
     n, dt = len(dr.t), dr.dt
     first = np.zeros(1)
@@ -141,7 +211,23 @@ def robot_payloads(plan: Plan, block: int = 1024) -> Iterator[tuple[bytes, bytes
 
 
 def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tuple[dict, Plan]:
-    """Simulate ``cfg`` and write the recording to ``out`` (atomic): (summary, plan)."""
+    """Simulate ``cfg`` and write the recording to ``out`` (atomic): (summary, plan).
+
+    Parameters
+    ----------
+    cfg : Config
+        The simulation's config.
+    out : path
+        The MCAP file.
+    source : str
+        The config's name (for error messages).
+
+    Returns
+    -------
+    summary : dict
+        The recording's figures (the JSON summary's part).
+    plan : Plan
+    """
     rngs = rng_streams(cfg.seed)
     plan = make_plan(cfg, rngs, source)
     world, dr, enc = plan.world, plan.drive, plan.encoders

@@ -30,7 +30,17 @@ STREAMS = ("encoders", "sonar", "camera", "drive")
 
 
 def rng_streams(seed: int) -> dict[str, np.random.Generator]:
-    """Independent generators per sensor from one SeedSequence(seed)."""
+    """Independent generators per sensor from one SeedSequence(seed).
+
+    Parameters
+    ----------
+    seed : int
+        The simulation's seed.
+
+    Returns
+    -------
+    dict of str to numpy.random.Generator
+    """
     children = np.random.SeedSequence(seed).spawn(len(STREAMS))
     return {name: np.random.default_rng(c) for name, c in zip(STREAMS, children, strict=True)}
 
@@ -51,7 +61,23 @@ class Plan:
 
 
 def lamp_failure_events(cfg, drive_events: list[Event], n_lamps: int, source: str) -> list[Event]:
-    """A lamp_failure event at the start of each configured run (validated indices)."""
+    """A lamp_failure event at the start of each configured run (validated indices).
+
+    Parameters
+    ----------
+    cfg : Config
+        The simulation's config (``scenario.lamp_failures``).
+    drive_events : list of Event
+        The drive's run events.
+    n_lamps : int
+        Lamps in the world.
+    source : str
+        The config's name (for error messages).
+
+    Returns
+    -------
+    list of Event
+    """
     starts = {e.run: e.t for e in drive_events if e.kind == "run_start"}
     out = []
     for i, f in enumerate(cfg.scenario.lamp_failures):
@@ -67,7 +93,21 @@ def lamp_failure_events(cfg, drive_events: list[Event], n_lamps: int, source: st
 
 
 def lamps_lit(events: list[Event], n_lamps: int, t: float) -> np.ndarray:
-    """Mask of lamps lit at time t (failures take effect at their event time)."""
+    """Mask of lamps lit at time t (failures take effect at their event time).
+
+    Parameters
+    ----------
+    events : list of Event
+        The plan's events.
+    n_lamps : int
+        Lamps in the world.
+    t : float
+        The time (s).
+
+    Returns
+    -------
+    ndarray of bool, shape (n_lamps,)
+    """
     lit = np.ones(n_lamps, dtype=bool)
     for e in events:
         if e.kind == "lamp_failure" and e.t <= t:
@@ -76,7 +116,21 @@ def lamps_lit(events: list[Event], n_lamps: int, t: float) -> np.ndarray:
 
 
 def make_plan(cfg, rngs: dict[str, np.random.Generator], source: str = "config") -> Plan:
-    """The plan of a config: world, drive, encoders, events (sorted by time)."""
+    """The plan of a config: world, drive, encoders, events (sorted by time).
+
+    Parameters
+    ----------
+    cfg : Config
+        The simulation's config.
+    rngs : dict of str to numpy.random.Generator
+        :func:`rng_streams`.
+    source : str
+        The config's name (for error messages).
+
+    Returns
+    -------
+    Plan
+    """
     world = build_world(cfg.world, cfg.camera, source)
     centre = centreline_array(cfg.world, source)
     dr = drive(centre, cfg.robot, cfg.scenario, rngs["drive"])

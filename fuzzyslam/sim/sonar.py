@@ -36,6 +36,22 @@ def cast_rays(walls: np.ndarray, origins: np.ndarray, dirs: np.ndarray):
     Ray p + t d meets segment a + u (b - a) where, with cross(x, y) = x0 y1 - x1 y0,
     t = cross(a - p, e) / cross(d, e) and u = cross(a - p, d) / cross(d, e), e = b - a;
     a hit needs t > 0 and 0 <= u <= 1.
+
+    Parameters
+    ----------
+    walls : ndarray, shape (S, 4)
+        Wall segments (ax, ay, bx, by).
+    origins : ndarray, shape (R, 2)
+        Ray origins.
+    dirs : ndarray, shape (R, 2)
+        Ray directions (unit).
+
+    Returns
+    -------
+    dist : ndarray, shape (R,)
+        Distance to the nearest hit (inf: none).
+    seg : ndarray of int, shape (R,)
+        Its segment (-1: none).
     """
     a = walls[None, :, 0:2]
     e = walls[None, :, 2:4] - walls[None, :, 0:2]
@@ -54,7 +70,17 @@ def cast_rays(walls: np.ndarray, origins: np.ndarray, dirs: np.ndarray):
 
 
 def wall_normals(walls: np.ndarray) -> np.ndarray:
-    """Unit normals (S, 2) of wall segments (either side)."""
+    """Unit normals (S, 2) of wall segments (either side).
+
+    Parameters
+    ----------
+    walls : ndarray, shape (S, 4)
+        Wall segments (ax, ay, bx, by).
+
+    Returns
+    -------
+    ndarray, shape (S, 2)
+    """
     e = walls[:, 2:4] - walls[:, 0:2]
     n = np.column_stack([-e[:, 1], e[:, 0]])
     return n / np.linalg.norm(n, axis=1)[:, None]
@@ -71,6 +97,22 @@ def ideal_ranges(
     ``sensors`` (M, 3) are world poses (x, y, yaw) of the transducers. ``discs`` (J, 3)
     x y radius: people (``sim.obstacles``), rough reflectors: a ray meeting one before
     any wall echoes from it whatever its incidence.
+
+    Parameters
+    ----------
+    walls : ndarray, shape (S, 4)
+        Wall segments.
+    sensors : ndarray, shape (M, 3)
+        The transducers' world poses.
+    params : SonarParams
+        The sonar model (cone, incidence, range).
+    discs : ndarray, shape (J, 3), optional
+        People (x, y, radius).
+
+    Returns
+    -------
+    ndarray, shape (M,)
+        Ranges (m); inf: no echo.
     """
     m = len(sensors)
     n = params.rays_per_cone
@@ -119,6 +161,20 @@ def measure(ideal: np.ndarray, params: SonarParams, rng: np.random.Generator) ->
     """Readings from ideal ranges: noise, crosstalk, clipping and quantisation.
 
     Always draws the same number of random numbers per call (determinism).
+
+    Parameters
+    ----------
+    ideal : ndarray, shape (M,)
+        Noise-free ranges (inf: no echo).
+    params : SonarParams
+        Noise, crosstalk, maximum range, quantisation.
+    rng : numpy.random.Generator
+        The sonar's random stream.
+
+    Returns
+    -------
+    ndarray, shape (M,)
+        Readings (m); the maximum range for no echo.
     """
     m = len(ideal)
     noise = rng.standard_normal(m)
@@ -136,7 +192,19 @@ def measure(ideal: np.ndarray, params: SonarParams, rng: np.random.Generator) ->
 
 
 def sensor_poses(pose: np.ndarray, mounts: np.ndarray) -> np.ndarray:
-    """World poses (M, 3) of sensors mounted at ``mounts`` (M, 3) on a robot at ``pose``."""
+    """World poses (M, 3) of sensors mounted at ``mounts`` (M, 3) on a robot at ``pose``.
+
+    Parameters
+    ----------
+    pose : ndarray, shape (3,)
+        The robot's world pose.
+    mounts : ndarray, shape (M, 3)
+        The sensors' poses on the robot.
+
+    Returns
+    -------
+    ndarray, shape (M, 3)
+    """
     c, s = np.cos(pose[2]), np.sin(pose[2])
     x = pose[0] + c * mounts[:, 0] - s * mounts[:, 1]
     y = pose[1] + s * mounts[:, 0] + c * mounts[:, 1]
@@ -151,5 +219,26 @@ def ring(
     rng: np.random.Generator,
     discs: np.ndarray | None = None,
 ) -> np.ndarray:
-    """One ring of readings (M,) from a robot at world ``pose`` (``discs``: people)."""
+    """One ring of readings (M,) from a robot at world ``pose`` (``discs``: people).
+
+    Parameters
+    ----------
+    walls : ndarray, shape (S, 4)
+        Wall segments.
+    pose : ndarray, shape (3,)
+        The robot's world pose.
+    mounts : ndarray, shape (M, 3)
+        The sensors' poses on the robot.
+    params : SonarParams
+        The sonar model.
+    rng : numpy.random.Generator
+        The sonar's random stream.
+    discs : ndarray, shape (J, 3), optional
+        People (x, y, radius).
+
+    Returns
+    -------
+    ndarray, shape (M,)
+        Readings (m).
+    """
     return measure(ideal_ranges(walls, sensor_poses(pose, mounts), params, discs), params, rng)

@@ -22,7 +22,26 @@ def run(
     """Simulate ``config`` (a YAML path or an embedded name; default paper.yaml) with
     ``seed`` into the MCAP file ``output``; ``preview`` (PNG) and ``truth_tum`` (the true
     trajectory as TUM) are written too when given, every file complete before the log is
-    renamed into place. Returns the JSON summary."""
+    renamed into place. Returns the JSON summary.
+
+    Parameters
+    ----------
+    config : str or None
+        A YAML path or an embedded name.
+    output : path
+        The MCAP file.
+    seed : int or None
+        Overrides the config's.
+    preview : str or None
+        A PNG of the world and the paths.
+    truth_tum : str or None
+        The true trajectory as TUM.
+
+    Returns
+    -------
+    dict
+        The JSON summary.
+    """
     from fuzzyslam.sim.record import simulate_to_mcap
 
     cfg_name = config if config is not None else DEFAULT_CONFIG

@@ -21,7 +21,19 @@ from fuzzyslam.streams.logmeta import Corridor, World
 
 
 def centreline_array(params: WorldParams, source: str = "config") -> np.ndarray:
-    """(N, 2) centre-line vertices, validated (>= 3 distinct vertices, no zero-length edge)."""
+    """(N, 2) centre-line vertices, validated (>= 3 distinct vertices, no zero-length edge).
+
+    Parameters
+    ----------
+    params : WorldParams
+        The config's ``world:`` section.
+    source : str
+        The config's name (for error messages).
+
+    Returns
+    -------
+    ndarray, shape (N, 2)
+    """
     pts = np.asarray(params.centerline, dtype=float)
     if pts.ndim != 2 or pts.shape[1] != 2 or len(pts) < 3:
         raise ConfigError(source, "'world.centerline' must be a list of >= 3 [x, y] points")
@@ -31,7 +43,19 @@ def centreline_array(params: WorldParams, source: str = "config") -> np.ndarray:
 
 
 def offset_loop(pts: np.ndarray, d: float) -> np.ndarray:
-    """Closed polygon offset by ``d`` to the left of its direction (mitred corners)."""
+    """Closed polygon offset by ``d`` to the left of its direction (mitred corners).
+
+    Parameters
+    ----------
+    pts : ndarray, shape (N, 2)
+        The closed polygon.
+    d : float
+        The offset (m; negative: to the right).
+
+    Returns
+    -------
+    ndarray, shape (N, 2)
+    """
     e_in = pts - np.roll(pts, 1, axis=0)
     e_out = np.roll(pts, -1, axis=0) - pts
     n_in = np.column_stack([-e_in[:, 1], e_in[:, 0]]) / np.linalg.norm(e_in, axis=1)[:, None]
@@ -41,6 +65,18 @@ def offset_loop(pts: np.ndarray, d: float) -> np.ndarray:
 
 
 def loop_length(pts: np.ndarray) -> float:
+    """The perimeter of a closed polyline.
+
+    Parameters
+    ----------
+    pts : ndarray, shape (N, 2)
+        Its vertices.
+
+    Returns
+    -------
+    float
+        The length (m).
+    """
     return float(np.sum(np.linalg.norm(np.roll(pts, -1, axis=0) - pts, axis=1)))
 
 
@@ -55,7 +91,17 @@ class Loop:
         self.cum = np.concatenate([[0.0], np.cumsum(self.lens)])
 
     def at(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        """Points (N, 2) and unit tangents (N, 2) at arc lengths ``s`` (mod the length)."""
+        """Points (N, 2) and unit tangents (N, 2) at arc lengths ``s`` (mod the length).
+
+        Parameters
+        ----------
+        s : ndarray, shape (N,)
+            Arc lengths (m).
+
+        Returns
+        -------
+        points, tangents : ndarray, shape (N, 2)
+        """
         cum = self.cum
         s = np.mod(np.asarray(s, dtype=float), cum[-1])
         # integer indices: minimum(maximum()) is np.clip without its call overhead
@@ -65,12 +111,36 @@ class Loop:
 
 
 def point_at(pts: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Points (N, 2) and unit tangents (N, 2) at arc lengths ``s`` (mod the loop length)."""
+    """Points (N, 2) and unit tangents (N, 2) at arc lengths ``s`` (mod the loop length).
+
+    Parameters
+    ----------
+    pts : ndarray, shape (K, 2)
+        The closed polyline.
+    s : ndarray, shape (N,)
+        Arc lengths (m).
+
+    Returns
+    -------
+    points, tangents : ndarray, shape (N, 2)
+    """
     return Loop(pts).at(s)
 
 
 def even_lamps(pts: np.ndarray, count: int) -> np.ndarray:
-    """``count`` lamps evenly along the loop, the first half a spacing from vertex 0."""
+    """``count`` lamps evenly along the loop, the first half a spacing from vertex 0.
+
+    Parameters
+    ----------
+    pts : ndarray, shape (K, 2)
+        The centre-line loop.
+    count : int
+        Number of lamps.
+
+    Returns
+    -------
+    ndarray, shape (count, 2)
+    """
     if count == 0:
         return np.zeros((0, 2))
     spacing = loop_length(pts) / count
@@ -89,7 +159,21 @@ def _check_offsets(pts: np.ndarray, left: np.ndarray, right: np.ndarray, source:
 
 
 def build_world(params: WorldParams, camera: CameraParams, source: str = "config") -> World:
-    """The World (logmeta contract) of the config: walls, lamps, corridors, ceiling height."""
+    """The World (logmeta contract) of the config: walls, lamps, corridors, ceiling height.
+
+    Parameters
+    ----------
+    params : WorldParams
+        The config's ``world:`` section.
+    camera : CameraParams
+        The ceiling height.
+    source : str
+        The config's name (for error messages).
+
+    Returns
+    -------
+    World
+    """
     pts = centreline_array(params, source)
     half = params.corridor_width / 2.0
     left = offset_loop(pts, half)

@@ -39,7 +39,17 @@ def joint_threshold(gate_chi2: float, dof: int) -> float:
 
 
 def block_diag_cov(r: np.ndarray) -> np.ndarray:
-    """(2k, 2k) block-diagonal matrix of k (2, 2) covariances."""
+    """(2k, 2k) block-diagonal matrix of k (2, 2) covariances.
+
+    Parameters
+    ----------
+    r : ndarray, shape (k, 2, 2)
+        The covariances.
+
+    Returns
+    -------
+    ndarray, shape (2k, 2k)
+    """
     r = np.asarray(r, dtype=float).reshape(-1, 2, 2)
     k = len(r)
     out = np.zeros((2 * k, 2 * k))
@@ -49,7 +59,23 @@ def block_diag_cov(r: np.ndarray) -> np.ndarray:
 
 
 def joint_nis(ekf: EkfSlam, pairs: list[tuple[int, int]], z: np.ndarray, r: np.ndarray) -> float:
-    """NIS of the stacked innovation of ``pairs`` (detection j, lamp i)."""
+    """NIS of the stacked innovation of ``pairs`` (detection j, lamp i).
+
+    Parameters
+    ----------
+    ekf : EkfSlam
+        The filter.
+    pairs : list of (int, int)
+        (detection, lamp) pairs.
+    z : ndarray, shape (m, 2)
+        Detections (robot frame).
+    r : ndarray, shape (m, 2, 2)
+        Their covariances.
+
+    Returns
+    -------
+    float
+    """
     if not pairs:
         return 0.0
     det = [j for j, _ in pairs]
@@ -87,7 +113,17 @@ class JointTable:
         self.s = ekf.innovation_cov(cols, hc, block_diag_cov(r[det]))
 
     def nis(self, pairs: list[tuple[int, int]]) -> float:
-        """Joint NIS of ``pairs`` (all in the table)."""
+        """Joint NIS of ``pairs`` (all in the table).
+
+        Parameters
+        ----------
+        pairs : list of (int, int)
+            (detection, lamp) pairs.
+
+        Returns
+        -------
+        float
+        """
         rows = []  # the two rows of each pair in v and S
         for p in pairs:
             k = 2 * self.index[p]
@@ -98,7 +134,20 @@ class JointTable:
 
 
 def candidates(d2: np.ndarray, gate_chi2: float) -> list[list[int]]:
-    """Per detection, the individually compatible lamps, nearest first."""
+    """Per detection, the individually compatible lamps, nearest first.
+
+    Parameters
+    ----------
+    d2 : ndarray, shape (m, n)
+        Squared Mahalanobis distances of detections to lamps.
+    gate_chi2 : float
+        The individual gate.
+
+    Returns
+    -------
+    list of list of int
+        Per detection, lamp indices.
+    """
     return [
         sorted(np.nonzero(d2[j] <= gate_chi2)[0].tolist(), key=lambda i, j=j: d2[j, i])
         for j in range(len(d2))
@@ -108,7 +157,17 @@ def candidates(d2: np.ndarray, gate_chi2: float) -> list[list[int]]:
 def unique_hypothesis(cands: list[list[int]]) -> list[tuple[int, int]] | None:
     """The pairing of every detection with its candidate when no detection has two
     candidates and no lamp two detections (then it is the only hypothesis with the most
-    pairings, and JCBB reduces to one joint test); else None."""
+    pairings, and JCBB reduces to one joint test); else None.
+
+    Parameters
+    ----------
+    cands : list of list of int
+        :func:`candidates`.
+
+    Returns
+    -------
+    list of (int, int) or None
+    """
     flat = [c[0] for c in cands if c]
     if all(len(c) <= 1 for c in cands) and len(set(flat)) == len(flat):
         return [(j, c[0]) for j, c in enumerate(cands) if c]
@@ -143,6 +202,25 @@ def jcbb(
     is a log-likelihood ratio: an alternative within it is at least exp(-margin / 2) as
     likely as the best, so choosing between them is a guess (e.g. landmarks closer
     together than the detection noise, seen from afar).
+
+    Parameters
+    ----------
+    ekf : EkfSlam
+        The filter.
+    z : ndarray, shape (m, 2)
+        Detections (robot frame).
+    r : ndarray, shape (m, 2, 2)
+        Their covariances.
+    d2 : ndarray, shape (m, n)
+        Individual squared Mahalanobis distances.
+    gate_chi2 : float
+        The 2-dof gate.
+    ambiguity_margin : float
+        Joint NIS margin of an alternative hypothesis.
+
+    Returns
+    -------
+    Association
     """
     m = len(z)
     cands = candidates(d2, gate_chi2)
@@ -217,7 +295,13 @@ class TentativeLamps:
     expired: int = 0
 
     def expire(self, t: float) -> None:
-        """Drop candidates not seen for longer than ``timeout``."""
+        """Drop candidates not seen for longer than ``timeout``.
+
+        Parameters
+        ----------
+        t : float
+            Log time (s).
+        """
         keep = [c for c in self.items if t - c.last_t <= self.timeout]
         self.expired += len(self.items) - len(keep)
         self.items = keep
@@ -233,6 +317,21 @@ class TentativeLamps:
         distance (w - c)^T (C_w + C_c)^-1 (w - c) is within ``gate_chi2``, so that
         landmarks closer together than ``radius`` but far apart in units of the
         detection noise keep their own candidates.
+
+        Parameters
+        ----------
+        t : float
+            Log time (s).
+        world : ndarray, shape (2,)
+            The sighting (world frame).
+        taken : set of int
+            Candidates sighted in this frame.
+        cov : ndarray, shape (2, 2), optional
+            The sighting's world covariance.
+
+        Returns
+        -------
+        bool
         """
         world = np.asarray(world, dtype=float)
         best, best_d = -1, np.inf

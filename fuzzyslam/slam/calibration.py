@@ -70,8 +70,35 @@ class Calibration:
         return len(self.names)
 
 
+@dataclass(frozen=True, kw_only=True)
+class CalibrationEntry:
+    """The summary's ``calibration``: the odometry self-calibration's model, where it
+    started (``start``: the prior or a file) and its final factors (slam/stage.py)."""
+
+    model: str
+    start: str
+    start_factors: list[float]
+    names: list[str]
+    factors: list[float]
+    sigma: list[float]
+
+
 def prior(kind: str, slam, wheel_base: float) -> Calibration:
-    """The config's prior: factors 1, sigmas ``slam.calib_*_sigma`` (independent)."""
+    """The config's prior: factors 1, sigmas ``slam.calib_*_sigma`` (independent).
+
+    Parameters
+    ----------
+    kind : str
+        wheels or odom.
+    slam : SlamParams
+        ``calib_*_sigma`` and the random walk.
+    wheel_base : float
+        The nominal wheel base (m).
+
+    Returns
+    -------
+    Calibration
+    """
     if kind == "wheels":
         s = [slam.calib_wheel_sigma, slam.calib_wheel_sigma, slam.calib_base_sigma]
     else:
@@ -91,6 +118,19 @@ def calibrated_increment(kind: str, b: float, c, dt_n: float, dr_n: float):
 
     wheels: F = [[a_L/2, a_R/2, 0], [-a_L/(b s_B), a_R/(b s_B), -dr/s_B]];
     odom:   F = [[dt_n, 0], [0, dr_n]] (module docstring).
+
+    Parameters
+    ----------
+    kind : str
+        wheels or odom.
+    b : float
+        The nominal wheel base (m).
+    c : sequence of float, length k
+        The factors.
+    dt_n : float
+        Nominal translation increment (m).
+    dr_n : float
+        Nominal rotation increment (rad).
     """
     if kind == "wheels":
         sl, sr, sb = c
@@ -117,6 +157,12 @@ class CalibratedPreintegrator(Preintegrator):
         super().__init__(noise)
 
     def reset(self, factors=None) -> None:
+        """Parameters
+
+        ----------
+        factors : sequence of float, length k, optional
+            The filter's current factors (None: keep the last).
+        """
         super().reset()
         if factors is not None:
             self.c = tuple(float(v) for v in factors)
@@ -155,6 +201,17 @@ def predict_calibrated(ekf, delta: np.ndarray, q: np.ndarray, d: np.ndarray) -> 
     P_r,x' = T P_(r,c),x for every column x but the pose's;  P_rr' = T P_(r,c),(r,c) T^T
     + J_b Q J_b^T; c and its covariance unchanged (the random walk is added by the
     runner, ``EkfSlam.diffuse``). O(n).
+
+    Parameters
+    ----------
+    ekf : EkfSlam
+        The filter (pose, factors and landmarks; updated in place).
+    delta : ndarray, shape (3,)
+        The preintegrated motion.
+    q : ndarray, shape (3, 3)
+        Its covariance.
+    d : ndarray, shape (3, k)
+        d delta / d c.
     """
     m0, n = ekf.m0, ekf.dim
     p = ekf.P  # views of the filter's arrays: updated in place
@@ -172,7 +229,15 @@ def predict_calibrated(ekf, delta: np.ndarray, q: np.ndarray, d: np.ndarray) -> 
 
 
 def diffuse(ekf, var: float) -> None:
-    """Random walk of the factors: P_cc' = P_cc + var I."""
+    """Random walk of the factors: P_cc' = P_cc + var I.
+
+    Parameters
+    ----------
+    ekf : EkfSlam
+        The filter (updated in place).
+    var : float
+        The variance added to each factor.
+    """
     if var > 0.0:
         i = np.arange(3, ekf.m0)
         ekf.P[i, i] += var
@@ -182,7 +247,21 @@ def freeze_gain(k: np.ndarray, frozen: np.ndarray, c0: int, c1: int) -> np.ndarr
     """The gain K (n, m) with the calibration rows c0:c1 projected so that u^T K_c = 0
     for every frozen direction u (rows of ``frozen``, (j, k)): K_c' = (I - U (U^T U)^-1
     U^T) K_c, U = frozen^T. Then u^T c and u^T P_cc u are unchanged by the update (the
-    Joseph form holds for any gain)."""
+    Joseph form holds for any gain).
+
+    Parameters
+    ----------
+    k : ndarray, shape (n, m)
+        The gain.
+    frozen : ndarray, shape (j, k)
+        The frozen directions.
+    c0, c1 : int
+        The calibration rows of the state.
+
+    Returns
+    -------
+    ndarray, shape (n, m)
+    """
     u = np.asarray(frozen, dtype=float).T  # (k, j)
     k = k.copy()
     kc = k[c0:c1]
@@ -194,13 +273,38 @@ def freeze_gain(k: np.ndarray, frozen: np.ndarray, c0: int, c1: int) -> np.ndarr
 
 
 def csv_header(model: Calibration) -> list[str]:
+    """calibration.csv's header: t, the factors, their sigmas, their correlations.
+
+    Parameters
+    ----------
+    model : Calibration
+        The calibration model (kind, names).
+
+    Returns
+    -------
+    list of str
+    """
     names = model.names
     corr = [f"corr_{a}_{b}" for i, a in enumerate(names) for b in names[i + 1 :]]
     return ["t", *names, *(f"sigma_{n}" for n in names), *corr]
 
 
 def csv_row(t: float, c: np.ndarray, cov: np.ndarray) -> list[str]:
-    """One calibration.csv row: t (9 decimals), factors, sigmas, correlations."""
+    """One calibration.csv row: t (9 decimals), factors, sigmas, correlations.
+
+    Parameters
+    ----------
+    t : float
+        Log time (s).
+    c : ndarray, shape (k,)
+        The factors.
+    cov : ndarray, shape (k, k)
+        Their covariance.
+
+    Returns
+    -------
+    list of str
+    """
     sig = np.sqrt(np.maximum(np.diag(cov), 0.0))
     k = len(c)
     corr = [
@@ -212,6 +316,8 @@ def csv_row(t: float, c: np.ndarray, cov: np.ndarray) -> list[str]:
 
 
 def write_csv(path: Path, model: Calibration, rows: list[list[str]]) -> None:
+    """calibration.csv: :func:`csv_header` and ``rows`` (:func:`csv_row`), into a staging
+    directory."""
     buf = io.StringIO()
     w = csv.writer(buf, lineterminator="\n")
     w.writerow(csv_header(model))
@@ -220,6 +326,24 @@ def write_csv(path: Path, model: Calibration, rows: list[list[str]]) -> None:
 
 
 def as_dict(model: Calibration, t: float | None, c: np.ndarray, cov: np.ndarray) -> dict:
+    """calibration.yaml's content.
+
+    Parameters
+    ----------
+    model : Calibration
+        The calibration model (kind, names).
+    t : float or None
+        The time the factors hold at (s).
+    c : ndarray, shape (k,)
+        The factors.
+    cov : ndarray, shape (k, k)
+        Their covariance.
+
+    Returns
+    -------
+    dict
+        model, names, factors, sigma, covariance[, wheel_base_nominal][, t].
+    """
     sig = np.sqrt(np.maximum(np.diag(cov), 0.0))
     out = {
         "model": model.kind,
@@ -236,12 +360,26 @@ def as_dict(model: Calibration, t: float | None, c: np.ndarray, cov: np.ndarray)
 
 
 def write_yaml(path: Path, d: dict) -> None:
+    """calibration.yaml of ``d`` (:func:`as_dict`), into a staging directory."""
     path.write_text(yaml.safe_dump(d, sort_keys=False))  # staged, as write_csv
 
 
 def load(path: str | Path, model: Calibration) -> Calibration:
     """``model`` started from the factors and covariance of a calibration.yaml (a run's,
-    or a map directory's: the calibration at the map's freeze time)."""
+    or a map directory's: the calibration at the map's freeze time).
+
+    Parameters
+    ----------
+    path : path
+        A calibration.yaml.
+    model : Calibration
+        The calibration model (kind, names).
+
+    Returns
+    -------
+    Calibration
+        ``model`` with the file's factors and covariance (InputError naming the file).
+    """
     path = Path(path)
     try:
         d = yaml.safe_load(path.read_text())
@@ -268,7 +406,19 @@ def load(path: str | Path, model: Calibration) -> Calibration:
 
 def at_time(csv_path: Path, t_end: float) -> dict | None:
     """The calibration of a run's calibration.csv at time ``t_end`` (its last row at or
-    before it) as a calibration.yaml dict; None without the file or such a row."""
+    before it) as a calibration.yaml dict; None without the file or such a row.
+
+    Parameters
+    ----------
+    csv_path : Path
+        A run's calibration.csv.
+    t_end : float
+        The time (s).
+
+    Returns
+    -------
+    dict or None
+    """
     if not csv_path.is_file():
         return None
     with csv_path.open(newline="") as f:

@@ -49,7 +49,28 @@ def detect_lamps(
     max_aspect: float = 2.0,
     border: int = 1,
 ) -> Blobs:
-    """Lamp centroids in a mono8 frame (module docstring). ``rejected`` counts gated blobs."""
+    """Lamp centroids in a mono8 frame (module docstring). ``rejected`` counts gated blobs.
+
+    Parameters
+    ----------
+    img : ndarray of uint8, shape (H, W)
+        The frame.
+    threshold : int
+        Smallest grey level of a lamp pixel.
+    min_area, max_area : int
+        A blob's area bounds (pixels).
+    min_fill : float
+        Smallest area / bounding-box area.
+    max_aspect : float
+        Largest bounding-box aspect ratio.
+    border : int
+        Blobs whose box comes within this many pixels of the frame's edge are refused.
+
+    Returns
+    -------
+    Blobs
+        Centroids uv (n, 2) and areas (n,) in pixels, and the count of rejected blobs.
+    """
     img = np.ascontiguousarray(img, dtype=np.uint8)
     if img.ndim != 2:
         raise ValueError(f"expected a (H, W) mono8 image, got shape {img.shape}")

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, Any, Protocol
 
 import numpy as np
 
@@ -63,9 +63,37 @@ class FilterView(Protocol):
 
     def update_robot(
         self, z: np.ndarray, r: np.ndarray, idx: np.ndarray, gate_chi2: float | None = None
-    ) -> UpdateResult: ...
+    ) -> UpdateResult:
+        """A direct measurement z of the robot's components ``idx`` (h(x) = x[idx]),
+        NIS-gated.
 
-    def inflate_robot(self, q: np.ndarray) -> None: ...
+        Parameters
+        ----------
+        z : ndarray, shape (k,)
+            The measurement.
+        r : ndarray, shape (k, k)
+            Its covariance.
+        idx : ndarray of int, shape (k,)
+            Robot components (0 x, 1 y, 2 heading).
+        gate_chi2 : float or None
+            Refused (no change) when the NIS exceeds it; None: no gate.
+
+        Returns
+        -------
+        UpdateResult
+            accepted, NIS, innovation (k,).
+        """
+        ...
+
+    def inflate_robot(self, q: np.ndarray) -> None:
+        """P_rr += q (fading memory: the filter admits an error it did not model).
+
+        Parameters
+        ----------
+        q : ndarray, shape (3, 3)
+            Added to the robot block.
+        """
+        ...
 
 
 class Aid(Protocol):
@@ -111,16 +139,48 @@ class RowSink(Protocol):
         """A trajectory row: pose (3,) and covariance (6,) ``pxx pxy pxt pyy pyt ptt``."""
 
     def odometry_start(self, t: float) -> None:
-        """Time of the start pose of the dead reckoning."""
+        """Time of the start pose of the dead reckoning.
+
+        Parameters
+        ----------
+        t : float
+            Log time (s).
+        """
 
     def odometry(self, t: float, d_trans: float, d_rot: float) -> None:
-        """One odometry increment ending at ``t``."""
+        """One odometry increment ending at ``t``.
+
+        Parameters
+        ----------
+        t : float
+            Log time (s).
+        d_trans : float
+            Translation (m).
+        d_rot : float
+            Rotation (rad).
+        """
 
     def update(self, row: UpdateRow) -> None:
-        """One measurement update attempt."""
+        """One measurement update attempt.
+
+        Parameters
+        ----------
+        row : UpdateRow
+            The attempt.
+        """
 
     def snapshot(self, t: float, lamps: np.ndarray, covs: np.ndarray) -> None:
-        """The lamps (n, 2) and their covariances (n, 2, 2) at ``t``."""
+        """The lamps (n, 2) and their covariances (n, 2, 2) at ``t``.
+
+        Parameters
+        ----------
+        t : float
+            Log time (s).
+        lamps : ndarray, shape (n, 2)
+            Lamp positions.
+        covs : ndarray, shape (n, 2, 2)
+            Their covariances.
+        """
 
 
 class MemorySink:
@@ -177,10 +237,21 @@ class SlamResult:
     health: dict = field(default_factory=dict)
     noise_estimate: DetectionNoiseEstimate | None = None
     delay_estimate: DelayEstimate | None = None  # the odometry latency (slam/latency.py)
-    calibration: dict | None = None  # the summary's entry (slam/stage.py)
+    calibration: Any = None  # the summary's entry, calibration.CalibrationEntry (slam/stage.py)
 
     def mean_nis(self, kind: str = "lamp") -> float:
-        """Mean NIS of the accepted updates of ``kind`` (expected value: their dof)."""
+        """Mean NIS of the accepted updates of ``kind`` (expected value: their dof).
+
+        Parameters
+        ----------
+        kind : str
+            The update kind (lamp, heading, pose).
+
+        Returns
+        -------
+        float
+            NaN without such updates.
+        """
         vals = [u.nis for u in self.updates if u.kind == kind and u.accepted]
         return float(np.mean(vals)) if vals else float("nan")
 

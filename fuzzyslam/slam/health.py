@@ -44,6 +44,22 @@ def solve_spd(
     min(diag L)^2 <= rel_eps max(diag L)^2 (a condition number beyond ~1/rel_eps); it is
     then solved as S + e I with e = max(rel_eps trace(S)/k, abs_eps) (abs_eps in the
     units of S: 1e-15 m^2 or rad^2), e grown tenfold until the factorisation succeeds.
+
+    Parameters
+    ----------
+    s : ndarray, shape (k, k)
+        Symmetric S.
+    b : ndarray, shape (k,) or (k, n)
+        Right-hand side.
+    rel_eps : float
+        Relative singularity threshold.
+    abs_eps : float
+        Smallest regularisation (units of S).
+
+    Returns
+    -------
+    x : ndarray, shape of ``b``
+    regularised : bool
     """
     s = 0.5 * (s + s.T)
     if not (np.isfinite(s).all() and np.isfinite(b).all()):
@@ -75,7 +91,17 @@ def chi2_quantile(p: float, dof: int) -> float:
 
 
 def is_spd(p: np.ndarray) -> bool:
-    """True if P is finite, exactly symmetric and its Cholesky factorisation succeeds."""
+    """True if P is finite, exactly symmetric and its Cholesky factorisation succeeds.
+
+    Parameters
+    ----------
+    p : ndarray, shape (n, n)
+        A covariance.
+
+    Returns
+    -------
+    bool
+    """
     if not np.all(np.isfinite(p)) or not np.array_equal(p, p.T):
         return False
     try:
@@ -87,7 +113,20 @@ def is_spd(p: np.ndarray) -> bool:
 
 def repair_covariance(p: np.ndarray, floor: float = 1e-12) -> tuple[np.ndarray, bool]:
     """(P', repaired): P itself if symmetric positive definite, else its nearest symmetric
-    matrix with eigenvalues >= ``floor`` (relative to the largest): V max(L, f) V^T."""
+    matrix with eigenvalues >= ``floor`` (relative to the largest): V max(L, f) V^T.
+
+    Parameters
+    ----------
+    p : ndarray, shape (n, n)
+        A covariance.
+    floor : float
+        Smallest eigenvalue relative to the largest.
+
+    Returns
+    -------
+    p : ndarray, shape (n, n)
+    repaired : bool
+    """
     if is_spd(p):
         return p, False
     sym = 0.5 * (p + p.T)
@@ -151,7 +190,17 @@ class DivergenceMonitor:
     reasons: list[str] = field(default_factory=list)  # the tests that found divergence
 
     def observe(self, t: float, nis: float, dof: int) -> None:
-        """One update's NIS (``dof`` its degrees of freedom)."""
+        """One update's NIS (``dof`` its degrees of freedom).
+
+        Parameters
+        ----------
+        t : float
+            The update's time (s).
+        nis : float
+            Its NIS (non-finite: counted as 1e6).
+        dof : int
+            Its degrees of freedom.
+        """
         if self._n == 0:
             self._t0 = t
         self._sum += nis if math.isfinite(nis) else 1e6
@@ -165,7 +214,17 @@ class DivergenceMonitor:
             self._sum, self._dof, self._n = 0.0, 0, 0
 
     def observe_frame(self, t: float, detections: int, associated: int) -> None:
-        """One frame's detections and how many were associated with mapped lamps."""
+        """One frame's detections and how many were associated with mapped lamps.
+
+        Parameters
+        ----------
+        t : float
+            The frame's time (s).
+        detections : int
+            Lamps detected.
+        associated : int
+            Of them, associated with mapped lamps.
+        """
         if detections <= 0:
             return
         if self._det == 0:
@@ -185,7 +244,15 @@ class DivergenceMonitor:
     def observe_birth(self, t: float, pose_cov: np.ndarray) -> None:
         """A landmark initialised at ``t`` (from a pose of covariance ``pose_cov``); counted
         as untrusted when the latest window of either test is out of bounds: its position
-        inherits an error the filter does not admit (a future duplicate)."""
+        inherits an error the filter does not admit (a future duplicate).
+
+        Parameters
+        ----------
+        t : float
+            The birth time (s).
+        pose_cov : ndarray, shape (3, 3)
+            The robot's covariance then.
+        """
         self.births += 1
         if self.untrusted:
             self.births_untrusted += 1
@@ -210,6 +277,13 @@ class DivergenceMonitor:
         return self.nis.out_of_bounds
 
     def summary(self) -> dict:
+        """The summary's ``filter_health`` (without the numerical guards).
+
+        Returns
+        -------
+        dict
+            Window counts, births, ``diverged``, ``reasons``, ``diverged_at``, spans.
+        """
         spans = sorted(self.nis.spans + self.assoc.spans)
         return {
             "nis_windows": self.nis.windows,
@@ -241,6 +315,13 @@ def orphan_landmarks(
     ----------
     first_seen : (n,) birth times of the landmarks (s).
     observations : (n,) frames in which each landmark was associated.
+
+    Returns
+    -------
+    count : int
+        Orphans.
+    at : float or None
+        The time the map turned untrustworthy.
     """
     order = np.argsort(first_seen, kind="stable")
     orphan = np.asarray(observations)[order] < min_observations

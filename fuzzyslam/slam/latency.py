@@ -72,8 +72,19 @@ DELAY_NOTE_S = 0.05  # an estimate this far from the configured delay is told (s
 
 
 def delay_note(estimate: float, configured: float) -> str:
-    """The one-line advice when the estimated latency differs from the configured one by
-    more than ``DELAY_NOTE_S``; else ''."""
+    """The one-line advice when the estimated latency differs from the configured one.
+
+    Parameters
+    ----------
+    estimate, configured : float
+        The estimated and the configured odometry delay (s).
+
+    Returns
+    -------
+    str
+        The line naming the key and the value, when they differ by more than
+        ``DELAY_NOTE_S``; else ''.
+    """
     if abs(estimate - configured) <= DELAY_NOTE_S:
         return ""
     advice = max(round(estimate, 2), 0.0)
@@ -94,7 +105,13 @@ class DelayEstimate:
     residual_at_configured_deg: float  # the same at the configured delay
 
     def as_dict(self) -> dict:
-        """The summary's ``odometry_delay_estimate``."""
+        """The summary's ``odometry_delay_estimate``.
+
+        Returns
+        -------
+        dict
+            ``delay_s``, ``pairs``, ``residual_deg``, ``residual_at_configured_deg``.
+        """
         return {
             "delay_s": round(self.delay_s, 3),
             "pairs": self.pairs,
@@ -123,7 +140,20 @@ class MotionTap:
 
     def estimate(self, configured: float, min_pairs: int = MIN_PAIRS) -> DelayEstimate | None:
         """``estimate_odometry_delay`` on what passed (stamps as the filter saw them, so
-        the lag found is added to ``configured``); None with fewer than ``min_pairs``."""
+        the lag found is added to ``configured``).
+
+        Parameters
+        ----------
+        configured : float
+            The delay (s) the events were restamped with.
+        min_pairs : int
+            Fewest pairs of consecutive sightings to give an estimate.
+
+        Returns
+        -------
+        DelayEstimate or None
+            None with fewer than ``min_pairs`` pairs.
+        """
         if len(self.odo) < 2 or len(self.frames) < 2:
             return None
         t, dt, dr = np.asarray(self.odo, dtype=float).T

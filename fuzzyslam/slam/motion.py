@@ -18,6 +18,20 @@ def motion_noise(d_trans: float, d_rot: float, noise) -> np.ndarray:
 
         M = diag(k_tt |dt| + k_tr |dr|,  k_rr |dr| + k_rt |dt|),
         noise = (k_tt [m^2/m], k_tr [m^2/rad], k_rr [rad^2/rad], k_rt [rad^2/m]).
+
+    Parameters
+    ----------
+    d_trans : float
+        Translation increment (m).
+    d_rot : float
+        Rotation increment (rad).
+    noise : tuple of 4 float
+        (k_tt, k_tr, k_rr, k_rt).
+
+    Returns
+    -------
+    ndarray, shape (2, 2)
+        M.
     """
     k_tt, k_tr, k_rr, k_rt = noise
     adt, adr = abs(d_trans), abs(d_rot)
@@ -30,6 +44,20 @@ def motion_jacobians(pose: np.ndarray, d_trans: float, d_rot: float) -> tuple[np
     With m = theta + dr/2:  x' = x + dt cos m,  y' = y + dt sin m,  theta' = theta + dr.
     G_x = [[1, 0, -dt sin m], [0, 1, dt cos m], [0, 0, 1]],
     G_u = [[cos m, -dt sin m / 2], [sin m, dt cos m / 2], [0, 1]].
+
+    Parameters
+    ----------
+    pose : ndarray, shape (3,)
+        The pose before the step.
+    d_trans : float
+        Translation increment (m).
+    d_rot : float
+        Rotation increment (rad).
+
+    Returns
+    -------
+    g_x : ndarray, shape (3, 3)
+    g_u : ndarray, shape (3, 2)
     """
     m = pose[2] + 0.5 * d_rot
     c, s = np.cos(m), np.sin(m)
@@ -40,7 +68,18 @@ def motion_jacobians(pose: np.ndarray, d_trans: float, d_rot: float) -> tuple[np
 
 def odometry_noise_tuple(noise) -> tuple[float, float, float, float]:
     """The four random-walk coefficients (k_tt, k_tr, k_rr, k_rt) of :func:`motion_noise`,
-    checked: finite and non-negative."""
+    checked: finite and non-negative.
+
+    Parameters
+    ----------
+    noise : sequence of 4 float
+        The coefficients.
+
+    Returns
+    -------
+    tuple of 4 float
+        (k_tt, k_tr, k_rr, k_rt); ValueError when one is negative or not finite.
+    """
     k = tuple(float(a) for a in noise)
     if len(k) != 4 or not all(math.isfinite(a) and a >= 0.0 for a in k):
         raise ValueError(f"odometry noise needs 4 finite coefficients >= 0, got {noise!r}")
@@ -60,12 +99,24 @@ class Preintegrator:
         self.reset()
 
     def reset(self) -> None:
+        """Start a new relative motion (identity, zero covariance).
+
+
+        """
         self.dx = self.dy = self.dth = 0.0
         self._q = [0.0] * 6  # q00 q01 q02 q11 q12 q22
         self.steps = 0
 
     def add(self, d_trans: float, d_rot: float) -> None:
-        """Compose one increment (the matrix products written out on the 6 unique entries)."""
+        """Compose one increment (the matrix products written out on the 6 unique entries).
+
+        Parameters
+        ----------
+        d_trans : float
+            Translation increment (m).
+        d_rot : float
+            Rotation increment (rad).
+        """
         k_tt, k_tr, k_rr, k_rt = self.noise
         adt, adr = abs(d_trans), abs(d_rot)
         mt = k_tt * adt + k_tr * adr  # motion_noise, written out

@@ -38,6 +38,14 @@ class DetectionNoiseEstimate:
     bearing_deg: float | None
 
     def as_dict(self) -> dict[str, float | int | None]:
+        """The summary's ``noise_estimate`` (rounded).
+
+        Returns
+        -------
+        dict
+            samples, detection_sigma_range, detection_sigma_range_per_m,
+            detection_sigma_bearing_deg (None: not measurable).
+        """
         def rnd(v: float | None, k: int) -> float | None:
             return None if v is None else round(v, k)
 
@@ -56,7 +64,19 @@ class DetectionNoiseEstimator:
     _rows: list[tuple[float, float, float]] = field(default_factory=list)
 
     def add(self, z: np.ndarray, v: np.ndarray, s: np.ndarray, r: np.ndarray) -> None:
-        """One accepted detection: z (2,) robot frame, innovation v (2,), its S and R (2, 2)."""
+        """One accepted detection: z (2,) robot frame, innovation v (2,), its S and R (2, 2).
+
+        Parameters
+        ----------
+        z : ndarray, shape (2,)
+            The detection (robot frame, m).
+        v : ndarray, shape (2,)
+            Its innovation.
+        s : ndarray, shape (2, 2)
+            The innovation covariance.
+        r : ndarray, shape (2, 2)
+            The detection covariance.
+        """
         rng = math.hypot(float(z[0]), float(z[1]))
         if rng <= 0:
             return
@@ -70,7 +90,12 @@ class DetectionNoiseEstimator:
         return len(self._rows)
 
     def estimate(self) -> DetectionNoiseEstimate | None:
-        """The estimate, or None with fewer than ``MIN_SAMPLES`` detections."""
+        """The estimate, or None with fewer than ``MIN_SAMPLES`` detections.
+
+        Returns
+        -------
+        DetectionNoiseEstimate or None
+        """
         if len(self._rows) < MIN_SAMPLES:
             return None
         a = np.array(self._rows)
@@ -100,7 +125,22 @@ def suggestion(est: DetectionNoiseEstimate, params, tolerance: float = 0.3) -> s
     configured noise is not below the estimate by more than ``tolerance`` (relative) at
     typical ranges. Only an underestimated noise is told: it makes the filter overconfident
     (wrong associations, duplicates), while a configured noise above the estimate of the
-    accepted detections is the margin that keeps heavy-tailed outliers out."""
+    accepted detections is the margin that keeps heavy-tailed outliers out.
+
+    Parameters
+    ----------
+    est : DetectionNoiseEstimate
+        The estimate.
+    params : SlamParams
+        The configured noise.
+    tolerance : float
+        Relative margin.
+
+    Returns
+    -------
+    str
+        The line, or "".
+    """
     keys = []
     now_b = params.detection_sigma_bearing_deg
     if est.bearing_deg is not None and est.bearing_deg > (1 + tolerance) * now_b:

@@ -46,7 +46,25 @@ def within_speed(
 ) -> bool:
     """An increment (d_trans m, d_rot rad) the robot can drive in ``dt`` s: |d_trans| and
     |d_rot| within ``SPEED_MARGIN`` times ``max_speed`` and ``max_turn_rate`` over
-    ``dt + SLACK_S``."""
+    ``dt + SLACK_S``.
+
+    Parameters
+    ----------
+    dt : float
+        The time between the poses (s).
+    d_trans : float
+        Translation (m).
+    d_rot : float
+        Rotation (rad).
+    max_speed : float
+        m/s.
+    max_turn_rate : float
+        rad/s.
+
+    Returns
+    -------
+    bool
+    """
     span = SPEED_MARGIN * (max(dt, 0.0) + SLACK_S)
     return abs(d_trans) <= max_speed * span and abs(d_rot) <= max_turn_rate * span
 
@@ -66,7 +84,15 @@ class OdomGate:
     _refused: int = 0
 
     def prime(self, t: float, pose: np.ndarray) -> None:
-        """Start from a known reference pose (e.g. :func:`first_plausible_pose`)."""
+        """Start from a known reference pose (e.g. :func:`first_plausible_pose`).
+
+        Parameters
+        ----------
+        t : float
+            Its time (s).
+        pose : ndarray, shape (3,)
+            The reference pose.
+        """
         self._pose, self._t, self._refused = np.asarray(pose, dtype=float), float(t), 0
 
     @property
@@ -77,7 +103,20 @@ class OdomGate:
     def step(self, t: float, pose: np.ndarray) -> str:
         """``"first"``, ``"ok"`` (an increment from :attr:`pose` to ``pose``),
         ``"jump"`` (refused) or ``"reset"`` (accepted after refusals: an increment from the
-        previous reference, read before the call, to ``pose``)."""
+        previous reference, read before the call, to ``pose``).
+
+        Parameters
+        ----------
+        t : float
+            The pose's time (s).
+        pose : ndarray, shape (3,)
+            The stream's next pose.
+
+        Returns
+        -------
+        str
+            first, ok, jump or reset.
+        """
         if self._pose is None:
             self._pose, self._t = pose, t
             return "first"
@@ -91,7 +130,19 @@ class OdomGate:
         return "jump"
 
     def plausible(self, a: np.ndarray, b: np.ndarray, dt: float) -> bool:
-        """Whether the increment from pose ``a`` to ``b`` in ``dt`` s is possible."""
+        """Whether the increment from pose ``a`` to ``b`` in ``dt`` s is possible.
+
+        Parameters
+        ----------
+        a, b : ndarray, shape (3,)
+            The poses.
+        dt : float
+            The time between them (s).
+
+        Returns
+        -------
+        bool
+        """
         # rel = between(a, b) on floats (called for every odometry message)
         dx, dy = float(b[0]) - float(a[0]), float(b[1]) - float(a[1])
         c, s = math.cos(float(a[2])), math.sin(float(a[2]))
@@ -112,7 +163,25 @@ def first_plausible_pose(
     """(time, pose) of the stream's first confirmed pose: the first of ``poses`` (N, 3) at
     times (N,) from which at least ``need`` of the next ``look`` poses are plausible
     increments (``gate``'s test; a stray first pose is not confirmed by the stream that
-    follows it). The first pose when none is; None for no pose."""
+    follows it). The first pose when none is; None for no pose.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Times (s).
+    poses : ndarray, shape (N, 3)
+        The stream's poses.
+    gate : OdomGate, optional
+        The test (default limits).
+    look : int
+        Poses looked at after a candidate.
+    need : int
+        Of them, how many must be plausible.
+
+    Returns
+    -------
+    (float, ndarray of shape (3,)) or None
+    """
     gate = gate if gate is not None else OdomGate()
     t = np.asarray(t, dtype=float)
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
@@ -126,7 +195,21 @@ def first_plausible_pose(
 
 def plausible_mask(t: np.ndarray, poses: np.ndarray, gate: OdomGate | None = None) -> np.ndarray:
     """(N,) bool: the poses the gate keeps (accepted or reset), starting from the first
-    confirmed pose (:func:`first_plausible_pose`); the others refused."""
+    confirmed pose (:func:`first_plausible_pose`); the others refused.
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Times (s).
+    poses : ndarray, shape (N, 3)
+        The stream's poses.
+    gate : OdomGate, optional
+        The test (default limits).
+
+    Returns
+    -------
+    ndarray of bool, shape (N,)
+    """
     gate = gate if gate is not None else OdomGate()
     first = first_plausible_pose(t, poses, gate)
     if first is not None:

@@ -50,7 +50,21 @@ def _fmt_rows(a: np.ndarray) -> str:
 def dead_reckoning_at(t: np.ndarray, odo_t: np.ndarray, odo_poses: np.ndarray) -> np.ndarray:
     """The dead-reckoning poses (N, 3) at times ``t``: the pose after the last odometry
     increment at or before each time (the one the filter's estimate has integrated; the
-    first pose, the start pose, before the first increment)."""
+    first pose, the start pose, before the first increment).
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Query times (s).
+    odo_t : ndarray, shape (K,)
+        Times of the dead-reckoning poses (sorted).
+    odo_poses : ndarray, shape (K, 3)
+        The dead-reckoning poses.
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+    """
     idx = np.searchsorted(np.asarray(odo_t, dtype=float), np.asarray(t, dtype=float), "right")
     return np.asarray(odo_poses, dtype=float).reshape(-1, 3)[np.maximum(idx - 1, 0)]
 
@@ -61,7 +75,24 @@ def tf_payloads(
     """CDR of the /tf messages of trajectory rows: map -> odom (the filter's correction,
     estimate (+) (-)dead reckoning) and odom -> base_link (the dead reckoning ``odo`` at
     the same times), so that map -> odom -> base_link composes to the estimate; the
-    frame names and whether odom -> base is written from ``frames`` (slam/events.py)."""
+    frame names and whether odom -> base is written from ``frames`` (slam/events.py).
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Row times (s).
+    poses : ndarray, shape (N, 3)
+        The estimate.
+    odo : ndarray, shape (N, 3)
+        The dead reckoning at ``t``.
+    frames : TfFrames, optional
+        Frame names (default map, odom, base_link).
+
+    Returns
+    -------
+    list of bytes
+        One CDR tf2_msgs/TFMessage per row.
+    """
     f = frames or TfFrames()
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
     odo = np.asarray(odo, dtype=float).reshape(-1, 3)
@@ -245,7 +276,15 @@ class StreamingOutputs:
     def finish(self, res: SlamResult, extra=()) -> None:
         """Write what is left: the last blocks, landmarks.yaml and ``extra`` (topic, type
         name, message, t) messages of estimates.mcap (e.g. the aids' /slam/changes), and
-        close estimates.mcap (renamed into place inside ``tmp``)."""
+        close estimates.mcap (renamed into place inside ``tmp``).
+
+        Parameters
+        ----------
+        res : SlamResult
+            The filter's result (landmarks).
+        extra : iterable of (str, str, message, float)
+            The aids' messages.
+        """
         self._flush_rows()
         self._flush_odometry()
         write_landmarks(self.tmp / LANDMARKS, res.lamps)
@@ -258,12 +297,33 @@ class StreamingOutputs:
 
 def write_outputs(tmp: Path, out: StreamingOutputs, res: SlamResult, extra=()) -> None:
     """Complete the streamed files of docs/contracts.md sec. 2 (but summary.json and the fix
-    files) in the staging directory ``tmp`` (:meth:`StreamingOutputs.finish`)."""
+    files) in the staging directory ``tmp`` (:meth:`StreamingOutputs.finish`).
+
+    Parameters
+    ----------
+    tmp : Path
+        The staging directory.
+    out : StreamingOutputs
+        The sink the rows went to.
+    res : SlamResult
+        The filter's result.
+    extra : iterable of (str, str, message, float)
+        The aids' messages for estimates.mcap.
+    """
     assert out.tmp == Path(tmp)
     out.finish(res, extra)
 
 
 def write_summary(tmp: Path, summary: dict) -> None:
+    """summary.json (indented, keys sorted, numpy numbers as floats).
+
+    Parameters
+    ----------
+    tmp : Path
+        The staging directory.
+    summary : dict
+        The JSON summary.
+    """
     (tmp / SUMMARY).write_text(
         json.dumps(summary, indent=2, sort_keys=True, default=float) + "\n", encoding="utf-8"
     )

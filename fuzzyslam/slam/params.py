@@ -106,7 +106,17 @@ class SlamParams:
     def detection_cov(self, z: np.ndarray) -> np.ndarray:
         """(m, 2, 2) covariances of detections z (m, 2) in the robot frame (docstring):
         R = J diag(sigma_r^2, sigma_b^2) J^T with J = [[cos b, -r sin b], [sin b, r cos b]],
-        i.e. sigma_r^2 along the line of sight and (r sigma_b)^2 across it."""
+        i.e. sigma_r^2 along the line of sight and (r sigma_b)^2 across it.
+
+        Parameters
+        ----------
+        z : ndarray, shape (m, 2)
+            Detections (robot frame, m).
+
+        Returns
+        -------
+        ndarray, shape (m, 2, 2)
+        """
         z = np.asarray(z, dtype=float).reshape(-1, 2)
         r = np.hypot(z[:, 0], z[:, 1])
         with np.errstate(invalid="ignore", divide="ignore"):

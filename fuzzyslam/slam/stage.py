@@ -9,7 +9,9 @@ import copy
 import importlib
 import os
 import time
+from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 import numpy as np
 
@@ -25,52 +27,73 @@ from fuzzyslam.slam.latency import MotionTap, delay_note
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
 from fuzzyslam.slam.outputs import StreamingOutputs, write_outputs, write_summary
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
+from fuzzyslam.slam.summary import RunSummary
+from fuzzyslam.summary import OMIT, as_json
 
 
 def make_summary(
     res: SlamResult, inputs, wall: float, aids: list, streamed: StreamingOutputs
-) -> dict:
-    """The JSON summary (stdout and summary.json); row statistics from ``streamed``."""
+) -> RunSummary:
+    """The run's summary (stdout and summary.json); row statistics from ``streamed``.
+
+    Parameters
+    ----------
+    res : SlamResult
+        The filter's result (slam/runner.py), with its health and calibration.
+    inputs : slam.inputs.Inputs
+        The opened log (sources, start pose, warnings, damage, ring statistics).
+    wall : float
+        Wall-clock seconds of the run.
+    aids : list
+        The fix plug-ins (their ``summary()`` under ``aids``).
+    streamed : StreamingOutputs
+        The written rows (trajectory rows, the lamps' mean NIS).
+
+    Returns
+    -------
+    RunSummary
+    """
     duration = max(inputs.end - inputs.start, 0.0)
-    out = {
-        "command": "run",
-        "log": str(inputs.reader.path),
-        "odometry_source": f"{inputs.odom_source} ({inputs.odom_topic})",
-        "lamp_source": f"{inputs.lamp_source} ({inputs.lamp_topic})",
-        "start_pose": [float(v) for v in inputs.start_pose],
-        "log_duration_s": round(duration, 3),
-        "counts": res.counts,
-        "filter_health": res.health,
-        "lamps": len(res.lamps),
-        "duplicates_guarded": res.counts["duplicates_guarded"],
-        "mean_nis_lamp": streamed.lamp_nis.mean(),
-        "mean_nis_lamp_dof": 2,
-        "final_pose": [float(v) for v in res.poses[-1]] if len(res.poses) else None,
-        "final_pose_sigma": (
+    est = res.noise_estimate
+    return RunSummary(
+        log=str(inputs.reader.path),
+        odometry_source=f"{inputs.odom_source} ({inputs.odom_topic})",
+        lamp_source=f"{inputs.lamp_source} ({inputs.lamp_topic})",
+        start_pose=[float(v) for v in inputs.start_pose],
+        log_duration_s=round(duration, 3),
+        counts=res.counts,
+        filter_health=res.health,
+        lamps=len(res.lamps),
+        duplicates_guarded=res.counts["duplicates_guarded"],
+        mean_nis_lamp=streamed.lamp_nis.mean(),
+        final_pose=[float(v) for v in res.poses[-1]] if len(res.poses) else None,
+        final_pose_sigma=(
             [float(np.sqrt(res.cov[-1][k])) for k in (0, 3, 5)] if len(res.cov) else None
         ),
-        "trajectory_rows": streamed.rows,
-        "warnings": dict(sorted(inputs.warnings.items())),
-        "truncated_log": inputs.reader.damage()["truncated"],
-        "log_damage": inputs.reader.damage(),
-        "wall_time_s": round(wall, 3),
-        "real_time_factor": round(duration / wall, 1) if wall > 0 else None,
-    }
-    if inputs.first_problem:
-        out["first_warning"] = inputs.first_problem
-    est = res.noise_estimate
-    if inputs.lamp_source == "detections":
-        out["noise_estimate"] = est.as_dict() if est is not None else None
-        delay = res.delay_estimate
-        out["odometry_delay_estimate"] = delay.as_dict() if delay is not None else None
-    if res.calibration is not None:
-        out["calibration"] = res.calibration
-    if aids:
-        out["aids"] = {type(a).__name__: a.summary() for a in aids}
-        out["rings"] = inputs.ring_stats.as_dict()
-        if inputs.ranges is not None:
-            out["range_sensor"] = inputs.ranges.describe()
-    return out
+        trajectory_rows=streamed.rows,
+        warnings=dict(sorted(inputs.warnings.items())),
+        truncated_log=inputs.reader.damage()["truncated"],
+        log_damage=inputs.reader.damage(),
+        wall_time_s=round(wall, 3),
+        real_time_factor=round(duration / wall, 1) if wall > 0 else None,
+        first_warning=inputs.first_problem or OMIT,
+        noise_estimate=(
+            (est.as_dict() if est is not None else None)
+            if inputs.lamp_source == "detections"
+            else OMIT
+        ),
+        odometry_delay_estimate=(
+            (res.delay_estimate.as_dict() if res.delay_estimate is not None else None)
+            if inputs.lamp_source == "detections"
+            else OMIT
+        ),
+        calibration=res.calibration if res.calibration is not None else OMIT,
+        aids={type(a).__name__: a.summary() for a in aids} if aids else OMIT,
+        rings=inputs.ring_stats.as_dict() if aids else OMIT,
+        range_sensor=(
+            inputs.ranges.describe() if aids and inputs.ranges is not None else OMIT
+        ),
+    )
 
 
 def run(
@@ -92,7 +115,39 @@ def run(
     (``fixes.aids.aids_for_log``, the plug-ins loaded on demand); ``calibration``: a
     run's calibration.yaml to start the odometry self-calibration from (default with a
     map and ``slam.calibrate``: the map's, its calibration at the freeze time). Returns
-    the JSON summary; UsageError for options that do not go together."""
+    the JSON summary (:class:`RunSummary` as JSON); UsageError for options that do not
+    go together.
+
+    Parameters
+    ----------
+    log : path
+        The MCAP log.
+    outdir : path
+        The output directory.
+    config : str or None
+        A YAML path or an embedded name.
+    seed : int or None
+        Overrides the config's.
+    map_dir : path or None
+        ``--map``.
+    fix : str or None
+        ``--fix``.
+    fix_from : float or None
+        ``--fix-from``.
+    ranges : str or None
+        ``--ranges`` (sonar|scan).
+    start_pose : (float, float, float) or None
+        ``--start-pose``.
+    adapt_noise : bool
+        ``--adapt-noise``.
+    calibration : path or None
+        ``--calibration``.
+
+    Returns
+    -------
+    dict
+        The JSON summary.
+    """
     from fuzzyslam.config import load_config
     from fuzzyslam.errors import UsageError
     from fuzzyslam.fixes.aids import aids_for_log  # the plug-ins (fixes/) sit above slam/
@@ -125,7 +180,7 @@ def run_stage(
     ranges: str | None = None,
     start_pose: tuple[float, float, float] | None = None,
     calibration: str | os.PathLike | None = None,
-) -> dict:
+) -> dict[str, Any]:
     """Run EKF-SLAM on ``log`` and write docs/contracts.md sec. 2 files into ``outdir``.
 
     The rows are streamed into the staging directory of ``OutputDir`` as they come
@@ -141,12 +196,37 @@ def run_stage(
     start pose (slam/inputs.py). ``calibration``: a calibration.yaml whose factors and
     covariance start the odometry self-calibration (slam/calibration.py; implies it).
     A log without lamps and without aids is dead reckoning: a one-line note on stderr
-    says so."""
+    says so.
+
+    Parameters
+    ----------
+    log : path
+        The MCAP log.
+    outdir : path
+        The output directory.
+    cfg : Config
+        The loaded config.
+    aids : list of FixAid, optional
+        The fix plug-ins.
+    adapt_noise : bool
+        Two passes, the second with the estimated detection noise.
+    ranges : str or None
+        The aids' range sensor.
+    start_pose : (float, float, float) or None
+        Overrides the log's start pose.
+    calibration : path or None
+        A calibration.yaml to start from.
+
+    Returns
+    -------
+    dict
+        The JSON summary (:class:`RunSummary` as JSON).
+    """
     if adapt_noise:
         if aids:
             raise ValueError("adapt_noise: the aids of a first pass cannot be reused")
         first = _run_once(log, outdir, cfg, [], True, ranges, start_pose, calibration)
-        est = first.get("noise_estimate")
+        est = first.noise_estimate or None
         if est:
             cfg = copy.deepcopy(cfg)
             for key in (
@@ -157,27 +237,27 @@ def run_stage(
                 if est[key] is not None:  # None: not measurable (slam.noise)
                     setattr(cfg.slam, key, float(est[key]))
         summary = _run_once(log, outdir, cfg, [], True, ranges, start_pose, calibration)
-        summary["noise_adapted"] = est
+        summary = replace(summary, noise_adapted=est)
         _tell(summary)
-        return summary
-    return _run_once(log, outdir, cfg, aids, False, ranges, start_pose, calibration)
+        return as_json(summary)
+    return as_json(_run_once(log, outdir, cfg, aids, False, ranges, start_pose, calibration))
 
 
-def _tell(summary: dict, cfg: Config | None = None) -> None:
+def _tell(summary: RunSummary, cfg: Config | None = None) -> None:
     """The one-line notes on stderr: the filter in trouble, the noise to change."""
-    health = summary.get("filter_health", {})
+    health = summary.filter_health
     if health.get("diverged"):
         note(
             f"filter_health: the filter looks inconsistent from t = {health['diverged_at']:.3f} s "
             f"({', '.join(health.get('reasons', [])) or 'NIS or association windows'}; see "
             "the summary's filter_health): do not trust this estimate"
         )
-    delay = summary.get("odometry_delay_estimate")
+    delay = summary.odometry_delay_estimate
     if cfg is not None and delay:
         line = delay_note(delay["delay_s"], cfg.slam.odometry_delay_s)
         if line:
             note(line)
-    est = summary.get("noise_estimate")
+    est = summary.noise_estimate
     if cfg is not None and est:
         line = suggestion(
             DetectionNoiseEstimate(
@@ -201,7 +281,7 @@ def _run_once(
     ranges: str | None = None,
     start_pose: tuple[float, float, float] | None = None,
     calibration: str | os.PathLike | None = None,
-) -> dict:
+) -> RunSummary:
     aids = list(aids or [])
     wall0 = time.perf_counter()
     check_outputs([log], [outdir])
@@ -224,7 +304,7 @@ def _run_once(
         ]  # fmt: skip
         write_outputs(tmp, streamed, res, extra)
         summary = make_summary(res, inputs, time.perf_counter() - wall0, aids, streamed)
-        write_summary(tmp, summary)
+        write_summary(tmp, as_json(summary))
     if not _quiet:
         _tell(summary, cfg)
     return summary
@@ -233,7 +313,21 @@ def _run_once(
 def calibration_model(inputs, cfg: Config, path) -> cal.Calibration | None:
     """The run's odometry calibration (slam/calibration.py): None when ``slam.calibrate``
     is off and no file is given; else the model of the log's odometry (``wheels`` for
-    encoders, ``odom`` for Odometry poses) from the config's prior or from ``path``."""
+    encoders, ``odom`` for Odometry poses) from the config's prior or from ``path``.
+
+    Parameters
+    ----------
+    inputs : Inputs
+        The opened log (its odometry source).
+    cfg : Config
+        The run's config (``slam.calibrate`` and the priors).
+    path : path or None
+        A calibration.yaml to start from.
+
+    Returns
+    -------
+    Calibration or None
+    """
     if not cfg.slam.calibrate and path is None:
         return None
     kind = "wheels" if inputs.odom_source == "encoders" else "odom"
@@ -302,7 +396,7 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs, model=N
     return res
 
 
-def _write_calibration(runner: SlamRunner, model: cal.Calibration, outdir) -> dict:
+def _write_calibration(runner: SlamRunner, model: cal.Calibration, outdir) -> cal.CalibrationEntry:
     """calibration.csv (the factors over time, a last row at the end) and calibration.yaml
     (the final factors and covariance: ``run --calibration`` reads it); the summary entry."""
     ekf = runner.ekf
@@ -315,9 +409,9 @@ def _write_calibration(runner: SlamRunner, model: cal.Calibration, outdir) -> di
     final = cal.as_dict(model, t_end, c, cov)
     cal.write_yaml(Path(outdir) / "calibration.yaml", final)
     prior = model.factors
-    return {
-        "model": model.kind,
-        "start": model.source,
-        "start_factors": [float(v) for v in prior],
+    return cal.CalibrationEntry(
+        model=model.kind,
+        start=model.source,
+        start_factors=[float(v) for v in prior],
         **{k: final[k] for k in ("names", "factors", "sigma")},
-    }
+    )

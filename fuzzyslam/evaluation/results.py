@@ -1,0 +1,299 @@
+"""metrics.json, typed: the dataclasses :func:`fuzzyslam.evaluation.core.evaluate`
+fills (one per section), written by :func:`fuzzyslam.summary.as_json`; the warnings and
+the headline drawn from them.
+
+A metric renamed or left out where it is computed is a ``TypeError`` there, not a key
+missing from metrics.json (the experiment's table would then raise ``MissingMetric``).
+Sections left :data:`~fuzzyslam.summary.OMIT` are absent from the file: a phase
+without samples has only its span, runs and samples; ``lamps`` needs true and
+estimated landmarks, ``lamps_by_run`` the map's history and a simulated world,
+``odometry`` the run's dead reckoning, ``heading_fix`` heading_fixes.csv.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import Any
+
+from fuzzyslam.evaluation.consistency import Consistency
+from fuzzyslam.evaluation.metrics import Stats
+from fuzzyslam.summary import OMIT, key
+
+
+@dataclass(frozen=True, kw_only=True)
+class ApeMetrics:
+    """APE of positions (m): raw, after a rigid and after a similarity alignment."""
+
+    raw: Stats
+    aligned: Stats
+    aligned_scale: Stats
+    alignment: dict[str, float]
+
+
+@dataclass(frozen=True, kw_only=True)
+class RpeMetrics:
+    """RPE per metre of travel over ``delta_m`` metres."""
+
+    delta_m: float
+    trans_m_per_m: Stats
+    rot_deg_per_m: Stats
+
+
+@dataclass(frozen=True, kw_only=True)
+class UpdateCounts:
+    """Measurement updates of the phase (updates.csv): attempted, accepted."""
+
+    attempted: int
+    accepted: int
+
+
+@dataclass(frozen=True, kw_only=True)
+class HeadingFixMetrics:
+    """Heading fixes of the phase against the true heading (deg); ``reasons`` counts
+    heading_fixes.csv's reasons."""
+
+    attempted: int
+    accepted: int
+    error_deg: Stats
+    error_all_deg: Stats
+    reasons: dict[str, int] = OMIT
+
+
+@dataclass(frozen=True, kw_only=True)
+class PhaseMetrics:
+    """Every metric over the samples of one phase (overall, A, after, run<r>)."""
+
+    t0: float
+    t1: float
+    runs: list[int]
+    samples: int
+    x_m: Stats = OMIT
+    y_m: Stats = OMIT
+    heading_deg: Stats = OMIT
+    position_m: Stats = OMIT
+    ape_m: ApeMetrics = OMIT
+    rpe: RpeMetrics = OMIT
+    distance_m: float = OMIT
+    nees: Consistency = OMIT
+    nis: dict[str, Consistency] = OMIT
+    updates: UpdateCounts = OMIT
+    heading_fix: HeadingFixMetrics = OMIT
+
+
+@dataclass(frozen=True, kw_only=True)
+class LampSummary:
+    """A one-to-one matching of estimated to true lamps (``LampMatch.summary()``)."""
+
+    matched: int
+    duplicates: int
+    spurious: int
+    missed: int
+    max_dist_m: float
+    error_m: dict[str, Any]
+    per_lamp_error_m: list[float | None]
+    duplicate_ids: list[int]
+    missed_ids: list[int]
+
+
+@dataclass(frozen=True, kw_only=True)
+class LampMetrics(LampSummary):
+    """The final map's lamps against the true ones."""
+
+    estimated: int
+    true: int
+    left_over: int
+    true_within_0_3_m: int = field(metadata=key("true_within_0.3_m"))
+    true_within_0_5_m: int = field(metadata=key("true_within_0.5_m"))
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunLampMetrics(LampSummary):
+    """The map as it stood at the end of a run (its last snapshot, at ``t``)."""
+
+    t: float
+    estimated: int
+
+
+@dataclass(frozen=True, kw_only=True)
+class OdometryMetrics:
+    """The run's dead reckoning against the truth."""
+
+    position_m: Stats
+    heading_deg: Stats
+
+
+@dataclass(frozen=True, kw_only=True)
+class TruthCoverage:
+    """How much of the estimate the truth covers (``core.truth_coverage``)."""
+
+    fraction: float
+    compared_samples: int
+    estimate_samples: int
+    estimate_span_s: list[float] | None
+    truth_span_s: list[float]
+
+
+@dataclass(frozen=True, kw_only=True)
+class Headline:
+    """The few numbers printed on stdout and shown first in the report."""
+
+    position_mean_m: float
+    heading_mean_deg: float
+    ape_rmse_m: float
+    ape_aligned_rmse_m: float
+    rpe_m_per_m: float
+    truth_coverage: float
+    log_damage: dict[str, Any] | None
+    warnings: list[str]
+    phase_A_position_mean_m: float = OMIT
+    after_position_mean_m: float = OMIT
+    nees_mean: float = OMIT
+    nees_in_band: bool = OMIT
+    lamps_true_within_0_5_m: int = field(default=OMIT, metadata=key("lamps_true_within_0.5_m"))
+    lamps_left_over: int = OMIT
+    lamp_error_mean_m: float = OMIT
+    lamps_duplicated: int = OMIT
+    lamps_missed: int = OMIT
+    lamps_spurious: int = OMIT
+    lamps_estimated: int = OMIT
+    heading_fix_error_mean_deg: float = OMIT
+    heading_fix_error_std_deg: float = OMIT
+
+
+@dataclass(frozen=True, kw_only=True)
+class ComparisonPhase:
+    """One phase of a compared estimate: position and heading errors, mean and max."""
+
+    position_mean_m: float
+    position_max_m: float
+    heading_mean_deg: float
+    heading_max_deg: float
+
+
+@dataclass(frozen=True, kw_only=True)
+class ComparisonRow:
+    """One estimate of ``evaluate --compare`` (evaluation/evaluate.py ``comparison_row``)."""
+
+    label: str
+    estimate: str
+    phases: dict[str, ComparisonPhase]
+    lamps_duplicated: int | None
+
+
+@dataclass(frozen=True, kw_only=True)
+class Metrics:
+    """metrics.json: every metric of one estimate against the truth."""
+
+    label: str
+    truth: str
+    estimate: str
+    samples: int
+    estimate_samples: int
+    span_s: list[float]
+    params: dict[str, Any]
+    freeze_run: int | None
+    phases: dict[str, PhaseMetrics]
+    aligned_to_truth: dict[str, float] = OMIT
+    lamps: LampMetrics = OMIT
+    lamps_by_run: dict[str, RunLampMetrics] = OMIT
+    odometry: OdometryMetrics = OMIT
+    truth_coverage: TruthCoverage
+    log_damage: dict[str, Any] | None
+    warnings: list[str]
+    headline: Headline
+    comparison: list[ComparisonRow] = OMIT  # evaluate --compare
+    change_detection: dict[str, Any] = OMIT  # evaluation/changes.py (--fix pose, obstacles)
+
+
+COVERAGE_WARN = 0.99  # below this fraction of the estimate compared, the summary says so
+
+
+def evaluation_warnings(cov: TruthCoverage, dmg: dict[str, Any] | None) -> list[str]:
+    """What the numbers do not cover, in words: a truth covering only part of the
+    estimate, a damaged truth log.
+
+    Parameters
+    ----------
+    cov : TruthCoverage
+        The truth's coverage of the estimate (:func:`truth_coverage`).
+    dmg : dict or None
+        The truth log's damage report (``LogReader.damage()``).
+
+    Returns
+    -------
+    list of str
+        One sentence per problem.
+    """
+    out = []
+    if cov.fraction < COVERAGE_WARN:
+        t0, t1 = cov.truth_span_s
+        out.append(
+            f"the truth covers only {100 * cov.fraction:.1f} % of the estimate's samples "
+            f"({t0:.1f}-{t1:.1f} s); the rest is not evaluated"
+        )
+    if dmg and (dmg.get("truncated") or dmg.get("lost_bytes") or dmg.get("damaged_records")):
+        out.append(
+            f"the truth log is damaged ({dmg.get('lost_bytes', 0)} bytes lost); ground truth "
+            "is missing where it was"
+        )
+    return out
+
+
+def headline(
+    phases: dict[str, PhaseMetrics],
+    coverage: TruthCoverage,
+    log_damage: dict[str, Any] | None,
+    warnings: list[str],
+    lamps: LampMetrics,
+) -> Headline:
+    """The few numbers printed on stdout and shown first in the report.
+
+    Parameters
+    ----------
+    phases : dict of str to PhaseMetrics
+        The phases' metrics (``overall`` always; ``A`` and ``after`` when present).
+    coverage : TruthCoverage
+        The truth's coverage of the estimate.
+    log_damage : dict or None
+        The truth log's damage report.
+    warnings : list of str
+        :func:`evaluation_warnings`.
+    lamps : LampMetrics or OMIT
+        The final map's lamps against the truth (OMIT: no landmarks to compare).
+
+    Returns
+    -------
+    Headline
+    """
+    ov = phases["overall"]
+
+    def position(name: str) -> float:
+        ph = phases.get(name)
+        return ph.position_m.mean if ph is not None and ph.position_m is not OMIT else OMIT
+
+    has_lamps = lamps is not OMIT
+    has_nees = ov.nees is not OMIT
+    fix = ov.heading_fix.error_deg if ov.heading_fix is not OMIT else None
+    return Headline(
+        position_mean_m=ov.position_m.mean,
+        heading_mean_deg=ov.heading_deg.mean,
+        ape_rmse_m=ov.ape_m.raw.rmse,
+        ape_aligned_rmse_m=ov.ape_m.aligned.rmse,
+        rpe_m_per_m=ov.rpe.trans_m_per_m.mean,
+        truth_coverage=coverage.fraction,
+        log_damage=log_damage,
+        warnings=warnings,
+        phase_A_position_mean_m=position("A"),
+        after_position_mean_m=position("after"),
+        nees_mean=ov.nees.mean if has_nees else OMIT,
+        nees_in_band=ov.nees.in_band if has_nees else OMIT,
+        lamps_true_within_0_5_m=lamps.true_within_0_5_m if has_lamps else OMIT,
+        lamps_left_over=lamps.left_over if has_lamps else OMIT,
+        lamp_error_mean_m=lamps.error_m["mean"] if has_lamps else OMIT,
+        lamps_duplicated=lamps.duplicates if has_lamps else OMIT,
+        lamps_missed=lamps.missed if has_lamps else OMIT,
+        lamps_spurious=lamps.spurious if has_lamps else OMIT,
+        lamps_estimated=lamps.estimated if has_lamps else OMIT,
+        heading_fix_error_mean_deg=fix.mean if fix is not None else OMIT,
+        heading_fix_error_std_deg=fix.std if fix is not None else OMIT,
+    )

@@ -1,0 +1,98 @@
+"""What every fix plug-in of ``fuzzyslam run`` shares (the ``Aid`` protocol of
+``slam/events.py``): its start time, the rings seen before it, its decisions (one
+record per ring it acted on, each with a ``row()`` of its CSV) and the CSV file they
+are written to (docs/contracts.md sec. 2). The heading aid (``fixes/heading.py``), the
+pose aid (``fixes/pose_aid.py``) and the change detector (``fixes/changes.py``) derive
+from :class:`FixAid` and add ``on_ring`` and ``summary``.
+"""
+
+from __future__ import annotations
+
+import csv
+from collections.abc import Iterable, Sequence
+from pathlib import Path
+from typing import Any, ClassVar, Protocol
+
+from fuzzyslam.fileio import atomic_path
+from fuzzyslam.fixes.params import FixParams
+
+
+class Row(Protocol):
+    """A decision: one CSV row of text fields."""
+
+    def row(self) -> list[str]: ...
+
+
+def write_rows(path: Path, fields: Sequence[str], decisions: Iterable[Row]) -> None:
+    """One CSV file of decisions, written whole or not at all (``fileio.atomic_path``).
+
+    Parameters
+    ----------
+    path : Path
+        The file.
+    fields : sequence of str
+        The header (the column names).
+    decisions : iterable of Row
+        One row each (``row()``, as many fields as ``fields``).
+    """
+    with atomic_path(path) as tmp, open(tmp, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh, lineterminator="\n")
+        w.writerow(fields)
+        w.writerows(d.row() for d in decisions)
+
+
+class FixAid:
+    """The base of the fix plug-ins: ``start_time``, ``before_start``, ``decisions``
+    and ``write(outdir)`` (``csv_name`` with the header ``csv_fields``).
+
+    A subclass sets ``kind``, ``csv_name`` and ``csv_fields``, calls
+    ``FixAid.__init__`` and starts its ``on_ring`` with ``if not self.started(t): return``.
+
+    Parameters
+    ----------
+    params : FixParams
+        The ``fixes:`` section of the config.
+    start_time : float
+        Log time (s) from which the aid acts (the map's freeze time by default,
+        fixes/aids.py); rings before it are only counted.
+    """
+
+    kind: ClassVar[str] = ""
+    csv_name: ClassVar[str] = ""
+    csv_fields: ClassVar[tuple[str, ...]] = ()
+    viewer_map: Any = None  # (FGM, references) this aid shows in estimates.mcap (aids.py)
+
+    def __init__(self, params: FixParams, start_time: float = 0.0) -> None:
+        self.params = params
+        self.start_time = float(start_time)
+        self.decisions: list[Any] = []
+        self.before_start = 0
+
+    def started(self, t: float) -> bool:
+        """Whether the aid acts on a ring at log time ``t`` (counted in ``before_start``
+        when not).
+
+        Parameters
+        ----------
+        t : float
+            The ring's log time (s).
+
+        Returns
+        -------
+        bool
+            ``t >= start_time``.
+        """
+        if t < self.start_time:
+            self.before_start += 1
+            return False
+        return True
+
+    def write(self, outdir: Path) -> None:
+        """The decisions as ``outdir/csv_name``.
+
+        Parameters
+        ----------
+        outdir : Path
+            The run's (staging) output directory.
+        """
+        write_rows(Path(outdir) / self.csv_name, self.csv_fields, self.decisions)

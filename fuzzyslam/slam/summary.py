@@ -1,0 +1,50 @@
+"""The ``run`` stage's summary, typed (summary.json and stdout): :class:`RunSummary`,
+filled by :func:`fuzzyslam.slam.stage.make_summary` and written by
+:func:`fuzzyslam.summary.as_json`."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any
+
+from fuzzyslam.slam.calibration import CalibrationEntry
+from fuzzyslam.summary import OMIT
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunSummary:
+    """The ``run`` stage's JSON summary (stdout and summary.json, docs/contracts.md
+    sec. 2). Fields left :data:`~fuzzyslam.summary.OMIT` are absent from the JSON:
+    ``first_warning`` (no input problem), ``noise_estimate`` and
+    ``odometry_delay_estimate`` (lamps from frames), ``calibration`` (off), ``aids``,
+    ``rings``, ``range_sensor`` (no fixes),
+    ``noise_adapted`` (without ``--adapt-noise``)."""
+
+    command: str = "run"
+    log: str
+    odometry_source: str
+    lamp_source: str
+    start_pose: list[float]
+    log_duration_s: float
+    counts: dict[str, int]
+    filter_health: dict[str, Any]
+    lamps: int
+    duplicates_guarded: int
+    mean_nis_lamp: float | None
+    mean_nis_lamp_dof: int = 2
+    final_pose: list[float] | None
+    final_pose_sigma: list[float] | None
+    trajectory_rows: int
+    warnings: dict[str, int]
+    truncated_log: bool
+    log_damage: dict[str, Any]
+    wall_time_s: float
+    real_time_factor: float | None
+    first_warning: str = OMIT
+    noise_estimate: dict[str, Any] | None = OMIT
+    odometry_delay_estimate: dict[str, Any] | None = OMIT
+    calibration: CalibrationEntry = OMIT
+    aids: dict[str, dict[str, Any]] = OMIT
+    rings: dict[str, Any] = OMIT
+    range_sensor: dict[str, Any] = OMIT
+    noise_adapted: dict[str, Any] | None = OMIT
