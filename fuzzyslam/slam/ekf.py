@@ -185,12 +185,17 @@ class EkfSlam:
         m = motion_noise(d_trans, d_rot, self.noise)
         self._x[:3] = motion_step(pose, d_trans, d_rot)
         self.odometry_pose = motion_step(self.odometry_pose, d_trans, d_rot)
+        self._propagate(gx, gu, m)
+
+    def _propagate(self, a: np.ndarray, b: np.ndarray, q: np.ndarray) -> None:
+        """P_rr' = A P_rr A^T + B Q B^T;  P_rm' = A P_rm: the prediction's covariance, the
+        robot block and the robot-map cross rows only (O(n))."""
         n = self.dim
         p = self._p
-        prr = gx @ p[:3, :3] @ gx.T + gu @ m @ gu.T
+        prr = a @ p[:3, :3] @ a.T + b @ q @ b.T
         p[:3, :3] = 0.5 * (prr + prr.T)
         if n > 3:
-            cross = gx @ p[:3, 3:n]
+            cross = a @ p[:3, 3:n]
             p[:3, 3:n] = cross
             p[3:n, :3] = cross.T
 
@@ -216,14 +221,7 @@ class EkfSlam:
         ja, jb = jacobians_compose(pose, delta)
         self._x[:3] = compose(pose, delta)
         self.odometry_pose = compose(self.odometry_pose, delta)
-        n = self.dim
-        p = self._p
-        prr = ja @ p[:3, :3] @ ja.T + jb @ q_delta @ jb.T
-        p[:3, :3] = 0.5 * (prr + prr.T)
-        if n > 3:
-            cross = ja @ p[:3, 3:n]
-            p[:3, 3:n] = cross
-            p[3:n, :3] = cross.T
+        self._propagate(ja, jb, q_delta)
 
     def inflate_robot(self, q) -> None:
         """Add ``q`` (3, 3, symmetric PSD) to the robot block: P_rr' = P_rr + Q.
