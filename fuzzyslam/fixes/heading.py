@@ -148,6 +148,20 @@ class HeadingFixAid(FixAid):
         self.recent.push(t, ekf.odometry_pose, ring.ranges, ring.max_range, ring.fov)
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
+        """Form the ring's heading measurement (the paper's, on its FLM or the multi-ring
+        window's), decide it and apply it to the filter (module docstring).
+
+        Parameters
+        ----------
+        t : float
+            The ring's log time (s).
+        ring : Ring
+            The sonar ring (ranges (M,), max ranges (M,), fov).
+        mounts : ndarray, shape (M, 3)
+            The sonars' poses in base_link.
+        ekf : FilterView
+            The filter (its pose, covariance, dead reckoning, ``update_robot``).
+        """
         if not self.started(t):
             return
         if self.recent is not None:
@@ -291,7 +305,13 @@ class HeadingFixAid(FixAid):
 
     def update_rows(self) -> list[dict[str, Any]]:
         """The EKF update attempts, as rows of run's updates.csv (docs/contracts.md sec. 2):
-        fixes that reached the filter (accepted, recovered, or refused by its NIS gate)."""
+        fixes that reached the filter (accepted, recovered, or refused by its NIS gate).
+
+        Returns
+        -------
+        list of dict
+            One row per attempt: t, kind, nis, accepted, innovation.
+        """
         return [
             {
                 "t": d.t,
@@ -309,6 +329,14 @@ class HeadingFixAid(FixAid):
         ]
 
     def summary(self) -> dict[str, Any]:
+        """The aid's entry in run's summary.
+
+        Returns
+        -------
+        dict
+            Rings decided and before the start, fixes accepted, bump recoveries, the
+            multi-ring window's use, decisions by reason, the accepted fixes' mean NIS.
+        """
         reasons = Counter(d.reason for d in self.decisions)
         accepted = [d for d in self.decisions if d.accepted]
         nis = np.array([d.nis for d in accepted]) if accepted else np.zeros(0)
@@ -325,7 +353,20 @@ class HeadingFixAid(FixAid):
 
     def messages(self, topics: Any, start: float | None = None) -> list:
         """The heading fixes for estimates.mcap (``topics.heading_fixes``, fixes/viewer.py),
-        and the map (``viewer_map``, stamped ``start``) when this aid shows it."""
+        and the map (``viewer_map``, stamped ``start``) when this aid shows it.
+
+        Parameters
+        ----------
+        topics : TopicParams
+            The config's topics (``heading_fixes`` and the map's).
+        start : float or None
+            The log's start (s), the map messages' stamp.
+
+        Returns
+        -------
+        list
+            The messages (topic, stamp, message) for the run's estimates.mcap.
+        """
         from fuzzyslam.fixes.viewer import heading_fix_messages, map_messages
 
         angles = {r.id: r.angle for r in self.refs}

@@ -54,6 +54,14 @@ class HeadingDecision:
     y: float = math.nan
 
     def row(self) -> list[str]:
+        """The decision as a row of heading_fixes.csv.
+
+        Returns
+        -------
+        list of str
+            t (nine decimals), corridor, measured, predicted, accepted, reason, strength.
+        """
+
         def num(v: float) -> str:
             return "" if not np.isfinite(v) else f"{v:.9g}"
 
@@ -71,8 +79,20 @@ class HeadingDecision:
 def nearest_candidate(theta0: float, predicted: float, period: float) -> tuple[float, float, float]:
     """Among theta0 + k * period, the candidate nearest ``predicted``.
 
-    Returns (theta, d1, d2): the candidate wrapped to (-pi, pi], its distance to the
-    prediction (|d1| <= period / 2) and the distance of the second nearest (period - |d1|).
+    Parameters
+    ----------
+    theta0 : float
+        One member of the comb (rad).
+    predicted : float
+        The predicted heading (rad).
+    period : float
+        The comb's period (rad): pi, or pi / 2 with right angles.
+
+    Returns
+    -------
+    theta, d1, d2 : float
+        The candidate wrapped to (-pi, pi], its distance to the prediction
+        (|d1| <= period / 2) and the distance of the second nearest (period - |d1|).
     """
     d = float(wrap_angle_period(theta0 - predicted, period))
     theta = float(wrap_angle(predicted + d))
@@ -90,6 +110,24 @@ def select_corridor(
     with ``junction_margin`` > 0, all of them ("junction"). Outside every region:
     ``no_corridor``, or, with ``junction_margin`` > 0, the regions within that distance
     (a corner, "junction"), all of whose angles then compete in :func:`decide_heading_fix`.
+
+    Parameters
+    ----------
+    xy : sequence of float, shape (2,)
+        The predicted position (m).
+    refs : sequence of Reference
+        The map's corridor references.
+    period : float
+        Angles agree mod this period (rad).
+    junction_margin : float
+        Distance (m) within which regions near ``xy`` still count (0: off).
+
+    Returns
+    -------
+    references : list of Reference
+        The candidates (empty when none).
+    why : str
+        "", "junction", or the reason there is none.
     """
     inside = corridors_at(xy, refs)
     if not inside:
@@ -128,6 +166,28 @@ def decide_heading_fix(
     (larger, measured) noise ``sigma_junction_deg``. The decision's ``sigma`` is the R used.
     ``sigmas_deg``: (corridor, junction) standard deviations replacing
     (``sigma_heading_deg``, ``sigma_junction_deg``), e.g. for a multi-ring FLM.
+
+    Parameters
+    ----------
+    t : float
+        The ring's log time (s).
+    wall : WallLike or None
+        The FLM's dominant wall direction (angle, strength) in the robot frame.
+    refs : sequence of Reference
+        The map's corridor references.
+    pose : ndarray, shape (3,)
+        The filter's pose.
+    pose_cov : ndarray, shape (3, 3)
+        Its covariance.
+    params : FixParams
+        The fixes' constants.
+    sigmas_deg : (float, float), optional
+        Standard deviations (deg) replacing the configured ones.
+
+    Returns
+    -------
+    HeadingDecision
+        The measurement, the prediction, whether it is to be applied and why.
     """
     predicted = float(pose[2])
     if wall is None or not np.isfinite(wall.angle):
