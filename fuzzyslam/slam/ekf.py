@@ -14,13 +14,12 @@ the whole matrix each time; ``x`` and ``P`` are views of the used part.
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 
 import numpy as np
 
 from fuzzyslam.robot import motion_step
 from fuzzyslam.se2 import compose, jacobians_compose, rot, wrap_angle
-from fuzzyslam.slam.health import repair_covariance, solve_spd
+from fuzzyslam.slam.ekf_update import EkfUpdates, UpdateResult  # updates; re-exported
 from fuzzyslam.slam.motion import (  # the motion model's home; re-exported here
     Preintegrator,
     motion_jacobians,
@@ -32,21 +31,26 @@ __all__ = ["EkfSlam", "Preintegrator", "UpdateResult", "lamp_init", "lamp_measur
            "motion_jacobians", "motion_noise", "odometry_noise_tuple"]  # fmt: skip
 
 
-@dataclass
-class UpdateResult:
-    """Outcome of one measurement update: accepted, NIS = v^T S^-1 v, innovation v."""
-
-    accepted: bool
-    nis: float
-    innovation: np.ndarray
-    s: np.ndarray | None = None  # innovation covariance S = H P H^T + R (prior)
-
-
 def lamp_measurement(pose: np.ndarray, lamp: np.ndarray) -> tuple[np.ndarray, ...]:
     """Predicted lamp position in the robot frame and its Jacobians (docs/models.md sec. 3).
 
     h = R(theta)^T (l - p);  dh/dp = -R^T;  dh/dl = R^T;  dh/dtheta = (h_y, -h_x).
-    Returns (h (2,), H_r (2, 3), H_l (2, 2)).
+
+    Parameters
+    ----------
+    pose : ndarray, shape (3,)
+        The robot pose (x, y, theta).
+    lamp : array_like, shape (2,)
+        The lamp (x, y) in the map frame.
+
+    Returns
+    -------
+    h : ndarray, shape (2,)
+        The lamp in the robot frame.
+    h_r : ndarray, shape (2, 3)
+        dh / d pose.
+    h_l : ndarray, shape (2, 2)
+        dh / d lamp.
     """
     rt = rot(pose[2]).T
     h = rt @ (np.asarray(lamp, dtype=float) - pose[:2])
@@ -60,6 +64,22 @@ def lamp_init(pose: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, ...]:
     """Inverse model: lamp l = p + R(theta) z, with Jacobians J_r (2, 3) and J_z (2, 2).
 
     J_r = [[1, 0, -s zx - c zy], [0, 1, c zx - s zy]],  J_z = R(theta).
+
+    Parameters
+    ----------
+    pose : ndarray, shape (3,)
+        The robot pose (x, y, theta).
+    z : array_like, shape (2,)
+        The detection in the robot frame.
+
+    Returns
+    -------
+    lamp : ndarray, shape (2,)
+        The lamp in the map frame.
+    j_r : ndarray, shape (2, 3)
+        d lamp / d pose.
+    j_z : ndarray, shape (2, 2)
+        d lamp / d z.
     """
     r = rot(pose[2])
     d = r @ np.asarray(z, dtype=float)
@@ -67,30 +87,7 @@ def lamp_init(pose: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, ...]:
     return pose[:2] + d, jr, r
 
 
-_BLOCK = 256
-_POSE_COLS = np.arange(3)  # the robot pose's columns of H
-_XY = np.arange(2)  # a lamp's x, y offsets in the state
-
-
-def _add_symmetric_update(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:
-    """P += A B^T for a symmetric A B^T, in place, keeping P exactly symmetric.
-
-    Row blocks of the upper triangle are updated (one small GEMM each), diagonal blocks
-    averaged with their transpose and the rest mirrored to the lower triangle: no
-    n x n temporary and no full-matrix transpose, so the cost stays O(n^2) once P
-    leaves the caches.
-    """
-    n = p.shape[0]
-    for i0 in range(0, n, _BLOCK):
-        i1 = min(i0 + _BLOCK, n)
-        p[i0:i1, i0:] += a[i0:i1] @ b[i0:].T
-        blk = p[i0:i1, i0:i1]
-        blk[...] = 0.5 * (blk + blk.T)
-        if i1 < n:
-            p[i1:, i0:i1] = p[i0:i1, i1:].T
-
-
-class EkfSlam:
+class EkfSlam(EkfUpdates):
     """EKF-SLAM state and covariance with O(n) prediction and Joseph-form updates."""
 
     def __init__(
@@ -161,12 +158,29 @@ class EkfSlam:
         return self._x[self.m0 : self.dim].reshape(-1, 2)
 
     def lamp_cov(self, i: int) -> np.ndarray:
+        """The marginal covariance of lamp ``i``.
+
+        Parameters
+        ----------
+        i : int
+            The lamp's index.
+
+        Returns
+        -------
+        ndarray, shape (2, 2)
+            A copy of its diagonal block of P.
+        """
         j = self.m0 + 2 * i
         return self._p[j : j + 2, j : j + 2].copy()
 
     def lamp_covs(self) -> np.ndarray:
         """(n, 2, 2) marginal covariances of all lamps (O(n), no loop in Python): a copy of
-        the 2x2 diagonal blocks of the lamp block, read through a (n, 2, n, 2) view."""
+        the 2x2 diagonal blocks of the lamp block, read through a (n, 2, n, 2) view.
+
+        Returns
+        -------
+        ndarray, shape (n, 2, 2)
+        """
         n, m0 = self.n_lamps, self.m0
         blocks = self._p[m0 : self.dim, m0 : self.dim].reshape(n, 2, n, 2)
         return np.diagonal(blocks, axis1=0, axis2=2).transpose(2, 0, 1).copy()
@@ -179,6 +193,11 @@ class EkfSlam:
         x_r' = g(x_r, u);   P_rr' = G_x P_rr G_x^T + G_u M G_u^T;   P_rm' = G_x P_rm.
 
         Only the robot block and the robot-map cross rows change: O(n).
+
+        Parameters
+        ----------
+        d_trans, d_rot : float
+            The odometry increment: distance (m) and turn (rad).
         """
         pose = self._x[:3]
         gx, gu = motion_jacobians(pose, d_trans, d_rot)
@@ -211,6 +230,15 @@ class EkfSlam:
 
         With calibration factors c, ``d_calib`` (3, k) is d delta / d c and the pose rows
         take T = [J_a, J_b D] over (pose, c) (``calibration.predict_calibrated``).
+
+        Parameters
+        ----------
+        delta : ndarray, shape (3,)
+            The relative motion (x, y, theta) in the robot frame.
+        q_delta : ndarray, shape (3, 3)
+            Its covariance.
+        d_calib : ndarray, shape (3, k), optional
+            d delta / d c (with self-calibration).
         """
         if self.k and d_calib is not None:
             from fuzzyslam.slam.calibration import predict_calibrated
@@ -229,146 +257,16 @@ class EkfSlam:
         Covariance inflation (fading memory; Simon, "Optimal state estimation", sec. 7.4)
         after an unseen disturbance (a bump): the pose keeps its mean and its
         correlations with the lamps, but admits the disturbance. P stays symmetric PSD.
+
+        Parameters
+        ----------
+        q : array_like, shape (3, 3)
+            Symmetric positive semi-definite; ValueError otherwise.
         """
         q = np.asarray(q, dtype=float).reshape(3, 3)
         if not np.allclose(q, q.T) or np.linalg.eigvalsh(0.5 * (q + q.T)).min() < -1e-12:
             raise ValueError("inflate_robot: q must be symmetric positive semi-definite")
         self._p[:3, :3] += 0.5 * (q + q.T)
-
-    # -- updates ------------------------------------------------------------------------
-
-    def _correct(
-        self,
-        cols: np.ndarray,
-        hc: np.ndarray,
-        v: np.ndarray,
-        r: np.ndarray,
-        frozen: np.ndarray | None = None,
-    ) -> None:
-        """Kalman correction with H nonzero only on columns ``cols`` (H[:, cols] = hc).
-
-        K = P H^T S^-1,  x' = x + K v,
-        P' = (I - K H) P (I - K H)^T + K R K^T      (Joseph form)
-           = P - K (P H^T)^T - (P H^T) K^T + K S K^T (expanded, valid for any K)
-           = P + X Y^T + Y X^T,  X = K, Y = K S / 2 - P H^T,
-        one (n x 4k)(4k x n) matrix product: O(n^2 k), applied by row blocks to the upper
-        triangle and mirrored, so P stays exactly symmetric (``_add_symmetric_update``).
-
-        ``frozen`` (j, k): calibration directions this measurement cannot observe; the
-        gain along them is projected out (``calibration.freeze_gain``; the Joseph form
-        keeps P the covariance of the suboptimal gain, those directions unchanged).
-        """
-        n = self.dim
-        p = self._p[:n, :n]
-        pht = p[:, cols] @ hc.T
-        s = hc @ pht[cols] + r
-        s = 0.5 * (s + s.T)
-        kt, reg = solve_spd(s, pht.T)  # S near-singular: regularised (and counted)
-        self.guards["s_regularised"] += reg
-        k = kt.T
-        if frozen is not None and len(frozen):
-            from fuzzyslam.slam.calibration import freeze_gain
-
-            k = freeze_gain(k, frozen, 3, self.m0)
-        self._x[:n] += k @ v
-        self._x[2] = wrap_angle(self._x[2])
-        y = 0.5 * (k @ s) - pht
-        _add_symmetric_update(p, np.hstack([k, y]), np.hstack([y, k]))
-        d = np.diagonal(p)
-        if not 0.0 < d.min() <= d.max() < np.inf:  # finite and > 0 (NaN fails): O(n)
-            self.check_covariance()
-
-    def check_covariance(self) -> bool:
-        """Repair P if it is not symmetric positive definite (``health.repair_covariance``,
-        the nearest such matrix); count it in ``guards['p_repaired']``. O(n^3): called
-        after an update breaks the O(n) diagonal check, and periodically by the runner."""
-        p, repaired = repair_covariance(self.P)
-        if repaired:
-            self._p[: self.dim, : self.dim] = p
-            self.guards["p_repaired"] += 1
-        return repaired
-
-    def _nis(self, s: np.ndarray, v: np.ndarray) -> float:
-        """v^T S^-1 v, with a near-singular S regularised (and counted)."""
-        w, reg = solve_spd(s, v)
-        self.guards["s_regularised"] += reg
-        return float(v @ w)
-
-    def innovation_cov(self, cols: np.ndarray, hc: np.ndarray, r: np.ndarray) -> np.ndarray:
-        """S = H P H^T + R for H nonzero only on ``cols``."""
-        s = hc @ self._p[cols][:, cols] @ hc.T + r
-        return 0.5 * (s + s.T)
-
-    def predict_lamps(self, ids) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Stacked prediction of lamps ``ids``: h (2k,), columns, H restricted to columns.
-
-        Columns are [0, 1, 2, l_i...]; H is (2k, 3 + 2k) with the blocks of
-        ``lamp_measurement`` (vectorised over the k lamps).
-        """
-        ids = np.asarray(ids, dtype=int).reshape(-1)
-        k = len(ids)
-        x = self._x
-        c, s = math.cos(x[2]), math.sin(x[2])
-        rt = np.array([[c, s], [-s, c]])
-        j = self.m0 + 2 * ids
-        jj = j[:, None] + _XY  # the lamps' (x, y) indices (k, 2)
-        h = (x[jj] - x[:2]) @ rt.T  # (k, 2)
-        hc = np.zeros((2 * k, 3 + 2 * k))
-        rows = np.arange(k)
-        hv = hc.reshape(k, 2, 3 + 2 * k)
-        hv[:, :, :2] = -rt
-        hv[:, 0, 2] = h[:, 1]
-        hv[:, 1, 2] = -h[:, 0]
-        hv[rows, :, 3 + 2 * rows] = rt[:, 0]
-        hv[rows, :, 4 + 2 * rows] = rt[:, 1]
-        cols = np.concatenate([_POSE_COLS, jj.reshape(-1)])
-        return h.reshape(-1), cols, hc
-
-    def update_lamps(
-        self, ids, z: np.ndarray, r: np.ndarray, gate_chi2: float | None = None
-    ) -> UpdateResult:
-        """Joint update with lamps ``ids`` observed at robot-frame points z (k, 2).
-
-        ``r`` is the (2k, 2k) measurement covariance (block-diagonal for independent
-        detections). v = z - h(x); S = H P H^T + R; rejected if NIS > gate_chi2.
-        """
-        h, cols, hc = self.predict_lamps(ids)
-        v = np.asarray(z, dtype=float).reshape(-1) - h
-        s = self.innovation_cov(cols, hc, r)
-        nis = self._nis(s, v)
-        if gate_chi2 is not None and not nis <= gate_chi2:
-            return UpdateResult(False, nis, v, s)
-        self._correct(cols, hc, v, r)
-        return UpdateResult(True, nis, v, s)
-
-    def update_lamp(self, i: int, z, r, gate_chi2: float | None = None) -> UpdateResult:
-        """Update with one lamp ``i`` seen at robot-frame point z (2,), covariance r (2, 2)."""
-        return self.update_lamps([i], np.asarray(z).reshape(1, 2), np.asarray(r), gate_chi2)
-
-    def update_robot(self, z, r, idx, gate_chi2: float | None = None) -> UpdateResult:
-        """Direct measurement of robot state components ``idx`` (e.g. [2] heading, [0, 1, 2]).
-
-        h(x) = x[idx], H = rows of the identity; the heading component of the
-        innovation is wrapped to (-pi, pi]. Rejected (no change) if NIS > gate_chi2.
-        """
-        cols = np.asarray(idx, dtype=int).reshape(-1)
-        if np.any((cols < 0) | (cols > 2)):
-            raise ValueError("update_robot: idx must be robot components 0, 1, 2")
-        z = np.asarray(z, dtype=float).reshape(-1)
-        r = np.atleast_2d(np.asarray(r, dtype=float))
-        v = z - self._x[cols]
-        v[cols == 2] = wrap_angle(v[cols == 2])
-        hc = np.eye(len(cols))
-        s = self.innovation_cov(cols, hc, r)
-        nis = self._nis(s, v)
-        if gate_chi2 is not None and not nis <= gate_chi2:
-            res = UpdateResult(False, nis, v)
-        else:
-            heading_only = bool(np.all(cols == 2))
-            self._correct(cols, hc, v, r, self.heading_frozen if heading_only else None)
-            res = UpdateResult(True, nis, v)
-        self.robot_updates.append((tuple(int(c) for c in cols), res))
-        return res
 
     # -- augmentation -------------------------------------------------------------------
 
@@ -388,6 +286,18 @@ class EkfSlam:
 
         l = p + R(theta) z;  P_ll = J_r P_rr J_r^T + J_z R J_z^T;  P_lx = J_r P_rx
         (Probabilistic Robotics sec. 10.2; O(n)).
+
+        Parameters
+        ----------
+        z : array_like, shape (2,)
+            The detection in the robot frame.
+        r : array_like, shape (2, 2)
+            Its covariance.
+
+        Returns
+        -------
+        int
+            The new lamp's index.
         """
         n = self.dim
         self._grow(n + 2)
@@ -411,6 +321,18 @@ class EkfSlam:
         H_i = R^T [-I, d_i^perp | I] (d^perp = (d_y, -d_x)), so S_ij = R^T (W_i + R R_j R^T) R
         with W_i = G_i P_rr G_i^T + G_i P_rl_i + P_rl_i^T G_i^T + P_ll_i, G_i = [-I, d_i^perp],
         and D2_ij = (R v_ij)^T (W_i + R R_j R^T)^-1 (R v_ij).
+
+        Parameters
+        ----------
+        z : ndarray, shape (m, 2)
+            The detections in the robot frame.
+        r : ndarray, shape (m, 2, 2) or (2, 2)
+            Their covariances (one for all).
+
+        Returns
+        -------
+        ndarray, shape (m, n)
+            D2_ij (inf everywhere when there is no lamp or no detection).
         """
         z = np.asarray(z, dtype=float).reshape(-1, 2)
         n = self.n_lamps
