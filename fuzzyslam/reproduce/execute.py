@@ -228,8 +228,14 @@ class Engine:
         return out[:-1]
 
     def close(self, cancel: bool = False) -> None:
-        """Stop the pool (or leave the cluster), cancelling queued steps if ``cancel``."""
+        """Stop the pool (or leave the cluster); with ``cancel`` (an interrupt), queued steps
+        are cancelled and the local pool's running steps terminated (their temporary
+        outputs removed by their own SIGTERM handling), so that Ctrl-C or SIGTERM does not
+        wait for them."""
         if self._client is None:
+            if cancel:  # interrupted: stop the running steps now instead of waiting for them
+                for child in multiprocessing.active_children():  # the pool's workers
+                    child.terminate()  # SIGTERM: each step removes its temporary outputs
             self.pool.shutdown(wait=True, cancel_futures=cancel)
             return
         self.pool.shutdown(wait=not cancel)  # Dask's executor: wait=False cancels
