@@ -156,11 +156,12 @@ class MotionTap:
         """
         if len(self.odo) < 2 or len(self.frames) < 2:
             return None
-        t, dt, dr = np.asarray(self.odo, dtype=float).T
+        t, d_trans, d_rot = np.asarray(self.odo, dtype=float).T
         pairs = consecutive_sightings(self.frames)
         if len(pairs) < min_pairs:
             return None
-        lag, scale, scale0 = estimate_odometry_delay(t, np.cumsum(dt), np.cumsum(dr), pairs)
+        cum_trans, cum_rot = np.cumsum(d_trans), np.cumsum(d_rot)
+        lag, scale, scale0 = estimate_odometry_delay(t, cum_trans, cum_rot, pairs)
         return DelayEstimate(configured + lag, len(pairs), scale, scale0)
 
 
@@ -202,11 +203,12 @@ def consecutive_sightings(frames: list[tuple[float, np.ndarray]]) -> np.ndarray:
         else:
             unique = np.ones(len(z0), dtype=bool)
         ok = unique & (np.abs(r1[j] - r0) <= MAX_RANGE_STEP_M)
-        for a in np.nonzero(ok)[0]:
-            b = j[a]
-            mean_b = b0[a] + 0.5 * db[a, b]
-            rows.append((t0, t1, db[a, b], mean_b, 0.5 * (r0[a] + r1[b])))
-    return np.asarray(rows, dtype=float).reshape(-1, 5)
+        a = np.nonzero(ok)[0]
+        b = j[a]
+        d = db[a, b]
+        stamps = np.broadcast_to([t0, t1], (len(a), 2))
+        rows.append(np.column_stack([stamps, d, b0[a] + 0.5 * d, 0.5 * (r0[a] + r1[b])]))
+    return np.concatenate(rows) if rows else np.zeros((0, 5))
 
 
 def estimate_odometry_delay(
