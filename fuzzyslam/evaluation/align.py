@@ -78,3 +78,34 @@ def umeyama(src: ArrayLike, dst: ArrayLike, with_scale: bool = False) -> Similar
         raise ValueError("umeyama: degenerate source points (zero variance)")
     t = mu_y - scale * r @ mu_x
     return Similarity(rotation=r, translation=t, scale=scale)
+
+
+def anchor(est_pose: ArrayLike, truth_pose: ArrayLike) -> Similarity:
+    """The rigid 2-D motion that takes one estimated pose onto the true pose at that time.
+
+    A SLAM filter started with a (near) zero start covariance defines its map frame by the
+    robot's first pose: its covariances are the uncertainty of the pose relative to that
+    frame. Mapping the estimate by the motion that makes the first poses coincide puts
+    estimate and truth in that frame, where ``e^T P^-1 e`` is the NEES the filter claims
+    (Bar-Shalom et al. 2001, sec. 5.4). A least-squares alignment of the whole path
+    (:func:`umeyama`) moves the start away from the truth's, where the filter claims
+    millimetres, and spreads the late drift over the whole path.
+
+    Parameters
+    ----------
+    est_pose : array_like, shape (3,)
+        The estimated pose (x, y, theta).
+    truth_pose : array_like, shape (3,)
+        The true pose at the same time.
+
+    Returns
+    -------
+    Similarity
+        Rotation by theta_t - theta_e about the origin, then the translation that maps
+        the estimated position onto the true one (scale 1).
+    """
+    e = np.asarray(est_pose, dtype=float).reshape(3)
+    t = np.asarray(truth_pose, dtype=float).reshape(3)
+    a = float(t[2] - e[2])
+    r = np.array([[np.cos(a), -np.sin(a)], [np.sin(a), np.cos(a)]])
+    return Similarity(r, t[:2] - r @ e[:2])

@@ -10,7 +10,7 @@ from numpy.typing import NDArray
 
 from fuzzyslam.evaluation import metrics as M
 from fuzzyslam.evaluation import results as R
-from fuzzyslam.evaluation.align import umeyama
+from fuzzyslam.evaluation.align import anchor, umeyama
 from fuzzyslam.evaluation.consistency import consistency, nees
 from fuzzyslam.evaluation.lamps import LampMatch, found_within, match_lamps
 from fuzzyslam.evaluation.params import EvalParams
@@ -216,17 +216,48 @@ def align_estimate(est: Estimate, truth: Truth, params: EvalParams) -> tuple[Est
         "tx_m": float(s.translation[0]),
         "ty_m": float(s.translation[1]),
         "theta_deg": float(np.degrees(s.angle)),
+        "nees_frame": "first pose",  # see anchored_nees
     }
     return out, info
+
+
+def anchored_nees(est: Estimate, truth: Truth, params: EvalParams) -> Array:
+    """NEES of an unaligned estimate in its own map frame, the frame of the first pose.
+
+    The truth is moved into the estimate's frame by the rigid motion that makes the first
+    paired poses coincide (:func:`fuzzyslam.evaluation.align.anchor`); the covariances are
+    the filter's own. Used for real logs, whose map frame is the robot's start.
+
+    Parameters
+    ----------
+    est : Estimate
+        The estimate as the run wrote it (not aligned), with covariances.
+    truth : Truth
+        The truth.
+    params : EvalParams
+        ``max_dt_s`` for pairing.
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        NEES per paired sample (the samples of :func:`metrics.associate`).
+    """
+    a = M.associate(est.t, est.poses, truth.t, truth.poses, params.max_dt_s)
+    s = anchor(a.est[0], a.truth[0])
+    rot = np.eye(3)
+    rot[:2, :2] = s.rotation
+    err = M.pose_errors(s.apply_poses(a.est), a.truth)
+    return nees(err, rot @ est.cov[a.index] @ rot.T)
 
 
 def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = False) -> Evaluation:
     """Compute every metric of ``est`` against ``truth``, overall, per run and per phase.
 
     ``align``: first move the estimate onto the truth with one rigid 2-D motion
-    (:func:`align_estimate`), so that errors, NEES and landmarks are taken in the truth's
-    frame up to that motion. Raises SpanError when fewer than two estimate samples overlap
-    the truth in time.
+    (:func:`align_estimate`), so that errors and landmarks are taken in the truth's
+    frame up to that motion; the NEES is then taken in the estimate's own frame, anchored
+    at the first pose (:func:`anchored_nees`), the frame its covariances refer to. Raises
+    SpanError when fewer than two estimate samples overlap the truth in time.
 
     Parameters
     ----------
@@ -245,6 +276,7 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
         The typed metrics (``typed``; ``metrics``: metrics.json) and the figures' series.
     """
     alignment = None
+    raw = est
     if align:
         est, alignment = align_estimate(est, truth, params)
     assoc = M.associate(est.t, est.poses, truth.t, truth.poses, params.max_dt_s)
@@ -258,7 +290,7 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
     if est.cov is not None:
         c = est.cov[assoc.index]
         sigma = np.sqrt(np.clip(np.diagonal(c, axis1=1, axis2=2), 0.0, None))
-        nees_v = nees(err, c)
+        nees_v = nees(err, c) if not alignment else anchored_nees(raw, truth, params)
     fix_t = fix_err = fix_ok = None
     if est.heading_fixes is not None and est.heading_fixes.t.size:
         hf = est.heading_fixes

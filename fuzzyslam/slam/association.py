@@ -9,6 +9,7 @@
   same confidence as the individual gate; ties go to the smaller joint NIS. A lamp
   takes at most one detection, so two lamps closer than the gate is wide each
   keep their own detection when both are seen.
+- Relocalisation test: :mod:`fuzzyslam.slam.relocalise`.
 - New lamps: a detection paired with no lamp becomes a tentative lamp; it is
   promoted into the state after ``hits`` sightings within ``radius`` of each other
   (the paper: "once those features become reliable, they are included into the
@@ -181,6 +182,8 @@ class Association:
 
     pairs: list[tuple[int, int]]
     ambiguous: list[int] = field(default_factory=list)
+    # the best hypothesis before the ambiguous pairings were taken out of it
+    best: list[tuple[int, int]] = field(default_factory=list)
 
 
 def jcbb(
@@ -228,7 +231,7 @@ def jcbb(
     if pairs is not None and (
         not pairs or joint_nis(ekf, pairs, z, r) <= joint_threshold(gate_chi2, 2 * len(pairs))
     ):
-        return Association(pairs)
+        return Association(pairs, [], pairs)
     table = JointTable(ekf, z, r, cands)
     hyps: list[tuple[list[tuple[int, int]], float]] = []  # (pairs, nis) with the best count
     best_n, best_nis = 0, np.inf
@@ -264,12 +267,12 @@ def jcbb(
         return Association([])
     best = min(hyps, key=lambda h: h[1])[0]
     if ambiguity_margin <= 0:
-        return Association(best)
+        return Association(best, [], best)
     alts = [set(h) for h, nis in hyps if nis <= best_nis + ambiguity_margin]
     common = set.intersection(*alts)
     keep = [pr for pr in best if pr in common]
     ambiguous = sorted({j for alt in alts for j, _ in alt} - {j for j, _ in keep})
-    return Association(keep, ambiguous)
+    return Association(keep, ambiguous, best)
 
 
 @dataclass

@@ -78,6 +78,13 @@ class SlamParams:
     # margin of the best makes the pairings it changes ambiguous (not applied; a
     # log-likelihood ratio: 4 = alternatives at least e^-2 = 14 % as likely); 0: off
     ambiguity_margin: float = field(default=4.0, metadata={"min": 0.0, "max": 100.0})
+    # relocalisation test (slam/association.py ``relocalisation_test``): a frame that the
+    # best hypothesis leaves >= relocalise_min_gain detections unexplained is associated
+    # again with the robot's covariance inflated by an unmodelled disturbance of these
+    # sigmas (m, deg); kept when it then pairs that many more, and at least 3. 0: off
+    relocalise_sigma_m: float = field(default=0.0, metadata={"min": 0.0, "max": 100.0})
+    relocalise_sigma_heading_deg: float = field(default=0.0, metadata={"min": 0.0, "max": 180.0})
+    relocalise_min_gain: int = field(default=2, metadata={"min": 1, "max": 100})
     tentative_hits: int = field(default=3, metadata={"min": 1})
     tentative_radius: float = field(default=0.3, metadata={"min": 0.01, "max": 10.0})
     tentative_timeout: float = field(default=2.0, metadata={"min": 0.0})

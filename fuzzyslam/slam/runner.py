@@ -51,6 +51,7 @@ from fuzzyslam.slam.events import (
 from fuzzyslam.slam.health import DivergenceMonitor
 from fuzzyslam.slam.noise import DetectionNoiseEstimator
 from fuzzyslam.slam.params import SlamParams
+from fuzzyslam.slam.relocalise import Relocaliser
 
 CALIB_PERIOD_S = 1.0  # calibration.csv: a row at most this often (s)
 # the upper triangle of the pose covariance, row by row (a trajectory row's covariance)
@@ -111,20 +112,13 @@ class SlamRunner:
         self.tentative = TentativeLamps(
             p.tentative_hits, p.tentative_radius, p.tentative_timeout, p.gate_chi2
         )
-        self.counts: dict[str, int] = {
-            "odometry": 0,
-            "frames": 0,
-            "detections": 0,
-            "associated": 0,
-            "lamps_created": 0,
-            "lamps_deferred": 0,
-            "duplicates_guarded": 0,
-            "ambiguous": 0,
-            "frames_stale_odometry": 0,
-            "rings": 0,
-            "aid_calls": 0,
-            "out_of_order": 0,
-        }
+        self.counts: dict[str, int] = dict.fromkeys(
+            "odometry frames detections associated lamps_created lamps_deferred "
+            "duplicates_guarded ambiguous frames_stale_odometry rings aid_calls "
+            "out_of_order".split(),
+            0,
+        )
+        self.relocaliser = Relocaliser.from_params(p)
         if self.sink is None:
             self.sink = MemorySink()
         # the last trajectory row is held back until the next one: a row of the same
@@ -228,6 +222,8 @@ class SlamRunner:
         self.tentative.expire(ev.t)
         if m:
             d2 = ekf.individual_compatibility(z, r)
+            if self.relocaliser is not None:  # a pose that has left its covariance?
+                d2 = self.relocaliser(ekf, z, r, d2)
             assoc, res = self._associate_update(z, r, d2)
             pairs = assoc.pairs
             if pairs:
@@ -418,6 +414,7 @@ class SlamRunner:
         counts = dict(self.counts)
         counts["tentative_expired"] = self.tentative.expired
         counts["tentative_pending"] = len(self.tentative.items)
+        counts.update(self.relocaliser.counts() if self.relocaliser is not None else {})
         sink = self.sink
         if not isinstance(sink, MemorySink):  # streamed: only the last row is kept
             rows = [last] if last is not None else []

@@ -1,0 +1,91 @@
+"""The relocalisation test (slam/relocalise.py) on the real filter."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from fuzzyslam.se2 import inverse_transform_points
+from fuzzyslam.slam.association import jcbb
+from fuzzyslam.slam.ekf import EkfSlam
+from fuzzyslam.slam.relocalise import Relocaliser, relocalisation_test
+
+NOISE = (0.01, 0.005, 0.01, 0.02)
+GATE = 9.21
+# two groups that look alike (a pair 0.2 m apart, 2.5 m from a third landmark), as the
+# landmarks of the MRCLAM arena stand; the robot sees them from about 3 m
+LAMPS = np.array([[3.0, 0.0], [3.0, 0.2], [3.2, 2.5], [0.0, 3.0], [0.2, 3.0], [2.5, 3.2]])
+Q = np.diag([0.5**2, 0.5**2, np.radians(30.0) ** 2])
+
+
+def _filter(pose_est: np.ndarray, sigma_deg: float = 2.0) -> EkfSlam:
+    """A filter whose map holds LAMPS exactly (tiny lamp covariance) and whose pose is
+    ``pose_est`` with a heading sigma of ``sigma_deg``."""
+    ekf = EkfSlam(pose_est, np.diag([1e-4, 1e-4, np.radians(sigma_deg) ** 2]), NOISE, capacity=8)
+    for lamp in LAMPS:
+        z = inverse_transform_points(ekf.pose, lamp[None])[0]
+        ekf.add_lamp(z, np.eye(2) * 1e-8)
+    return ekf
+
+
+def _detections(pose_true: np.ndarray, ids: list[int], rng=None) -> tuple[np.ndarray, np.ndarray]:
+    z = inverse_transform_points(pose_true, LAMPS[ids])
+    r = np.repeat(np.diag([0.1**2, 0.05**2])[None], len(ids), axis=0)
+    if rng is not None:
+        z = z + rng.normal(size=z.shape) * [0.1, 0.05]
+    return z, r
+
+
+def test_a_pose_off_by_15_deg_is_relocalised_and_then_pairs_every_detection():
+    true = np.array([0.5, 0.5, 0.3])
+    est = true + np.array([0.0, 0.0, np.radians(15.0)])  # a turn the wheels did not make: 7.5 sigma
+    ekf = _filter(est)
+    z, r = _detections(true, [0, 1, 2, 3, 4, 5], np.random.default_rng(1))
+    d2 = ekf.individual_compatibility(z, r)
+    before = jcbb(ekf, z, r, d2, GATE, 4.0)
+    assert len(before.best) <= 2  # the wrong pose explains at most a pair
+    p_before = ekf.P.copy()
+    d2_new, test = relocalisation_test(ekf, z, r, d2, GATE, 4.0, Q)
+    assert test is not None and test.accepted
+    assert test.pairs_after >= 5 and test.pairs_before == len(before.best)
+    # the robot block got exactly Q, nothing else changed; P stays symmetric PD
+    dp = ekf.P - p_before
+    assert np.allclose(dp[:3, :3], Q) and np.allclose(dp[3:], 0) and np.allclose(dp[:, 3:], 0)
+    assert np.allclose(ekf.P, ekf.P.T) and np.linalg.eigvalsh(ekf.P).min() > 0
+    after = jcbb(ekf, z, r, d2_new, GATE, 4.0)
+    assert sorted(after.pairs) == [(j, j) for j in range(6)]  # every one with its own lamp
+    det = [j for j, _ in after.pairs]
+    res = ekf.update_lamps([i for _, i in after.pairs], z[det], np.kron(np.eye(6), r[0]))
+    assert res.accepted
+    e = ekf.pose - true
+    assert abs(np.degrees(e[2])) < 1.0
+    assert e @ np.linalg.solve(ekf.pose_cov, e) < 16.27  # chi2(3) 99.9 %: consistent again
+
+
+def test_no_test_when_the_frame_is_explained_and_no_change_when_refused():
+    true = np.array([0.5, 0.5, 0.3])
+    ekf = _filter(true)
+    z, r = _detections(true, [0, 1, 2])
+    d2 = ekf.individual_compatibility(z, r)
+    assert relocalisation_test(ekf, z, r, d2, GATE, 4.0, Q) == (d2, None)
+    # three detections of landmarks not in the map (20 m away): the test runs, explains
+    # nothing more, is refused and leaves the filter bit for bit as it was
+    p0, x0 = ekf.P.copy(), ekf.x.copy()
+    far = np.array([[20.0, 0.0], [20.0, 1.0], [21.0, 3.0]])
+    d2f = ekf.individual_compatibility(far, r)
+    out, test = relocalisation_test(ekf, far, r, d2f, GATE, 4.0, Q)
+    assert test is not None and not test.accepted and test.pairs_after == 0
+    assert out is d2f and np.array_equal(ekf.P, p0) and np.array_equal(ekf.x, x0)
+
+
+def test_relocaliser_counts_and_is_off_by_default():
+    from fuzzyslam.slam.params import SlamParams
+
+    assert Relocaliser.from_params(SlamParams()) is None
+    p = SlamParams(relocalise_sigma_m=0.5, relocalise_sigma_heading_deg=30.0)
+    rel = Relocaliser.from_params(p)
+    assert np.allclose(rel.q, Q)
+    true = np.array([0.5, 0.5, 0.3])
+    ekf = _filter(true + np.array([0.0, 0.0, np.radians(15.0)]))
+    z, r = _detections(true, [0, 1, 2, 3, 4, 5])
+    rel(ekf, z, r, ekf.individual_compatibility(z, r))
+    assert rel.counts() == {"relocalisation_tests": 1, "relocalisations": 1}
