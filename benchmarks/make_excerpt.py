@@ -1,7 +1,7 @@
 """Cut a short excerpt of a landmark log (odometry, detections, ground truth) for the tests.
 
     python benchmarks/make_excerpt.py LOG.mcap TRUTH.tum LANDMARKS.yaml OUTDIR \
-        --start 60 --duration 120 --odom-every 5
+        --start 60 --duration 120 --odom-every 5 [--tum-every 10]
 
 Writes OUTDIR/log.mcap (the same messages, byte for byte, of the topics kept, between
 start and start + duration seconds of the log; every n-th odometry message: poses are
@@ -31,6 +31,7 @@ def main() -> None:
     ap.add_argument("--duration", type=float, default=120.0)
     ap.add_argument("--odom-every", type=int, default=5)
     ap.add_argument("--truth-every", type=int, default=2)
+    ap.add_argument("--tum-every", type=int, default=1, help="keep every n-th row of truth.tum")
     ap.add_argument("--topics", default="/odom,/landmark_detections,/ground_truth/odom")
     a = ap.parse_args()
     out = Path(a.outdir)
@@ -50,7 +51,9 @@ def main() -> None:
                 continue
             w.write_cdr(m.topic, m.typename, serialize(m.msg, m.typename), m.t)
     lines = Path(a.truth).read_text(encoding="utf-8").splitlines()
-    keep = [ln for ln in lines if ln.startswith("#") or t0 - 1 <= float(ln.split()[0]) <= t1 + 1]
+    rows = [ln for ln in lines if not ln.startswith("#")]
+    rows = [ln for ln in rows if t0 - 1 <= float(ln.split()[0]) <= t1 + 1]
+    keep = [ln for ln in lines if ln.startswith("#")] + rows[:: a.tum_every]
     (out / "truth.tum").write_text("\n".join(keep) + "\n", encoding="utf-8")
     shutil.copyfile(a.landmarks, out / "landmarks_truth.yaml")
 
