@@ -1021,7 +1021,7 @@ def test_one_agreeing_ring_between_fixes_does_not_clear_a_suspect_pose():
         flags.append(aid.pose_suspect)
     reasons = [d.reason for d in aid.decisions]
     assert reasons == ["between_fixes", "gated", "between_fixes", "ok"]
-    assert aid._single[-2].reason == "ok" and aid._single[-2].nis < p.suspect_chi2
+    assert aid.window.single[-2].reason == "ok" and aid.window.single[-2].nis < p.suspect_chi2
     assert flags == [False, True, True, False]
 
 
