@@ -90,6 +90,7 @@ from fuzzyslam.fixes.heading_measure import (  # the paper's measurement; re-exp
 from fuzzyslam.fixes.multi_ring import MultiRingWindow
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.references import Reference
+from fuzzyslam.fixes.summaries import HeadingSummary
 from fuzzyslam.maps.flm import RecentRings
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import wrap_angle
@@ -290,28 +291,28 @@ class HeadingFixAid(FixAid):
             if d.reason in ("ok", "recovered", "gated")
         ]
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> HeadingSummary:
         """The aid's entry in run's summary.
 
         Returns
         -------
-        dict
+        HeadingSummary
             Rings decided and before the start, fixes accepted, bump recoveries, the
             multi-ring window's use, decisions by reason, the accepted fixes' mean NIS.
         """
         reasons = Counter(d.reason for d in self.decisions)
         accepted = [d for d in self.decisions if d.accepted]
         nis = np.array([d.nis for d in accepted]) if accepted else np.zeros(0)
-        return {
-            "rings": len(self.decisions),
-            "before_start": self.before_start,
-            "accepted": len(accepted),
-            "recoveries": self.recoveries,
-            "flm_rings": self.window.recent.count if self.window is not None else 1,
-            "multi_ring_fixes_formed": self.window.formed if self.window is not None else 0,
-            "reasons": dict(sorted(reasons.items())),
-            "mean_nis": float(nis.mean()) if nis.size else None,
-        }
+        return HeadingSummary(
+            rings=len(self.decisions),
+            before_start=self.before_start,
+            accepted=len(accepted),
+            recoveries=self.recoveries,
+            flm_rings=self.window.recent.count if self.window is not None else 1,
+            multi_ring_fixes_formed=self.window.formed if self.window is not None else 0,
+            reasons=dict(sorted(reasons.items())),
+            mean_nis=float(nis.mean()) if nis.size else None,
+        )
 
     def messages(self, topics: Any, start: float | None = None) -> list:
         """The heading fixes for estimates.mcap (``topics.heading_fixes``, fixes/viewer.py),
