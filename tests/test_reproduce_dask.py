@@ -125,12 +125,14 @@ def test_sweep_logs_bad_arguments_are_one_line(tmp_path):
 # --- a real Dask cluster (slow) -------------------------------------------------------------
 
 
-@pytest.fixture
-def dask_cluster(tmp_path):
+@pytest.fixture(scope="module")
+def dask_cluster(tmp_path_factory):
     """``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1, as the README's
-    recipe starts them; yields (address, {worker address: pid})."""
+    recipe starts them, once for this module's tests (each test's outputs are in its own
+    directory); yields (address, {worker address: pid}, the workers' homes' parent)."""
     from distributed import Client
 
+    tmp_path = tmp_path_factory.mktemp("dask")
     sched_file = tmp_path / "scheduler.json"
     logs = tmp_path / "dask-logs"
     logs.mkdir()
@@ -161,7 +163,7 @@ def dask_cluster(tmp_path):
             client.wait_for_workers(2, timeout=60)
             pids = client.run(os.getpid)
             address = client.scheduler.address
-        yield address, pids
+        yield address, pids, tmp_path
     finally:
         for p in reversed(procs):
             p.terminate()
@@ -196,7 +198,7 @@ def test_reproduce_on_dask_equals_the_local_run(tmp_path, dask_cluster):
     table, same files byte for byte (timing fields aside), every step on the two workers,
     a progress line per finished step in a redirected stderr, the old output replaced
     whole, the logs removed for two seeds unless ``--keep-logs``."""
-    address, worker_pids = dask_cluster
+    address, worker_pids, _ = dask_cluster
     args = ("reproduce", "--quick", "--paper-only", "--seeds", "2")
     local, remote = tmp_path / "local", tmp_path / "remote"
     p = cli(*args, "-o", local, "--keep-logs")
@@ -252,7 +254,7 @@ def test_an_output_directory_a_worker_cannot_see_is_one_line(tmp_path, dask_clus
     from fuzzyslam.errors import InputError
     from fuzzyslam.reproduce.execute import StepFailed
 
-    address, workers = dask_cluster
+    address, workers, _ = dask_cluster
     root = tmp_path / "only-on-the-client"
     with pytest.raises(StepFailed) as exc:
         execute([Step("seed0/a", ("--version",), (), 1.0)], root, scheduler=address)
@@ -268,7 +270,7 @@ def test_reproduce_ships_the_files_with_the_tasks(tmp_path, dask_cluster):
     directory under the worker's own temp directory, and its outputs come back to the
     client; the same files byte for byte as the local run (timings aside), every step on
     the two workers (each in a working directory of its own)."""
-    address, worker_pids = dask_cluster
+    address, worker_pids, homes = dask_cluster
     args = ("reproduce", "--quick", "--paper-only", "--seeds", "1")
     local, remote = tmp_path / "local", tmp_path / "remote"
     p = cli(*args, "-o", local)
@@ -290,7 +292,7 @@ def test_reproduce_ships_the_files_with_the_tasks(tmp_path, dask_cluster):
         else:
             assert a == b, rel
     # the workers' private step directories are gone; no output was written beside them
-    assert not list(tmp_path.glob("worker*/fuzzyslam-step.*"))
+    assert not list(homes.glob("worker*/fuzzyslam-step.*"))
 
 
 # --- sweep (slow) ---------------------------------------------------------------------------
