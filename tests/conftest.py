@@ -1,8 +1,48 @@
-"""Shared fixtures: one quick simulated recording per test session, generated on demand."""
+"""The test session's environment (no progress bars, Agg) and :func:`shared_dir`, for
+fixtures built once per test run rather than once per xdist worker."""
 
 from __future__ import annotations
 
+import fcntl
 import os
+import shutil
+from pathlib import Path
+
+import pytest
 
 os.environ.setdefault("FUZZYSLAM_NO_PROGRESS", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
+
+
+def shared_dir(factory: pytest.TempPathFactory, name: str, build) -> Path:
+    """A directory of this test run built once by ``build(path)``, whichever xdist worker
+    asks first; the others wait for it (an exclusive lock) and reuse it. A module- or
+    session-scoped fixture is otherwise built once per worker that runs one of its tests
+    (twice under ``-n 2``). ``build`` must leave complete files; the tests only read them.
+
+    Parameters
+    ----------
+    factory : TempPathFactory
+        pytest's (its base temporary directory is the worker's, under the run's).
+    name : str
+        The directory's name, unique in the test run.
+    build : callable
+        ``build(path)`` writes into the new directory ``path``.
+
+    Returns
+    -------
+    Path
+        The built directory.
+    """
+    base = factory.getbasetemp()
+    if os.environ.get("PYTEST_XDIST_WORKER"):
+        base = base.parent  # the run's base directory, shared by its workers
+    root = base / f"shared-{name}"
+    with open(base / f"shared-{name}.lock", "w") as lock:
+        fcntl.flock(lock, fcntl.LOCK_EX)  # released when the file is closed
+        if not (root / ".built").is_file():
+            shutil.rmtree(root, ignore_errors=True)  # a failed build's remains
+            root.mkdir()
+            build(root)
+            (root / ".built").write_text("")
+    return root

@@ -22,6 +22,7 @@ from fuzzyslam.cli import _register, cli
 from fuzzyslam.robot import integrate
 from fuzzyslam.se2 import compose, wrap_angle
 from fuzzyslam.slam import calibration as cal
+from fuzzyslam.slam import calibration_files as calfiles
 from fuzzyslam.slam.ekf import EkfSlam, Preintegrator, motion_noise
 from fuzzyslam.slam.params import SlamParams
 from fuzzyslam.slam.runner import Frame, Odom, SlamRunner
@@ -327,18 +328,20 @@ def test_frozen_gain_update_is_the_joseph_form():
 def test_calibration_at_time_reads_back_the_csv(tmp_path):
     m = _model("wheels", [0.01, 0.01, 0.05])
     cov = np.array([[4e-6, 1e-6, 2e-6], [1e-6, 5e-6, -1e-6], [2e-6, -1e-6, 9e-5]])
-    rows = [cal.csv_row(t, np.array([1.0 + t * 1e-4, 1.0, 1.01]), cov * (1 + t)) for t in (0, 1, 2)]
-    cal.write_csv(tmp_path / "calibration.csv", m, rows)
-    d = cal.at_time(tmp_path / "calibration.csv", 1.5)
+    rows = [
+        calfiles.csv_row(t, np.array([1.0 + t * 1e-4, 1.0, 1.01]), cov * (1 + t)) for t in (0, 1, 2)
+    ]
+    calfiles.write_csv(tmp_path / "calibration.csv", m, rows)
+    d = calfiles.at_time(tmp_path / "calibration.csv", 1.5)
     assert d["t"] == 1.0 and d["names"] == list(m.names)
     np.testing.assert_allclose(d["factors"], [1.0001, 1.0, 1.01], rtol=1e-8)
     np.testing.assert_allclose(d["covariance"], cov * 2, rtol=1e-7)
-    cal.write_yaml(tmp_path / "c.yaml", d)
-    back = cal.load(tmp_path / "c.yaml", m)
+    calfiles.write_yaml(tmp_path / "c.yaml", d)
+    back = calfiles.load(tmp_path / "c.yaml", m)
     np.testing.assert_allclose(back.cov, cov * 2, rtol=1e-7)
     with pytest.raises(Exception, match="model 'wheels'"):
-        cal.load(tmp_path / "c.yaml", _model("odom", [0.05, 0.05]))
-    assert cal.at_time(tmp_path / "calibration.csv", -1.0) is None
+        calfiles.load(tmp_path / "c.yaml", _model("odom", [0.05, 0.05]))
+    assert calfiles.at_time(tmp_path / "calibration.csv", -1.0) is None
 
 
 @pytest.mark.slow

@@ -17,6 +17,7 @@ import numpy as np
 import pytest
 import yaml
 from click.testing import CliRunner
+from conftest import shared_dir
 from matplotlib.collections import PathCollection
 from matplotlib.image import AxesImage
 from matplotlib.lines import Line2D
@@ -38,10 +39,8 @@ def invoke(args: list) -> dict:
     return json.loads(res.stdout)
 
 
-@pytest.fixture(scope="module")
-def drawn(tmp_path_factory) -> dict[str, plt.Figure]:
-    """file name -> the figure as drawn (open), for every figure of map and evaluate."""
-    tmp = tmp_path_factory.mktemp("figures")
+def _chain(tmp: Path) -> None:
+    """simulate (lamps failing, a bump in run 2), run, map, run --fix heading into ``tmp``."""
     cfg = tmp / "scenario.yaml"
     cfg.write_text(
         yaml.safe_dump(
@@ -53,6 +52,20 @@ def drawn(tmp_path_factory) -> dict[str, plt.Figure]:
     log = tmp / "log.mcap"
     invoke(["simulate", cfg, "-o", log, "--seed", 5])
     invoke(["run", log, "-o", tmp / "A", "--config", cfg])
+    invoke(["map", log, "--trajectory", tmp / "A" / "trajectory.tum", "-o", tmp / "fgm",
+            "--landmarks", tmp / "A" / "landmarks.yaml", "--no-figures"])  # fmt: skip
+    invoke(["run", log, "-o", tmp / "H", "--config", cfg, "--map", tmp / "fgm",
+            "--fix", "heading"])  # fmt: skip
+
+
+@pytest.fixture(scope="module")
+def drawn(tmp_path_factory) -> dict[str, plt.Figure]:
+    """file name -> the figure as drawn (open), for every figure of map and evaluate. The
+    log and the runs come from :func:`_chain` (once per test run); map and evaluate draw
+    the figures here."""
+    shared = shared_dir(tmp_path_factory, "figures-chain", _chain)
+    log = shared / "log.mcap"
+    tmp = tmp_path_factory.mktemp("figures")
     figs: dict[str, plt.Figure] = {}
     mp = pytest.MonkeyPatch()
     for mod in (map_figures, eval_figures):
@@ -65,12 +78,12 @@ def drawn(tmp_path_factory) -> dict[str, plt.Figure]:
 
         mp.setattr(mod, "_save", keep)
     try:
-        invoke(["map", log, "--trajectory", tmp / "A" / "trajectory.tum", "-o", tmp / "fgm",
-                "--landmarks", tmp / "A" / "landmarks.yaml"])  # fmt: skip
-        invoke(["run", log, "-o", tmp / "H", "--config", cfg, "--map", tmp / "fgm",
-                "--fix", "heading"])  # fmt: skip
-        invoke(["evaluate", log, tmp / "H", "-o", tmp / "eval", "--map", tmp / "fgm",
-                "--compare", tmp / "A"])  # fmt: skip
+        invoke(["map", log, "--trajectory", shared / "A" / "trajectory.tum", "-o", tmp / "fgm",
+                "--landmarks", shared / "A" / "landmarks.yaml"])  # fmt: skip
+        # the same map as the one run H used (map is deterministic)
+        assert (tmp / "fgm" / "fgm.npz").read_bytes() == (shared / "fgm" / "fgm.npz").read_bytes()
+        invoke(["evaluate", log, shared / "H", "-o", tmp / "eval", "--map", tmp / "fgm",
+                "--compare", shared / "A"])  # fmt: skip
     finally:
         mp.undo()
     yield figs

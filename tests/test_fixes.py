@@ -366,7 +366,7 @@ def _drive_with_heading_fixes(theta_err: float, sigma_pred: float, rings: int):
 def test_ten_degree_heading_error_corrected_within_a_few_rings():
     errs, aid, ekf = _drive_with_heading_fixes(10 * DEG, 8 * DEG, 6)
     assert errs[2] < 1.0 and errs[-1] < 1.0
-    assert aid.summary()["accepted"] >= 3
+    assert aid.summary().accepted >= 3
     assert np.all(np.linalg.eigvalsh(ekf.P) > 0)
 
 
@@ -506,13 +506,13 @@ def test_pose_fixes_pull_toy_filter_to_truth_clean_walls(room, tmp_path):
     """From a wrong start (15 cm, 10 cm, 2.5 deg), 3 m of driving with pose fixes."""
     walls, fgm = room
     e, nees, aid = _drive_with_pose_fixes(fgm, walls, [1.0, 1.0, 0.2], "ideal")
-    assert aid.summary()["accepted"] >= 25
+    assert aid.summary().accepted >= 25
     assert np.hypot(*e[:2]) < 0.05 and abs(e[2]) < 1.0 * DEG
     assert nees[-1] < 11.34  # the filter is not confidently wrong
     aid.write(tmp_path)
     assert (tmp_path / "pose_fixes.csv").read_text().startswith("t,accepted,reason,x,y,theta")
     ups = aid.update_rows()
-    assert len(ups) >= aid.summary()["accepted"] and all(u["dof"] == 3 for u in ups)
+    assert len(ups) >= aid.summary().accepted and all(u["dof"] == 3 for u in ups)
 
 
 def test_pose_fixes_on_sonar_rings_bounded_and_consistent(room):
@@ -524,7 +524,7 @@ def test_pose_fixes_on_sonar_rings_bounded_and_consistent(room):
     errs = [np.hypot(*e[:2]) for e, _, _ in runs]
     assert np.mean(errs) < 0.15 and max(errs) < 0.2
     assert np.mean([n[10:].mean() for _, n, _ in runs]) < 7.81
-    assert all(a.summary()["accepted"] >= 15 for _, _, a in runs)
+    assert all(a.summary().accepted >= 15 for _, _, a in runs)
 
 
 def test_pose_match_refuses_flat_surface(room):
@@ -579,7 +579,7 @@ def test_pose_fixes_relocalise_beyond_the_search_window(room):
     err, aid = _relocalise(fgm, walls, 2)
     reasons = [d.reason for d in aid.decisions]
     assert reasons[0] == "gated" and "recovered" in reasons, reasons
-    assert aid.summary()["wide_searches"] >= 1 and aid.summary()["recoveries"] == 1
+    assert aid.summary().wide_searches >= 1 and aid.summary().recoveries == 1
     assert err < 0.05
     err0, aid0 = _relocalise(fgm, walls, 0)
     assert err0 > 0.5 and "recovered" not in [d.reason for d in aid0.decisions]
@@ -624,7 +624,7 @@ def test_change_detector_plugin_writes_csv(room, tmp_path):
     det = ChangeDetector(fgm, FixParams(), lambda r, m: src["flm"], 0.0)
     det.on_ring(1.0, ring(1.0), MOUNTS, SmallEkf(pose, np.eye(3) * 1e-4))
     det.on_ring(2.0, ring(2.0), MOUNTS, SmallEkf(pose, np.eye(3) * 1.0))  # too uncertain
-    assert det.summary()["skipped_uncertain"] == 1 and det.summary()["detections"] >= 1
+    assert det.summary().skipped_uncertain == 1 and det.summary().detections >= 1
     det.write(tmp_path)
     rows = list(csv.DictReader(open(tmp_path / "changes.csv")))
     assert list(rows[0]) == ["t", "x", "y", "size", "cells"] and len(rows) == len(det.decisions)
@@ -671,7 +671,7 @@ def test_make_aids_loads_and_checks_map_dir(room, tmp_path):
         r = Ring(t, raycast(pose, walls), np.full(16, MAXR), FOV)
         for a in [aid, *aids]:
             a.on_ring(t, r, MOUNTS, ekf)
-    assert aids[0].before_start == 1 and aids[0].summary()["rings"] == 2
+    assert aids[0].before_start == 1 and aids[0].summary().rings == 2
     out = tmp_path / "out"
     out.mkdir()
     for a in [aid, *aids]:
@@ -789,7 +789,7 @@ def test_multi_ring_fix_rate_noise_and_dead_reckoning_window(every):
     step = every or k
     formed = [d for d in aid.decisions if d.reason == "ok"]
     assert [d.t for d in formed] == [float(j) for j in range(n) if (j + 1) % step == 0 and j >= 1]
-    assert ekf.updates == len(formed) == aid.summary()["multi_ring_fixes_formed"]
+    assert ekf.updates == len(formed) == aid.summary().multi_ring_fixes_formed
     want = p.sigma_flm_deg * math.sqrt(max(1.0, k / step))
     assert all(d.sigma == pytest.approx(want * DEG) for d in formed)
     others = [d for d in aid.decisions if d.reason != "ok"]
@@ -855,7 +855,7 @@ def test_multi_ring_bump_recovered_by_the_single_ring_watchdog():
     # the first applied fix agrees with the recovered heading
     assert all(flags[:6]) and not any(flags[6:])
     assert np.degrees(errs[-1]) < 1.0
-    assert aid.summary()["recoveries"] == 1
+    assert aid.summary().recoveries == 1
 
 
 def _bump_walk(refs, noise_deg, drift_deg, xy=(0.0, 0.0), params=None):
@@ -981,8 +981,8 @@ def test_suspect_pose_defers_new_lamps():
     frames = [Frame(0.2 * k, z, cov) for k in range(1, 8)]
     flagged = SlamRunner(SlamParams(), np.zeros(3), [Flag()]).run(frames)
     free = SlamRunner(SlamParams(), np.zeros(3), []).run(frames)
-    assert free.counts["lamps_created"] == 1 and len(free.lamps) == 1
-    assert flagged.counts["lamps_created"] == 0 and flagged.counts["lamps_deferred"] == 7
+    assert free.counts.lamps_created == 1 and len(free.lamps) == 1
+    assert flagged.counts.lamps_created == 0 and flagged.counts.lamps_deferred == 7
 
 
 def test_heading_aid_flags_suspect_pose_until_a_fix_agrees():
@@ -1021,7 +1021,7 @@ def test_one_agreeing_ring_between_fixes_does_not_clear_a_suspect_pose():
         flags.append(aid.pose_suspect)
     reasons = [d.reason for d in aid.decisions]
     assert reasons == ["between_fixes", "gated", "between_fixes", "ok"]
-    assert aid._single[-2].reason == "ok" and aid._single[-2].nis < p.suspect_chi2
+    assert aid.window.single[-2].reason == "ok" and aid.window.single[-2].nis < p.suspect_chi2
     assert flags == [False, True, True, False]
 
 
@@ -1093,7 +1093,7 @@ def test_pose_matches_wait_for_travel_or_turn(room):
         ekf.predict(0.1, 0.0)
         true = compose(true, [0.1, 0.0, 0.0])
     assert matched == [True, False, False, False, False, True, False, False, False, False, True]
-    assert aid.summary()["near_last_match"] == 8
+    assert aid.summary().near_last_match == 8
     ekf.predict(0.0, math.radians(25.0))
     true = compose(true, [0.0, 0.0, math.radians(25.0)])
     src["flm"] = ideal_flm(true, walls, in_l_room)

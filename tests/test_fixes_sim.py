@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 import yaml
 from click.testing import CliRunner
+from conftest import shared_dir
 
 from fuzzyslam.cli import _register, cli
 from fuzzyslam.fixes.params import FixParams
@@ -73,13 +74,18 @@ def run_interval(log: Path, run: int) -> tuple[float, float]:
 
 @pytest.fixture(scope="session")
 def bump_case(tmp_path_factory):
-    """Run 2 has an unseen 10-degree bump in the middle of the top corridor."""
-    tmp = tmp_path_factory.mktemp("bump")
-    log, fgm = chain(
-        tmp, {"scenario": {"bumps": [{"run": 2, "fraction": 0.45, "angle_deg": 10.0}]}}, 5
-    )
-    summary = invoke(["run", log, "--map", fgm, "--fix", "heading", "-o", tmp / "C"])
-    return log, tmp / "C", summary
+    """Run 2 has an unseen 10-degree bump in the middle of the top corridor (built once
+    per test run: conftest.shared_dir)."""
+
+    def build(tmp: Path) -> None:
+        log, fgm = chain(
+            tmp, {"scenario": {"bumps": [{"run": 2, "fraction": 0.45, "angle_deg": 10.0}]}}, 5
+        )
+        summary = invoke(["run", log, "--map", fgm, "--fix", "heading", "-o", tmp / "C"])
+        (tmp / "C.json").write_text(json.dumps(summary))
+
+    tmp = shared_dir(tmp_path_factory, "fixsim-bump", build)
+    return tmp / "log.mcap", tmp / "C", json.loads((tmp / "C.json").read_text())
 
 
 BOX = {"kind": "box", "from_run": 2, "to_run": 2, "centre": [5.0, -0.72], "size": [0.6, 0.5]}
@@ -90,14 +96,19 @@ PERSON = {"kind": "disc", "from_run": 2, "to_run": 2, "radius": 0.25, "speed": 0
 @pytest.fixture(scope="session")
 def dark_case(tmp_path_factory):
     """Every lamp fails at the start of run 2, and a box and a person (unknown to the map)
-    appear: pose fixes against none, and change detection."""
-    tmp = tmp_path_factory.mktemp("dark")
-    scenario = {"lamp_failures": [{"run": 2, "lamps": ALL_LAMPS}], "obstacles": [BOX, PERSON]}
-    log, fgm = chain(tmp, {"scenario": scenario}, 6)
-    out = {}
-    for mode in ("pose", "none"):
-        out[mode] = invoke(["run", log, "--map", fgm, "--fix", mode, "-o", tmp / mode])
-    return log, tmp, out
+    appear: pose fixes against none, and change detection (built once per test run:
+    conftest.shared_dir)."""
+
+    def build(tmp: Path) -> None:
+        scenario = {"lamp_failures": [{"run": 2, "lamps": ALL_LAMPS}], "obstacles": [BOX, PERSON]}
+        log, fgm = chain(tmp, {"scenario": scenario}, 6)
+        out = {}
+        for mode in ("pose", "none"):
+            out[mode] = invoke(["run", log, "--map", fgm, "--fix", mode, "-o", tmp / mode])
+        (tmp / "summaries.json").write_text(json.dumps(out))
+
+    tmp = shared_dir(tmp_path_factory, "fixsim-dark", build)
+    return tmp / "log.mcap", tmp, json.loads((tmp / "summaries.json").read_text())
 
 
 def test_ten_degree_bump_corrected_by_heading_fixes_within_a_few_rings(bump_case):

@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 import yaml
+from conftest import shared_dir
 
 from fuzzyslam.cli import main
 from fuzzyslam.maps.mapio import load_fgm, load_references, read_pgm
@@ -26,31 +27,36 @@ def run_cli(args: list[str], capsys) -> tuple[int, str, str]:
 
 @pytest.fixture(scope="session")
 def one_run_log(tmp_path_factory) -> tuple[Path, Path]:
-    """A one-run simulated log and its ground truth as a TUM trajectory."""
-    d = tmp_path_factory.mktemp("maplog")
-    cfg = d / "one_run.yaml"
-    cfg.write_text("extends: quick.yaml\nname: one_run\nscenario:\n  runs: 1\n")
-    log = d / "one_run.mcap"
-    with pytest.raises(SystemExit) as exc:
-        main(["simulate", str(cfg), "-o", str(log)])
-    assert exc.value.code == 0
-    t, p = [], []
-    for m in LogReader(log).messages(["/ground_truth/odom"]):
-        t.append(m.t)
-        p.append(pose_of(m.msg.pose.pose))
-    tum = d / "truth.tum"
-    write_tum(tum, np.array(t), np.array(p))
-    return log, tum
+    """A one-run simulated log and its ground truth as a TUM trajectory (once per test run:
+    conftest.shared_dir)."""
+
+    def build(d: Path) -> None:
+        cfg = d / "one_run.yaml"
+        cfg.write_text("extends: quick.yaml\nname: one_run\nscenario:\n  runs: 1\n")
+        log = d / "one_run.mcap"
+        with pytest.raises(SystemExit) as exc:
+            main(["simulate", str(cfg), "-o", str(log)])
+        assert exc.value.code == 0
+        t, p = [], []
+        for m in LogReader(log).messages(["/ground_truth/odom"]):
+            t.append(m.t)
+            p.append(pose_of(m.msg.pose.pose))
+        write_tum(d / "truth.tum", np.array(t), np.array(p))
+
+    d = shared_dir(tmp_path_factory, "maps-one-run", build)
+    return d / "one_run.mcap", d / "truth.tum"
 
 
 @pytest.fixture(scope="session")
 def built_map(one_run_log, tmp_path_factory):
     log, tum = one_run_log
-    out = tmp_path_factory.mktemp("fgm") / "fgm"
-    with pytest.raises(SystemExit) as exc:
-        main(["map", str(log), "--trajectory", str(tum), "-o", str(out)])
-    assert exc.value.code == 0
-    return out
+
+    def build(d: Path) -> None:
+        with pytest.raises(SystemExit) as exc:
+            main(["map", str(log), "--trajectory", str(tum), "-o", str(d / "fgm")])
+        assert exc.value.code == 0
+
+    return shared_dir(tmp_path_factory, "maps-built", build) / "fgm"
 
 
 @pytest.mark.slow

@@ -11,6 +11,7 @@ import sys
 from pathlib import Path
 
 import pytest
+from conftest import shared_dir
 
 from fuzzyslam.reproduce.execute import StepFailed, execute
 from fuzzyslam.reproduce.plan import (
@@ -179,10 +180,15 @@ def test_reproduce_output_in_missing_directory_is_one_line(tmp_path):
 
 @pytest.fixture(scope="module")
 def quick_run(tmp_path_factory) -> tuple[Path, dict]:
-    out = tmp_path_factory.mktemp("reproduce") / "out"
-    p = cli("reproduce", "--quick", "--seeds", "1", "-o", out, "--jobs", "2")
-    assert p.returncode == 0, p.stderr
-    return out, json.loads(p.stdout)
+    """``reproduce --quick --seeds 1`` once per test run (conftest.shared_dir)."""
+
+    def build(root: Path) -> None:
+        p = cli("reproduce", "--quick", "--seeds", "1", "-o", root / "out", "--jobs", "2")
+        assert p.returncode == 0, p.stderr
+        (root / "stdout.json").write_text(p.stdout)
+
+    root = shared_dir(tmp_path_factory, "quick-reproduce", build)
+    return root / "out", json.loads((root / "stdout.json").read_text())
 
 
 def test_quick_reproduce_report_has_every_row_with_a_number(quick_run):

@@ -125,12 +125,14 @@ def test_sweep_logs_bad_arguments_are_one_line(tmp_path):
 # --- a real Dask cluster (slow) -------------------------------------------------------------
 
 
-@pytest.fixture
-def dask_cluster(tmp_path):
+@pytest.fixture(scope="module")
+def dask_cluster(tmp_path_factory):
     """``dask scheduler`` and two ``dask worker`` processes on 127.0.0.1, as the README's
-    recipe starts them; yields (address, {worker address: pid})."""
+    recipe starts them, once for this module's tests (each test's outputs are in its own
+    directory); yields (address, {worker address: pid}, the workers' homes' parent)."""
     from distributed import Client
 
+    tmp_path = tmp_path_factory.mktemp("dask")
     sched_file = tmp_path / "scheduler.json"
     logs = tmp_path / "dask-logs"
     logs.mkdir()
@@ -161,7 +163,7 @@ def dask_cluster(tmp_path):
             client.wait_for_workers(2, timeout=60)
             pids = client.run(os.getpid)
             address = client.scheduler.address
-        yield address, pids
+        yield address, pids, tmp_path
     finally:
         for p in reversed(procs):
             p.terminate()
@@ -196,7 +198,7 @@ def test_reproduce_on_dask_equals_the_local_run(tmp_path, dask_cluster):
     table, same files byte for byte (timing fields aside), every step on the two workers,
     a progress line per finished step in a redirected stderr, the old output replaced
     whole, the logs removed for two seeds unless ``--keep-logs``."""
-    address, worker_pids = dask_cluster
+    address, worker_pids, _ = dask_cluster
     args = ("reproduce", "--quick", "--paper-only", "--seeds", "2")
     local, remote = tmp_path / "local", tmp_path / "remote"
     p = cli(*args, "-o", local, "--keep-logs")
@@ -252,7 +254,7 @@ def test_an_output_directory_a_worker_cannot_see_is_one_line(tmp_path, dask_clus
     from fuzzyslam.errors import InputError
     from fuzzyslam.reproduce.execute import StepFailed
 
-    address, workers = dask_cluster
+    address, workers, _ = dask_cluster
     root = tmp_path / "only-on-the-client"
     with pytest.raises(StepFailed) as exc:
         execute([Step("seed0/a", ("--version",), (), 1.0)], root, scheduler=address)
@@ -268,7 +270,7 @@ def test_reproduce_ships_the_files_with_the_tasks(tmp_path, dask_cluster):
     directory under the worker's own temp directory, and its outputs come back to the
     client; the same files byte for byte as the local run (timings aside), every step on
     the two workers (each in a working directory of its own)."""
-    address, worker_pids = dask_cluster
+    address, worker_pids, homes = dask_cluster
     args = ("reproduce", "--quick", "--paper-only", "--seeds", "1")
     local, remote = tmp_path / "local", tmp_path / "remote"
     p = cli(*args, "-o", local)
@@ -290,13 +292,16 @@ def test_reproduce_ships_the_files_with_the_tasks(tmp_path, dask_cluster):
         else:
             assert a == b, rel
     # the workers' private step directories are gone; no output was written beside them
-    assert not list(tmp_path.glob("worker*/fuzzyslam-step.*"))
+    assert not list(homes.glob("worker*/fuzzyslam-step.*"))
 
 
 # --- sweep (slow) ---------------------------------------------------------------------------
 
 
-SWEEP = ("sweep", "sample.yaml", "--set", "robot.wheel_noise=0.002,0.01,0.03", "--seeds", "3")
+# 2 seeds: the table's statistics (mean, sd, min, max) are checked against numpy's over
+# the seeds' metrics.json, which two seeds test as well as three (a third cost 9 steps)
+SWEEP = ("sweep", "sample.yaml", "--set", "robot.wheel_noise=0.002,0.01,0.03", "--seeds", "2")
+STEPS = 18  # 3 values x 2 seeds x (simulate, run, evaluate)
 
 
 def _stats(values: list[float]) -> tuple[float, float, float, float]:
@@ -307,9 +312,9 @@ def _stats(values: list[float]) -> tuple[float, float, float, float]:
 
 @pytest.mark.slow
 def test_sweep_killed_halfway_goes_on_and_skips_the_finished_steps(tmp_path):
-    """3 values x 3 seeds of sample.yaml (27 steps); SIGTERM after 6 finished steps; the
+    """3 values x 2 seeds of sample.yaml (18 steps); SIGTERM after 6 finished steps; the
     rerun skips them (counted) and writes the table and the figure; every row's mean, sd,
-    min and max equal numpy's over the three evaluations' metrics.json."""
+    min and max equal numpy's over the two evaluations' metrics.json."""
     import signal
 
     out = tmp_path / "sw"
@@ -332,8 +337,8 @@ def test_sweep_killed_halfway_goes_on_and_skips_the_finished_steps(tmp_path):
     p = cli(*SWEEP, "-o", out)
     assert p.returncode == 0, p.stderr
     summary = json.loads(p.stdout)
-    assert summary["steps"] == 27 and summary["skipped"] == recorded
-    assert summary["ran"] + summary["skipped"] == 27
+    assert summary["steps"] == STEPS and summary["skipped"] == recorded
+    assert summary["ran"] + summary["skipped"] == STEPS
 
     # the table: a row per value, each statistic recomputed from the per-seed files
     assert [r["values"] for r in summary["rows"]] == [{"robot.wheel_noise": v}
@@ -343,7 +348,7 @@ def test_sweep_killed_halfway_goes_on_and_skips_the_finished_steps(tmp_path):
     assert [ln.split(" | ")[0] for ln in rows] == ["| 0.002", "| 0.01", "| 0.03"]
     for i, (r, line) in enumerate(zip(summary["rows"], rows, strict=True)):
         overall = [json.loads((out / f"g{i}/seed{s}/eval/metrics.json").read_text())
-                   ["phases"]["overall"] for s in range(3)]  # fmt: skip
+                   ["phases"]["overall"] for s in range(2)]  # fmt: skip
         expect = {
             "mean position error (cm)": _stats([100 * o["position_m"]["mean"] for o in overall]),
             "max position error (cm)": _stats([100 * o["position_m"]["max"] for o in overall]),
@@ -352,7 +357,7 @@ def test_sweep_killed_halfway_goes_on_and_skips_the_finished_steps(tmp_path):
         cells = line.strip("| ").split(" | ")[1:]
         for cell, (m, (mean, sd, lo, hi)) in zip(cells, expect.items(), strict=True):
             st = r["measures"][m]
-            assert st["n"] == 3
+            assert st["n"] == 2
             assert [st["mean"], st["sd"], st["min"], st["max"]] == pytest.approx(
                 [mean, sd, lo, hi], rel=1e-12)
             assert cell == f"{mean:.2f}, {sd:.2f} [{lo:.2f}, {hi:.2f}]"
@@ -368,7 +373,7 @@ def test_sweep_killed_halfway_goes_on_and_skips_the_finished_steps(tmp_path):
 
     # a third run changes nothing: every step skipped, the same table
     p = cli(*SWEEP, "-o", out)
-    assert json.loads(p.stdout)["skipped"] == 27
+    assert json.loads(p.stdout)["skipped"] == STEPS
     assert (out / "sweep.md").read_text().splitlines()[4:] == table[4:]
 
 

@@ -9,6 +9,7 @@ import numpy as np
 import pytest
 import yaml
 from click.testing import CliRunner
+from conftest import shared_dir
 from scipy.optimize import linear_sum_assignment
 
 from fuzzyslam import se2
@@ -29,19 +30,25 @@ def invoke(args):
 
 @pytest.fixture(scope="session")
 def quick_log(tmp_path_factory) -> Path:
-    """One simulated quick.yaml recording (2 laps, ~250 s) per test session."""
-    path = tmp_path_factory.mktemp("sim") / "quick.mcap"
-    res = invoke(["simulate", "quick", "-o", str(path), "--seed", "3"])
-    assert res.exit_code == 0, res.output
-    return path
+    """One simulated quick.yaml recording (2 laps, ~250 s) per test run (conftest.shared_dir)."""
+
+    def build(root: Path) -> None:
+        res = invoke(["simulate", "quick", "-o", str(root / "quick.mcap"), "--seed", "3"])
+        assert res.exit_code == 0, res.output
+
+    return shared_dir(tmp_path_factory, "e2e-quick-log", build) / "quick.mcap"
 
 
 @pytest.fixture(scope="session")
 def quick_run(quick_log, tmp_path_factory) -> tuple[Path, dict]:
-    out = tmp_path_factory.mktemp("run") / "est"
-    res = CliRunner().invoke(cli, ["run", str(quick_log), "-o", str(out), "--config", "quick"])
-    assert res.exit_code == 0, res.output
-    return out, json.loads(res.stdout)
+    def build(root: Path) -> None:
+        args = ["run", str(quick_log), "-o", str(root / "est"), "--config", "quick"]
+        res = CliRunner().invoke(cli, args)
+        assert res.exit_code == 0, res.output
+        (root / "stdout.json").write_text(res.stdout)
+
+    root = shared_dir(tmp_path_factory, "e2e-quick-run", build)
+    return root / "est", json.loads((root / "stdout.json").read_text())
 
 
 def truth(log: Path) -> np.ndarray:

@@ -241,7 +241,7 @@ def test_synthetic_slam_is_accurate_consistent_without_duplicates():
     lamps = np.column_stack([2.0 * np.cos(ang), 2.0 * np.sin(ang)]) * 1.1
     runner, nees, err = synthetic_run(0, lamps)
     res = runner.result()
-    assert runner.ekf.n_lamps == len(lamps) and res.counts["lamps_created"] == len(lamps)
+    assert runner.ekf.n_lamps == len(lamps) and res.counts.lamps_created == len(lamps)
     # each true lamp has exactly one estimate within 5 cm
     d = np.hypot(*(runner.ekf.lamps[:, None, :] - lamps[None, :, :]).transpose(2, 0, 1))
     assert np.all(d.min(axis=0) < 0.05) and np.all(d.min(axis=1) < 0.05)

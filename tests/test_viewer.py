@@ -15,6 +15,7 @@ import numpy as np
 import pytest
 import yaml
 from click.testing import CliRunner
+from conftest import shared_dir
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
@@ -119,7 +120,11 @@ def invoke(args: list) -> dict:
 
 @pytest.fixture(scope="module")
 def chain(tmp_path_factory) -> Path:
-    tmp = tmp_path_factory.mktemp("viewer")
+    """simulate, run, map, run --fix heading|pose, once per test run (conftest.shared_dir)."""
+    return shared_dir(tmp_path_factory, "viewer-chain", _build_chain)
+
+
+def _build_chain(tmp: Path) -> None:
     cfg = tmp / "scenario.yaml"
     cfg.write_text(
         yaml.safe_dump(
@@ -133,7 +138,6 @@ def chain(tmp_path_factory) -> Path:
     invoke(["map", log, "--trajectory", tmp / "A" / "trajectory.tum", "-o", tmp / "fgm"])
     for fix in ("heading", "pose"):
         invoke(["run", log, "-o", tmp / fix, "--config", cfg, "--map", tmp / "fgm", "--fix", fix])
-    return tmp
 
 
 def _tf_tree(tf_msgs, pose_msgs) -> None:

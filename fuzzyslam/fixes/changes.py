@@ -31,6 +31,7 @@ import numpy as np
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.fixes.base import FixAid
 from fuzzyslam.fixes.params import FixParams
+from fuzzyslam.fixes.summaries import ChangeSummary
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import transform_points
 from fuzzyslam.slam.events import FilterView
@@ -237,20 +238,20 @@ class ChangeDetector(FixAid):
             self.params.change_link_cells,
         )
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> ChangeSummary:
         """The detector's entry in the run summary.
 
         Returns
         -------
-        dict
+        ChangeSummary
             rings, skipped_uncertain, detections, rings_with_detections.
         """
-        return {
-            "rings": self.rings,
-            "skipped_uncertain": self.uncertain,
-            "detections": len(self.decisions),
-            "rings_with_detections": len({c.t for c in self.decisions}),
-        }
+        return ChangeSummary(
+            rings=self.rings,
+            skipped_uncertain=self.uncertain,
+            detections=len(self.decisions),
+            rings_with_detections=len({c.t for c in self.decisions}),
+        )
 
     def write(self, outdir: Path) -> None:
         """changes.csv (:class:`FixAid`) and changes.png (:func:`draw_changes`).

@@ -39,7 +39,8 @@ new lamp, it would be a duplicate) unless the latest ring's fix agrees with the
 prediction (NIS <= ``suspect_chi2``), and from a disagreement (gated, NIS above
 ``suspect_chi2``, or a recovery) until a fix that agrees is applied (``_update_suspicion``).
 
-Multi-ring FLM [ours] (``fixes.flm_rings`` > 1, and a multi-ring FLM builder given):
+Multi-ring FLM [ours] (``fixes.flm_rings`` > 1, and a multi-ring FLM builder given; the
+window is :class:`fuzzyslam.fixes.multi_ring.MultiRingWindow`):
 one ring's wall direction scatters by about 1.5 deg (echo noise, short arcs); the FLM of
 the last ``flm_rings`` rings (:class:`fuzzyslam.maps.flm.RecentRings`) gives about 0.4
 deg. The rings are placed by their DEAD-RECKONING relative poses (``EkfSlam.odometry_pose``,
@@ -86,8 +87,10 @@ from fuzzyslam.fixes.heading_measure import (  # the paper's measurement; re-exp
     nearest_candidate,
     select_corridor,
 )
+from fuzzyslam.fixes.multi_ring import MultiRingWindow
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.references import Reference
+from fuzzyslam.fixes.summaries import HeadingSummary
 from fuzzyslam.maps.flm import RecentRings
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import wrap_angle
@@ -131,21 +134,12 @@ class HeadingFixAid(FixAid):
         # gated): ``run`` then creates no new lamp (it would be a duplicate)
         self.pose_suspect = False
         self._disagreed = False  # a disagreement not yet resolved by an applied fix
-        p = params
-        self.rings_flm = rings_flm if p.flm_rings > 1 else None
-        self.recent = RecentRings(p.flm_rings, p.flm_window_s) if self.rings_flm else None
-        self.fix_every = p.flm_fix_every if p.flm_fix_every > 0 else p.flm_rings
-        infl = math.sqrt(max(1.0, p.flm_rings / self.fix_every))
-        scale = p.sigma_flm_deg / p.sigma_heading_deg
-        self.multi_sigmas_deg = (p.sigma_flm_deg * infl, p.sigma_junction_deg * scale * infl)
-        self._since_fix = 0  # rings since the last multi-ring fix was formed
-        self._single: list[HeadingDecision] = []  # single-ring decisions (the watchdog)
-        self.multi_formed = 0
-
-    def _push(self, t: float, ring: Any, ekf: FilterView) -> None:
-        """Add the ring to the window with its dead-reckoning pose (module docstring)."""
-        assert self.recent is not None
-        self.recent.push(t, ekf.odometry_pose, ring.ranges, ring.max_range, ring.fov)
+        # the multi-ring window (fixes/multi_ring.py): with rings_flm and flm_rings > 1
+        self.window = (
+            MultiRingWindow(params, rings_flm, wall_direction)
+            if rings_flm is not None and params.flm_rings > 1
+            else None
+        )
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
         """Form the ring's heading measurement (the paper's, on its FLM or the multi-ring
@@ -164,9 +158,9 @@ class HeadingFixAid(FixAid):
         """
         if not self.started(t):
             return
-        if self.recent is not None:
-            self._push(t, ring, ekf)
-            self._since_fix += 1
+        window = self.window
+        if window is not None:
+            window.push(t, ring, ekf)
         pose = ekf.pose
         x0, y0 = float(pose[0]), float(pose[1])
         odo_heading = float(ekf.odometry_pose[2])
@@ -178,13 +172,13 @@ class HeadingFixAid(FixAid):
                     t, -1, math.nan, pose[2], False, why, math.nan, odometry=odo_heading
                 )
             )
-            if self.recent is not None:
-                self._single.append(self.decisions[-1])  # skipped by _recovery_streak
+            if window is not None:
+                window.single.append(self.decisions[-1])  # skipped by recovery_streak
             return
         wall = self.wall_direction(self.flm_source(ring, mounts))
         d = decide_heading_fix(t, wall, self.refs, pose, ekf.pose_cov, self.params)
         d = replace(d, odometry=odo_heading, oblique=why == "junction" and oblique(cands))
-        history = self._single if self.recent is not None else self.decisions
+        history = window.single if window is not None else self.decisions
         recover = d.reason == "gated"
         streak = recovery_streak(d, history, self.params) if recover else []
         if streak:
@@ -210,19 +204,13 @@ class HeadingFixAid(FixAid):
             ekf.inflate_robot(np.diag([q_xy, q_xy, v * v]))
             d = replace(d, accepted=True, reason="recovered")
             self.recoveries += 1
-            if self.recent is not None:  # the window's older rings are from before the bump
-                self.recent.clear()
-                self._push(t, ring, ekf)
-                self._since_fix = 0
+            if window is not None:  # the window's older rings are from before the bump
+                window.restart(t, ring, ekf)
         single = d
-        if self.recent is not None:
-            self._single.append(d)
-            # the watchdog's memory: what _recovery_streak may look at
-            horizon = t - self.params.recover_window_s
-            while self._single and self._single[0].t < horizon:
-                del self._single[0]
+        if window is not None:
+            window.remember(t, d)  # the watchdog's memory: what recovery_streak may see
             if d.reason != "recovered":
-                d = self._multi_decision(t, d, mounts, ekf)
+                d = window.decide(t, d, self.refs, mounts, ekf)
         if d.accepted:
             res = ekf.update_robot(
                 [d.measured], [[d.sigma * d.sigma]], [2], gate_chi2=self.params.gate_chi2
@@ -278,31 +266,6 @@ class HeadingFixAid(FixAid):
             self._disagreed = True
         self.pose_suspect = self._disagreed or not self._agrees(single)
 
-    def _multi_decision(
-        self, t: float, single: HeadingDecision, mounts: np.ndarray, ekf: FilterView
-    ) -> HeadingDecision:
-        """The multi-ring fix when one is due (every ``fix_every`` rings, a window at least
-        half full), else the single-ring decision as a row that is not applied."""
-        assert self.recent is not None and self.rings_flm is not None
-        due = self._since_fix >= self.fix_every and 2 * len(self.recent) >= self.recent.count
-        if not due:
-            if single.reason == "gated":
-                return single
-            return replace(single, measured=math.nan, accepted=False, reason="between_fixes")
-        self._since_fix = 0
-        self.multi_formed += 1
-        wall = self.wall_direction(self.rings_flm(self.recent, mounts))
-        sig_c, sig_j = self.multi_sigmas_deg
-        fit = math.degrees(float(getattr(wall, "sigma", math.nan))) if wall is not None else 0.0
-        if self.params.flm_fit_sigma and math.isfinite(fit) and fit > self.params.sigma_flm_deg:
-            # the tangent fit's own standard deviation (range noise through the fit's
-            # Jacobian) when it exceeds the floor: a loose fit weighs less
-            k = fit / self.params.sigma_flm_deg
-            sig_c, sig_j = sig_c * k, sig_j * k
-        return decide_heading_fix(
-            t, wall, self.refs, ekf.pose, ekf.pose_cov, self.params, (sig_c, sig_j)
-        )
-
     def update_rows(self) -> list[dict[str, Any]]:
         """The EKF update attempts, as rows of run's updates.csv (docs/contracts.md sec. 2):
         fixes that reached the filter (accepted, recovered, or refused by its NIS gate).
@@ -328,28 +291,28 @@ class HeadingFixAid(FixAid):
             if d.reason in ("ok", "recovered", "gated")
         ]
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> HeadingSummary:
         """The aid's entry in run's summary.
 
         Returns
         -------
-        dict
+        HeadingSummary
             Rings decided and before the start, fixes accepted, bump recoveries, the
             multi-ring window's use, decisions by reason, the accepted fixes' mean NIS.
         """
         reasons = Counter(d.reason for d in self.decisions)
         accepted = [d for d in self.decisions if d.accepted]
         nis = np.array([d.nis for d in accepted]) if accepted else np.zeros(0)
-        return {
-            "rings": len(self.decisions),
-            "before_start": self.before_start,
-            "accepted": len(accepted),
-            "recoveries": self.recoveries,
-            "flm_rings": self.recent.count if self.recent is not None else 1,
-            "multi_ring_fixes_formed": self.multi_formed,
-            "reasons": dict(sorted(reasons.items())),
-            "mean_nis": float(nis.mean()) if nis.size else None,
-        }
+        return HeadingSummary(
+            rings=len(self.decisions),
+            before_start=self.before_start,
+            accepted=len(accepted),
+            recoveries=self.recoveries,
+            flm_rings=self.window.recent.count if self.window is not None else 1,
+            multi_ring_fixes_formed=self.window.formed if self.window is not None else 0,
+            reasons=dict(sorted(reasons.items())),
+            mean_nis=float(nis.mean()) if nis.size else None,
+        )
 
     def messages(self, topics: Any, start: float | None = None) -> list:
         """The heading fixes for estimates.mcap (``topics.heading_fixes``, fixes/viewer.py),

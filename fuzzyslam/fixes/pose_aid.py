@@ -39,6 +39,7 @@ import numpy as np
 from fuzzyslam.fixes.base import FixAid
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.pose_match import PoseMatch, PoseMatcher
+from fuzzyslam.fixes.summaries import PoseSummary
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import between, compose, wrap_angle
 from fuzzyslam.slam.events import FilterView
@@ -285,29 +286,29 @@ class PoseFixAid(FixAid):
             if d.innovation is not None
         ]
 
-    def summary(self) -> dict[str, Any]:
+    def summary(self) -> PoseSummary:
         """The aid's entry in the run summary.
 
         Returns
         -------
-        dict
+        PoseSummary
             rings, before_start, accepted, reasons, degenerate, mean_nis, recoveries,
             wide_searches, near_last_match, recentred_searches.
         """
         reasons = Counter(d.reason for d in self.decisions)
         acc = [d for d in self.decisions if d.accepted]
-        return {
-            "rings": len(self.decisions),
-            "before_start": self.before_start,
-            "accepted": len(acc),
-            "reasons": dict(sorted(reasons.items())),
-            "degenerate": int(sum(d.degenerate > 0 for d in acc)),
-            "mean_nis": float(np.mean([d.nis for d in acc])) if acc else None,
-            "recoveries": self.recoveries,
-            "wide_searches": self.wide_searches,
-            "near_last_match": self.near_last,
-            "recentred_searches": self.recentred,
-        }
+        return PoseSummary(
+            rings=len(self.decisions),
+            before_start=self.before_start,
+            accepted=len(acc),
+            reasons=dict(sorted(reasons.items())),
+            degenerate=int(sum(d.degenerate > 0 for d in acc)),
+            mean_nis=float(np.mean([d.nis for d in acc])) if acc else None,
+            recoveries=self.recoveries,
+            wide_searches=self.wide_searches,
+            near_last_match=self.near_last,
+            recentred_searches=self.recentred,
+        )
 
     def messages(self, topics: Any, start: float | None = None) -> list:
         """The pose matches for estimates.mcap (``topics.pose_fixes``, fixes/viewer.py),

@@ -29,7 +29,7 @@ from fuzzyslam.maps.references import Reference, extract_references
 from fuzzyslam.maps.summary import MapSummary, ReferenceEntry, ReferenceTruth, WallQuality
 from fuzzyslam.progress import Progress
 from fuzzyslam.se2 import interpolate_poses, wrap_angle_period
-from fuzzyslam.slam import calibration
+from fuzzyslam.slam import calibration_files
 from fuzzyslam.streams.logmeta import World, read_scenario, read_world
 from fuzzyslam.streams.ranges import open_ranges
 from fuzzyslam.streams.reader import LogReader
@@ -348,7 +348,7 @@ def build_map(
         )
     # the odometry calibration of the trajectory's run at the freeze time (run --map starts
     # from it: slam/calibration.py), when that run had one
-    calib = calibration.at_time(Path(traj_path).parent / "calibration.csv", t_end)
+    calib = calibration_files.at_time(Path(traj_path).parent / "calibration.csv", t_end)
     summary = MapSummary(
         log=str(log_path),
         trajectory=str(traj_path),
@@ -389,7 +389,7 @@ def build_map(
     with OutputDir(outdir, owns=owns) as tmp:
         mapio.save_fgm(tmp / "fgm.npz", fgm, True, t_end, log_id)
         if calib is not None:
-            calibration.write_yaml(tmp / "calibration.yaml", calib)
+            calibration_files.write_yaml(tmp / "calibration.yaml", calib)
         mapio.save_nav2(tmp / "fgm.yaml", tmp / "fgm.pgm", fgm)
         mapio.save_references(tmp / "references.yaml", [r.to_dict() for r in refs])
         _write_viewer_log(tmp / "fgm.mcap", fgm, refs, float(reader.start), cfg)

@@ -10,7 +10,7 @@ Events (built from a log by :mod:`fuzzyslam.slam.inputs`, or by a test):
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -22,6 +22,7 @@ from fuzzyslam.streams.sonar import Ring
 
 if TYPE_CHECKING:  # slam/latency.py reads the events defined here
     from fuzzyslam.slam.latency import DelayEstimate
+    from fuzzyslam.slam.run_results import FilterHealth, RunCounts
 
 
 @dataclass(slots=True)
@@ -229,12 +230,12 @@ class SlamResult:
     odo_poses: np.ndarray
     lamps: list[LampRecord]
     updates: list[UpdateRow]
-    counts: dict[str, int]
+    counts: RunCounts  # (slam/run_results.py)
     snapshots: list[tuple[float, np.ndarray, np.ndarray]]
     ekf: EkfSlam
     # set by the run stage: numerical guards and the divergence test (slam/health.py),
     # and the detection noise the innovations imply (slam/noise.py)
-    health: dict = field(default_factory=dict)
+    health: FilterHealth | None = None
     noise_estimate: DetectionNoiseEstimate | None = None
     delay_estimate: DelayEstimate | None = None  # the odometry latency (slam/latency.py)
     calibration: Any = None  # the summary's entry, calibration.CalibrationEntry (slam/stage.py)

@@ -24,17 +24,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fuzzyslam.robot import integrate
 from fuzzyslam.slam import calibration as cal
-from fuzzyslam.slam.association import (
-    Association,
-    TentativeLamps,
-    block_diag_cov,
-    candidates,
-    jcbb,
-    joint_threshold,
-    unique_hypothesis,
-)
+from fuzzyslam.slam import calibration_files
+from fuzzyslam.slam.association import TentativeLamps
 from fuzzyslam.slam.ekf import EkfSlam, Preintegrator, lamp_init
 from fuzzyslam.slam.events import (
     Aid,
@@ -49,9 +41,11 @@ from fuzzyslam.slam.events import (
     UpdateRow,
 )
 from fuzzyslam.slam.health import DivergenceMonitor
+from fuzzyslam.slam.lamp_update import associate_update
 from fuzzyslam.slam.noise import DetectionNoiseEstimator
 from fuzzyslam.slam.params import SlamParams
 from fuzzyslam.slam.relocalise import Relocaliser
+from fuzzyslam.slam.run_results import RunCounts, slam_result
 
 CALIB_PERIOD_S = 1.0  # calibration.csv: a row at most this often (s)
 # the upper triangle of the pose covariance, row by row (a trajectory row's covariance)
@@ -160,7 +154,7 @@ class SlamRunner:
         self._pending = (t, self.ekf.pose, row)
         self._last_record = t
         if self.calibration is not None and t - self._last_calib >= CALIB_PERIOD_S:
-            self.calib_rows.append(cal.csv_row(t, self.ekf.calib, self.ekf.calib_cov))
+            self.calib_rows.append(calibration_files.csv_row(t, self.ekf.calib, self.ekf.calib_cov))
             self._last_calib = t
         if self._n_rows % 50 == 0:
             self.ekf.check_covariance()  # O(n^3), every 50 rows (health.repair_covariance)
@@ -187,7 +181,13 @@ class SlamRunner:
         pre.reset(self.ekf.calib)
 
     def odometry(self, ev: Odom) -> None:
-        """Odometry increment: preintegrated (applied at the next flush), and dead reckoning."""
+        """Odometry increment: preintegrated (applied at the next flush), and dead reckoning.
+
+        Parameters
+        ----------
+        ev : Odom
+            The increment (d_trans m, d_rot rad) ending at ``ev.t`` (s).
+        """
         self._last_odometry = ev.t
         if self.calibration is not None and not self.preint.steps:
             self.preint.reset(self.ekf.calib)  # the factors as the last update left them
@@ -204,6 +204,12 @@ class SlamRunner:
         (ambiguous: another hypothesis fits nearly as well, ``slam.ambiguity_margin``),
         a rejected attempt (near a mapped lamp that no other detection of the frame
         explains: the duplicate guard), or a tentative lamp.
+
+        Parameters
+        ----------
+        ev : Frame
+            The frame at ``ev.t`` (s): detections ``z`` (m, 2) in base_link (m) with their
+            covariances ``cov`` (m, 2, 2).
         """
         ekf = self.ekf
         self.flush()
@@ -224,7 +230,8 @@ class SlamRunner:
             d2 = ekf.individual_compatibility(z, r)
             if self.relocaliser is not None:  # a pose that has left its covariance?
                 d2 = self.relocaliser(ekf, z, r, d2)
-            assoc, res = self._associate_update(z, r, d2)
+            p = self.params
+            assoc, res = associate_update(ekf, z, r, d2, p.gate_chi2, p.ambiguity_margin)
             pairs = assoc.pairs
             if pairs:
                 for a, (j, i) in enumerate(pairs):
@@ -263,37 +270,6 @@ class SlamRunner:
                 taken = {i for _, i in pairs}
                 self._new_lamps(ev.t, z[rest], r[rest], d2[rest], taken)
         self._record(ev.t)
-
-    def _associate_update(self, z: np.ndarray, r: np.ndarray, d2: np.ndarray):
-        """JCBB association and the joint update of the paired lamps.
-
-        Fast path: when the hypothesis is unique (``unique_hypothesis``) the update's own
-        joint NIS test is the joint compatibility test; JCBB runs only otherwise.
-        Returns (Association, UpdateResult or None).
-        """
-        ekf = self.ekf
-        gate = self.params.gate_chi2
-        if ekf.n_lamps == 0:
-            return Association([]), None
-        pairs = unique_hypothesis(candidates(d2, gate))
-        if pairs is not None:
-            if not pairs:
-                return Association([]), None
-            det = [j for j, _ in pairs]
-            res = ekf.update_lamps(
-                [i for _, i in pairs],
-                z[det],
-                block_diag_cov(r[det]),
-                gate_chi2=joint_threshold(gate, 2 * len(pairs)),
-            )
-            if res.accepted:
-                return Association(pairs), res
-        assoc = jcbb(ekf, z, r, d2, gate, self.params.ambiguity_margin)
-        if not assoc.pairs:
-            return assoc, None
-        det = [j for j, _ in assoc.pairs]
-        res = ekf.update_lamps([i for _, i in assoc.pairs], z[det], block_diag_cov(r[det]))
-        return assoc, res
 
     def _new_lamps(
         self, t: float, z: np.ndarray, r: np.ndarray, d2_before: np.ndarray, taken: set[int]
@@ -334,7 +310,14 @@ class SlamRunner:
                 self.counts["lamps_created"] += 1
 
     def ring(self, ev: RingEvent) -> None:
-        """Hand a sonar ring to every aid whose start time has come."""
+        """Hand a sonar ring to every aid whose start time has come; their robot updates
+        become update rows.
+
+        Parameters
+        ----------
+        ev : RingEvent
+            The ring at ``ev.t`` (s): ``ev.ring`` (ranges (M,), max ranges (M,), fov).
+        """
         self.counts["rings"] += 1
         self.flush()
         for aid in self.aids:
@@ -357,7 +340,19 @@ class SlamRunner:
     ) -> SlamResult:
         """Process events in time order; an event older than the last one is counted, skipped.
 
-        ``t0``: time of the start pose (default: the first event's).
+        Parameters
+        ----------
+        events : iterable of Odom, Frame or RingEvent
+            The events, in time order.
+        progress : callable or None
+            ``progress(t)`` after each event (s).
+        t0 : float or None
+            Time of the start pose (s); default: the first event's.
+
+        Returns
+        -------
+        SlamResult
+            :meth:`result`.
         """
         first = self._n_rows == 0
         if first and t0 is not None:
@@ -387,7 +382,15 @@ class SlamRunner:
         self._record(t)
 
     def result(self) -> SlamResult:
-        """Finish the run (last row and snapshot to the sink) and return its result."""
+        """Finish the run (last row and snapshot to the sink) and return its result.
+
+        Returns
+        -------
+        SlamResult
+            Trajectory (N, 3) with covariance rows (N, 6), dead reckoning (K, 3), lamps,
+            update rows, :class:`~fuzzyslam.slam.run_results.RunCounts`, snapshots, the
+            filter (only the last row when streamed: ``run_results.slam_result``).
+        """
         self.flush()
         ekf = self.ekf
         if self._pending is not None and self._last_t > self._pending[0]:
@@ -411,36 +414,10 @@ class SlamRunner:
             )
             for i in range(ekf.n_lamps)
         ]
-        counts = dict(self.counts)
-        counts["tentative_expired"] = self.tentative.expired
-        counts["tentative_pending"] = len(self.tentative.items)
-        counts.update(self.relocaliser.counts() if self.relocaliser is not None else {})
-        sink = self.sink
-        if not isinstance(sink, MemorySink):  # streamed: only the last row is kept
-            rows = [last] if last is not None else []
-            return SlamResult(
-                np.array([r[0] for r in rows]),
-                np.array([r[1] for r in rows]).reshape(-1, 3),
-                np.array([r[2] for r in rows]).reshape(-1, 6),
-                np.zeros(0),
-                np.zeros((0, 3)),
-                lamps,
-                [],
-                counts,
-                [],
-                ekf,
-            )
-        u = np.asarray(sink.odo_u, dtype=float).reshape(-1, 2)
-        odo = integrate(self.start_pose, u[:, 0], u[:, 1]) if sink.odo_t else np.zeros((0, 3))
-        return SlamResult(
-            np.asarray(sink.t),
-            np.asarray(sink.x).reshape(-1, 3),
-            np.asarray(sink.p).reshape(-1, 6),
-            np.asarray(sink.odo_t),
-            odo,
-            lamps,
-            sink.updates,
-            counts,
-            sink.snapshots,
-            ekf,
+        counts = RunCounts(
+            **self.counts,
+            tentative_expired=self.tentative.expired,
+            tentative_pending=len(self.tentative.items),
+            **(self.relocaliser.counts() if self.relocaliser is not None else {}),
         )
+        return slam_result(self.sink, self.start_pose, last, lamps, counts, ekf)

@@ -21,11 +21,12 @@ from fuzzyslam.fileio import OutputDir, check_outputs
 from fuzzyslam.progress import Progress, note
 from fuzzyslam.rundir import OPTIONAL_OUTPUTS
 from fuzzyslam.slam import calibration as cal
-from fuzzyslam.slam.health import orphan_landmarks
+from fuzzyslam.slam import calibration_files
 from fuzzyslam.slam.inputs import open_inputs
 from fuzzyslam.slam.latency import MotionTap, delay_note
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
 from fuzzyslam.slam.outputs import StreamingOutputs, write_outputs, write_summary
+from fuzzyslam.slam.run_results import filter_health
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
 from fuzzyslam.slam.summary import RunSummary
 from fuzzyslam.summary import OMIT, as_json
@@ -64,7 +65,7 @@ def make_summary(
         counts=res.counts,
         filter_health=res.health,
         lamps=len(res.lamps),
-        duplicates_guarded=res.counts["duplicates_guarded"],
+        duplicates_guarded=res.counts.duplicates_guarded,
         mean_nis_lamp=streamed.lamp_nis.mean(),
         final_pose=[float(v) for v in res.poses[-1]] if len(res.poses) else None,
         final_pose_sigma=(
@@ -246,10 +247,10 @@ def run_stage(
 def _tell(summary: RunSummary, cfg: Config | None = None) -> None:
     """The one-line notes on stderr: the filter in trouble, the noise to change."""
     health = summary.filter_health
-    if health.get("diverged"):
+    if health.diverged:
         note(
-            f"filter_health: the filter looks inconsistent from t = {health['diverged_at']:.3f} s "
-            f"({', '.join(health.get('reasons', [])) or 'NIS or association windows'}; see "
+            f"filter_health: the filter looks inconsistent from t = {health.diverged_at:.3f} s "
+            f"({', '.join(health.reasons) or 'NIS or association windows'}; see "
             "the summary's filter_health): do not trust this estimate"
         )
     delay = summary.odometry_delay_estimate
@@ -332,7 +333,7 @@ def calibration_model(inputs, cfg: Config, path) -> cal.Calibration | None:
         return None
     kind = "wheels" if inputs.odom_source == "encoders" else "odom"
     model = cal.prior(kind, cfg.slam, cfg.robot.wheel_base)
-    return model if path is None else cal.load(path, model)
+    return model if path is None else calibration_files.load(path, model)
 
 
 def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs, model=None) -> SlamResult:
@@ -371,26 +372,13 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs, model=N
     res.noise_estimate = runner.noise.estimate()
     if tap is not None:  # the odometry latency the bearings imply (slam/latency.py)
         res.delay_estimate = tap.estimate(cfg.slam.odometry_delay_s)
-    res.health = {  # numerical guards and the divergence tests (slam/health.py)
-        **res.ekf.guards,
-        **runner.health.summary(),
-        "odometry_gap_s": round(inputs.gap_seconds, 3),
-    }
-    orphans, orphans_at = orphan_landmarks(
-        np.array([lm.first_seen for lm in res.lamps]),
-        np.array([lm.observations for lm in res.lamps]),
-    )
-    res.health["orphan_landmarks"] = orphans
-    if orphans_at is not None:
-        res.health["reasons"].append("orphan_landmarks")
-        at = res.health["diverged_at"]
-        res.health["diverged_at"] = orphans_at if at is None else min(at, orphans_at)
-        res.health["diverged"] = True
+    # numerical guards, the divergence tests, orphan landmarks (slam/run_results.py)
+    res.health = filter_health(res.ekf.guards, runner.health, inputs.gap_seconds, res.lamps)
     if inputs.lamp_source == "detections":
-        res.counts["detections_own_covariance"] = inputs.own_covariances
-    if res.counts["odometry"] == 0:
+        res.counts = replace(res.counts, detections_own_covariance=inputs.own_covariances)
+    if res.counts.odometry == 0:
         raise InputError(inputs.reader.path, f"no usable odometry on {inputs.odom_topic}")
-    if inputs.lamp_source == "frames" and res.counts["frames"] == 0:
+    if inputs.lamp_source == "frames" and res.counts.frames == 0:
         problem = inputs.first_problem or "no frames"
         raise InputError(inputs.reader.path, f"no usable camera frame ({problem})")
     return res
@@ -404,10 +392,10 @@ def _write_calibration(runner: SlamRunner, model: cal.Calibration, outdir) -> ca
     t_end = runner.last_time
     rows = runner.calib_rows
     if not rows or float(rows[-1][0]) < t_end:
-        rows.append(cal.csv_row(t_end, c, cov))
-    cal.write_csv(Path(outdir) / "calibration.csv", model, rows)
-    final = cal.as_dict(model, t_end, c, cov)
-    cal.write_yaml(Path(outdir) / "calibration.yaml", final)
+        rows.append(calibration_files.csv_row(t_end, c, cov))
+    calibration_files.write_csv(Path(outdir) / "calibration.csv", model, rows)
+    final = calibration_files.as_dict(model, t_end, c, cov)
+    calibration_files.write_yaml(Path(outdir) / "calibration.yaml", final)
     prior = model.factors
     return cal.CalibrationEntry(
         model=model.kind,

@@ -8,6 +8,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from fuzzyslam.slam.calibration import CalibrationEntry
+from fuzzyslam.slam.run_results import FilterHealth, RunCounts
 from fuzzyslam.summary import OMIT
 
 
@@ -26,8 +27,8 @@ class RunSummary:
     lamp_source: str
     start_pose: list[float]
     log_duration_s: float
-    counts: dict[str, int]
-    filter_health: dict[str, Any]
+    counts: RunCounts
+    filter_health: FilterHealth
     lamps: int
     duplicates_guarded: int
     mean_nis_lamp: float | None
@@ -44,7 +45,7 @@ class RunSummary:
     noise_estimate: dict[str, Any] | None = OMIT
     odometry_delay_estimate: dict[str, Any] | None = OMIT
     calibration: CalibrationEntry = OMIT
-    aids: dict[str, dict[str, Any]] = OMIT
+    aids: dict[str, Any] = OMIT  # class name -> summary() (a fixes/summaries.py dataclass)
     rings: dict[str, Any] = OMIT
     range_sensor: dict[str, Any] = OMIT
     noise_adapted: dict[str, Any] | None = OMIT

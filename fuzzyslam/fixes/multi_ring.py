@@ -1,0 +1,164 @@
+"""The heading aid's multi-ring window [ours] (``fixes.flm_rings`` > 1; the design is in
+:mod:`fuzzyslam.fixes.heading`'s docstring, "Multi-ring FLM").
+
+:class:`MultiRingWindow` keeps the last ``flm_rings`` rings with their DEAD-RECKONING
+poses (:class:`fuzzyslam.maps.flm.RecentRings`), forms one multi-ring heading fix every
+``flm_fix_every`` rings (0: every ``flm_rings``, disjoint windows) with the noise
+
+    R = sigma^2 * max(1, flm_rings / flm_fix_every)
+
+(sigma = ``sigma_flm_deg`` in a corridor, ``sigma_junction_deg`` scaled alike at a
+junction; overlapping windows count each ring's information once), raised to the wall
+fit's own standard deviation when that is larger (``flm_fit_sigma``), and keeps the
+single-ring watchdog's decisions of the last ``recover_window_s`` seconds (the history
+the bump recovery looks at). Between fixes a single-ring decision becomes a row that is
+not applied (``between_fixes``; ``gated`` rows stay, they drive the recovery).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import replace
+from typing import Any
+
+import numpy as np
+
+from fuzzyslam.fixes.heading_measure import HeadingDecision, WallLike, decide_heading_fix
+from fuzzyslam.fixes.params import FixParams
+from fuzzyslam.fixes.references import Reference
+from fuzzyslam.maps.flm import RecentRings
+from fuzzyslam.maps.grid import BeliefMap
+from fuzzyslam.slam.events import FilterView
+
+
+class MultiRingWindow:
+    """The multi-ring FLM window of the heading aid (module docstring).
+
+    Parameters
+    ----------
+    params : FixParams
+        ``flm_rings`` (> 1), ``flm_window_s``, ``flm_fix_every``, the sigmas, ``flm_fit_sigma``,
+        ``recover_window_s``.
+    rings_flm : callable
+        ``rings_flm(recent, mounts) -> BeliefMap``: the FLM of a :class:`RecentRings` in the
+        newest ring's frame (``RecentRings.flm``).
+    wall_direction : callable
+        ``wall_direction(flm) -> WallLike or None``: the FLM's wall (Hough).
+    """
+
+    def __init__(
+        self,
+        params: FixParams,
+        rings_flm: Callable[[RecentRings, np.ndarray], BeliefMap],
+        wall_direction: Callable[[BeliefMap], WallLike | None],
+    ) -> None:
+        p = params
+        self.params = params
+        self.rings_flm = rings_flm
+        self.wall_direction = wall_direction
+        self.recent = RecentRings(p.flm_rings, p.flm_window_s)
+        self.fix_every = p.flm_fix_every if p.flm_fix_every > 0 else p.flm_rings
+        infl = math.sqrt(max(1.0, p.flm_rings / self.fix_every))
+        scale = p.sigma_flm_deg / p.sigma_heading_deg
+        # (corridor, junction) sigmas of a multi-ring fix (deg)
+        self.sigmas_deg = (p.sigma_flm_deg * infl, p.sigma_junction_deg * scale * infl)
+        self.since_fix = 0  # rings since the last multi-ring fix was formed
+        self.single: list[HeadingDecision] = []  # the watchdog's recent decisions
+        self.formed = 0  # multi-ring fixes formed
+
+    def push(self, t: float, ring: Any, ekf: FilterView) -> None:
+        """Add a ring with the filter's dead-reckoning pose (``ekf.odometry_pose``).
+
+        Parameters
+        ----------
+        t : float
+            The ring's log time (s).
+        ring : Ring
+            The sonar ring (ranges (M,), max ranges (M,), fov).
+        ekf : FilterView
+            The filter (its dead reckoning, never corrected by the fixes).
+        """
+        self.recent.push(t, ekf.odometry_pose, ring.ranges, ring.max_range, ring.fov)
+        self.since_fix += 1
+
+    def restart(self, t: float, ring: Any, ekf: FilterView) -> None:
+        """Start the window afresh from this ring (after a bump recovery: the older rings
+        are from before the bump); the next fix is ``fix_every`` rings later.
+
+        Parameters
+        ----------
+        t : float
+            The ring's log time (s).
+        ring : Ring
+            The sonar ring.
+        ekf : FilterView
+            The filter (its dead reckoning).
+        """
+        self.recent.clear()
+        self.recent.push(t, ekf.odometry_pose, ring.ranges, ring.max_range, ring.fov)
+        self.since_fix = 0
+
+    def remember(self, t: float, d: HeadingDecision) -> None:
+        """Keep a single-ring decision in the watchdog's history, dropping those older
+        than ``recover_window_s`` before ``t``.
+
+        Parameters
+        ----------
+        t : float
+            The current ring's time (s).
+        d : HeadingDecision
+            The ring's single-ring decision.
+        """
+        self.single.append(d)
+        horizon = t - self.params.recover_window_s
+        while self.single and self.single[0].t < horizon:
+            del self.single[0]
+
+    def decide(
+        self,
+        t: float,
+        single: HeadingDecision,
+        refs: Sequence[Reference],
+        mounts: np.ndarray,
+        ekf: FilterView,
+    ) -> HeadingDecision:
+        """The multi-ring fix when one is due (``fix_every`` rings since the last, the
+        window at least half full), else ``single`` as a row that is not applied.
+
+        Parameters
+        ----------
+        t : float
+            The ring's log time (s).
+        single : HeadingDecision
+            The ring's single-ring decision (the watchdog's).
+        refs : sequence of Reference
+            The map's corridors.
+        mounts : ndarray, shape (M, 3)
+            The sonars' poses in base_link.
+        ekf : FilterView
+            The filter (pose (3,), pose covariance (3, 3)).
+
+        Returns
+        -------
+        HeadingDecision
+            The multi-ring decision (not yet applied), or ``single`` (``gated``) or its
+            ``between_fixes`` row (measured NaN, not accepted).
+        """
+        due = self.since_fix >= self.fix_every and 2 * len(self.recent) >= self.recent.count
+        if not due:
+            if single.reason == "gated":
+                return single
+            return replace(single, measured=math.nan, accepted=False, reason="between_fixes")
+        self.since_fix = 0
+        self.formed += 1
+        p = self.params
+        wall = self.wall_direction(self.rings_flm(self.recent, mounts))
+        sig_c, sig_j = self.sigmas_deg
+        fit = math.degrees(float(getattr(wall, "sigma", math.nan))) if wall is not None else 0.0
+        if p.flm_fit_sigma and math.isfinite(fit) and fit > p.sigma_flm_deg:
+            # the tangent fit's own standard deviation (range noise through the fit's
+            # Jacobian) when it exceeds the floor: a loose fit weighs less
+            k = fit / p.sigma_flm_deg
+            sig_c, sig_j = sig_c * k, sig_j * k
+        return decide_heading_fix(t, wall, refs, ekf.pose, ekf.pose_cov, p, (sig_c, sig_j))

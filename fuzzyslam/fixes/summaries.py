@@ -1,0 +1,48 @@
+"""The fix plug-ins' entries in the run summary (``aids``, one per aid by class name),
+typed: each aid's ``summary()`` returns one of these dataclasses, written by
+:func:`fuzzyslam.summary.as_json`, so that a figure left out is a ``TypeError`` where
+the aid makes it. ``reasons`` maps each decision reason to its count (keys sorted)."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+
+@dataclass(frozen=True, kw_only=True)
+class HeadingSummary:
+    """:class:`~fuzzyslam.fixes.heading.HeadingFixAid` (and the scan-line aid)."""
+
+    rings: int  # rings decided (from the aid's start time)
+    before_start: int  # rings before it
+    accepted: int  # fixes the filter accepted
+    recoveries: int  # bump recoveries
+    flm_rings: int  # rings per FLM (1: the paper's single-ring fixes)
+    multi_ring_fixes_formed: int
+    reasons: dict[str, int]
+    mean_nis: float | None  # of the accepted fixes (None: none)
+
+
+@dataclass(frozen=True, kw_only=True)
+class PoseSummary:
+    """:class:`~fuzzyslam.fixes.pose_aid.PoseFixAid`."""
+
+    rings: int
+    before_start: int
+    accepted: int
+    reasons: dict[str, int]
+    degenerate: int  # accepted matches with a degenerate direction (a corridor)
+    mean_nis: float | None
+    recoveries: int
+    wide_searches: int
+    near_last_match: int
+    recentred_searches: int
+
+
+@dataclass(frozen=True, kw_only=True)
+class ChangeSummary:
+    """:class:`~fuzzyslam.fixes.changes.ChangeDetector`."""
+
+    rings: int
+    skipped_uncertain: int  # rings skipped: the pose too uncertain
+    detections: int
+    rings_with_detections: int

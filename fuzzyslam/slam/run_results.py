@@ -1,0 +1,180 @@
+"""What the EKF-SLAM loop hands back, typed: its event counts (:class:`RunCounts`), the
+filter's health (:class:`FilterHealth`, assembled by :func:`filter_health`) and the
+:class:`~fuzzyslam.slam.events.SlamResult` of a memory or streaming sink
+(:func:`slam_result`). The run summary's ``counts`` and ``filter_health`` are these
+dataclasses, written by :func:`fuzzyslam.summary.as_json` (docs/contracts.md sec. 2):
+a counter or health figure left out is a ``TypeError`` where it is made."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from fuzzyslam.robot import integrate
+from fuzzyslam.slam.ekf import EkfSlam
+from fuzzyslam.slam.events import LampRecord, MemorySink, RowSink, SlamResult
+from fuzzyslam.slam.health import DivergenceMonitor, orphan_landmarks
+from fuzzyslam.summary import OMIT
+
+
+@dataclass(frozen=True, kw_only=True)
+class RunCounts:
+    """The run summary's ``counts``: events handled and what became of them.
+
+    ``detections_own_covariance`` (detections that carried their own covariance) is
+    present for logs whose lamps come as PoseArray detections only (set by the run stage).
+    """
+
+    odometry: int  # odometry increments
+    frames: int  # camera frames (or detection messages)
+    detections: int  # lamp detections in them
+    associated: int  # paired with a mapped lamp (JCBB) and used in an update
+    lamps_created: int
+    lamps_deferred: int  # unpaired while an aid found the pose suspect
+    duplicates_guarded: int  # refused: near a mapped lamp no other detection explains
+    ambiguous: int  # another hypothesis fitted nearly as well
+    frames_stale_odometry: int  # skipped: the odometry had been silent
+    rings: int  # sonar rings (or scans)
+    aid_calls: int  # rings handed to aids
+    out_of_order: int  # events older than the last one, skipped
+    tentative_expired: int
+    tentative_pending: int
+    detections_own_covariance: int = OMIT
+    # the relocalisation test's (slam/relocalise.py), present when it is on
+    relocalisation_tests: int = OMIT
+    relocalisations: int = OMIT  # accepted: the pose had left its covariance
+
+
+@dataclass(frozen=True, kw_only=True)
+class FilterHealth:
+    """The run summary's ``filter_health``: the EKF's numerical guards, the windowed NIS
+    and association-rate tests (:class:`~fuzzyslam.slam.health.DivergenceMonitor`), the
+    longest odometry gap and the orphan landmarks (:func:`filter_health`)."""
+
+    s_regularised: int  # near-singular innovation covariances regularised
+    p_repaired: int  # covariances repaired to symmetric positive definite
+    nis_windows: int
+    nis_windows_out_of_bounds: int
+    nis_worst_window_ratio: float
+    association_windows: int
+    association_windows_out_of_bounds: int
+    landmark_births: int
+    landmark_births_untrusted: int
+    diverged: bool
+    reasons: list[str]
+    diverged_at: float | None
+    out_of_bounds_spans: list[list[float]]
+    odometry_gap_s: float
+    orphan_landmarks: int
+
+
+def filter_health(
+    guards: dict[str, int],
+    monitor: DivergenceMonitor,
+    gap_s: float,
+    lamps: list[LampRecord],
+) -> FilterHealth:
+    """The filter's health at the end of a run: the guards' and windows' counts; the map
+    turned untrustworthy (orphan landmarks, :func:`~fuzzyslam.slam.health.orphan_landmarks`)
+    also counts as divergence (reason ``orphan_landmarks``, from the earlier time).
+
+    Parameters
+    ----------
+    guards : dict
+        ``EkfSlam.guards``: ``s_regularised`` and ``p_repaired`` counts.
+    monitor : DivergenceMonitor
+        The runner's NIS and association-rate windows.
+    gap_s : float
+        The longest gap in the odometry (s).
+    lamps : list of LampRecord
+        The mapped lamps (birth times, observation counts).
+
+    Returns
+    -------
+    FilterHealth
+    """
+    windows = monitor.summary()
+    reasons = list(windows.pop("reasons"))
+    diverged_at = windows.pop("diverged_at")
+    diverged = windows.pop("diverged")
+    orphans, orphans_at = orphan_landmarks(
+        np.array([lm.first_seen for lm in lamps]),
+        np.array([lm.observations for lm in lamps]),
+    )
+    if orphans_at is not None:
+        reasons.append("orphan_landmarks")
+        diverged_at = orphans_at if diverged_at is None else min(diverged_at, orphans_at)
+        diverged = True
+    return FilterHealth(
+        **guards,
+        **windows,
+        diverged=diverged,
+        reasons=reasons,
+        diverged_at=diverged_at,
+        odometry_gap_s=round(gap_s, 3),
+        orphan_landmarks=orphans,
+    )
+
+
+def slam_result(
+    sink: RowSink,
+    start_pose: np.ndarray,
+    last: tuple[float, np.ndarray, np.ndarray] | None,
+    lamps: list[LampRecord],
+    counts: RunCounts,
+    ekf: EkfSlam,
+) -> SlamResult:
+    """The loop's result from its sink: a :class:`MemorySink`'s rows (the dead reckoning
+    integrated from ``start_pose``), or, streamed, only the last trajectory row.
+
+    Parameters
+    ----------
+    sink : RowSink
+        The rows' sink (all rows given to it).
+    start_pose : ndarray, shape (3,)
+        The start pose (x, y, theta) of the dead reckoning.
+    last : (float, ndarray (3,), ndarray (6,)) or None
+        The last trajectory row: time, pose, covariance's upper triangle.
+    lamps : list of LampRecord
+        The mapped lamps.
+    counts : RunCounts
+        The loop's counts.
+    ekf : EkfSlam
+        The filter at the end.
+
+    Returns
+    -------
+    SlamResult
+        Trajectory ``t`` (N,), ``poses`` (N, 3), ``cov`` (N, 6), dead reckoning ``odo_t``
+        (K,), ``odo_poses`` (K, 3), update rows and snapshots (N = 1 or 0 and the rest
+        empty when streamed).
+    """
+    if not isinstance(sink, MemorySink):  # streamed: only the last row is kept
+        rows = [last] if last is not None else []
+        return SlamResult(
+            np.array([r[0] for r in rows]),
+            np.array([r[1] for r in rows]).reshape(-1, 3),
+            np.array([r[2] for r in rows]).reshape(-1, 6),
+            np.zeros(0),
+            np.zeros((0, 3)),
+            lamps,
+            [],
+            counts,
+            [],
+            ekf,
+        )
+    u = np.asarray(sink.odo_u, dtype=float).reshape(-1, 2)
+    odo = integrate(start_pose, u[:, 0], u[:, 1]) if sink.odo_t else np.zeros((0, 3))
+    return SlamResult(
+        np.asarray(sink.t),
+        np.asarray(sink.x).reshape(-1, 3),
+        np.asarray(sink.p).reshape(-1, 6),
+        np.asarray(sink.odo_t),
+        odo,
+        lamps,
+        sink.updates,
+        counts,
+        sink.snapshots,
+        ekf,
+    )
