@@ -15,6 +15,7 @@ from fuzzyslam.robot import integrate
 from fuzzyslam.slam.ekf import EkfSlam
 from fuzzyslam.slam.events import LampRecord, MemorySink, RowSink, SlamResult
 from fuzzyslam.slam.health import DivergenceMonitor, orphan_landmarks
+from fuzzyslam.slam.map_motion import MapMotionMonitor
 from fuzzyslam.summary import OMIT
 
 
@@ -67,6 +68,9 @@ class FilterHealth:
     out_of_bounds_spans: list[list[float]]
     odometry_gap_s: float
     orphan_landmarks: int
+    # landmark motion windows (slam/map_motion.py), present when lamps were mapped
+    map_motion_windows: int = OMIT
+    map_motion_windows_out_of_bounds: int = OMIT
 
 
 def filter_health(
@@ -74,6 +78,7 @@ def filter_health(
     monitor: DivergenceMonitor,
     gap_s: float,
     lamps: list[LampRecord],
+    map_motion: MapMotionMonitor | None = None,
 ) -> FilterHealth:
     """The filter's health at the end of a run: the guards' and windows' counts; the map
     turned untrustworthy (orphan landmarks, :func:`~fuzzyslam.slam.health.orphan_landmarks`)
@@ -89,6 +94,8 @@ def filter_health(
         The longest gap in the odometry (s).
     lamps : list of LampRecord
         The mapped lamps (birth times, observation counts).
+    map_motion : MapMotionMonitor, optional
+        The runner's landmark motion windows (reason ``map_motion``).
 
     Returns
     -------
@@ -106,6 +113,17 @@ def filter_health(
         reasons.append("orphan_landmarks")
         diverged_at = orphans_at if diverged_at is None else min(diverged_at, orphans_at)
         diverged = True
+    motion = {}
+    if map_motion is not None and map_motion.windows:
+        motion = {
+            "map_motion_windows": map_motion.windows,
+            "map_motion_windows_out_of_bounds": map_motion.out_of_bounds,
+        }
+        if map_motion.diverged_at is not None:
+            reasons.append("map_motion")
+            t = map_motion.diverged_at
+            diverged_at = t if diverged_at is None else min(diverged_at, t)
+            diverged = True
     return FilterHealth(
         **guards,
         **windows,
@@ -114,6 +132,7 @@ def filter_health(
         diverged_at=diverged_at,
         odometry_gap_s=round(gap_s, 3),
         orphan_landmarks=orphans,
+        **motion,
     )
 
 

@@ -42,6 +42,7 @@ from fuzzyslam.slam.events import (
 )
 from fuzzyslam.slam.health import DivergenceMonitor
 from fuzzyslam.slam.lamp_update import associate_update
+from fuzzyslam.slam.map_motion import MapMotionMonitor
 from fuzzyslam.slam.noise import DetectionNoiseEstimator
 from fuzzyslam.slam.params import SlamParams
 from fuzzyslam.slam.relocalise import Relocaliser
@@ -113,6 +114,7 @@ class SlamRunner:
             0,
         )
         self.relocaliser = Relocaliser.from_params(p)
+        self.map_motion = MapMotionMonitor()
         if self.sink is None:
             self.sink = MemorySink()
         # the last trajectory row is held back until the next one: a row of the same
@@ -270,6 +272,8 @@ class SlamRunner:
                 taken = {i for _, i in pairs}
                 self._new_lamps(ev.t, z[rest], r[rest], d2[rest], taken)
         self._record(ev.t)
+        if self.map_motion.due(ev.t):  # the map moving beyond its covariance?
+            self.map_motion.observe(ev.t, ekf.lamps, ekf.lamp_covs())
 
     def _new_lamps(
         self, t: float, z: np.ndarray, r: np.ndarray, d2_before: np.ndarray, taken: set[int]

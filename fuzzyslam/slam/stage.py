@@ -373,7 +373,9 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs, model=N
     if tap is not None:  # the odometry latency the bearings imply (slam/latency.py)
         res.delay_estimate = tap.estimate(cfg.slam.odometry_delay_s)
     # numerical guards, the divergence tests, orphan landmarks (slam/run_results.py)
-    res.health = filter_health(res.ekf.guards, runner.health, inputs.gap_seconds, res.lamps)
+    res.health = filter_health(
+        res.ekf.guards, runner.health, inputs.gap_seconds, res.lamps, runner.map_motion
+    )
     if inputs.lamp_source == "detections":
         res.counts = replace(res.counts, detections_own_covariance=inputs.own_covariances)
     if res.counts.odometry == 0:
