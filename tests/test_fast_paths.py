@@ -4,7 +4,7 @@ Each test compares a fast path with a second implementation, bit for bit:
 ``se2.compose`` / ``wrap_angle`` on one pose or float against the array path,
 ``hough_accumulator`` (cached angle table, shifted second bincount) against the plain
 accumulator (np.average centroid, clipped bins), ``EkfSlam.lamp_covs`` (a block view)
-against fancy indexing of P.
+against fancy indexing of P, ``format_tum`` (Python floats) against numpy rows.
 """
 
 from __future__ import annotations
@@ -92,3 +92,119 @@ def test_lamp_covs_equals_fancy_indexing():
     rows = idx[:, None, None] + np.array([0, 1])[None, :, None]
     cols = idx[:, None, None] + np.array([0, 1])[None, None, :]
     assert np.array_equal(ekf.lamp_covs(), ekf.P[rows, cols])
+
+
+def test_format_tum_equals_numpy_rows():
+    from fuzzyslam.se2 import yaw_to_quaternion
+    from fuzzyslam.streams.tum import format_tum
+
+    rng = np.random.default_rng(5)
+    t = np.concatenate([rng.uniform(0.0, 2e9, 3000), [0.0, 1e-10, 1248444877.2400002]])
+    poses = rng.normal(size=(len(t), 3)) * [50.0, 50.0, 4.0]
+    poses[:4] = [[-0.0, 0.0, -0.0], [1e-7, -4e-7, np.pi], [np.inf, -np.inf, -np.pi], [1, 2, 3]]
+    q = yaw_to_quaternion(poses[:, 2]).reshape(-1, 4)
+    rows = np.column_stack([t, poses[:, 0], poses[:, 1], np.zeros(len(t)), q])
+    plain = [
+        "%.9f %.6f %.6f %.6f %.9f %.9f %.9f %.9f" % tuple(r)  # noqa: UP031 - numpy scalars
+        for r in rows
+    ]
+    text = format_tum(t, poses)
+    assert text == "\n".join(["# timestamp x y z qx qy qz qw", *plain]) + "\n"
+    assert format_tum(np.zeros(0), np.zeros((0, 3))) == "# timestamp x y z qx qy qz qw\n"
+
+
+@pytest.mark.parametrize("chunk_size", [4096, 1024 * 1024])
+def test_lean_mcap_writer_equals_mcap_writer(chunk_size):
+    import io
+
+    from mcap.writer import CompressionType
+
+    from fuzzyslam.streams.writer import _LeanWriter
+
+    rng = np.random.default_rng(6)
+    n = 3000
+    cids = rng.integers(0, 3, n)
+    times = np.sort(rng.integers(0, 10**12, n))
+    times[::7] = times[::7] // 2  # log times out of order now and then
+    sizes = rng.integers(0, 700, n)
+    out = {}
+    for lean in (True, False):
+        f = io.BytesIO()
+        w = _LeanWriter(f, chunk_size=chunk_size, compression=CompressionType.ZSTD)
+        assert w.lean
+        w.lean = lean
+        w.start(profile="ros2", library="test")
+        s = w.register_schema(name="a/msg/B", encoding="ros2msg", data=b"int32 x")
+        ch = [
+            w.register_channel(topic=f"/t{k}", message_encoding="cdr", schema_id=s)
+            for k in range(3)
+        ]
+        w.add_metadata("m", {"k": "v"})
+        for i in range(n):
+            data = rng.bytes(int(sizes[i])) if lean else out["data"][i]
+            if lean:
+                out.setdefault("data", []).append(data)
+            w.add_message(channel_id=ch[cids[i]], log_time=int(times[i]), data=data,
+                          publish_time=int(times[i]) + 1, sequence=i)  # fmt: skip
+        w.add_attachment(
+            create_time=1, log_time=2, name="w.yaml", media_type="text/yaml", data=b"x"
+        )
+        w.finish()
+        out[lean] = f.getvalue()
+    assert out[True] == out[False]
+    assert len(out[True]) > chunk_size or chunk_size > 10**5
+
+
+def test_loop_at1_equals_at():
+    from fuzzyslam.sim.world import Loop
+
+    rng = np.random.default_rng(7)
+    ang = np.sort(rng.uniform(0.0, 2 * np.pi, 9))
+    pts = np.column_stack([20 * np.cos(ang), 12 * np.sin(ang)]) + rng.normal(0, 0.5, (9, 2))
+    loop = Loop(pts)
+    total = float(loop.cum[-1])
+    s = rng.uniform(-3 * total, 3 * total, 20000)
+    s = np.concatenate([s, loop.cum, -loop.cum, loop.cum + total, [0.0, -0.0, total, -total]])
+    pt, tg = loop.at(s)
+    one = np.array([loop.at1(float(v)) for v in s])
+    assert np.array_equal(one[:, :2], pt) and np.array_equal(one[:, 2:], tg)
+
+
+def _odometry_fields(msg) -> tuple:
+    p, q = msg.pose.pose.position, msg.pose.pose.orientation
+    tw = msg.twist.twist
+    return (msg.header.stamp.sec, msg.header.stamp.nanosec, msg.header.frame_id,
+            msg.child_frame_id, p.x, p.y, p.z, q.x, q.y, q.z, q.w, tw.linear.x,
+            tw.angular.z, tuple(msg.pose.covariance), tuple(msg.twist.covariance))  # fmt: skip
+
+
+def _decoded(fn, buf):
+    try:
+        return _odometry_fields(fn(buf))
+    except Exception as exc:  # the same failure, by type
+        return type(exc)
+
+
+def test_odometry_layout_cache_equals_plain_decoder():
+    """Payloads of one layout (fast path after the first), of other frame names of the
+    same size, cut, and with damaged string lengths: the same messages or errors."""
+    from fuzzyslam.streams import cdr
+    from fuzzyslam.streams.cdr_encode import encode_odometry_block
+
+    rng = np.random.default_rng(8)
+    t = np.cumsum(rng.uniform(0.001, 0.05, 300)) + 1.2e9
+    poses = rng.normal(size=(300, 3)) * [10.0, 10.0, 3.0]
+    payloads = []
+    for frame, child in (("odom", "base_link"), ("odom", "base_linl"), ("odoM", "base_link"),
+                         ("", "b"), ("odom", "base_link")):  # fmt: skip
+        payloads += encode_odometry_block(t, frame, child, poses, poses[:, 0], poses[:, 2])[:60]
+    good = payloads[0]
+    for k in range(40):
+        bad = bytearray(good)
+        bad[int(rng.integers(0, 40))] ^= 1 << int(rng.integers(0, 8))
+        payloads += [bytes(bad), good[: len(good) - k], good, memoryview(good)]
+    fast = [_decoded(cdr.decode_odometry, b) for b in payloads]
+    plain = [_decoded(cdr.decode_odometry_plain, b) for b in payloads]
+    assert fast == plain
+    assert sum(isinstance(f, tuple) for f in fast) > 300
+    assert sum(not isinstance(f, tuple) for f in fast) > 20

@@ -119,9 +119,46 @@ def _pose(v) -> Pose:
 # -- decoders ------------------------------------------------------------------------------
 
 
+_STAMP = struct.Struct("<iI")
+# the last Odometry layout decoded: (size, bytes 0-4, bytes 12-a, frame_id, child, a)
+_odometry_layout: list = [None]
+
+
 def decode_odometry(buf: bytes | memoryview) -> Odometry:
     """nav_msgs/Odometry: header, child_frame_id, pose (7 f64 + covariance[36]), twist
-    (6 f64 + covariance[36]); the 85 float64 follow the string, aligned to 8."""
+    (6 f64 + covariance[36]); the 85 float64 follow the string, aligned to 8.
+
+    A payload of the size, encapsulation and frame_id/child_frame_id bytes of the last
+    one decoded passes the same checks with the same offsets: only its stamp and numbers
+    are read (:func:`decode_odometry_plain` is the whole decoder; a log's odometry
+    messages all have one layout)."""
+    lay = _odometry_layout[0]
+    if lay is not None and len(buf) == lay[0] and buf[12 : lay[5]] == lay[2] and buf[:4] == lay[1]:
+        sec, nsec = _STAMP.unpack_from(buf, 4)
+        a = lay[5]
+        pose = _pose(_F64X7.unpack_from(buf, a))
+        raw = bytes(buf[a + 56 : a + 680])
+        header = Header(Time(sec, nsec), lay[3])
+        return Odometry(header, lay[4], PoseWithCovariance(pose, (raw, 0)), (raw, 288))
+    msg, a = _odometry(buf)
+    _odometry_layout[0] = (
+        len(buf),
+        bytes(buf[:4]),
+        bytes(buf[12:a]),
+        msg.header.frame_id,
+        msg.child_frame_id,
+        a,
+    )
+    return msg
+
+
+def decode_odometry_plain(buf: bytes | memoryview) -> Odometry:
+    """:func:`decode_odometry` without the layout cache (every check made)."""
+    return _odometry(buf)[0]
+
+
+def _odometry(buf: bytes | memoryview) -> tuple[Odometry, int]:
+    """An Odometry and the offset of its 85 float64."""
     header, a = _header(buf)
     a += (4 - a) % 4
     child, a = _string(buf, a)
@@ -132,7 +169,7 @@ def decode_odometry(buf: bytes | memoryview) -> Odometry:
         raise CdrError(f"payload of {len(buf)} bytes, message ends at {a + 680}")
     pose = _pose(_F64X7.unpack_from(buf, a))
     raw = bytes(buf[a + 56 : a + 680])  # covariances and twist, decoded when read
-    return Odometry(header, child, PoseWithCovariance(pose, (raw, 0)), (raw, 288))
+    return Odometry(header, child, PoseWithCovariance(pose, (raw, 0)), (raw, 288)), a
 
 
 def decode_pose_array(buf: bytes | memoryview) -> PoseArray:
