@@ -53,3 +53,45 @@ def test_grid_centres_cached_equal_meshgrid():
         assert g.centres()[0] is x  # computed once per grid
         with pytest.raises(ValueError):
             x[0, 0] = 1.0  # shared: read-only
+
+
+def _plain_flm(ranges, max_range, fov, mounts, params):
+    """An FLM as built before the per-reading cache: ring_evidence of the whole ring."""
+    from fuzzyslam.maps.evidence import ring_evidence
+    from fuzzyslam.maps.flm import flm_grid
+    from fuzzyslam.maps.grid import BeliefMap
+    from fuzzyslam.maps.tbm import clip_masses
+
+    grid = flm_grid(params)
+    bm = BeliefMap.vacuous(grid)
+    ev = ring_evidence(grid, np.zeros(3), ranges, max_range, fov, mounts, params)
+    for arr, val in zip((bm.m_e, bm.m_o, bm.m_t, bm.m_c), clip_masses(ev.masses), strict=True):
+        arr.ravel()[ev.cells] = val
+    return bm
+
+
+@pytest.mark.parametrize("fov_deg", [25.0, 7.5])
+def test_flm_reading_cache_equals_ring_evidence(fov_deg):
+    from fuzzyslam.maps import flm
+    from fuzzyslam.maps.params import MapParams
+
+    rng = np.random.default_rng(9)
+    params = MapParams()
+    a = np.linspace(0.0, 2 * np.pi, 16, endpoint=False)
+    mounts = np.column_stack([0.2 * np.cos(a), 0.2 * np.sin(a), a])
+    max_range = np.full(16, 5.0)
+    fov = np.deg2rad(fov_deg)
+    values = np.round(rng.uniform(0.15, 5.2, 40) / 0.0254) * 0.0254  # few, quantised
+    values = np.concatenate([values, [5.0, np.nan, 0.0, 0.85, 0.9, 1.0]])
+    rings = rng.choice(values, (120, 16))
+    rings[7] = np.nan  # a ring without a reading
+    for ranges in rings:
+        new = flm.build_flm(ranges, max_range, fov, mounts, params)
+        old = _plain_flm(ranges, max_range, fov, mounts, params)
+        for m in ("m_e", "m_o", "m_t", "m_c"):
+            assert np.array_equal(getattr(new, m), getattr(old, m))
+    # the cache was used: fewer pieces than readings
+    assert 0 < len(flm._READINGS.pieces) < np.isfinite(rings).sum() / 2
+    # a ring that does not fit the mounts goes the plain way (the same error)
+    with pytest.raises(ValueError):
+        flm.build_flm(rings[0][:5], 5.0, fov, mounts, params)
