@@ -119,17 +119,14 @@ class _ReadingCells:
         rmax = np.broadcast_to(np.asarray(max_range, dtype=float), r_all.shape)
         ok = np.isfinite(r_all) & (r_all > 0)
         echo_all = ok & (~np.isfinite(rmax) | (r_all < rmax - 1e-6))
-        near, far = [], []
-        for i in np.flatnonzero(ok).tolist():
-            key = (i, float(r_all[i]), bool(echo_all[i]))
-            piece = self.pieces.get(key)
-            if piece is None:
-                piece = self._piece(grid, i, r_all[i : i + 1], echo_all[i : i + 1], half, params)
-                if len(self.pieces) > 50000:
-                    self.pieces.clear()
-                self.pieces[key] = piece
-            near.append(piece[0])
-            far.append(piece[1])
+        keys = [(i, float(r_all[i]), bool(echo_all[i])) for i in np.flatnonzero(ok).tolist()]
+        if len(self.pieces) > 50000:  # bounded (a quantised sonar stays far below)
+            self.pieces.clear()
+        missing = [k for k in keys if k not in self.pieces]
+        if missing:  # computed together (each entry depends on its own reading only)
+            self._add(grid, missing, half, params)
+        near = [self.pieces[k][0] for k in keys]
+        far = [self.pieces[k][1] for k in keys]
         if not near:  # no reading: the plain path
             return None
         parts = near + far
@@ -138,12 +135,17 @@ class _ReadingCells:
         b = combine_cells(cells, m_e, m_o, 1, ncell, int(ok.sum()))
         return RingEvidence(b.cells, b.masses, b.pairs, b.readings)
 
-    def _piece(self, grid, i, r, echo, half, params) -> tuple:
-        """Reading i's (cells, m_e, m_o) of its near and of its far sector."""
-        _, cell, m_e, m_o, second = readings_cells(
-            grid, self.sensors[i : i + 1], r, echo, half, params
-        )
-        return (cell[~second], m_e[~second], m_o[~second]), (cell[second], m_e[second], m_o[second])
+    def _add(self, grid, keys: list, half: float, params) -> None:
+        """Remember the (cells, m_e, m_o) of the near and of the far sector of each
+        reading (sensor, range, echo) in ``keys``."""
+        idx = [k[0] for k in keys]
+        r = np.array([k[1] for k in keys])
+        echo = np.array([k[2] for k in keys])
+        rid, cell, m_e, m_o, second = readings_cells(grid, self.sensors[idx], r, echo, half, params)
+        for j, key in enumerate(keys):
+            mine = rid == j
+            a, b = mine & ~second, mine & second
+            self.pieces[key] = ((cell[a], m_e[a], m_o[a]), (cell[b], m_e[b], m_o[b]))
 
 
 _READINGS = _ReadingCells()
