@@ -208,3 +208,68 @@ def test_odometry_layout_cache_equals_plain_decoder():
     assert fast == plain
     assert sum(isinstance(f, tuple) for f in fast) > 300
     assert sum(not isinstance(f, tuple) for f in fast) > 20
+
+
+def test_sonar_rings_traced_together_equal_one_by_one():
+    from fuzzyslam.sim import sonar
+    from fuzzyslam.sim.params import SonarParams
+
+    rng = np.random.default_rng(10)
+    # a closed room with inner walls, the robot anywhere inside
+    box = [[-6, -4, 6, -4], [6, -4, 6, 4], [6, 4, -6, 4], [-6, 4, -6, -4]]
+    inner = np.column_stack([rng.uniform(-5, 5, (12, 2)), rng.uniform(-5, 5, (12, 2))])
+    walls = np.vstack([box, inner]).astype(float)
+    a = np.linspace(0.0, 2 * np.pi, 16, endpoint=False)
+    mounts = np.column_stack([0.2 * np.cos(a), 0.2 * np.sin(a), a])
+    poses = np.column_stack([rng.uniform(-5.5, 5.5, (40, 2)), rng.uniform(-np.pi, np.pi, 40)])
+    for params in (SonarParams(), SonarParams(rays_per_cone=1, max_bounces=0)):
+        many = sonar.ideal_ranges_many(walls, poses, mounts, params)
+        one = np.array([sonar.ideal_ranges(walls, sonar.sensor_poses(p, mounts), params)
+                        for p in poses])  # fmt: skip
+        assert np.array_equal(many, one)
+        assert np.isfinite(many).mean() > 0.2  # echoes, not only misses
+
+
+def _joint_fields(fn, buf):
+    try:
+        m = fn(buf)
+    except Exception as exc:  # the same failure, by type
+        return type(exc)
+    return (m.header.stamp.sec, m.header.stamp.nanosec, m.header.frame_id, tuple(m.name),
+            m.position.tobytes(), m.velocity.tobytes(), m.effort.tobytes(),
+            m.position.dtype.str)  # fmt: skip
+
+
+def test_joint_state_layout_cache_equals_plain_decoder():
+    """Joint states of one layout (fast path after the first), of other names of the same
+    size, with velocities, cut, and with damaged bytes: the same messages or errors."""
+    from fuzzyslam.streams import cdr
+    from fuzzyslam.streams.cdr_encode import encode_joint_state_block
+    from fuzzyslam.streams.typestore import msgtype, serialize
+
+    rng = np.random.default_rng(11)
+    t = np.cumsum(rng.uniform(0.001, 0.05, 100)) + 1.2e9
+    payloads = []
+    wheels = ["wheel_left_joint", "wheel_right_joint"]
+    for names in (wheels, ["wheel_left_joint", "wheel_rigHt_joint"], ["a", "b", "c"], wheels):
+        pos = rng.normal(size=(100, len(names))) * 100
+        payloads += encode_joint_state_block(t, names, pos)[:50]
+    js = msgtype("sensor_msgs/msg/JointState")
+    hdr = msgtype("std_msgs/msg/Header")(
+        stamp=msgtype("builtin_interfaces/msg/Time")(sec=5, nanosec=7), frame_id="f"
+    )
+    for k in range(20):  # with velocities and efforts of a few lengths
+        n = k % 3
+        msg = js(header=hdr, name=["x", "y"], position=rng.normal(size=2),
+                 velocity=rng.normal(size=n), effort=rng.normal(size=2 - n))  # fmt: skip
+        payloads += [serialize(msg, "sensor_msgs/msg/JointState")] * 2
+    good = payloads[0]
+    for k in range(40):
+        bad = bytearray(good)
+        bad[int(rng.integers(0, len(good)))] ^= 1 << int(rng.integers(0, 8))
+        payloads += [bytes(bad), good[: len(good) - k], good, memoryview(good)]
+    fast = [_joint_fields(cdr.decode_joint_state, b) for b in payloads]
+    plain = [_joint_fields(cdr.decode_joint_state_plain, b) for b in payloads]
+    assert fast == plain
+    assert sum(isinstance(f, tuple) for f in fast) > 250
+    assert sum(not isinstance(f, tuple) for f in fast) > 20
