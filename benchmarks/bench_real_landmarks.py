@@ -11,6 +11,14 @@ over after the one-to-one matching, NEES mean (3 dof, against the aligned truth)
 time with NEES above 100, what filter_health says, the real-time factor (log duration over
 wall time, as the summary gives it, and over the process's CPU time: the figure to read
 on a loaded machine), and the odometry latency the bearings imply.
+
+With ``--baseline REV`` it instead times ``fuzzyslam run`` of the old code (git revision
+REV) and of this code side by side on each log, alternating, ``--repeat`` times each
+(benchmarks/sidebyside.py): CPU and wall medians, the real-time factors (log duration
+over CPU and over wall time, target >= 200x) and whether the outputs are byte-identical
+(summary.json without its timing fields).
+
+    python benchmarks/bench_real_landmarks.py [DATA_DIR] --baseline main --repeat 3
 """
 
 from __future__ import annotations
@@ -40,10 +48,15 @@ def main() -> None:
     default = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
     ap.add_argument("data", nargs="?", default=str(default))
     ap.add_argument("--adapt-noise", action="store_true")
+    ap.add_argument("--baseline", metavar="REV", default=None)
+    ap.add_argument("--repeat", type=int, default=3)
     a = ap.parse_args()
     logs = sorted(p for p in Path(a.data).glob("*") if (p / "landmarks_truth.yaml").is_file())
     if not logs:
         print(f"no landmark logs under {a.data}: skipped")
+        return
+    if a.baseline:
+        side_by_side_runs(logs, a.baseline, a.repeat)
         return
     print(f"{'log':16s} {'APE m':>6s} {'DR m':>6s} {'found':>5s} {'left':>4s} {'NEES':>6s} "
           f"{'NEES>100 s':>10s} {'diverged':>8s} {'RTF':>6s} {'CPU RTF':>7s} {'lag s':>6s}")
@@ -70,6 +83,33 @@ def main() -> None:
                   f"{'' if over is None else f'{over * (cov[-1, 0] - cov[0, 0]):.0f}':>10s} "
                   f"{s['filter_health']['diverged']!s:>8s} {s['real_time_factor']:6.1f} "
                   f"{s['log_duration_s'] / cpu:7.1f} {'' if lag is None else f'{lag:.3f}':>6s}")
+
+
+def side_by_side_runs(logs: list[Path], rev: str, repeat: int) -> None:
+    """Old (``rev``) and new ``fuzzyslam run --config real_detections.yaml``, alternately."""
+    sys.path.insert(0, str(Path(__file__).parent))
+    from bench_run import _same_outputs
+    from sidebyside import export_revision, load, side_by_side
+
+    from fuzzyslam.streams.reader import LogReader
+
+    src = export_revision(rev)
+    work = Path(tempfile.mkdtemp(prefix="bench_real."))
+    for log in logs:
+        reader = LogReader(log / "log.mcap")
+        duration = reader.end - reader.start
+        outs = {v: work / f"{log.name}_{v}" for v in ("old", "new")}
+        before = load()
+        res = side_by_side(lambda v, outs=outs, log=log: [
+            "run", str(log / "log.mcap"), "--config", "real_detections.yaml", "-o",
+            str(outs[v])], src, repeat)  # fmt: skip
+        for v in ("old", "new"):
+            res[v]["real_time_factor_cpu"] = round(duration / res[v]["cpu_median_s"])
+            res[v]["real_time_factor_wall"] = round(duration / res[v]["wall_median_s"])
+        print(json.dumps({"run": log.name, "log_s": round(duration, 1), "baseline": rev,
+                          "repeat": repeat, **res, "target_real_time_factor": 200,
+                          "outputs_byte_identical": _same_outputs(outs["old"], outs["new"]),
+                          "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
 
 
 if __name__ == "__main__":

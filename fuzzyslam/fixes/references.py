@@ -54,4 +54,32 @@ def corridors_near(xy: Sequence[float], refs: Sequence[Reference], margin: float
     list of Reference
     """
     p = np.asarray(xy, dtype=float).reshape(1, 2)
-    return [r for r in refs if distance_to_polygon(p, r.polygon)[0] <= margin]
+    x, y = float(p[0, 0]), float(p[0, 1])
+    out = []
+    for r in refs:
+        # a region whose bounding box is farther than the margin (1 um to spare: the
+        # exact distance is computed to 1e-15) is not near: skip the polygon distance
+        x0, y0, x1, y1 = _box(r.polygon)
+        dx, dy = max(x0 - x, 0.0, x - x1), max(y0 - y, 0.0, y - y1)
+        if dx * dx + dy * dy > (margin + 1e-6) ** 2:
+            continue
+        if distance_to_polygon(p, r.polygon)[0] <= margin:
+            out.append(r)
+    return out
+
+
+_BOXES: dict[int, tuple[np.ndarray, tuple[float, float, float, float]]] = {}
+
+
+def _box(poly: np.ndarray) -> tuple[float, float, float, float]:
+    """The bounding box (xmin, ymin, xmax, ymax) of a polygon (K, 2), cached per array
+    (the cache keeps the array, so its id is not reused while cached)."""
+    hit = _BOXES.get(id(poly))
+    if hit is not None and hit[0] is poly:
+        return hit[1]
+    lo, hi = np.min(poly, axis=0), np.max(poly, axis=0)
+    box = (float(lo[0]), float(lo[1]), float(hi[0]), float(hi[1]))
+    if len(_BOXES) > 256:
+        _BOXES.clear()
+    _BOXES[id(poly)] = (poly, box)
+    return box

@@ -248,10 +248,53 @@ def rings_evidence(
     half = 0.5 * float(fov)
     ring_of, sensor_of = np.nonzero(ok)
     sensors = compose(poses[ring_of], mounts[sensor_of])
-    r = ranges[ok]
-    echo = echo_all[ok]
-    # Each reading's cone is split in two annular sectors, so that the cells between the
-    # empty evidence's reach and the occupied arc (no evidence) are never enumerated:
+    rid, cell, m_e, m_o, _ = readings_cells(grid, sensors, ranges[ok], echo_all[ok], half, params)
+    ncell = grid.shape[0] * grid.shape[1]
+    return combine_cells(ring_of[rid] * ncell + cell, m_e, m_o, k_rings, ncell, int(ok.sum()))
+
+
+def readings_cells(
+    grid: Grid,
+    sensors: np.ndarray,
+    r: np.ndarray,
+    echo: np.ndarray,
+    half: float,
+    params: MapParams,
+) -> tuple[np.ndarray, ...]:
+    """The cells that readings give evidence to and their masses, before combination.
+
+    Each reading's cone is split in two annular sectors (the near one: empty evidence,
+    and the arc when it is near; the far one: the arc), so that the cells between them
+    are never enumerated. Entries come sector by sector, the near sectors of all readings
+    first, then the far ones, each sector's cells row by row; every entry depends only on
+    its own reading (so one reading alone gives its own entries, bit for bit).
+
+    Parameters
+    ----------
+    grid : Grid
+        The grid.
+    sensors : ndarray, shape (R, 3)
+        The readings' sensor poses in the grid's frame.
+    r : ndarray, shape (R,)
+        The ranges (m), finite and positive.
+    echo : ndarray of bool, shape (R,)
+        Whether each is an echo (else no echo up to the maximum range).
+    half : float
+        The cone's half-angle (rad).
+    params : MapParams
+        The sonar model's constants.
+
+    Returns
+    -------
+    rid : ndarray of int, shape (C,)
+        The reading of each entry.
+    cell : ndarray of int, shape (C,)
+        Its flat cell index (iy nx + ix).
+    m_e, m_o : ndarray, shape (C,)
+        Its masses (at least one positive).
+    second : ndarray of bool, shape (C,)
+        Whether it comes from a far sector.
+    """
     # near: [0, n1] (empty evidence, and the arc when it is near); far: [r - dr, r + dr].
     dr = params.range_tolerance
     reach = np.where(echo, r + dr, np.minimum(params.no_echo_reach, r))
@@ -282,14 +325,38 @@ def rings_evidence(
     phi = np.arctan2(across[inside], along[inside])
     m_e, m_o = reading_masses(rho, phi, r[rid], echo[rid], half, params)
     keep = (m_e > 0) | (m_o > 0)
-    ncell = grid.shape[0] * grid.shape[1]
-    key = (ring_of[rid] * ncell + iy * grid.shape[1] + ix)[keep]
-    m_e, m_o = m_e[keep], m_o[keep]
+    second = (pid >= len(r))[inside][keep]
+    return rid[keep], (iy * grid.shape[1] + ix)[keep], m_e[keep], m_o[keep], second
+
+
+def combine_cells(
+    key: np.ndarray, m_e: np.ndarray, m_o: np.ndarray, k_rings: int, ncell: int, readings: int
+) -> BatchEvidence:
+    """The entries of :func:`readings_cells` combined per cell and ring (conjunctive rule,
+    in the entries' order).
+
+    Parameters
+    ----------
+    key : ndarray of int, shape (C,)
+        Ring k's cell c is k ncell + c.
+    m_e, m_o : ndarray, shape (C,)
+        The entries' masses.
+    k_rings : int
+        Number of rings.
+    ncell : int
+        Cells of the grid.
+    readings : int
+        Readings used (for the summary).
+
+    Returns
+    -------
+    BatchEvidence
+    """
     ukey, inv = np.unique(key, return_inverse=True)
     zeros = np.zeros_like(m_e)
     masses = conjunctive_grouped((m_e, m_o, 1.0 - m_e - m_o, zeros), inv, len(ukey))
     ptr = np.searchsorted(ukey, np.arange(k_rings + 1) * ncell)
-    return BatchEvidence(ptr, ukey % ncell, masses, int(key.size), int(ok.sum()))
+    return BatchEvidence(ptr, ukey % ncell, masses, int(key.size), readings)
 
 
 def ring_evidence(

@@ -16,12 +16,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fuzzyslam.maps.evidence import ring_evidence
+from fuzzyslam.maps.evidence import RingEvidence, combine_cells, readings_cells, ring_evidence
 from fuzzyslam.maps.grid import BeliefMap, Grid
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.tangent import RingReadings, readings_in_frame
 from fuzzyslam.maps.tbm import clip_masses
-from fuzzyslam.se2 import between
+from fuzzyslam.se2 import between, compose
 
 
 @dataclass
@@ -81,11 +81,74 @@ def build_flm(
     params = params if params is not None else MapParams()
     grid = flm_grid(params)
     bm = BeliefMap.vacuous(grid)
-    ev = ring_evidence(grid, np.zeros(3), ranges, max_range, fov, mounts, params)
+    ev = _READINGS.evidence(grid, ranges, max_range, fov, mounts, params)
+    if ev is None:  # a ring the cache does not take (not one range per mount)
+        ev = ring_evidence(grid, np.zeros(3), ranges, max_range, fov, mounts, params)
     for arr, val in zip((bm.m_e, bm.m_o, bm.m_t, bm.m_c), clip_masses(ev.masses), strict=True):
         arr.ravel()[ev.cells] = val
     ranges = np.asarray(ranges, dtype=float).reshape(1, -1)
     return LocalMap.of(bm, readings_in_frame(np.zeros((1, 3)), ranges, max_range, fov, mounts))
+
+
+class _ReadingCells:
+    """The FLM's evidence of one ring (the robot at the grid's origin) assembled from each
+    reading's own cells and masses (:func:`fuzzyslam.maps.evidence.readings_cells` of that
+    reading alone), remembered per (sensor, range, echo): a sonar's ranges are quantised,
+    so the same readings come back ring after ring. The entries are concatenated in
+    ``readings_cells``' order (near sectors, then far ones) and combined by
+    ``combine_cells``: the same evidence as ``ring_evidence``, bit for bit
+    (tests/test_fast_paths_aid.py)."""
+
+    def __init__(self) -> None:
+        self.setup: tuple | None = None
+        self.sensors = np.zeros((0, 3))
+        self.pieces: dict[tuple[int, float, bool], tuple] = {}
+
+    def evidence(self, grid, ranges, max_range, fov, mounts, params) -> RingEvidence | None:
+        """:func:`ring_evidence` at the origin (None when the ring does not fit the mounts or
+        has no reading)."""
+        mounts = np.asarray(mounts, dtype=float).reshape(-1, 3)
+        r_all = np.asarray(ranges, dtype=float).reshape(-1)
+        if len(r_all) != len(mounts):
+            return None
+        half = 0.5 * float(fov)
+        setup = (grid, half, mounts.tobytes(), tuple(vars(params).values()))
+        if setup != self.setup:
+            self.setup, self.pieces = setup, {}
+            self.sensors = compose(np.zeros((len(mounts), 3)), mounts)
+        rmax = np.broadcast_to(np.asarray(max_range, dtype=float), r_all.shape)
+        ok = np.isfinite(r_all) & (r_all > 0)
+        echo_all = ok & (~np.isfinite(rmax) | (r_all < rmax - 1e-6))
+        keys = [(i, float(r_all[i]), bool(echo_all[i])) for i in np.flatnonzero(ok).tolist()]
+        if len(self.pieces) > 50000:  # bounded (a quantised sonar stays far below)
+            self.pieces.clear()
+        missing = [k for k in keys if k not in self.pieces]
+        if missing:  # computed together (each entry depends on its own reading only)
+            self._add(grid, missing, half, params)
+        near = [self.pieces[k][0] for k in keys]
+        far = [self.pieces[k][1] for k in keys]
+        if not near:  # no reading: the plain path
+            return None
+        parts = near + far
+        cells, m_e, m_o = (np.concatenate([p[k] for p in parts]) for k in range(3))
+        ncell = grid.shape[0] * grid.shape[1]
+        b = combine_cells(cells, m_e, m_o, 1, ncell, int(ok.sum()))
+        return RingEvidence(b.cells, b.masses, b.pairs, b.readings)
+
+    def _add(self, grid, keys: list, half: float, params) -> None:
+        """Remember the (cells, m_e, m_o) of the near and of the far sector of each
+        reading (sensor, range, echo) in ``keys``."""
+        idx = [k[0] for k in keys]
+        r = np.array([k[1] for k in keys])
+        echo = np.array([k[2] for k in keys])
+        rid, cell, m_e, m_o, second = readings_cells(grid, self.sensors[idx], r, echo, half, params)
+        for j, key in enumerate(keys):
+            mine = rid == j
+            a, b = mine & ~second, mine & second
+            self.pieces[key] = ((cell[a], m_e[a], m_o[a]), (cell[b], m_e[b], m_o[b]))
+
+
+_READINGS = _ReadingCells()
 
 
 def build_flm_rings(
@@ -197,10 +260,7 @@ class RecentRings:
                 buf.pop(0)
 
     def clear(self) -> None:
-        """Forget every ring.
-
-
-        """
+        """Forget every ring."""
         for buf in (self._t, self._poses, self._ranges, self._rmax):
             buf.clear()
 

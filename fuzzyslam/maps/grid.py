@@ -12,6 +12,7 @@ and m(emptyset) (conflict), which always sum to 1 (docs/models.md sec. 6).
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -75,21 +76,31 @@ class Grid:
         return (iy >= 0) & (iy < self.shape[0]) & (ix >= 0) & (ix < self.shape[1])
 
     def centres(self) -> tuple[np.ndarray, np.ndarray]:
-        """(ny, nx) arrays X, Y of cell-centre coordinates.
+        """(ny, nx) arrays X, Y of cell-centre coordinates (read-only, computed once per
+        grid: the heading aid asks for the FLM grid's at every ring).
 
         Returns
         -------
         X, Y : ndarray, shape (ny, nx)
         """
-        xs = self.origin[0] + (np.arange(self.shape[1]) + 0.5) * self.resolution
-        ys = self.origin[1] + (np.arange(self.shape[0]) + 0.5) * self.resolution
-        return np.meshgrid(xs, ys)
+        return _centres(self)
 
     @property
     def extent(self) -> tuple[float, float, float, float]:
         """(xmin, xmax, ymin, ymax), for matplotlib's imshow(origin='lower')."""
         ox, oy = self.origin
         return (ox, ox + self.shape[1] * self.resolution, oy, oy + self.shape[0] * self.resolution)
+
+
+@lru_cache(maxsize=16)
+def _centres(grid: Grid) -> tuple[np.ndarray, np.ndarray]:
+    """:meth:`Grid.centres`, read-only (shared by every caller of the same grid)."""
+    xs = grid.origin[0] + (np.arange(grid.shape[1]) + 0.5) * grid.resolution
+    ys = grid.origin[1] + (np.arange(grid.shape[0]) + 0.5) * grid.resolution
+    out = np.meshgrid(xs, ys)
+    for a in out:
+        a.flags.writeable = False
+    return out[0], out[1]
 
 
 @dataclass

@@ -207,7 +207,6 @@ def fit_walls(
     -------
     TangentFit
     """
-    nw = len(walls)
     psi = float(psi0)
     cs = np.array([_initial_offset(psi + w, rd, delta_max, tolerance) for w in walls])
     nread = len(rd)
@@ -220,24 +219,36 @@ def fit_walls(
             break
         best = np.full(nread, np.inf)
         assign = np.full(nread, -1)
-        jac = np.zeros((nread, 1 + nw))
+        # per reading: d r / d psi and d r / d c of the wall it is assigned to, and the
+        # residual (the Jacobian's rows are [d psi, 0 .., d c at 1 + wall, .. 0])
+        j_psi = np.zeros(nread)
+        j_c = np.zeros(nread)
         resid = np.zeros(nread)
         for j in active:  # one pass per wall (2)
             r, dpsi, dc, delta, p = predict_ranges(psi + walls[j], cs[j], rd.sensors, rd.half_angle)
             e = rd.ranges - r
-            take = (delta < delta_max) & (p > 0) & (np.abs(e) < tolerance) & (np.abs(e) < best)
-            best[take] = np.abs(e[take])
+            ae = np.abs(e)
+            take = (delta < delta_max) & (p > 0) & (ae < tolerance) & (ae < best)
+            best[take] = ae[take]
             assign[take] = j
-            jac[take] = 0.0
-            jac[take, 0] = dpsi[take]
-            jac[take, 1 + j] = dc[take]
+            j_psi[take] = dpsi[take]
+            j_c[take] = dc[take]
             resid[take] = e[take]
         sel = assign >= 0
-        if sel.sum() < 3:
+        nsel = int(np.count_nonzero(sel))
+        if nsel < 3:
             return TangentFit(psi, cs, sel, assign, float("inf"))
-        cols = np.concatenate([[0], 1 + active])
-        a = jac[sel][:, cols] / sig[sel, None]
-        b = resid[sel] / sig[sel]
+        s_sel = sig[sel]
+        # the weighted Jacobian of the active walls, column-major as a column selection of
+        # a row-major array is (a.T @ a then multiplies the same layout: the same floats)
+        a = np.zeros((nsel, 1 + active.size), order="F")
+        a[:, 0] = j_psi[sel] / s_sel
+        jc_w = j_c[sel] / s_sel
+        on = assign[sel]
+        for q, j in enumerate(active):
+            rows = on == j
+            a[rows, 1 + q] = jc_w[rows]
+        b = resid[sel] / s_sel
         normal = a.T @ a
         try:
             dx = np.linalg.solve(normal, a.T @ b)

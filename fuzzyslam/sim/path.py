@@ -132,8 +132,8 @@ def drive(
             raise RuntimeError(f"the drive did not finish within {max_duration} s")
         v = w = 0.0
         if turning:
-            g, _ = loop.at(np.array([s0 + direction * (sigma + robot.lookahead)]))
-            e = wrap_angle_scalar(math.atan2(g[0, 1] - y, g[0, 0] - x) - th)
+            g0, g1, _, _ = loop.at1(s0 + direction * (sigma + robot.lookahead))
+            e = wrap_angle_scalar(math.atan2(g1 - y, g0 - x) - th)
             if abs(e) < ALIGNED:
                 turning = False
                 events.append(Event(t=t, kind="run_start", run=run, direction=direction))
@@ -143,8 +143,8 @@ def drive(
             cand = np.clip(sigma + SEARCH, 0.0, lap)
             pts, _ = loop.at(s0 + direction * cand)
             sigma = float(cand[np.argmin(np.hypot(pts[:, 0] - x, pts[:, 1] - y))])
-            end, _ = loop.at(np.array([s0 + direction * lap]))
-            to_end = math.hypot(end[0, 0] - x, end[0, 1] - y)
+            end0, end1, _, _ = loop.at1(s0 + direction * lap)
+            to_end = math.hypot(end0 - x, end1 - y)
             if lap - sigma < 0.5 and to_end < STOP_DISTANCE:
                 events.append(Event(t=t, kind="run_end", run=run))
                 if run == scenario.runs:
@@ -159,12 +159,12 @@ def drive(
                 bmp.append(0.0)
                 continue
             s_aim = min(sigma + robot.lookahead, lap)
-            g, tg = loop.at(np.array([s0 + direction * s_aim]))
+            g0, g1, tg0, tg1 = loop.at1(s0 + direction * s_aim)
             if rng is not None:
                 offset = a_ou * offset + b_ou * float(rng.standard_normal())
             fade = min(1.0, sigma, max(lap - s_aim, 0.0))
-            gx = g[0, 0] - direction * tg[0, 1] * offset * fade
-            gy = g[0, 1] + direction * tg[0, 0] * offset * fade
+            gx = g0 - direction * tg1 * offset * fade
+            gy = g1 + direction * tg0 * offset * fade
             e = wrap_angle_scalar(math.atan2(gy - y, gx - x) - th)
             w = max(-robot.max_turn_rate, min(robot.max_turn_rate, K_OMEGA * e))
             v = 0.0 if abs(e) > math.pi / 3 else v_max * max(math.cos(e), 0.0) ** 2

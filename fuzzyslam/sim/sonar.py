@@ -242,3 +242,31 @@ def ring(
         Readings (m).
     """
     return measure(ideal_ranges(walls, sensor_poses(pose, mounts), params, discs), params, rng)
+
+
+def ideal_ranges_many(
+    walls: np.ndarray, poses: np.ndarray, mounts: np.ndarray, params: SonarParams
+) -> np.ndarray:
+    """:func:`ideal_ranges` of K rings at once (no people): every ray is traced on its own
+    (element-wise operations and per-ray minima), so ring k's row is bit for bit
+    ``ideal_ranges(walls, sensor_poses(poses[k], mounts), params)``, with the numpy call
+    overhead paid once for the K rings (tests/test_fast_paths.py).
+
+    Parameters
+    ----------
+    walls : ndarray, shape (S, 4)
+        Wall segments.
+    poses : ndarray, shape (K, 3)
+        The robot's world poses.
+    mounts : ndarray, shape (M, 3)
+        The sensors' poses on the robot.
+    params : SonarParams
+        The sonar model.
+
+    Returns
+    -------
+    ndarray, shape (K, M)
+        Ranges (m); inf: no echo.
+    """
+    sensors = np.concatenate([sensor_poses(p, mounts) for p in poses])
+    return ideal_ranges(walls, sensors, params).reshape(len(poses), len(mounts))

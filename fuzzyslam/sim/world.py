@@ -12,6 +12,8 @@ the offset vertices of its two ends, so the corridors tile the loop.
 
 from __future__ import annotations
 
+from bisect import bisect_right
+
 import numpy as np
 
 from fuzzyslam.errors import ConfigError
@@ -89,6 +91,9 @@ class Loop:
         self.edges = np.roll(pts, -1, axis=0) - pts
         self.lens = np.linalg.norm(self.edges, axis=1)
         self.cum = np.concatenate([[0.0], np.cumsum(self.lens)])
+        # the same numbers as Python floats, for the one-point queries of the drive
+        self._rows = list(zip(pts.tolist(), self.edges.tolist(), self.lens.tolist(), strict=True))
+        self._cum = self.cum.tolist()
 
     def at(self, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """Points (N, 2) and unit tangents (N, 2) at arc lengths ``s`` (mod the length).
@@ -108,6 +113,28 @@ class Loop:
         i = np.minimum(np.maximum(np.searchsorted(cum, s, side="right") - 1, 0), len(self.pts) - 1)
         tang = self.edges[i] / self.lens[i, None]
         return self.pts[i] + tang * (s - cum[i])[:, None], tang
+
+    def at1(self, s: float) -> tuple[float, float, float, float]:
+        """:meth:`at` of one arc length on Python floats (the drive's hot path; the same
+        operations, so the same floats: float % is np.mod, bisect_right is searchsorted).
+
+        Parameters
+        ----------
+        s : float
+            Arc length (m).
+
+        Returns
+        -------
+        tuple of 4 float
+            The point (x, y) and the unit tangent (tx, ty).
+        """
+        cum = self._cum
+        s = float(s) % cum[-1]
+        i = min(max(bisect_right(cum, s) - 1, 0), len(self._rows) - 1)
+        (px, py), (ex, ey), ln = self._rows[i]
+        tx, ty = ex / ln, ey / ln
+        d = s - cum[i]
+        return px + tx * d, py + ty * d, tx, ty
 
 
 def point_at(pts: np.ndarray, s: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -119,9 +119,46 @@ def _pose(v) -> Pose:
 # -- decoders ------------------------------------------------------------------------------
 
 
+_STAMP = struct.Struct("<iI")
+# the last Odometry layout decoded: (size, bytes 0-4, bytes 12-a, frame_id, child, a)
+_odometry_layout: list = [None]
+
+
 def decode_odometry(buf: bytes | memoryview) -> Odometry:
     """nav_msgs/Odometry: header, child_frame_id, pose (7 f64 + covariance[36]), twist
-    (6 f64 + covariance[36]); the 85 float64 follow the string, aligned to 8."""
+    (6 f64 + covariance[36]); the 85 float64 follow the string, aligned to 8.
+
+    A payload of the size, encapsulation and frame_id/child_frame_id bytes of the last
+    one decoded passes the same checks with the same offsets: only its stamp and numbers
+    are read (:func:`decode_odometry_plain` is the whole decoder; a log's odometry
+    messages all have one layout)."""
+    lay = _odometry_layout[0]
+    if lay is not None and len(buf) == lay[0] and buf[12 : lay[5]] == lay[2] and buf[:4] == lay[1]:
+        sec, nsec = _STAMP.unpack_from(buf, 4)
+        a = lay[5]
+        pose = _pose(_F64X7.unpack_from(buf, a))
+        raw = bytes(buf[a + 56 : a + 680])
+        header = Header(Time(sec, nsec), lay[3])
+        return Odometry(header, lay[4], PoseWithCovariance(pose, (raw, 0)), (raw, 288))
+    msg, a = _odometry(buf)
+    _odometry_layout[0] = (
+        len(buf),
+        bytes(buf[:4]),
+        bytes(buf[12:a]),
+        msg.header.frame_id,
+        msg.child_frame_id,
+        a,
+    )
+    return msg
+
+
+def decode_odometry_plain(buf: bytes | memoryview) -> Odometry:
+    """:func:`decode_odometry` without the layout cache (every check made)."""
+    return _odometry(buf)[0]
+
+
+def _odometry(buf: bytes | memoryview) -> tuple[Odometry, int]:
+    """An Odometry and the offset of its 85 float64."""
     header, a = _header(buf)
     a += (4 - a) % 4
     child, a = _string(buf, a)
@@ -132,7 +169,7 @@ def decode_odometry(buf: bytes | memoryview) -> Odometry:
         raise CdrError(f"payload of {len(buf)} bytes, message ends at {a + 680}")
     pose = _pose(_F64X7.unpack_from(buf, a))
     raw = bytes(buf[a + 56 : a + 680])  # covariances and twist, decoded when read
-    return Odometry(header, child, PoseWithCovariance(pose, (raw, 0)), (raw, 288))
+    return Odometry(header, child, PoseWithCovariance(pose, (raw, 0)), (raw, 288)), a
 
 
 def decode_pose_array(buf: bytes | memoryview) -> PoseArray:
@@ -173,9 +210,48 @@ def decode_laser_scan(buf: bytes | memoryview) -> LaserScan:
     return LaserScan(header, *f, ranges, intensities)
 
 
+# the last JointState layout: (size, bytes 0-4, bytes 12-a (names, position count), a,
+# frame_id, names, ((count offset, count bytes, data offset, count) per sequence))
+_joint_state_layout: list = [None]
+
+
 def decode_joint_state(buf: bytes | memoryview) -> JointState:
     """sensor_msgs/JointState: header, name (sequence of strings), position, velocity and
-    effort (float64 sequences)."""
+    effort (float64 sequences).
+
+    A payload of the last one's size, encapsulation, frame_id, names and sequence counts
+    passes the same checks with the same offsets: only its stamp and numbers are read
+    (:func:`decode_joint_state_plain` is the whole decoder)."""
+    lay = _joint_state_layout[0]
+    if (
+        lay is not None
+        and len(buf) == lay[0]
+        and buf[12 : lay[3]] == lay[2]
+        and buf[:4] == lay[1]
+        and all(buf[c : c + 4] == cb for c, cb, _, _ in lay[6][1:])
+    ):
+        sec, nsec = _STAMP.unpack_from(buf, 4)
+        arrays = [
+            np.frombuffer(buf, _F8, n, d).copy() if n else _EMPTY[_F8] for _, _, d, n in lay[6]
+        ]
+        return JointState(Header(Time(sec, nsec), lay[4]), list(lay[5]), *arrays)
+    msg, a, seqs = _joint_state(buf)
+    counts = tuple((c, bytes(buf[c : c + 4]), d, n) for c, d, n in seqs)
+    _joint_state_layout[0] = (
+        len(buf), bytes(buf[:4]), bytes(buf[12:a]), a, msg.header.frame_id, tuple(msg.name),
+        counts,
+    )  # fmt: skip
+    return msg
+
+
+def decode_joint_state_plain(buf: bytes | memoryview) -> JointState:
+    """:func:`decode_joint_state` without the layout cache (every check made)."""
+    return _joint_state(buf)[0]
+
+
+def _joint_state(buf: bytes | memoryview) -> tuple[JointState, int, list]:
+    """A JointState, the offset after its position count, and per sequence (count
+    offset, data offset, count)."""
     header, a = _header(buf)
     a += (4 - a) % 4
     (count,) = _U32.unpack_from(buf, a)
@@ -187,14 +263,16 @@ def decode_joint_state(buf: bytes | memoryview) -> JointState:
         a += (4 - a) % 4
         s, a = _string(buf, a)
         names.append(s)
-    a += (4 - a) % 4
-    position, a = _sequence(buf, a, _F8)
-    a += (4 - a) % 4
-    velocity, a = _sequence(buf, a, _F8)
-    a += (4 - a) % 4
-    effort, a = _sequence(buf, a, _F8)
+    seqs, arrays = [], []
+    for _ in range(3):  # position, velocity, effort
+        a += (4 - a) % 4
+        (n,) = _U32.unpack_from(buf, a)
+        data = a + 4 + ((4 - (a + 4)) % 8 if n else 0)
+        seqs.append((a, data, n))
+        arr, a = _sequence(buf, a, _F8)
+        arrays.append(arr)
     _end(buf, a)
-    return JointState(header, names, position, velocity, effort)
+    return JointState(header, names, *arrays), seqs[0][0] + 4, seqs
 
 
 def decode_image(buf: bytes | memoryview) -> Image:

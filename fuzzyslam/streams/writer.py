@@ -11,10 +11,13 @@ from __future__ import annotations
 import contextlib
 import json
 import os
+import struct
 import sys
 from pathlib import Path
 from typing import Any
 
+from mcap.opcode import Opcode
+from mcap.records import MessageIndex
 from mcap.writer import CompressionType, Writer
 
 from fuzzyslam import __version__
@@ -25,6 +28,79 @@ from fuzzyslam.streams.typestore import msgdef, normalise_typename, serialize
 def sec_to_ns(t: float) -> int:
     """Seconds (float) to integer nanoseconds, rounded."""
     return round(t * 1e9)
+
+
+_MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, 2 times
+_MESSAGE_OPCODE = 0x05
+
+
+class _PackedIndex(MessageIndex):
+    """A chunk's Message Index record written with one struct pack for all its (log time,
+    offset) entries (mcap's writes each number on its own: the same bytes)."""
+
+    def write(self, stream) -> None:
+        """The record: opcode 0x04, length, channel id, entries' byte count, entries."""
+        n = len(self.records)
+        stream.start_record(Opcode.MESSAGE_INDEX)
+        stream.write(struct.pack(f"<HI{2 * n}Q", self.channel_id, 16 * n,
+                                 *(v for entry in self.records for v in entry)))  # fmt: skip
+        stream.finish_record()
+
+
+class _LeanWriter(Writer):
+    """mcap's Writer with a lean ``add_message``: the message record packed in one struct
+    call straight into the open chunk, the statistics and the chunk's message index kept
+    exactly as ``Writer.add_message`` keeps them (the same bytes: tests/test_fast_paths.py
+    writes both). The rest (schemas, channels, chunks, summary) is mcap's own. When this
+    mcap has other internals, the plain ``add_message`` is used."""
+
+    def __init__(self, *args, **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        # name-mangled internals of mcap 1.x's Writer and ChunkBuilder
+        self._stats = getattr(self, "_Writer__statistics", None)
+        self._chunks = getattr(self, "_Writer__chunk_builder", None)
+        self._limit = getattr(self, "_Writer__chunk_size", None)
+        self._finalize = getattr(self, "_Writer__finalize_chunk", None)
+        parts = ("record_writer", "message_indices", "num_messages", "message_start_time")
+        self.lean = None not in (self._stats, self._chunks, self._limit, self._finalize) and all(
+            hasattr(self._chunks, a) for a in parts
+        )
+
+    def add_message(
+        self, channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int = 0
+    ) -> None:
+        """``Writer.add_message`` (chunked), written out for one message."""
+        if not self.lean:
+            super().add_message(channel_id, log_time, data, publish_time, sequence)
+            return
+        st = self._stats
+        if st.message_count == 0:
+            st.message_start_time = log_time
+        else:
+            st.message_start_time = min(log_time, st.message_start_time)
+        st.message_end_time = max(log_time, st.message_end_time)
+        st.channel_message_counts[channel_id] += 1
+        st.message_count += 1
+        cb = self._chunks
+        if cb.num_messages == 0:
+            cb.message_start_time = log_time
+        else:
+            cb.message_start_time = min(cb.message_start_time, log_time)
+        cb.message_end_time = max(cb.message_end_time, log_time)
+        index = cb.message_indices.get(channel_id)
+        if index is None:
+            index = cb.message_indices[channel_id] = _PackedIndex(channel_id=channel_id, records=[])
+        rec = cb.record_writer
+        index.records.append((log_time, rec.count))
+        cb.num_messages += 1
+        rec.write(
+            _MESSAGE_HEAD.pack(
+                _MESSAGE_OPCODE, 22 + len(data), channel_id, sequence, log_time, publish_time
+            )
+        )
+        rec.write(data)
+        if rec.count > self._limit:
+            self._finalize()
 
 
 class LogWriter:
@@ -50,7 +126,7 @@ class LogWriter:
             self._file = stack.enter_context(open(self._tmp, "wb"))
             self._stack = stack.pop_all()
         try:
-            self._writer = Writer(
+            self._writer = _LeanWriter(
                 self._file, chunk_size=self.chunk_size, compression=CompressionType.ZSTD
             )
             self._writer.start(profile="ros2", library=f"fuzzyslam {__version__}")
