@@ -66,7 +66,9 @@ def test_no_test_when_the_frame_is_explained_and_no_change_when_refused():
     ekf = _filter(true)
     z, r = _detections(true, [0, 1, 2])
     d2 = ekf.individual_compatibility(z, r)
-    assert relocalisation_test(ekf, z, r, d2, GATE, 4.0, Q) == (d2, None)
+    out, test = relocalisation_test(ekf, z, r, d2, GATE, 4.0, Q)
+    assert out is d2 and not test.tested and not test.accepted
+    assert sorted(test.before.pairs) == [(0, 0), (1, 1), (2, 2)]
     # three detections of landmarks not in the map (20 m away): the test runs, explains
     # nothing more, is refused and leaves the filter bit for bit as it was
     p0, x0 = ekf.P.copy(), ekf.x.copy()
@@ -87,5 +89,6 @@ def test_relocaliser_counts_and_is_off_by_default():
     true = np.array([0.5, 0.5, 0.3])
     ekf = _filter(true + np.array([0.0, 0.0, np.radians(15.0)]))
     z, r = _detections(true, [0, 1, 2, 3, 4, 5])
-    rel(ekf, z, r, ekf.individual_compatibility(z, r))
+    _, known = rel(ekf, z, r, ekf.individual_compatibility(z, r))
+    assert known is None  # accepted: the association must be made again on the new d2
     assert rel.counts() == {"relocalisation_tests": 1, "relocalisations": 1}

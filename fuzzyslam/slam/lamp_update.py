@@ -24,6 +24,7 @@ def associate_update(
     d2: np.ndarray,
     gate_chi2: float,
     ambiguity_margin: float,
+    known: Association | None = None,
 ) -> tuple[Association, UpdateResult | None]:
     """JCBB association and the joint update of the paired lamps.
 
@@ -46,6 +47,9 @@ def associate_update(
         The individual gate (chi-square, 2 dof).
     ambiguity_margin : float
         JCBB's margin below which another hypothesis makes a detection ambiguous.
+    known : Association, optional
+        JCBB's result on these ``d2`` and this filter state, when already computed (the
+        relocalisation test's): used instead of running JCBB again.
 
     Returns
     -------
@@ -69,7 +73,7 @@ def associate_update(
         )
         if res.accepted:
             return Association(pairs), res
-    assoc = jcbb(ekf, z, r, d2, gate_chi2, ambiguity_margin)
+    assoc = known if known is not None else jcbb(ekf, z, r, d2, gate_chi2, ambiguity_margin)
     if not assoc.pairs:
         return assoc, None
     det = [j for j, _ in assoc.pairs]

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fuzzyslam.slam.association import jcbb
+from fuzzyslam.slam.association import Association, jcbb
 from fuzzyslam.slam.ekf import EkfSlam
 from fuzzyslam.slam.params import SlamParams
 
@@ -26,6 +26,9 @@ class Relocalisation:
     pairs_before: int
     pairs_after: int
     accepted: bool
+    # JCBB's association of the frame as the filter stood (still valid when refused)
+    before: Association | None = None
+    tested: bool = True  # False: the frame did not call for the test (nothing unexplained)
 
 
 def relocalisation_test(
@@ -80,20 +83,23 @@ def relocalisation_test(
         The distances to associate with: recomputed under the inflated covariance when
         accepted, else the ``d2`` given.
     test : Relocalisation or None
-        The test's outcome; None when the frame did not call for one.
+        The test's outcome (``tested`` False when the best hypothesis explained the frame
+        well enough, with ``before`` its JCBB association); None when the frame had too
+        few detections or the map too few lamps.
     """
     m = len(z)
     if m < min_pairs or ekf.n_lamps < min_pairs:
         return d2, None
-    before = len(jcbb(ekf, z, r, d2, gate_chi2, ambiguity_margin).best)
+    assoc = jcbb(ekf, z, r, d2, gate_chi2, ambiguity_margin)
+    before = len(assoc.best)
     if m - before < min_gain:
-        return d2, None
+        return d2, Relocalisation(before, before, False, assoc, tested=False)
     trial = copy.deepcopy(ekf)
     trial.inflate_robot(q)
     d2_wide = trial.individual_compatibility(z, r)
     after = len(jcbb(trial, z, r, d2_wide, gate_chi2, ambiguity_margin).best)
     if after < max(before + min_gain, min_pairs):
-        return d2, Relocalisation(before, after, False)
+        return d2, Relocalisation(before, after, False, assoc)
     ekf.inflate_robot(q)
     return ekf.individual_compatibility(z, r), Relocalisation(before, after, True)
 
@@ -138,7 +144,9 @@ class Relocaliser:
         q = np.diag([sp * sp, sp * sp, sh * sh])
         return cls(q, p.gate_chi2, p.ambiguity_margin, p.relocalise_min_gain)
 
-    def __call__(self, ekf: EkfSlam, z: np.ndarray, r: np.ndarray, d2: np.ndarray) -> np.ndarray:
+    def __call__(
+        self, ekf: EkfSlam, z: np.ndarray, r: np.ndarray, d2: np.ndarray
+    ) -> tuple[np.ndarray, Association | None]:
         """Run :func:`relocalisation_test` on one frame and count it.
 
         Parameters
@@ -154,16 +162,21 @@ class Relocaliser:
 
         Returns
         -------
-        ndarray, shape (m, n)
+        d2 : ndarray, shape (m, n)
             The distances to associate with.
+        known : Association or None
+            JCBB's association on them, when the test computed it and left the filter as
+            it was (for :func:`~fuzzyslam.slam.lamp_update.associate_update`).
         """
         d2, test = relocalisation_test(
             ekf, z, r, d2, self.gate_chi2, self.ambiguity_margin, self.q, self.min_gain
         )
-        if test is not None:
+        if test is None:
+            return d2, None
+        if test.tested:
             self.tests += 1
             self.accepted += test.accepted
-        return d2
+        return d2, None if test.accepted else test.before
 
     def counts(self) -> dict[str, int]:
         """The summary's counts: tests run and disturbances accepted.

@@ -230,10 +230,11 @@ class SlamRunner:
         self.tentative.expire(ev.t)
         if m:
             d2 = ekf.individual_compatibility(z, r)
+            known = None  # JCBB's association, when the relocalisation test made it
             if self.relocaliser is not None:  # a pose that has left its covariance?
-                d2 = self.relocaliser(ekf, z, r, d2)
+                d2, known = self.relocaliser(ekf, z, r, d2)
             p = self.params
-            assoc, res = associate_update(ekf, z, r, d2, p.gate_chi2, p.ambiguity_margin)
+            assoc, res = associate_update(ekf, z, r, d2, p.gate_chi2, p.ambiguity_margin, known)
             pairs = assoc.pairs
             if pairs:
                 for a, (j, i) in enumerate(pairs):
