@@ -87,6 +87,15 @@ class LogInputs:
     frames: TfFrames = field(default_factory=TfFrames)
 
     def warn(self, key: str, problem: str = "") -> None:
+        """Count a glitch of kind ``key`` (the summary's ``warnings``).
+
+        Parameters
+        ----------
+        key : str
+            The glitch's kind.
+        problem : str
+            One line on it, kept as ``first_problem`` if it is the first.
+        """
         self.warnings[key] = self.warnings.get(key, 0) + 1
         if problem and not self.first_problem:
             self.first_problem = problem
@@ -94,8 +103,19 @@ class LogInputs:
     # -- streams --------------------------------------------------------------------------
 
     def events(self, rings: bool = False, ring_start: float | None = None) -> Iterator[Event]:
-        """All events in time order (rings merged in only when ``rings``, from
-        ``ring_start`` on when given: the aids' start, e.g. the map's freeze time)."""
+        """All events in time order.
+
+        Parameters
+        ----------
+        rings : bool
+            Merge in the range sensor's rings (for the aids).
+        ring_start : float or None
+            Rings from this log time (s) on: the aids' start, e.g. the map's freeze time.
+
+        Returns
+        -------
+        iterator of Odom, Frame or RingEvent
+        """
         main = self._main_events()
         delay = self.cfg.slam.odometry_delay_s
         if delay:
@@ -277,7 +297,17 @@ def camera_info_problem(info) -> str | None:
     """Why a CameraInfo cannot be a pinhole ceiling camera (None if it can): a size
     that is not positive, focal lengths fx, fy that are not finite and positive or
     differ by more than 1 % (square pixels are assumed), a horizontal field of view
-    outside [1, 179] degrees, a principal point that is not finite or is off the image."""
+    outside [1, 179] degrees, a principal point that is not finite or is off the image.
+
+    Parameters
+    ----------
+    info : sensor_msgs/CameraInfo
+        The message (width, height, k: the 3x3 camera matrix row by row).
+
+    Returns
+    -------
+    str or None
+    """
     w, h = int(info.width), int(info.height)
     if not (0 < w <= 100_000 and 0 < h <= 100_000):
         return f"image size {w}x{h} is not a camera's"
@@ -312,8 +342,23 @@ def open_inputs(
 ) -> LogInputs:
     """Open a log and decide its streams; InputError naming topics and config keys if missing.
 
-    ``ranges``: sonar|scan (``--ranges``) overriding ``ranges.source``; ``start_pose``:
-    ``--start-pose`` (module docstring)."""
+    Parameters
+    ----------
+    path : path
+        The MCAP log.
+    cfg : Config
+        The run's config (topics, slam, ranges).
+    need_rings : bool
+        The aids need a range sensor.
+    ranges : str or None
+        sonar|scan (``--ranges``) overriding ``ranges.source``.
+    start_pose : (float, float, float) or None
+        ``--start-pose`` (m, m, rad; module docstring).
+
+    Returns
+    -------
+    LogInputs
+    """
     reader = LogReader(path)
     tp = cfg.topics
     if cfg.slam.use_encoders and reader.has(tp.joint_states):
@@ -372,7 +417,21 @@ def tf_frames(reader: LogReader, cfg: Config, odom_topic: str | None) -> TfFrame
     """The /tf frames of the estimates (:class:`TfFrames`): the odometry's own frame names
     when it is nav_msgs/Odometry (``odom_topic``), and whether the log's /tf already
     carries odom -> base (looked for in its first messages), so that it is not
-    written twice."""
+    written twice.
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    cfg : Config
+        The config (``topics.tf``).
+    odom_topic : str or None
+        The nav_msgs/Odometry topic (None: encoders, the default names).
+
+    Returns
+    -------
+    TfFrames
+    """
     if odom_topic is None:
         return TfFrames()
     first = _first(reader, odom_topic)
