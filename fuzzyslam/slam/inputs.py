@@ -47,9 +47,14 @@ from fuzzyslam.errors import InputError
 from fuzzyslam.robot import WHEEL_NAMES
 from fuzzyslam.slam.events import Event, Frame, Odom, RingEvent, TfFrames
 from fuzzyslam.slam.latency import delay_odometry
-from fuzzyslam.slam.odom_gate import REANCHOR, OdomGate, first_plausible_pose, within_speed
+from fuzzyslam.slam.log_setup import (
+    camera_info_problem,
+    filter_start_pose,
+    first_message,
+    tf_frames,
+)
+from fuzzyslam.slam.odom_gate import REANCHOR, OdomGate, within_speed
 from fuzzyslam.streams import messages as M
-from fuzzyslam.streams.logmeta import read_scenario
 from fuzzyslam.streams.ranges import RangeSensor, open_ranges
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.sonar import RingStats
@@ -293,46 +298,6 @@ class LogInputs:
             yield RingEvent(ring.t, ring)
 
 
-def camera_info_problem(info) -> str | None:
-    """Why a CameraInfo cannot be a pinhole ceiling camera (None if it can): a size
-    that is not positive, focal lengths fx, fy that are not finite and positive or
-    differ by more than 1 % (square pixels are assumed), a horizontal field of view
-    outside [1, 179] degrees, a principal point that is not finite or is off the image.
-
-    Parameters
-    ----------
-    info : sensor_msgs/CameraInfo
-        The message (width, height, k: the 3x3 camera matrix row by row).
-
-    Returns
-    -------
-    str or None
-    """
-    w, h = int(info.width), int(info.height)
-    if not (0 < w <= 100_000 and 0 < h <= 100_000):
-        return f"image size {w}x{h} is not a camera's"
-    k = np.asarray(info.k, dtype=float).ravel()
-    if k.shape != (9,) or not np.all(np.isfinite(k)):
-        return "the camera matrix K must be nine finite numbers"
-    fx, fy, cx, cy = k[0], k[4], k[2], k[5]
-    if not (fx > 0 and fy > 0):
-        return f"focal lengths must be > 0 (fx = {fx:.6g}, fy = {fy:.6g})"
-    if abs(fx - fy) > 0.01 * max(fx, fy):
-        return f"fx = {fx:.6g} and fy = {fy:.6g} differ (square pixels are assumed)"
-    hfov = 2.0 * math.degrees(math.atan(w / (2.0 * fx)))
-    if not 1.0 <= hfov <= 179.0:
-        return f"focal length {fx:.6g} px gives a {hfov:.3g}-degree field of view"
-    if not (-0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5):
-        return f"principal point ({cx:.6g}, {cy:.6g}) is off the {w}x{h} image"
-    return None
-
-
-def _first(reader: LogReader, topic: str):
-    for m in reader.messages([topic]):
-        return m.msg
-    return None
-
-
 def open_inputs(
     path: str | os.PathLike,
     cfg: Config,
@@ -373,7 +338,7 @@ def open_inputs(
     camera = None
     if reader.has(tp.image):
         lamp_topic, lamp_source = tp.image, "frames"
-        info = _first(reader, tp.camera_info) if reader.has(tp.camera_info) else None
+        info = first_message(reader, tp.camera_info) if reader.has(tp.camera_info) else None
         if info is None:
             reader.require([tp.camera_info], "the config's topics.camera_info")
             raise InputError(reader.path, f"no message on {tp.camera_info}")
@@ -394,7 +359,7 @@ def open_inputs(
     sensor = open_ranges(reader, cfg, ranges) if need_rings else None
     mounts = sensor.mounts if sensor is not None else np.zeros((0, 3))
     gate = OdomGate()
-    pose = _start_pose(reader, cfg, odom_topic, odom_source, start_pose, gate)
+    pose = filter_start_pose(reader, cfg, odom_topic, odom_source, start_pose, gate)
     return LogInputs(
         reader,
         cfg,
@@ -411,77 +376,3 @@ def open_inputs(
         _gate=gate,
         frames=tf_frames(reader, cfg, odom_topic if odom_source == "odom" else None),
     )
-
-
-def tf_frames(reader: LogReader, cfg: Config, odom_topic: str | None) -> TfFrames:
-    """The /tf frames of the estimates (:class:`TfFrames`): the odometry's own frame names
-    when it is nav_msgs/Odometry (``odom_topic``), and whether the log's /tf already
-    carries odom -> base (looked for in its first messages), so that it is not
-    written twice.
-
-    Parameters
-    ----------
-    reader : LogReader
-        The log.
-    cfg : Config
-        The config (``topics.tf``).
-    odom_topic : str or None
-        The nav_msgs/Odometry topic (None: encoders, the default names).
-
-    Returns
-    -------
-    TfFrames
-    """
-    if odom_topic is None:
-        return TfFrames()
-    first = _first(reader, odom_topic)
-    odom = str(first.header.frame_id).lstrip("/") if first is not None else ""
-    base = str(first.child_frame_id).lstrip("/") if first is not None else ""
-    frames = TfFrames(odom=odom or "odom", base=base or "base_link")
-    if reader.has(cfg.topics.tf):
-        for k, m in enumerate(reader.messages([cfg.topics.tf])):
-            for ts in m.msg.transforms:
-                pair = (str(ts.header.frame_id).lstrip("/"), str(ts.child_frame_id).lstrip("/"))
-                if pair == (frames.odom, frames.base):
-                    return TfFrames(frames.map, frames.odom, frames.base, odom_to_base=False)
-            if k >= 100:
-                break
-    return frames
-
-
-def _first_odometry_pose(
-    reader: LogReader, topic: str, default: np.ndarray, gate: OdomGate
-) -> np.ndarray:
-    """The first confirmed odometry pose (slam/odom_gate.py ``first_plausible_pose``, from
-    the first 100 messages), ``gate`` primed with it; ``default`` when there is none."""
-    t, poses = [], []
-    for m in reader.messages([topic]):
-        p = M.pose_of(m.msg.pose.pose)
-        if np.all(np.isfinite(p)):
-            t.append(M.stamp_to_sec(m.msg.header.stamp))
-            poses.append(p)
-        if len(t) >= 100:
-            break
-    first = first_plausible_pose(np.asarray(t), np.asarray(poses).reshape(-1, 3), gate)
-    if first is None:
-        return default
-    gate.prime(*first)
-    return np.asarray(first[1], dtype=float)
-
-
-def _start_pose(
-    reader: LogReader, cfg: Config, odom_topic: str, odom_source: str, given, gate: OdomGate
-):
-    """The filter's start pose (module docstring), checked finite."""
-    scen = read_scenario(reader) if given is None else None
-    if given is not None:
-        pose = np.asarray(given, dtype=float)
-    elif scen is not None:
-        pose = np.asarray(scen.start_pose, dtype=float)
-    else:
-        pose = np.asarray(cfg.slam.start_pose, dtype=float)
-        if odom_source == "odom" and pose.shape == (3,) and not np.any(pose):
-            pose = _first_odometry_pose(reader, odom_topic, pose, gate)
-    if pose.shape != (3,) or not np.all(np.isfinite(pose)):
-        raise InputError(reader.path, "start pose must be three finite numbers (x, y, theta)")
-    return pose
