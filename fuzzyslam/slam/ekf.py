@@ -60,6 +60,26 @@ def lamp_measurement(pose: np.ndarray, lamp: np.ndarray) -> tuple[np.ndarray, ..
     return h, hr, rt
 
 
+def mahalanobis_2x2(a, b, d, v0, v1):
+    """Squared Mahalanobis distance v^T S^-1 v for symmetric 2x2 S = [[a, b], [b, d]],
+    in closed form (S^-1 = [[d, -b], [-b, a]] / (a d - b^2)), element-wise over arrays.
+
+    Parameters
+    ----------
+    a, b, d : ndarray or float, one shape (...)
+        The entries of S.
+    v0, v1 : ndarray or float, shape (...)
+        The entries of v.
+
+    Returns
+    -------
+    ndarray or float, shape (...)
+        (d v0^2 - 2 b v0 v1 + a v1^2) / (a d - b^2).
+    """
+    det = a * d - b * b
+    return (d * v0**2 - 2 * b * v0 * v1 + a * v1**2) / det
+
+
 def lamp_init(pose: np.ndarray, z: np.ndarray) -> tuple[np.ndarray, ...]:
     """Inverse model: lamp l = p + R(theta) z, with Jacobians J_r (2, 3) and J_z (2, 2).
 
@@ -366,5 +386,4 @@ class EkfSlam(EkfUpdates):
         a = w[None, :, 0, 0] + rw[:, None, 0, 0]
         b = w[None, :, 0, 1] + rw[:, None, 0, 1]
         dd = w[None, :, 1, 1] + rw[:, None, 1, 1]
-        det = a * dd - b * b
-        return (dd * v[..., 0] ** 2 - 2 * b * v[..., 0] * v[..., 1] + a * v[..., 1] ** 2) / det
+        return mahalanobis_2x2(a, b, dd, v[..., 0], v[..., 1])

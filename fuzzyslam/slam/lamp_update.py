@@ -72,7 +72,7 @@ def associate_update(
             gate_chi2=joint_threshold(gate_chi2, 2 * len(pairs)),
         )
         if res.accepted:
-            return Association(pairs), res
+            return Association(pairs, [], pairs), res
     assoc = known if known is not None else jcbb(ekf, z, r, d2, gate_chi2, ambiguity_margin)
     if not assoc.pairs:
         return assoc, None

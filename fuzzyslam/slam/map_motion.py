@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fuzzyslam.slam.ekf import mahalanobis_2x2
 from fuzzyslam.slam.health import chi2_quantile
 
 
@@ -50,15 +51,12 @@ def landmark_motion(
         m2 = d^T (P_a - P_b + floor^2 I)^-1 d per landmark (inf where that matrix is not
         positive definite: the covariance grew, which a static landmark's cannot).
     """
-    d = np.asarray(lamps_b, dtype=float) - np.asarray(lamps_a, dtype=float)
+    v = np.asarray(lamps_b, dtype=float) - np.asarray(lamps_a, dtype=float)
     c = np.asarray(covs_a, dtype=float) - np.asarray(covs_b, dtype=float)
-    c = c + np.eye(2) * floor**2
-    det = c[:, 0, 0] * c[:, 1, 1] - c[:, 0, 1] * c[:, 1, 0]
-    num = c[:, 1, 1] * d[:, 0] ** 2 - (c[:, 0, 1] + c[:, 1, 0]) * d[:, 0] * d[:, 1]
-    num = num + c[:, 0, 0] * d[:, 1] ** 2
-    ok = (det > 0) & (c[:, 0, 0] > 0)
-    out = np.full(len(d), np.inf)
-    out[ok] = num[ok] / det[ok]
+    a, b, d = c[:, 0, 0] + floor**2, 0.5 * (c[:, 0, 1] + c[:, 1, 0]), c[:, 1, 1] + floor**2
+    ok = (a * d - b * b > 0) & (a > 0)  # positive definite
+    out = np.full(len(v), np.inf)
+    out[ok] = mahalanobis_2x2(a[ok], b[ok], d[ok], v[ok, 0], v[ok, 1])
     return out
 
 
