@@ -221,7 +221,9 @@ def align_estimate(est: Estimate, truth: Truth, params: EvalParams) -> tuple[Est
     return out, info
 
 
-def anchored_nees(est: Estimate, truth: Truth, params: EvalParams) -> Array:
+def anchored_nees(
+    est: Estimate, truth: Truth, params: EvalParams, assoc: M.Associated | None = None
+) -> Array:
     """NEES of an unaligned estimate in its own map frame, the frame of the first pose.
 
     The truth is moved into the estimate's frame by the rigid motion that makes the first
@@ -236,18 +238,23 @@ def anchored_nees(est: Estimate, truth: Truth, params: EvalParams) -> Array:
         The truth.
     params : EvalParams
         ``max_dt_s`` for pairing.
+    assoc : Associated, optional
+        The pairing in time already made (of this estimate or of a moved copy: it depends
+        on the times only).
 
     Returns
     -------
     ndarray, shape (n,)
         NEES per paired sample (the samples of :func:`metrics.associate`).
     """
-    a = M.associate(est.t, est.poses, truth.t, truth.poses, params.max_dt_s)
-    s = anchor(a.est[0], a.truth[0])
+    if assoc is None:
+        assoc = M.associate(est.t, est.poses, truth.t, truth.poses, params.max_dt_s)
+    poses = est.poses[assoc.index]
+    s = anchor(poses[0], assoc.truth[0])
     rot = np.eye(3)
     rot[:2, :2] = s.rotation
-    err = M.pose_errors(s.apply_poses(a.est), a.truth)
-    return nees(err, rot @ est.cov[a.index] @ rot.T)
+    err = M.pose_errors(s.apply_poses(poses), assoc.truth)
+    return nees(err, rot @ est.cov[assoc.index] @ rot.T)
 
 
 def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = False) -> Evaluation:
@@ -290,7 +297,7 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
     if est.cov is not None:
         c = est.cov[assoc.index]
         sigma = np.sqrt(np.clip(np.diagonal(c, axis1=1, axis2=2), 0.0, None))
-        nees_v = nees(err, c) if not alignment else anchored_nees(raw, truth, params)
+        nees_v = nees(err, c) if not alignment else anchored_nees(raw, truth, params, assoc)
     fix_t = fix_err = fix_ok = None
     if est.heading_fixes is not None and est.heading_fixes.t.size:
         hf = est.heading_fixes
