@@ -63,7 +63,8 @@ Reasons recorded per ring (``heading_fixes.csv``): ``ok``, ``recovered``, ``no_w
 open space), ``no_corridor``, ``ambiguous_corridor`` (two regions with different
 reference angles, junctions off), ``ambiguous_reference`` (the map stage flagged the
 corridor's own reference angle), ``ambiguous_heading`` (two candidates both
-plausible), ``gated``.
+plausible), ``gated``, ``loose_fit`` (a multi-ring window whose own wall fit is too
+loose, ``fixes.flm_fit_scatter``).
 """
 
 from __future__ import annotations

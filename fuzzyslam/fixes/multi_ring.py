@@ -13,6 +13,16 @@ fit's own standard deviation when that is larger (``flm_fit_sigma``), and keeps 
 single-ring watchdog's decisions of the last ``recover_window_s`` seconds (the history
 the bump recovery looks at). Between fixes a single-ring decision becomes a row that is
 not applied (``between_fixes``; ``gated`` rows stay, they drive the recovery).
+
+In metres of travel [ours] (``flm_window_m`` > 0, real buildings): the window keeps the
+rings within ``flm_window_m`` of dead-reckoned travel and a fix is formed every
+``flm_fix_travel`` metres, R inflated by flm_window_m / flm_fix_travel: what a window
+sees of the walls grows with the travel, not with the rings (a ring every 9 cm in one
+building log, every metre in another). With ``flm_fit_scatter`` a fix's sigma comes
+from its window's own wall fit, max(sigma_flm, flm_fit_scale q), q = sigma_fit
+max(1, Birge ratio) sqrt(K) over the window's K rings, and a window with q above
+``flm_fit_max_deg`` forms no fix (``loose_fit``): measured on two building logs, the
+error's rms is 1.4-2.5 q up to q = 1 deg, and gross errors dominate beyond.
 """
 
 from __future__ import annotations
@@ -57,13 +67,19 @@ class MultiRingWindow:
         self.params = params
         self.rings_flm = rings_flm
         self.wall_direction = wall_direction
-        self.recent = RecentRings(p.flm_rings, p.flm_window_s)
+        self.recent = RecentRings(p.flm_rings, p.flm_window_s, p.flm_window_m)
         self.fix_every = p.flm_fix_every if p.flm_fix_every > 0 else p.flm_rings
-        infl = math.sqrt(max(1.0, p.flm_rings / self.fix_every))
+        self.fix_travel = p.flm_fix_travel if p.flm_window_m > 0 else 0.0
+        if self.fix_travel > 0:  # windows and fixes in metres of travel
+            infl = math.sqrt(max(1.0, p.flm_window_m / self.fix_travel))
+        else:
+            infl = math.sqrt(max(1.0, p.flm_rings / self.fix_every))
         scale = p.sigma_flm_deg / p.sigma_heading_deg
         # (corridor, junction) sigmas of a multi-ring fix (deg)
         self.sigmas_deg = (p.sigma_flm_deg * infl, p.sigma_junction_deg * scale * infl)
         self.since_fix = 0  # rings since the last multi-ring fix was formed
+        self.travelled = 0.0  # dead-reckoned travel (m) since then
+        self._last_xy: np.ndarray | None = None
         self.single: list[HeadingDecision] = []  # the watchdog's recent decisions
         self.formed = 0  # multi-ring fixes formed
 
@@ -79,7 +95,11 @@ class MultiRingWindow:
         ekf : FilterView
             The filter (its dead reckoning, never corrected by the fixes).
         """
-        self.recent.push(t, ekf.odometry_pose, ring.ranges, ring.max_range, ring.fov)
+        odo = np.asarray(ekf.odometry_pose, dtype=float)
+        if self._last_xy is not None:
+            self.travelled += float(np.hypot(*(odo[:2] - self._last_xy)))
+        self._last_xy = odo[:2].copy()
+        self.recent.push(t, odo, ring.ranges, ring.max_range, ring.fov)
         self.since_fix += 1
 
     def restart(self, t: float, ring: Any, ekf: FilterView) -> None:
@@ -98,6 +118,7 @@ class MultiRingWindow:
         self.recent.clear()
         self.recent.push(t, ekf.odometry_pose, ring.ranges, ring.max_range, ring.fov)
         self.since_fix = 0
+        self.travelled = 0.0
 
     def remember(self, t: float, d: HeadingDecision) -> None:
         """Keep a single-ring decision in the watchdog's history, dropping those older
@@ -145,20 +166,48 @@ class MultiRingWindow:
             The multi-ring decision (not yet applied), or ``single`` (``gated``) or its
             ``between_fixes`` row (measured NaN, not accepted).
         """
-        due = self.since_fix >= self.fix_every and 2 * len(self.recent) >= self.recent.count
+        if self.fix_travel > 0:  # once the robot has travelled fix_travel since the last
+            due = self.travelled >= self.fix_travel and len(self.recent) >= 2
+        else:
+            due = self.since_fix >= self.fix_every and 2 * len(self.recent) >= self.recent.count
         if not due:
             if single.reason == "gated":
                 return single
             return replace(single, measured=math.nan, accepted=False, reason="between_fixes")
         self.since_fix = 0
+        self.travelled = 0.0
         self.formed += 1
         p = self.params
         wall = self.wall_direction(self.rings_flm(self.recent, mounts))
         sig_c, sig_j = self.sigmas_deg
         fit = math.degrees(float(getattr(wall, "sigma", math.nan))) if wall is not None else 0.0
+        if p.flm_fit_scatter:
+            return self._scatter_decision(t, wall, fit, refs, ekf)
         if p.flm_fit_sigma and math.isfinite(fit) and fit > p.sigma_flm_deg:
             # the tangent fit's own standard deviation (range noise through the fit's
             # Jacobian) when it exceeds the floor: a loose fit weighs less
             k = fit / p.sigma_flm_deg
             sig_c, sig_j = sig_c * k, sig_j * k
         return decide_heading_fix(t, wall, refs, ekf.pose, ekf.pose_cov, p, (sig_c, sig_j))
+
+    def _scatter_decision(
+        self, t: float, wall: WallLike | None, fit_deg: float, refs: Sequence[Reference], ekf
+    ) -> HeadingDecision:
+        """The multi-ring decision with R from the wall fit's own scatter
+        (``flm_fit_scatter``, see :class:`fuzzyslam.fixes.params.FixParams`): q =
+        sigma_fit max(1, Birge) sqrt(K); no fix (``loose_fit``) above ``flm_fit_max_deg``."""
+        p = self.params
+        birge = float(getattr(wall, "birge", math.nan)) if wall is not None else math.nan
+        q = fit_deg * max(1.0, birge if math.isfinite(birge) else 1.0) * math.sqrt(len(self.recent))
+        if (
+            wall is not None
+            and math.isfinite(wall.angle)
+            and not (math.isfinite(q) and q <= p.flm_fit_max_deg)
+        ):
+            strength = float(wall.strength)
+            return HeadingDecision(
+                t, -1, math.nan, float(ekf.pose[2]), False, "loose_fit", strength
+            )
+        sig_c, sig_j = self.sigmas_deg
+        k = max(1.0, p.flm_fit_scale * q / p.sigma_flm_deg) if math.isfinite(q) else 1.0
+        return decide_heading_fix(t, wall, refs, ekf.pose, ekf.pose_cov, p, (sig_c * k, sig_j * k))

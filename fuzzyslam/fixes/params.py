@@ -87,6 +87,28 @@ class FixParams:
     # 2.8 / 1.5 cm (1 ring: 2.0 / 2.3 / 2.1); real-time factor of run (heading, seed 0)
     # 124 / 116 / 98 (1 ring: 130), pose mode 111 / 104 / 89: every 5
     flm_fix_every: int = field(default=5, metadata={"min": 0, "max": 64})
+    # windows in metres of travel (fixes.multi_ring) [ours]: what a window sees of the
+    # walls grows with the robot's travel, not with its rings (a ring every 9 cm in one
+    # building, every metre in another). flm_window_m > 0: the window keeps only rings
+    # within this much dead-reckoned travel of the newest (also at most flm_rings, within
+    # flm_window_s); flm_fix_travel > 0: a fix is formed once the robot has travelled this
+    # far since the last one (instead of every flm_fix_every rings), with R inflated by
+    # flm_window_m / flm_fix_travel (overlapping windows count each metre once)
+    flm_window_m: float = field(default=0.0, metadata={"min": 0.0, "max": 100.0})
+    flm_fix_travel: float = field(default=0.0, metadata={"min": 0.0, "max": 100.0})
+    # a multi-ring fix's noise from its own wall fit [ours] (with the tangent refinement):
+    # q = sigma_fit * max(1, Birge ratio) * sqrt(rings in the window), the fit's standard
+    # deviation scaled by how far its residuals exceed the range noise model (doors,
+    # clutter, rooms) and by sqrt(K) because the K rings of a window re-measure the same
+    # walls (their errors are common, not independent). Measured on two real building
+    # logs (4 m windows placed by truth, error against the corridor's reference): the
+    # rms error is 1.4-2.5 q for q up to 1 deg in both, and beyond 1 deg the gross
+    # (> 10 deg) errors rise to 40-60 %. So sigma = max(sigma_flm_deg, flm_fit_scale * q)
+    # (times the overlap inflation), and a window with q above flm_fit_max_deg forms no
+    # fix (reason loose_fit). Off: flm_fit_sigma's rule (R raised to the model's sigma)
+    flm_fit_scatter: bool = False
+    flm_fit_scale: float = field(default=2.0, metadata={"min": 0.0, "max": 100.0})
+    flm_fit_max_deg: float = field(default=1.0, metadata={"min": 0.0, "max": 90.0})
     # R = sigma^2 of one multi-ring fix in a corridor (disjoint windows; the measured std is
     # 0.40-0.49 deg); at a junction sigma_junction_deg * sigma_flm_deg / sigma_heading_deg
     sigma_flm_deg: float = field(default=0.5, metadata={"min": 0.01, "max": 90.0})

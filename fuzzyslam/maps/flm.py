@@ -205,14 +205,18 @@ class RecentRings:
     its updates); ``flm()`` is the FLM of the rings of the last ``window`` seconds (at most
     ``count``) placed in the newest ring's frame. Successive multi-ring FLMs share rings,
     so their wall directions are correlated: feed a filter one of them every ``count``
-    rings, or inflate its noise accordingly.
+    rings, or inflate its noise accordingly. With ``distance`` > 0 the rings also lie
+    within that much travel (m, the path through the kept poses) of the newest: what a
+    window sees of the walls grows with the travel, not with the number of rings.
     """
 
-    def __init__(self, count: int = 8, window: float = 2.5) -> None:
+    def __init__(self, count: int = 8, window: float = 2.5, distance: float = 0.0) -> None:
         if count < 1:
             raise ValueError(f"count must be >= 1, got {count}")
         self.count = int(count)
         self.window = float(window)
+        self.distance = float(distance)
+        self._s: list[float] = []  # travel (m) along the kept poses, from the first pushed
         self._t: list[float] = []
         self._poses: list[np.ndarray] = []
         self._ranges: list[np.ndarray] = []
@@ -250,18 +254,30 @@ class RecentRings:
         ranges = np.asarray(ranges, dtype=float).ravel()
         if self._t and (t < self._t[-1] or len(ranges) != len(self._ranges[-1])):
             self.clear()  # time went back or the ring changed: start afresh
+        pose = np.asarray(pose, dtype=float).reshape(3)
+        step = float(np.hypot(*(pose[:2] - self._poses[-1][:2]))) if self._poses else 0.0
+        self._s.append(self._s[-1] + step if self._s else 0.0)
         self._t.append(float(t))
-        self._poses.append(np.asarray(pose, dtype=float).reshape(3))
+        self._poses.append(pose)
         self._ranges.append(ranges)
         self._rmax.append(np.broadcast_to(np.asarray(max_range, dtype=float), ranges.shape))
         self.fov = float(fov)
-        while len(self._t) > self.count or self._t[-1] - self._t[0] > self.window:
-            for buf in (self._t, self._poses, self._ranges, self._rmax):
+        while (
+            len(self._t) > self.count
+            or self._t[-1] - self._t[0] > self.window
+            or (self.distance > 0 and self._s[-1] - self._s[0] > self.distance)
+        ):
+            for buf in (self._s, self._t, self._poses, self._ranges, self._rmax):
                 buf.pop(0)
+
+    @property
+    def span(self) -> float:
+        """The travel (m) from the oldest kept ring's pose to the newest's."""
+        return self._s[-1] - self._s[0] if self._s else 0.0
 
     def clear(self) -> None:
         """Forget every ring."""
-        for buf in (self._t, self._poses, self._ranges, self._rmax):
+        for buf in (self._s, self._t, self._poses, self._ranges, self._rmax):
             buf.clear()
 
     def flm(self, mounts: np.ndarray, params: MapParams | None = None) -> LocalMap:

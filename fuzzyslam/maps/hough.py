@@ -57,7 +57,7 @@ class WallDirection:
     direction first, then the second direction's peak); cells: voting cells;
     sigma: standard deviation of ``angle`` (rad) from the tangent refinement (NaN when
     the angle is the Hough's own); method: "hough" or "tangent"; inliers: echoes
-    supporting the tangent fit.
+    supporting the tangent fit; birge: that fit's Birge ratio (``TangentFit.birge``).
     """
 
     angle: float
@@ -70,6 +70,7 @@ class WallDirection:
     sigma: float = float("nan")
     method: str = "hough"
     inliers: int = 0
+    birge: float = float("nan")
 
 
 def wall_weights(bm: BeliefMap, threshold: float) -> np.ndarray:
@@ -382,5 +383,6 @@ def refine_tangent(wd: WallDirection, readings, params: MapParams) -> WallDirect
         sigma=fit.sigma,
         method="tangent",
         inliers=n1,
+        birge=fit.birge,
         ambiguous=bool(wd.ambiguous or loose or second),
     )

@@ -102,13 +102,16 @@ def readings_in_frame(
 class TangentFit:
     """Result of :func:`fit_walls`: normal angle psi (rad) of the first wall, offsets c
     (one per wall, NaN where unseen), inlier mask and wall of each reading (-1: outlier),
-    sigma (rad, standard deviation of psi; inf when not determined)."""
+    sigma (rad, standard deviation of psi; inf when not determined), birge: the Birge
+    ratio sqrt(chi^2 / dof) of the inliers' weighted residuals at the last step (NaN
+    without dof; above 1 the walls scatter more than the range noise model says)."""
 
     psi: float
     offsets: np.ndarray
     inliers: np.ndarray
     wall_of: np.ndarray
     sigma: float
+    birge: float = float("nan")
 
     @property
     def ok(self) -> bool:
@@ -256,6 +259,9 @@ def fit_walls(
             return TangentFit(psi, cs, sel, assign, float("inf"))
         psi += float(dx[0])
         cs[active] += dx[1:]
+        dof = nsel - 1 - active.size  # residuals after the step, to first order b - a dx
+        res = b - a @ dx
+        birge = float(np.sqrt(res @ res / dof)) if dof > 0 else float("nan")
     if normal is None:
         return TangentFit(psi, cs, assign >= 0, assign, float("inf"))
     try:
@@ -263,4 +269,4 @@ def fit_walls(
     except np.linalg.LinAlgError:
         var = float("inf")
     sigma = float(np.sqrt(var)) if np.isfinite(var) and var >= 0 else float("inf")
-    return TangentFit(float(wrap_angle(psi)), cs, assign >= 0, assign, sigma)
+    return TangentFit(float(wrap_angle(psi)), cs, assign >= 0, assign, sigma, birge)
