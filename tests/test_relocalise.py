@@ -92,3 +92,70 @@ def test_relocaliser_counts_and_is_off_by_default():
     _, known = rel(ekf, z, r, ekf.individual_compatibility(z, r))
     assert known is None  # accepted: the association must be made again on the new d2
     assert rel.counts() == {"relocalisation_tests": 1, "relocalisations": 1}
+
+
+def test_pool_window_moves_earlier_detections_by_the_odometry_and_drops_repeats():
+    from fuzzyslam import se2
+    from fuzzyslam.slam.relocalise import _Sighting, pool_window
+
+    # the robot drove 1 m forward and turned 90 deg left since the earlier frame
+    odo_then, odo_now = np.array([0.0, 0.0, 0.0]), np.array([1.0, 0.0, np.pi / 2])
+    r = np.repeat(np.diag([0.1**2, 0.05**2])[None], 2, axis=0)
+    world = np.array([[3.0, 0.0], [1.0, 2.0]])  # two landmarks
+    then = _Sighting(0.0, odo_then, se2.inverse_transform_points(odo_then, world), r)
+    # now the frame sees the second landmark only
+    z_now = se2.inverse_transform_points(odo_now, world[1:])
+    zw, rw = pool_window(z_now, r[:1], odo_now, [then], GATE)
+    assert zw.shape == (2, 2)  # the repeat of landmark 2 dropped, landmark 1 added
+    assert np.allclose(zw[0], z_now[0])
+    assert np.allclose(zw[1], se2.inverse_transform_points(odo_now, world[:1])[0])  # (0, -2)
+    # its covariance turned with it: range along the robot's new -y axis
+    assert np.allclose(rw[1], np.diag([0.05**2, 0.1**2]))
+
+
+def test_window_relocalises_a_pose_seen_one_or_two_landmarks_at_a_time():
+    """Frames of 1-2 detections cannot call for the test; pooled over 2 s they do: the
+    disturbance is accepted (P_rr + Q exactly), and the frames that follow pair each
+    detection with its own landmark until the pose is consistent again. Without the window
+    the filter never pairs again."""
+    from fuzzyslam.slam.lamp_update import associate_update
+    from fuzzyslam.slam.params import SlamParams
+
+    # groups of different shapes, as a real arena's (a pair, a single, a wider pair)
+    lamps = np.array([[3.0, 0.0], [3.0, 0.2], [3.2, 2.5], [0.0, 3.0], [0.3, 3.1], [-1.5, 2.0]])
+    true = np.array([0.5, 0.5, 0.3])
+    est = true + np.array([0.0, 0.0, np.radians(20.0)])  # 10 sigma off
+    frames = [[0, 3], [2], [1, 5], [4], [0, 3], [2, 5], [1, 4]]  # still, 0.25 s apart
+    results = {}
+    for window in (0.0, 2.0):
+        p = SlamParams(
+            relocalise_sigma_m=0.5, relocalise_sigma_heading_deg=30.0, relocalise_window_s=window
+        )
+        rel = Relocaliser.from_params(p)
+        ekf = EkfSlam(est, np.diag([1e-4, 1e-4, np.radians(2.0) ** 2]), NOISE, capacity=8)
+        for lamp in lamps:
+            ekf.add_lamp(inverse_transform_points(ekf.pose, lamp[None])[0], np.eye(2) * 1e-8)
+        paired, grew = [], []
+        for k, ids in enumerate(frames):
+            rng = np.random.default_rng(k)
+            z = inverse_transform_points(true, lamps[ids]) + rng.normal(size=(len(ids), 2)) * 0.03
+            r = np.repeat(np.diag([0.1**2, 0.05**2])[None], len(ids), axis=0)
+            rel.moved(np.zeros(3))
+            p_before = ekf.P.copy()
+            d2, known = rel(ekf, z, r, ekf.individual_compatibility(z, r), 0.25 * k)
+            grew.append(ekf.P[:3, :3] - p_before[:3, :3])
+            assoc, _ = associate_update(ekf, z, r, d2, GATE, 4.0, known)
+            rel.unexplained(0.25 * k, z, r, assoc)
+            paired.append([(ids[j], i) for j, i in assoc.pairs])
+        results[window] = (paired, grew, rel.counts(), ekf)
+    paired, grew, counts, _ = results[0.0]
+    assert counts["relocalisations"] == 0 and all(not pr for pr in paired)
+    paired, grew, counts, ekf = results[2.0]
+    assert counts["relocalisations"] == 1
+    k = next(k for k, g in enumerate(grew) if np.any(g))
+    assert k == 1 and np.allclose(grew[k], Q)  # frame 1 pooled with frame 0: P_rr + Q
+    assert all(lid == i for pr in paired for lid, i in pr)  # never a wrong pairing
+    assert sum(len(pr) for pr in paired[k:]) >= 4
+    e = ekf.pose - true
+    assert abs(np.degrees(e[2])) < 2.0
+    assert e @ np.linalg.solve(ekf.pose_cov, e) < 16.27  # consistent again

@@ -85,6 +85,9 @@ class SlamParams:
     relocalise_sigma_m: float = field(default=0.0, metadata={"min": 0.0, "max": 100.0})
     relocalise_sigma_heading_deg: float = field(default=0.0, metadata={"min": 0.0, "max": 180.0})
     relocalise_min_gain: int = field(default=2, metadata={"min": 1, "max": 100})
+    # frames with fewer than 3 detections: their unexplained detections are pooled over
+    # this window (s) of odometry and the test run on the pool; 0: each frame on its own
+    relocalise_window_s: float = field(default=0.0, metadata={"min": 0.0, "max": 60.0})
     tentative_hits: int = field(default=3, metadata={"min": 1})
     tentative_radius: float = field(default=0.3, metadata={"min": 0.01, "max": 10.0})
     tentative_timeout: float = field(default=2.0, metadata={"min": 0.0})

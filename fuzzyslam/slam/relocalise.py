@@ -3,18 +3,21 @@
 When the best JCBB hypothesis (:mod:`fuzzyslam.slam.association`) leaves several of a
 frame's detections unexplained, the frame is associated again under the hypothesis that
 the robot suffered an unmodelled disturbance (its covariance inflated); the disturbance is
-accepted when that explains clearly more detections (docs/models.md sec. 4c).
+accepted when that explains clearly more detections (docs/models.md sec. 4c). Frames with
+too few detections for the test are pooled over a short window of odometry (a camera that
+sees one or two landmarks at a time, frame after frame, while the pose is lost).
 """
 
 from __future__ import annotations
 
 import copy
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
+from fuzzyslam import se2
 from fuzzyslam.slam.association import Association, jcbb
-from fuzzyslam.slam.ekf import EkfSlam
+from fuzzyslam.slam.ekf import EkfSlam, mahalanobis_2x2
 from fuzzyslam.slam.params import SlamParams
 
 
@@ -29,6 +32,8 @@ class Relocalisation:
     # JCBB's association of the frame as the filter stood (still valid when refused)
     before: Association | None = None
     tested: bool = True  # False: the frame did not call for the test (nothing unexplained)
+    # JCBB's association under the inflated covariance, when accepted
+    wide: Association | None = None
 
 
 def relocalisation_test(
@@ -97,16 +102,88 @@ def relocalisation_test(
     trial = copy.deepcopy(ekf)
     trial.inflate_robot(q)
     d2_wide = trial.individual_compatibility(z, r)
-    after = len(jcbb(trial, z, r, d2_wide, gate_chi2, ambiguity_margin).best)
+    wide = jcbb(trial, z, r, d2_wide, gate_chi2, ambiguity_margin)
+    after = len(wide.best)
     if after < max(before + min_gain, min_pairs):
         return d2, Relocalisation(before, after, False, assoc)
     ekf.inflate_robot(q)
-    return ekf.individual_compatibility(z, r), Relocalisation(before, after, True)
+    return d2_wide, Relocalisation(before, after, True, wide=wide)
+
+
+@dataclass
+class _Sighting:
+    """Unexplained detections of one frame, with the odometry pose they were made from."""
+
+    t: float
+    odo: np.ndarray  # (3,) dead-reckoned pose (odometry only) at the frame
+    z: np.ndarray  # (k, 2) robot frame
+    r: np.ndarray  # (k, 2, 2)
+
+
+def _same(v: np.ndarray, s: np.ndarray) -> float:
+    return float(mahalanobis_2x2(s[0, 0], s[0, 1], s[1, 1], v[0], v[1]))
+
+
+def pool_window(
+    z: np.ndarray,
+    r: np.ndarray,
+    odo: np.ndarray,
+    past: list[_Sighting],
+    gate_chi2: float,
+) -> tuple[np.ndarray, np.ndarray]:
+    """A frame's detections with earlier frames' unexplained ones, in the frame's robot frame.
+
+    An earlier detection z_a made at odometry pose o_a is seen from the odometry pose o
+    now at z = o^-1 (+) o_a (+) z_a (the odometry's relative motion over a short window
+    is precise even when the absolute pose is lost); its covariance is rotated with it.
+    An earlier detection within ``gate_chi2`` (squared Mahalanobis, R_a + R_b) of one
+    already pooled is the same landmark seen again and is left out, newest first: one
+    frame does not see a landmark twice, a window does.
+
+    Parameters
+    ----------
+    z : ndarray, shape (m, 2)
+        The frame's detections (robot frame).
+    r : ndarray, shape (m, 2, 2)
+        Their covariances.
+    odo : ndarray, shape (3,)
+        The odometry pose at the frame.
+    past : list of _Sighting
+        Earlier frames' unexplained detections, oldest first.
+    gate_chi2 : float
+        The 2-dof gate of "the same landmark".
+
+    Returns
+    -------
+    z : ndarray, shape (k, 2)
+        The pooled detections, the frame's first.
+    r : ndarray, shape (k, 2, 2)
+        Their covariances.
+    """
+    zs, rs = list(z), list(r)
+    for s in reversed(past):
+        rel = se2.between(odo, s.odo)  # the earlier robot frame seen from this one
+        c = se2.rot(rel[2])
+        for za, ra in zip(se2.transform_points(rel, s.z), s.r, strict=True):
+            ra = c @ ra @ c.T
+            if all(_same(za - zb, ra + rb) > gate_chi2 for zb, rb in zip(zs, rs, strict=True)):
+                zs.append(za)
+                rs.append(ra)
+    return np.asarray(zs, dtype=float).reshape(-1, 2), np.asarray(rs, dtype=float).reshape(-1, 2, 2)
 
 
 @dataclass
 class Relocaliser:
     """The test as the SLAM loop runs it, with its counts.
+
+    Frames with fewer than 3 detections cannot call for the test on their own. With
+    ``window_s`` > 0 the unexplained detections of the frames of the last ``window_s``
+    seconds are pooled with the frame's (:func:`pool_window`) and the test is run on the
+    pool; when it accepts, the filter's robot covariance is inflated and the frame's
+    detections take the pairings that the pool's best hypothesis gives them. The earlier
+    detections are evidence (for the test and the pairings), not measurements: their
+    place in the frame rests on the odometry's motion over the window, which is what
+    fails when a turn is commanded and not made.
 
     Parameters
     ----------
@@ -116,14 +193,19 @@ class Relocaliser:
         JCBB's gate and ambiguity margin.
     min_gain : int
         Extra pairings needed to accept.
+    window_s : float
+        The pooling window (s); 0: each frame on its own.
     """
 
     q: np.ndarray
     gate_chi2: float
     ambiguity_margin: float
     min_gain: int = 2
+    window_s: float = 0.0
     tests: int = 0
     accepted: int = 0
+    _odo: np.ndarray = field(default_factory=lambda: np.zeros(3))
+    _past: list[_Sighting] = field(default_factory=list)
 
     @classmethod
     def from_params(cls, p: SlamParams) -> Relocaliser | None:
@@ -142,12 +224,23 @@ class Relocaliser:
             return None
         sp, sh = p.relocalise_sigma_m, np.radians(p.relocalise_sigma_heading_deg)
         q = np.diag([sp * sp, sp * sp, sh * sh])
-        return cls(q, p.gate_chi2, p.ambiguity_margin, p.relocalise_min_gain)
+        return cls(q, p.gate_chi2, p.ambiguity_margin, p.relocalise_min_gain, p.relocalise_window_s)
+
+    def moved(self, delta: np.ndarray) -> None:
+        """The odometry's relative motion since the last call (robot frame), for the window.
+
+        Parameters
+        ----------
+        delta : ndarray, shape (3,)
+            (dx, dy, dtheta) in the robot frame at the start of the motion.
+        """
+        if self.window_s > 0:
+            self._odo = se2.compose(self._odo, delta)
 
     def __call__(
-        self, ekf: EkfSlam, z: np.ndarray, r: np.ndarray, d2: np.ndarray
+        self, ekf: EkfSlam, z: np.ndarray, r: np.ndarray, d2: np.ndarray, t: float = 0.0
     ) -> tuple[np.ndarray, Association | None]:
-        """Run :func:`relocalisation_test` on one frame and count it.
+        """Run :func:`relocalisation_test` on one frame (or its window) and count it.
 
         Parameters
         ----------
@@ -159,6 +252,8 @@ class Relocaliser:
             Their covariances.
         d2 : ndarray, shape (m, n)
             Their squared Mahalanobis distances to the lamps.
+        t : float
+            The frame's time (s), for the window.
 
         Returns
         -------
@@ -168,15 +263,65 @@ class Relocaliser:
             JCBB's association on them, when the test computed it and left the filter as
             it was (for :func:`~fuzzyslam.slam.lamp_update.associate_update`).
         """
-        d2, test = relocalisation_test(
+        d2_new, test = relocalisation_test(
             ekf, z, r, d2, self.gate_chi2, self.ambiguity_margin, self.q, self.min_gain
         )
-        if test is None:
-            return d2, None
-        if test.tested:
+        if test is not None and test.tested:
             self.tests += 1
             self.accepted += test.accepted
-        return d2, None if test.accepted else test.before
+        if test is not None or self.window_s <= 0:
+            if test is not None and test.accepted:
+                self._past.clear()
+            return d2_new, None if test is None or test.accepted else test.before
+        # too few detections on their own: pool the window's unexplained ones with them
+        self._past = [s for s in self._past if t - s.t <= self.window_s]
+        if not self._past or ekf.n_lamps == 0:
+            return d2, None
+        zw, rw = pool_window(z, r, self._odo, self._past, self.gate_chi2)
+        if len(zw) == len(z):
+            return d2, None
+        dw = ekf.individual_compatibility(zw, rw)
+        dw, pooled = relocalisation_test(
+            ekf, zw, rw, dw, self.gate_chi2, self.ambiguity_margin, self.q, self.min_gain
+        )
+        if pooled is None or not pooled.tested:
+            return d2, None
+        self.tests += 1
+        self.accepted += pooled.accepted
+        if not pooled.accepted:
+            return d2, None
+        self._past.clear()
+        # the pool's association decides the frame's pairings (the frame's detections come
+        # first in it); only the frame's own detections are measurements
+        m, w = len(z), pooled.wide
+        known = Association(
+            [pr for pr in w.pairs if pr[0] < m],
+            [j for j in w.ambiguous if j < m],
+            [pr for pr in w.best if pr[0] < m],
+        )
+        return dw[:m], known
+
+    def unexplained(self, t: float, z: np.ndarray, r: np.ndarray, assoc: Association) -> None:
+        """Keep the frame's detections that the best hypothesis left unexplained, for the
+        window (nothing when ``window_s`` is 0).
+
+        Parameters
+        ----------
+        t : float
+            The frame's time (s).
+        z : ndarray, shape (m, 2)
+            Its detections (robot frame).
+        r : ndarray, shape (m, 2, 2)
+            Their covariances.
+        assoc : Association
+            The frame's association (``best``: the best hypothesis).
+        """
+        if self.window_s <= 0:
+            return
+        explained = {j for j, _ in assoc.best}
+        rest = [j for j in range(len(z)) if j not in explained]
+        if rest:
+            self._past.append(_Sighting(t, self._odo.copy(), z[rest].copy(), r[rest].copy()))
 
     def counts(self) -> dict[str, int]:
         """The summary's counts: tests run and disturbances accepted.

@@ -172,6 +172,8 @@ class SlamRunner:
         pre = self.preint
         if not pre.steps:
             return
+        if self.relocaliser is not None:
+            self.relocaliser.moved(pre.delta)
         if self.calibration is None:
             self.ekf.predict_relative(pre.delta, pre.q)
             pre.reset()
@@ -232,9 +234,11 @@ class SlamRunner:
             d2 = ekf.individual_compatibility(z, r)
             known = None  # JCBB's association, when the relocalisation test made it
             if self.relocaliser is not None:  # a pose that has left its covariance?
-                d2, known = self.relocaliser(ekf, z, r, d2)
+                d2, known = self.relocaliser(ekf, z, r, d2, ev.t)
             p = self.params
             assoc, res = associate_update(ekf, z, r, d2, p.gate_chi2, p.ambiguity_margin, known)
+            if self.relocaliser is not None:  # its window keeps what the map left unexplained
+                self.relocaliser.unexplained(ev.t, z, r, assoc)
             pairs = assoc.pairs
             if pairs:
                 for a, (j, i) in enumerate(pairs):
