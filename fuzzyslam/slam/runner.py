@@ -177,7 +177,7 @@ class SlamRunner:
             pre.reset()
             return
         # x' = x (+) delta(c), D = d delta / dc; then the factors' random walk
-        self.ekf.predict_relative(pre.delta, pre.q, pre.d_calib)
+        self.ekf.predict_relative(pre.delta, pre.q_calib(self.ekf.calib_cov), pre.d_calib)
         cm = self.calibration
         cal.diffuse(self.ekf, cm.var_per_m * pre.dist + cm.var_per_rad * pre.turn)
         pre.reset(self.ekf.calib)
@@ -236,6 +236,8 @@ class SlamRunner:
             p = self.params
             assoc, res = associate_update(ekf, z, r, d2, p.gate_chi2, p.ambiguity_margin, known)
             pairs = assoc.pairs
+            if pairs and self.calibration is not None:
+                self.preint.mark()  # an update: the calibration Jacobian's next instrument
             if pairs:
                 for a, (j, i) in enumerate(pairs):
                     self._update(
@@ -330,6 +332,8 @@ class SlamRunner:
                 aid.on_ring(ev.t, ev.ring, self.mounts, self.ekf)
                 self.counts["aid_calls"] += 1
         for idx, res in self.ekf.robot_updates:
+            if res.accepted and self.calibration is not None:
+                self.preint.mark()
             kind = "heading" if idx == (2,) else "pose"
             self._update(UpdateRow(ev.t, kind, -1, len(idx), res.nis, res.accepted, res.innovation))
             self.health.observe(ev.t, res.nis, len(idx))
