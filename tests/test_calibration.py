@@ -52,6 +52,41 @@ def _nominal(kind: str, c, dt: float, dr: float) -> tuple[float, float]:
 # -- Jacobians -------------------------------------------------------------------------------
 
 
+def test_true_factors_reproduce_the_simulators_kinematics():
+    """The factor definitions are the simulator's: its true wheels (radii r left_scale,
+    r right_scale, base b base_scale; sim/encoders.py) turned by a true motion, read back
+    with the nominal r and b (robot.wheel_increments_to_odometry), give back the true
+    increment through calibrated_increment at c = (left_scale, right_scale, base_scale),
+    and not at the reciprocal base factor; also through simulate_encoders without noise
+    (ticks fine enough that quantisation is below 1e-9 rad)."""
+    from dataclasses import replace
+
+    from fuzzyslam.robot import wheel_increments_to_odometry
+    from fuzzyslam.sim.encoders import simulate_encoders, true_wheel_increments
+    from fuzzyslam.sim.params import RobotParams
+
+    rng = np.random.default_rng(11)
+    robot = RobotParams(left_scale=1.003, right_scale=0.996, base_scale=1.01)
+    dt = rng.uniform(0.0, 0.03, 200)
+    dr = rng.uniform(-0.08, 0.08, 200)
+    dl, dr_w = true_wheel_increments(dt, dr, robot)
+    nt, nr = wheel_increments_to_odometry(dl, dr_w, robot.wheel_radius, robot.wheel_base)
+    c = (robot.left_scale, robot.right_scale, robot.base_scale)
+    got = np.array([cal.calibrated_increment("wheels", robot.wheel_base, c, a, b)[:2]
+                    for a, b in zip(nt, nr, strict=True)])  # fmt: skip
+    np.testing.assert_allclose(got[:, 0], dt, rtol=0, atol=1e-15)
+    np.testing.assert_allclose(got[:, 1], dr, rtol=0, atol=1e-15)
+    inv = (robot.left_scale, robot.right_scale, 1.0 / robot.base_scale)
+    wrong = np.array([cal.calibrated_increment("wheels", robot.wheel_base, inv, a, b)[1]
+                      for a, b in zip(nt, nr, strict=True)])  # fmt: skip
+    assert np.max(np.abs(wrong - dr)) > 1e-3 * np.max(np.abs(dr))
+    enc = simulate_encoders(dt, dr, replace(robot, wheel_noise=0.0, ticks_per_rev=2**40),
+                            np.zeros(3), rng)  # fmt: skip
+    got = np.array([cal.calibrated_increment("wheels", robot.wheel_base, c, a, b)[:2]
+                    for a, b in zip(enc.d_trans, enc.d_rot, strict=True)])  # fmt: skip
+    np.testing.assert_allclose(got, np.column_stack([dt, dr]), rtol=0, atol=1e-9)
+
+
 @pytest.mark.parametrize("kind", ["wheels", "odom"])
 def test_increment_jacobian_matches_finite_differences(kind):
     rng = np.random.default_rng(1)
