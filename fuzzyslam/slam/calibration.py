@@ -158,9 +158,11 @@ class CalibratedPreintegrator(Preintegrator):
     comes out high by about sum n^2 / sum dr^2 over the update intervals (0.2-0.4 % on
     the paper scenario: 2-3 sigma). The previous interval's increments are independent
     of this interval's noise, and equal to the current ones at a steady motion, so F
-    keeps its value where the motion is steady and loses the bias. ``instrumented =
-    False`` gives the exact derivative at the measured increments (D then equals the
-    finite difference of delta in c).
+    keeps its value where the motion is steady and loses the bias. Before the first
+    update, and past twice the instrument's steps without one, F is the exact one. What
+    the instrument leaves out of F, E (3, k) (chained like D), enters the motion noise:
+    :meth:`q_calib`. ``instrumented = False`` gives the exact derivative at the measured
+    increments (D then equals the finite difference of delta in c).
     """
 
     instrumented = True
