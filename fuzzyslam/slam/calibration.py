@@ -145,12 +145,52 @@ class CalibratedPreintegrator(Preintegrator):
     delta' = delta (+) m(u(c)):  D' = A D + B G_u F,  A, B G_u as in ``Preintegrator.add``
     and F the Jacobian of :func:`calibrated_increment` (the chain rule through the
     composition). The factors are those of the filter at the last ``reset``.
+
+    F is evaluated at an instrument, not at the measured increment (``instrumented``,
+    docs/models.md sec. 4b): at the mean increment per step between the last two
+    updates (:meth:`mark`, called by the runner after each update). The measured increment
+    carries the encoders' noise n, and the rotation column of F (d dr / d s_B = -dr /
+    s_B, or dr_n for the rotation scale) with it; the next update's innovation carries
+    -n / s_B, so the factor's correction (gain times innovation, the gain through D
+    proportional to F) has a mean in E[n^2]: the errors-in-variables bias of a
+    regression on a noisy regressor. On a straight line (true rotation 0, measured
+    rotation n) every update shrinks the measured rotation by raising s_B; in all, s_B
+    comes out high by about sum n^2 / sum dr^2 over the update intervals (0.2-0.4 % on
+    the paper scenario: 2-3 sigma). The previous interval's increments are independent
+    of this interval's noise, and equal to the current ones at a steady motion, so F
+    keeps its value where the motion is steady and loses the bias. Before the first
+    update, and past twice the instrument's steps without one, F is the exact one. What
+    the instrument leaves out of F, E (3, k) (chained like D), enters the motion noise:
+    :meth:`q_calib`. ``instrumented = False`` gives the exact derivative at the measured
+    increments (D then equals the finite difference of delta in c).
     """
+
+    instrumented = True
 
     def __init__(self, noise, model: Calibration) -> None:
         self.kind, self.b = model.kind, model.wheel_base
         self.c = tuple(float(v) for v in model.factors)
+        self.inst = (0.0, 0.0)  # F's increment: the mean step between the last two updates
+        self.inst_steps = 0  # the steps it is the mean of (0: no instrument yet)
+        self._sum = [0.0, 0.0, 0]  # the nominal increments since the last update, and steps
         super().__init__(noise)
+
+    def mark(self) -> None:
+        """An update was made: the steps since the previous one give the instrument (their
+        mean step), and a new interval begins."""
+        n = self._sum[2]
+        if n:
+            self.inst = (self._sum[0] / n, self._sum[1] / n)
+            self.inst_steps = n
+        self._sum = [0.0, 0.0, 0]
+
+    @property
+    def instrument_valid(self) -> bool:
+        """The instrument stands for this step: there is one, and the steps since the last
+        update are at most twice those it was measured on (past that, with no update, the
+        motion may have changed and the exact F is used: the bias it brings grows with the
+        updates, which are then rare)."""
+        return self.instrumented and 0 < self._sum[2] <= 2 * self.inst_steps
 
     def reset(self, factors=None) -> None:
         """Start a new preintegration (delta = 0, D = 0) from the filter's factors.
@@ -165,22 +205,38 @@ class CalibratedPreintegrator(Preintegrator):
             self.c = tuple(float(v) for v in factors)
         k = len(self.c)
         self._d = [[0.0] * k for _ in range(3)]
+        self._e = [[0.0] * k for _ in range(3)]  # E: D's error (F's error, chained)
         self.dist = self.turn = 0.0  # |dt| and |dr| summed: the random walk's clock
 
     def add(self, d_trans: float, d_rot: float) -> None:
         dt, dr, f0, f1 = calibrated_increment(self.kind, self.b, self.c, d_trans, d_rot)
+        self._sum[0] += d_trans
+        self._sum[1] += d_rot
+        self._sum[2] += 1
+        g0 = g1 = None
+        if self.instrument_valid:  # F at the instrument, F's error apart (class docstring)
+            e0, e1 = calibrated_increment(self.kind, self.b, self.c, *self.inst)[2:]
+            g0 = [a - b for a, b in zip(f0, e0, strict=True)]
+            g1 = [a - b for a, b in zip(f1, e1, strict=True)]
+            f0, f1 = e0, e1
         h = 0.5 * dr
         mx, my = dt * math.cos(h), dt * math.sin(h)
         c, s = math.cos(self.dth), math.sin(self.dth)
         a = -s * mx - c * my  # A = [[1, 0, a], [0, 1, b], [0, 0, 1]]
         b = c * mx - s * my
         ch, sh, kk = math.cos(self.dth + h), math.sin(self.dth + h), 0.5 * dt
-        d0, d1, d2 = self._d  # B G_u = [[ch, -kk sh], [sh, kk ch], [0, 1]]
-        self._d = [
-            [d0[j] + a * d2[j] + ch * f0[j] - kk * sh * f1[j] for j in range(len(f0))],
-            [d1[j] + b * d2[j] + sh * f0[j] + kk * ch * f1[j] for j in range(len(f0))],
-            [d2[j] + f1[j] for j in range(len(f0))],
-        ]
+
+        def chain(d, f0, f1):  # A D + B G_u F, B G_u = [[ch, -kk sh], [sh, kk ch], [0, 1]]
+            d0, d1, d2 = d
+            return [
+                [d0[j] + a * d2[j] + ch * f0[j] - kk * sh * f1[j] for j in range(len(f0))],
+                [d1[j] + b * d2[j] + sh * f0[j] + kk * ch * f1[j] for j in range(len(f0))],
+                [d2[j] + f1[j] for j in range(len(f0))],
+            ]
+
+        self._d = chain(self._d, f0, f1)
+        if g0 is not None:
+            self._e = chain(self._e, g0, g1)
         self.dist += abs(dt)
         self.turn += abs(dr)
         super().add(dt, dr)
@@ -189,6 +245,23 @@ class CalibratedPreintegrator(Preintegrator):
     def d_calib(self) -> np.ndarray:
         """D = d delta / d c, (3, k)."""
         return np.array(self._d)
+
+    def q_calib(self, p_cc: np.ndarray) -> np.ndarray:
+        """The covariance (3, 3) of delta with what the instrument leaves out: Q + E P_cc E^T,
+        E (3, k) the chain rule of F's error (exact F minus F at the instrument; zero
+        when not ``instrumented``), P_cc the factors' covariance.
+
+        Parameters
+        ----------
+        p_cc : ndarray, shape (k, k)
+            The filter's covariance of the factors.
+
+        Returns
+        -------
+        ndarray, shape (3, 3)
+        """
+        e = np.array(self._e)
+        return self.q + e @ p_cc @ e.T
 
 
 def predict_calibrated(ekf, delta: np.ndarray, q: np.ndarray, d: np.ndarray) -> None:

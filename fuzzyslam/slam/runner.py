@@ -179,7 +179,7 @@ class SlamRunner:
             pre.reset()
             return
         # x' = x (+) delta(c), D = d delta / dc; then the factors' random walk
-        self.ekf.predict_relative(pre.delta, pre.q, pre.d_calib)
+        self.ekf.predict_relative(pre.delta, pre.q_calib(self.ekf.calib_cov), pre.d_calib)
         cm = self.calibration
         cal.diffuse(self.ekf, cm.var_per_m * pre.dist + cm.var_per_rad * pre.turn)
         pre.reset(self.ekf.calib)
@@ -240,6 +240,8 @@ class SlamRunner:
             if self.relocaliser is not None:  # its window keeps what the map left unexplained
                 self.relocaliser.unexplained(ev.t, z, r, assoc)
             pairs = assoc.pairs
+            if pairs and self.calibration is not None:
+                self.preint.mark()  # an update: the calibration Jacobian's next instrument
             if pairs:
                 for a, (j, i) in enumerate(pairs):
                     self._update(
@@ -334,6 +336,8 @@ class SlamRunner:
                 aid.on_ring(ev.t, ev.ring, self.mounts, self.ekf)
                 self.counts["aid_calls"] += 1
         for idx, res in self.ekf.robot_updates:
+            if res.accepted and self.calibration is not None:
+                self.preint.mark()
             kind = "heading" if idx == (2,) else "pose"
             self._update(UpdateRow(ev.t, kind, -1, len(idx), res.nis, res.accepted, res.innovation))
             self.health.observe(ev.t, res.nis, len(idx))
