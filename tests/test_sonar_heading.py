@@ -7,40 +7,22 @@ multi-ring FLM and analytic sonar rings in a corridor (tests/maps_synth.py)."""
 from __future__ import annotations
 
 import math
-from types import SimpleNamespace
 
 import numpy as np
 import pytest
-from maps_synth import cone_ranges, corridor_lines, ring_in_lines
+from maps_synth import cone_ranges
+
+# the corridor, its reference and its analytic rings: the multi-ring window's own tests'
+from test_multi_ring import ANGLE, DEG, FOV, MAXR, MOUNTS, MP, corridor_ref, ring_at
 
 from fuzzyslam.fixes.heading_measure import HeadingDecision
 from fuzzyslam.fixes.multi_ring import MultiRingWindow
 from fuzzyslam.fixes.params import FixParams
-from fuzzyslam.fixes.references import Reference
 from fuzzyslam.maps.flm import RecentRings
 from fuzzyslam.maps.hough import flm_wall_direction
-from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.tangent import RingReadings, fit_walls
-from fuzzyslam.robot import sonar_mounts
 from fuzzyslam.se2 import compose, rot
 from fuzzyslam.slam.ekf import EkfSlam
-
-DEG = math.pi / 180.0
-FOV, MAXR = 25 * DEG, 6.5
-MOUNTS = sonar_mounts(16, 0.225)
-MP = MapParams()
-ANGLE = 0.3  # the corridor's direction (rad)
-LINES = corridor_lines(ANGLE, 1.0)
-
-
-def corridor_ref() -> Reference:
-    box = np.array([[-1, -1], [1, -1], [1, 1], [-1, 1]]) * [20.0, 1.0]
-    return Reference(0, "c0", ANGLE, 1.0, box @ rot(ANGLE).T)
-
-
-def ring_at(pose) -> SimpleNamespace:
-    ranges = ring_in_lines(np.asarray(pose, float), MOUNTS, LINES, FOV, MAXR)
-    return SimpleNamespace(ranges=ranges, max_range=np.full(16, MAXR), fov=FOV)
 
 
 def test_recent_rings_keep_the_last_metres_of_travel():
