@@ -172,6 +172,37 @@ def test_pose_block_encoder_equals_rosbags(rows, frame) -> None:
         assert got[k] == ref
 
 
+@settings(max_examples=60, deadline=None)
+@given(
+    st.floats(0, 2e9),
+    st.lists(
+        st.tuples(*(st.floats(-1e3, 1e3),) * 3, *(st.floats(1e-9, 1e2),) * 3), max_size=7
+    ),
+    TEXT,
+)
+def test_marker_encoder_equals_rosbags(t, rows, frame) -> None:
+    """encode_markers (one rosbags Marker as a template) gives rosbags' bytes for the
+    MarkerArray of messages.marker, for 0 to 7 markers; and the run's lamp markers."""
+    a = np.array(rows, dtype=float).reshape(-1, 6)
+    poses, scales = a[:, :3], a[:, 3:5]
+    rgba = (1.0, 0.8, 0.1, 0.8)
+    got = cdr_encode.encode_markers(t, frame, "lamps", 2, poses, 2.5, scales, a[:1, 5].sum(), rgba)
+    ref = [M.marker(t, frame, "lamps", k, 2, tuple(poses[k]), 2.5,
+                    (*scales[k], a[:1, 5].sum()), rgba) for k in range(len(a))]  # fmt: skip
+    assert got == serialize(M.marker_array(ref), M.MARKER_ARRAY)
+    from fuzzyslam.slam.markers import lamp_markers, lamp_markers_cdr
+
+    covs = np.einsum(
+        "nij,nkj->nik", a[:, None, 3:5] * [[1.0], [0.5]], a[:, None, 3:5] * [[1.0], [0.5]]
+    )
+    covs = covs + np.eye(2) * a[:, 5:6, None]
+    lamps = poses[:, :2]
+    assert lamp_markers_cdr(t, lamps, covs) == serialize(
+        lamp_markers(t, lamps, covs), M.MARKER_ARRAY
+    )
+    assert cdr_encode._marker_layout("map", "lamps", 2, 2.5, 0.02, rgba) is not None  # no fallback
+
+
 ROWS = st.lists(st.tuples(st.floats(0, 2e9), *(st.floats(-1e6, 1e6),) * 5), min_size=1,
                 max_size=5)  # fmt: skip
 

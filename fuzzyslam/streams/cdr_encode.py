@@ -130,8 +130,6 @@ def encode_image_mono8(t: float, frame: str, img: np.ndarray) -> bytes:
     return restamp(_image_template(frame, *img.shape), t) + img.tobytes()
 
 
-
-
 def encode_pose_with_covariance_block(
     t: np.ndarray, poses: np.ndarray, cov: np.ndarray, frame: str
 ) -> list[bytes]:
@@ -252,3 +250,116 @@ def encode_tf_block(
         a[f"tf{k}"][:, 3:] = yaw_to_quaternion(p[:, 2])
     raw = buf.tobytes()
     return [raw[k * size : (k + 1) * size] for k in range(n)]
+
+
+# sentinels of the marker template: distinctive bit patterns, found in its bytes
+_SENT_T, _SENT_ID = 1234.5, 0x7A5B3C1D
+_SENT_XY, _SENT_SCALE = (1.2345678901e-3, -9.87654321e-2), (3.14159e-4, -2.71828e-5)
+
+
+@lru_cache(maxsize=16)
+def _marker_layout(
+    frame: str, ns: str, mtype: int, z: float, scale_z: float, rgba: tuple[float, ...]
+) -> tuple[bytes, int, int, np.dtype] | None:
+    """A visualization_msgs/MarkerArray's head (encapsulation, count), one Marker's bytes
+    (serialised by rosbags) and the stride from one Marker to the next (with the padding
+    between them), and the structured dtype of the numbers that change; None when a
+    3-marker array is not head + markers at that stride (then rosbags serialises)."""
+
+    def one(i: int, t: float, xy, scale) -> object:
+        return M.marker(t, frame, ns, i, mtype, (*xy, 0.0), z, (*scale, scale_z), rgba)
+
+    def ser(markers: list) -> bytes:
+        return serialize(M.marker_array(markers), M.MARKER_ARRAY)
+
+    s1 = ser([one(_SENT_ID, _SENT_T, _SENT_XY, _SENT_SCALE)])
+    s3 = ser([one(_SENT_ID, _SENT_T, _SENT_XY, _SENT_SCALE)] * 3)
+    body = s1[8:]
+    stride = (len(s3) - len(s1)) // 2
+    pad = s3[8 + len(body) : 8 + stride]
+    if s3 != s3[:8] + (body + pad) * 2 + body or pad.strip(b"\0"):
+        return None
+    sec, nsec = divmod(round(_SENT_T * 1e9), 1_000_000_000)
+    stamps = [k for k in range(len(body) - 7) if body[k : k + 8] == _STAMP.pack(sec, nsec)]
+    at_id = body.find(struct.pack("<i", _SENT_ID))
+    at_pose = body.find(struct.pack("<2d", *_SENT_XY))
+    at_scale = body.find(struct.pack("<2d", *_SENT_SCALE))
+    if min(at_id, at_pose, at_scale) < 0 or not stamps:
+        return None
+    names = ["id", "pose", "scale"]
+    formats: list = ["<i4", ("<f8", (7,)), ("<f8", (2,))]
+    offsets = [at_id, at_pose, at_scale]
+    for k, o in enumerate(stamps):
+        names += [f"sec{k}", f"nsec{k}"]
+        formats += ["<i4", "<u4"]
+        offsets += [o, o + 4]
+    dt = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": stride})
+    return body + pad, len(body), len(stamps), dt
+
+
+def encode_markers(
+    t: float,
+    frame: str,
+    ns: str,
+    mtype: int,
+    poses: np.ndarray,
+    z: float,
+    scales: np.ndarray,
+    scale_z: float,
+    rgba: tuple[float, float, float, float],
+) -> bytes:
+    """Little-endian CDR of the visualization_msgs/MarkerArray of ``messages.marker(t,
+    frame, ns, k, mtype, poses[k], z, (*scales[k], scale_z), rgba)`` for k = 0..n-1 (ids
+    0..n-1; no points, no text): the bytes ``typestore.serialize`` gives for it, from one
+    Marker serialised by rosbags as a template (the stamps, id, pose and scale written
+    into n copies through a structured view).
+
+    Parameters
+    ----------
+    t : float
+        Stamp (s), rounded to ns as ``messages.stamp``.
+    frame, ns : str
+        header.frame_id and the markers' namespace.
+    mtype : int
+        Marker type (2 sphere, 3 cylinder).
+    poses : ndarray, shape (n, 3)
+        x, y, yaw (a yaw quaternion, as ``messages.marker``).
+    z : float
+        The poses' height.
+    scales : ndarray, shape (n, 2)
+        Scale x, y.
+    scale_z : float
+        Scale z.
+    rgba : tuple of 4 float
+        Colour.
+
+    Returns
+    -------
+    bytes
+        The payload.
+    """
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    n = len(poses)
+    lay = _marker_layout(frame, ns, int(mtype), float(z), float(scale_z), tuple(map(float, rgba)))
+    if lay is None:  # a layout the template does not fit: rosbags, marker by marker
+        xs = [M.marker(t, frame, ns, k, mtype, tuple(poses[k]), z, (*scales[k], scale_z), rgba)
+              for k in range(n)]  # fmt: skip
+        return serialize(M.marker_array(xs), M.MARKER_ARRAY)
+    block, size, n_stamps, dt = lay
+    head = b"\x00\x01\x00\x00" + _U32.pack(n)
+    if n == 0:
+        return head
+    buf = np.frombuffer(block * n, dtype=np.uint8).copy()
+    a = buf.view(dt)
+    a["id"] = np.arange(n)
+    pose = a["pose"]
+    pose[:, :2] = poses[:, :2]
+    pose[:, 2] = z
+    # one yaw at a time, as messages.marker (the same sin and cos calls)
+    pose[:, 3:] = [yaw_to_quaternion(th) for th in poses[:, 2].tolist()]
+    a["scale"] = np.asarray(scales, dtype=float).reshape(n, 2)
+    sec, nsec = divmod(round(t * 1e9), 1_000_000_000)
+    for k in range(n_stamps):
+        a[f"sec{k}"] = sec
+        a[f"nsec{k}"] = nsec
+    return head + buf.tobytes()[: len(block) * (n - 1) + size]
