@@ -168,7 +168,8 @@ def side_by_side_run(log: Path, rev: str, repeat: int, candidate: str | None = N
         outs = {v: work / f"{name.split()[0]}_{v}" for v in ("old", "new")}
         before = load()
         res = side_by_side(lambda v, outs=outs, fix=fix: [
-            "run", str(log), "-o", str(outs[v]), "--config", "paper", *fix], src, repeat, new)  # fmt: skip
+            "run", str(log), "-o", str(outs[v]), "--config", "paper", *fix],
+            src, repeat, new)  # fmt: skip
         for v in ("old", "new"):
             res[v]["real_time_factor_cpu"] = round(duration / res[v]["cpu_median_s"])
             res[v]["real_time_factor_wall"] = round(duration / res[v]["wall_median_s"])
