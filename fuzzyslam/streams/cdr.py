@@ -228,18 +228,28 @@ def decode_joint_state(buf: bytes | memoryview) -> JointState:
         and len(buf) == lay[0]
         and buf[12 : lay[3]] == lay[2]
         and buf[:4] == lay[1]
-        and all(buf[c : c + 4] == cb for c, cb, _, _ in lay[6][1:])
+        and (
+            buf[lay[7] :] == lay[8]  # velocity and effort empty: their counts end the payload
+            if lay[7]
+            else all(buf[c : c + 4] == cb for c, cb, _, _ in lay[6][1:])
+        )
     ):
         sec, nsec = _STAMP.unpack_from(buf, 4)
+        if lay[7]:
+            _, _, d, n = lay[6][0]
+            pos = np.frombuffer(buf, _F8, n, d).copy() if n else _EMPTY[_F8]
+            return JointState(Header(Time(sec, nsec), lay[4]), list(lay[5]), pos, *lay[9])
         arrays = [
             np.frombuffer(buf, _F8, n, d).copy() if n else _EMPTY[_F8] for _, _, d, n in lay[6]
         ]
         return JointState(Header(Time(sec, nsec), lay[4]), list(lay[5]), *arrays)
     msg, a, seqs = _joint_state(buf)
     counts = tuple((c, bytes(buf[c : c + 4]), d, n) for c, d, n in seqs)
+    # with velocity and effort empty, the bytes from the velocity count on are all fixed
+    tail = seqs[1][0] if seqs[1][2] == 0 and seqs[2][2] == 0 else 0
     _joint_state_layout[0] = (
         len(buf), bytes(buf[:4]), bytes(buf[12:a]), a, msg.header.frame_id, tuple(msg.name),
-        counts,
+        counts, tail, bytes(buf[tail:]) if tail else b"", (msg.velocity, msg.effort),
     )  # fmt: skip
     return msg
 
