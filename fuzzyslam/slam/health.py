@@ -33,7 +33,8 @@ from functools import lru_cache
 
 import numpy as np
 from numpy.linalg import _umath_linalg
-from scipy.special import gammaincinv
+
+from fuzzyslam.slam.chi2_values import CHI2_QUANTILES, GATE_LEVELS
 
 _F8 = np.dtype(np.float64)
 # np.linalg.cholesky and np.linalg.solve of float64 arrays are these gufuncs called in this
@@ -106,8 +107,26 @@ def solve_spd(
 @lru_cache(maxsize=256)
 def chi2_quantile(p: float, dof: int) -> float:
     """chi2.ppf(p, dof) = 2 P^-1(dof/2, p) (P the regularised lower incomplete gamma);
-    scipy.special, not scipy.stats, whose import costs a second and 40 MB."""
+    scipy.special, not scipy.stats, whose import costs a second and 40 MB; at the points
+    of ``slam/chi2_values.py`` its value without importing scipy."""
+    v = CHI2_QUANTILES.get((p, dof))
+    if v is not None:
+        return v
+    from scipy.special import gammaincinv
+
     return float(2.0 * gammaincinv(dof / 2.0, p))
+
+
+@lru_cache(maxsize=64)
+def gate_level(gate_chi2: float) -> float:
+    """The confidence level of a 2-dof chi-square gate: chi2.cdf(gate, 2) = P(1, gate/2)
+    (scipy.special; at the points of ``slam/chi2_values.py`` without importing it)."""
+    v = GATE_LEVELS.get(gate_chi2)
+    if v is not None:
+        return v
+    from scipy.special import gammainc
+
+    return float(gammainc(1.0, gate_chi2 / 2.0))
 
 
 def is_spd(p: np.ndarray) -> bool:
