@@ -235,6 +235,50 @@ def test_simulation_encoders_equal_rosbags(rows, frame, child) -> None:
         M.camera_info(t[-1], frame, 64, 48, 50.0, 32.0, 24.0), M.CAMERA_INFO)  # fmt: skip
 
 
+def _same_fields(fast, ref) -> None:
+    """Every field of a light message (recursively) equals the rosbags message's."""
+    for name in fast.__dataclass_fields__:
+        a, b = getattr(fast, name), getattr(ref, name)
+        if isinstance(a, np.ndarray):
+            assert a.dtype == b.dtype and np.array_equal(a, b), name
+        elif isinstance(a, list):
+            assert len(a) == len(b), name
+            for x, y in zip(a, b, strict=True):
+                _same_fields(x, y)
+        elif hasattr(a, "__dataclass_fields__"):
+            _same_fields(a, b)
+        else:
+            assert type(a) is type(b) and a == b, name
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(0, 2e9), TEXT, TEXT, st.integers(1, 5000), st.integers(1, 5000),
+       st.lists(st.tuples(TEXT, TEXT, *(st.floats(-1e6, 1e6),) * 4), max_size=4))  # fmt: skip
+def test_camera_info_and_tf_decoders_equal_rosbags(t, frame, model, w, h, tfs) -> None:
+    """decode_camera_info / decode_tf_message: rosbags' messages field by field (the
+    distortion's length 0 to 5, odd frame names), and an error on a cut payload."""
+    info = M.camera_info(t, frame, w, h, 50.0 + w, w / 2.0, h / 3.0)
+    info.distortion_model = model
+    info.d = np.arange(len(model) % 6, dtype=float) / 7.0
+    info.binning_x, info.roi.do_rectify = w % 3, bool(h % 2)
+    tf = M.tf_message([M.transform_stamped(t, p, c, x, y, z, yaw) for p, c, x, y, z, yaw in tfs])
+    for typename, msg, fn in ((M.CAMERA_INFO, info, cdr.decode_camera_info),
+                              (M.TF_MESSAGE, tf, cdr.decode_tf_message)):  # fmt: skip
+        data = serialize(msg, typename)
+        _same_fields(cdr.decoder(typename)(data), deserialize(data, typename))
+        if len(data) > 12:
+            with pytest.raises((cdr.CdrError, struct.error, ValueError)):
+                fn(data[: len(data) - 5])
+
+
+def test_msgdefs_are_the_typestores() -> None:
+    """streams/msgdefs.py holds the typestore's definition text of each of its types."""
+    from fuzzyslam.streams.msgdefs import MSGDEFS
+
+    for name, text in MSGDEFS.items():
+        assert typestore().generate_msgdef(name, ros_version=2)[0] == text
+
+
 @settings(max_examples=100, deadline=None)
 @given(odometry(), st.data())
 def test_truncated_or_inconsistent_payload_raises(msg, data) -> None:
@@ -284,6 +328,8 @@ def _default(typename: str):
         M.JOINT_STATE: lambda: msgtype(M.JOINT_STATE)(h, ["a", "bc"], np.ones(2), z, z),
         M.IMAGE: lambda: msgtype(M.IMAGE)(h, 1, 2, "mono8", 0, 2, np.ones(2, np.uint8)),
         M.RANGE: lambda: msgtype(M.RANGE)(h, 1, 0.5, 0.25, 5.0, 2.0),
+        M.CAMERA_INFO: lambda: M.camera_info(1.5, "abc", 64, 48, 50.0, 32.0, 24.0),
+        M.TF_MESSAGE: lambda: M.tf_message([M.transform_stamped(1.5, "m", "o", 1, 2, 3, 0.5)]),
     }[typename]()
 
 

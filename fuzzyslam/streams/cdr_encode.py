@@ -257,20 +257,67 @@ _SENT_T, _SENT_ID = 1234.5, 0x7A5B3C1D
 _SENT_XY, _SENT_SCALE = (1.2345678901e-3, -9.87654321e-2), (3.14159e-4, -2.71828e-5)
 
 
+class _Cdr:
+    """A little-endian CDR payload written field by field (alignment from offset 4)."""
+
+    def __init__(self) -> None:
+        self.b = bytearray(b"\x00\x01\x00\x00")
+
+    def put(self, fmt: str, size: int, *values) -> None:
+        self.b += bytes(-(len(self.b) - 4) % size) + struct.pack("<" + fmt, *values)
+
+    def string(self, text: str) -> None:
+        data = text.encode() + b"\0"
+        self.put("I", 4, len(data))
+        self.b += data
+
+
+def _marker_array_cdr(frame: str, ns: str, mtype: int, rgba, markers: list[tuple]) -> bytes:
+    """visualization_msgs/MarkerArray (ROS 2 Humble) of markers (t, id, (x, y, z, qx, qy,
+    qz, qw), (sx, sy, sz)) in the frame, namespace, type and colour given, written
+    field by field (no points, colours, texture, uv coordinates, text or mesh; action 0,
+    lifetime 0): what rosbags serialises for ``messages.marker`` (tests/test_cdr.py)."""
+    w = _Cdr()
+    w.put("I", 4, len(markers))
+    for t, mid, pose, scale in markers:
+        sec, nsec = divmod(round(t * 1e9), 1_000_000_000)
+        w.put("iI", 4, sec, nsec)  # header
+        w.string(frame)
+        w.string(ns)
+        w.put("iii", 4, mid, mtype, 0)  # id, type, action
+        w.put("7d", 8, *pose)
+        w.put("3d", 8, *scale)
+        w.put("4f", 4, *rgba)
+        w.put("iI?", 4, 0, 0, False)  # lifetime, frame_locked
+        w.put("II", 4, 0, 0)  # points, colors
+        w.string("")  # texture_resource
+        w.put("iI", 4, sec, nsec)  # texture: header, format, data
+        w.string("")
+        w.string("")
+        w.put("I", 4, 0)
+        w.put("I", 4, 0)  # uv_coordinates
+        w.string("")  # text
+        w.string("")  # mesh_resource
+        w.string("")  # mesh_file: filename, data
+        w.put("I", 4, 0)
+        w.put("?", 1, False)  # mesh_use_embedded_materials
+    return bytes(w.b)
+
+
 @lru_cache(maxsize=16)
 def _marker_layout(
     frame: str, ns: str, mtype: int, z: float, scale_z: float, rgba: tuple[float, ...]
 ) -> tuple[bytes, int, int, np.dtype] | None:
-    """A visualization_msgs/MarkerArray's head (encapsulation, count), one Marker's bytes
-    (serialised by rosbags) and the stride from one Marker to the next (with the padding
-    between them), and the structured dtype of the numbers that change; None when a
-    3-marker array is not head + markers at that stride (then rosbags serialises)."""
+    """One Marker's bytes (``_marker_array_cdr``) with the padding to the next one, its
+    length, the number of stamps in it, and the structured dtype of the numbers that
+    change; None when a 3-marker array is not head + markers at that stride (then rosbags
+    serialises)."""
 
-    def one(i: int, t: float, xy, scale) -> object:
-        return M.marker(t, frame, ns, i, mtype, (*xy, 0.0), z, (*scale, scale_z), rgba)
+    def one(i: int, t: float, xy, scale) -> tuple:
+        return (t, i, (*xy, z, *yaw_to_quaternion(0.0).tolist()), (*scale, scale_z))
 
     def ser(markers: list) -> bytes:
-        return serialize(M.marker_array(markers), M.MARKER_ARRAY)
+        return _marker_array_cdr(frame, ns, mtype, rgba, markers)
 
     s1 = ser([one(_SENT_ID, _SENT_T, _SENT_XY, _SENT_SCALE)])
     s3 = ser([one(_SENT_ID, _SENT_T, _SENT_XY, _SENT_SCALE)] * 3)
@@ -311,7 +358,7 @@ def encode_markers(
     """Little-endian CDR of the visualization_msgs/MarkerArray of ``messages.marker(t,
     frame, ns, k, mtype, poses[k], z, (*scales[k], scale_z), rgba)`` for k = 0..n-1 (ids
     0..n-1; no points, no text): the bytes ``typestore.serialize`` gives for it, from one
-    Marker serialised by rosbags as a template (the stamps, id, pose and scale written
+    Marker written by ``_marker_array_cdr`` as a template (the stamps, id, pose and scale written
     into n copies through a structured view).
 
     Parameters
