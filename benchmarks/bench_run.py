@@ -18,6 +18,9 @@ run), with the real-time factors (log duration / CPU and / wall time) against th
 (summary.json without its timing fields).
 
     python benchmarks/bench_run.py [LOG.mcap] --baseline main --repeat 3
+
+``--sample`` (with ``--baseline``) times ``fuzzyslam run data/sample.mcap`` (121 s of log)
+instead, old and new alternately: the command's start-up weighs most there.
 """
 
 from __future__ import annotations
@@ -180,6 +183,27 @@ def side_by_side_run(log: Path, rev: str, repeat: int, candidate: str | None = N
                           "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
 
 
+def side_by_side_sample(rev: str, repeat: int, candidate: str | None = None) -> None:
+    """Old (``rev``) and new ``fuzzyslam run`` of the committed sample log (121 s, lamps
+    only) alternately: a short run, where the command's start-up (imports, typestores)
+    weighs most."""
+    import json
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from sidebyside import export_revision, load, side_by_side
+
+    log = Path(__file__).resolve().parents[1] / "data" / "sample.mcap"
+    src = export_revision(rev)
+    new = export_revision(candidate) if candidate else None
+    work = Path(tempfile.mkdtemp(prefix="bench_run_sample."))
+    before = load()
+    res = side_by_side(lambda v: ["run", str(log), "-o", str(work / v)], src, repeat, new)
+    print(json.dumps({"run": "sample log, lamps only", "baseline": rev,
+                      "candidate": candidate or "installed", "repeat": repeat, **res,
+                      "outputs_byte_identical": _same_outputs(work / "old", work / "new"),
+                      "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
+
+
 def main() -> None:
     import argparse
 
@@ -187,9 +211,14 @@ def main() -> None:
     ap.add_argument("log", nargs="?", default=None)
     ap.add_argument("--baseline", metavar="REV", default=None)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--sample", action="store_true",
+                    help="with --baseline: run the sample log instead (start-up)")  # fmt: skip
     ap.add_argument("--candidate", metavar="REV", default=None,
                     help="the new code: a git revision (default: the installed code)")  # fmt: skip
     args = ap.parse_args()
+    if args.baseline and args.sample:
+        side_by_side_sample(args.baseline, args.repeat, args.candidate)
+        return
     if args.log:
         log = Path(args.log)
     else:
