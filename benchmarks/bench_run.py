@@ -18,6 +18,9 @@ run), with the real-time factors (log duration / CPU and / wall time) against th
 (summary.json without its timing fields).
 
     python benchmarks/bench_run.py [LOG.mcap] --baseline main --repeat 3
+
+``--sample`` (with ``--baseline``) times ``fuzzyslam run data/sample.mcap`` (121 s of log)
+instead, old and new alternately: the command's start-up weighs most there.
 """
 
 from __future__ import annotations
@@ -143,8 +146,9 @@ def _same_outputs(a: Path, b: Path) -> bool:
     return True
 
 
-def side_by_side_run(log: Path, rev: str, repeat: int) -> None:
-    """Old (``rev``) and new ``fuzzyslam run`` alternately: lamps only, heading, pose."""
+def side_by_side_run(log: Path, rev: str, repeat: int, candidate: str | None = None) -> None:
+    """Old (``rev``) and new ``fuzzyslam run`` alternately: lamps only, heading, pose (new:
+    the installed code, or git revision ``candidate``)."""
     import json
 
     sys.path.insert(0, str(Path(__file__).parent))
@@ -155,25 +159,49 @@ def side_by_side_run(log: Path, rev: str, repeat: int) -> None:
     reader = LogReader(log)
     duration = reader.end - reader.start
     src = export_revision(rev)
+    new = export_revision(candidate) if candidate else None
     work = Path(tempfile.mkdtemp(prefix="bench_run."))
-    run_cli(["run", str(log), "-o", str(work / "AB"), "--config", "paper"], None)
+    run_cli(["run", str(log), "-o", str(work / "AB"), "--config", "paper"], new)
     run_cli(["map", str(log), "--trajectory", str(work / "AB" / "trajectory.tum"),
              "--landmarks", str(work / "AB" / "landmarks.yaml"), "-o", str(work / "fgm"),
-             "--config", "paper"], None)  # fmt: skip
+             "--config", "paper"], new)  # fmt: skip
     for name, extra, target in (("lamps only", [], 500), ("heading fixes", ["heading"], 300),
                                 ("pose fixes", ["pose"], 300)):  # fmt: skip
         fix = ["--map", str(work / "fgm"), "--fix", extra[0]] if extra else []
         outs = {v: work / f"{name.split()[0]}_{v}" for v in ("old", "new")}
         before = load()
         res = side_by_side(lambda v, outs=outs, fix=fix: [
-            "run", str(log), "-o", str(outs[v]), "--config", "paper", *fix], src, repeat)
+            "run", str(log), "-o", str(outs[v]), "--config", "paper", *fix],
+            src, repeat, new)  # fmt: skip
         for v in ("old", "new"):
             res[v]["real_time_factor_cpu"] = round(duration / res[v]["cpu_median_s"])
             res[v]["real_time_factor_wall"] = round(duration / res[v]["wall_median_s"])
         print(json.dumps({"run": name, "log_s": round(duration, 1), "baseline": rev,
+                          "candidate": candidate or "installed",
                           "repeat": repeat, **res, "target_real_time_factor": target,
                           "outputs_byte_identical": _same_outputs(outs["old"], outs["new"]),
                           "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
+
+
+def side_by_side_sample(rev: str, repeat: int, candidate: str | None = None) -> None:
+    """Old (``rev``) and new ``fuzzyslam run`` of the committed sample log (121 s, lamps
+    only) alternately: a short run, where the command's start-up (imports, typestores)
+    weighs most."""
+    import json
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from sidebyside import export_revision, load, side_by_side
+
+    log = Path(__file__).resolve().parents[1] / "data" / "sample.mcap"
+    src = export_revision(rev)
+    new = export_revision(candidate) if candidate else None
+    work = Path(tempfile.mkdtemp(prefix="bench_run_sample."))
+    before = load()
+    res = side_by_side(lambda v: ["run", str(log), "-o", str(work / v)], src, repeat, new)
+    print(json.dumps({"run": "sample log, lamps only", "baseline": rev,
+                      "candidate": candidate or "installed", "repeat": repeat, **res,
+                      "outputs_byte_identical": _same_outputs(work / "old", work / "new"),
+                      "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
 
 
 def main() -> None:
@@ -183,7 +211,14 @@ def main() -> None:
     ap.add_argument("log", nargs="?", default=None)
     ap.add_argument("--baseline", metavar="REV", default=None)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--sample", action="store_true",
+                    help="with --baseline: run the sample log instead (start-up)")  # fmt: skip
+    ap.add_argument("--candidate", metavar="REV", default=None,
+                    help="the new code: a git revision (default: the installed code)")  # fmt: skip
     args = ap.parse_args()
+    if args.baseline and args.sample:
+        side_by_side_sample(args.baseline, args.repeat, args.candidate)
+        return
     if args.log:
         log = Path(args.log)
     else:
@@ -195,7 +230,7 @@ def main() -> None:
                 stdout=subprocess.DEVNULL,
             )
     if args.baseline:
-        side_by_side_run(log.resolve(), args.baseline, args.repeat)
+        side_by_side_run(log.resolve(), args.baseline, args.repeat, args.candidate)
         return
     bench_log(log)
     bench_scaling()

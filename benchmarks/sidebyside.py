@@ -62,14 +62,17 @@ def run_cli(args: list[str], src: Path | None, env: dict[str, str] | None = None
     return wall, cpu
 
 
-def side_by_side(make_args, baseline: Path | None, repeat: int) -> dict[str, dict]:
+def side_by_side(
+    make_args, baseline: Path | None, repeat: int, candidate: Path | None = None
+) -> dict[str, dict]:
     """Run ``make_args(variant)`` (variant "old" or "new"; the command's arguments)
-    alternately ``repeat`` times each; per variant the best and median wall and CPU s."""
+    alternately ``repeat`` times each; per variant the best and median wall and CPU s.
+    ``candidate``: the new code's directory (an exported revision), None: the installed."""
     times: dict[str, list[tuple[float, float]]] = {"old": [], "new": []}
     variants = (["old"] if baseline is not None else []) + ["new"]
     for _ in range(repeat):
         for v in variants:
-            times[v].append(run_cli(make_args(v), baseline if v == "old" else None))
+            times[v].append(run_cli(make_args(v), baseline if v == "old" else candidate))
     out = {}
     for v in variants:
         walls, cpus = [t[0] for t in times[v]], [t[1] for t in times[v]]

@@ -172,6 +172,37 @@ def test_pose_block_encoder_equals_rosbags(rows, frame) -> None:
         assert got[k] == ref
 
 
+@settings(max_examples=60, deadline=None)
+@given(
+    st.floats(0, 2e9),
+    st.lists(
+        st.tuples(*(st.floats(-1e3, 1e3),) * 3, *(st.floats(1e-9, 1e2),) * 3), max_size=7
+    ),
+    TEXT,
+)
+def test_marker_encoder_equals_rosbags(t, rows, frame) -> None:
+    """encode_markers (one rosbags Marker as a template) gives rosbags' bytes for the
+    MarkerArray of messages.marker, for 0 to 7 markers; and the run's lamp markers."""
+    a = np.array(rows, dtype=float).reshape(-1, 6)
+    poses, scales = a[:, :3], a[:, 3:5]
+    rgba = (1.0, 0.8, 0.1, 0.8)
+    got = cdr_encode.encode_markers(t, frame, "lamps", 2, poses, 2.5, scales, a[:1, 5].sum(), rgba)
+    ref = [M.marker(t, frame, "lamps", k, 2, tuple(poses[k]), 2.5,
+                    (*scales[k], a[:1, 5].sum()), rgba) for k in range(len(a))]  # fmt: skip
+    assert got == serialize(M.marker_array(ref), M.MARKER_ARRAY)
+    from fuzzyslam.slam.markers import lamp_markers, lamp_markers_cdr
+
+    covs = np.einsum(
+        "nij,nkj->nik", a[:, None, 3:5] * [[1.0], [0.5]], a[:, None, 3:5] * [[1.0], [0.5]]
+    )
+    covs = covs + np.eye(2) * a[:, 5:6, None]
+    lamps = poses[:, :2]
+    assert lamp_markers_cdr(t, lamps, covs) == serialize(
+        lamp_markers(t, lamps, covs), M.MARKER_ARRAY
+    )
+    assert cdr_encode._marker_layout("map", "lamps", 2, 2.5, 0.02, rgba) is not None  # no fallback
+
+
 ROWS = st.lists(st.tuples(st.floats(0, 2e9), *(st.floats(-1e6, 1e6),) * 5), min_size=1,
                 max_size=5)  # fmt: skip
 
@@ -202,6 +233,50 @@ def test_simulation_encoders_equal_rosbags(rows, frame, child) -> None:
     info = serialize(M.camera_info(0.0, frame, 64, 48, 50.0, 32.0, 24.0), M.CAMERA_INFO)
     assert cdr_encode.restamp(info, t[-1]) == serialize(
         M.camera_info(t[-1], frame, 64, 48, 50.0, 32.0, 24.0), M.CAMERA_INFO)  # fmt: skip
+
+
+def _same_fields(fast, ref) -> None:
+    """Every field of a light message (recursively) equals the rosbags message's."""
+    for name in fast.__dataclass_fields__:
+        a, b = getattr(fast, name), getattr(ref, name)
+        if isinstance(a, np.ndarray):
+            assert a.dtype == b.dtype and np.array_equal(a, b), name
+        elif isinstance(a, list):
+            assert len(a) == len(b), name
+            for x, y in zip(a, b, strict=True):
+                _same_fields(x, y)
+        elif hasattr(a, "__dataclass_fields__"):
+            _same_fields(a, b)
+        else:
+            assert type(a) is type(b) and a == b, name
+
+
+@settings(max_examples=60, deadline=None)
+@given(st.floats(0, 2e9), TEXT, TEXT, st.integers(1, 5000), st.integers(1, 5000),
+       st.lists(st.tuples(TEXT, TEXT, *(st.floats(-1e6, 1e6),) * 4), max_size=4))  # fmt: skip
+def test_camera_info_and_tf_decoders_equal_rosbags(t, frame, model, w, h, tfs) -> None:
+    """decode_camera_info / decode_tf_message: rosbags' messages field by field (the
+    distortion's length 0 to 5, odd frame names), and an error on a cut payload."""
+    info = M.camera_info(t, frame, w, h, 50.0 + w, w / 2.0, h / 3.0)
+    info.distortion_model = model
+    info.d = np.arange(len(model) % 6, dtype=float) / 7.0
+    info.binning_x, info.roi.do_rectify = w % 3, bool(h % 2)
+    tf = M.tf_message([M.transform_stamped(t, p, c, x, y, z, yaw) for p, c, x, y, z, yaw in tfs])
+    for typename, msg, fn in ((M.CAMERA_INFO, info, cdr.decode_camera_info),
+                              (M.TF_MESSAGE, tf, cdr.decode_tf_message)):  # fmt: skip
+        data = serialize(msg, typename)
+        _same_fields(cdr.decoder(typename)(data), deserialize(data, typename))
+        if len(data) > 12:
+            with pytest.raises((cdr.CdrError, struct.error, ValueError)):
+                fn(data[: len(data) - 5])
+
+
+def test_msgdefs_are_the_typestores() -> None:
+    """streams/msgdefs.py holds the typestore's definition text of each of its types."""
+    from fuzzyslam.streams.msgdefs import MSGDEFS
+
+    for name, text in MSGDEFS.items():
+        assert typestore().generate_msgdef(name, ros_version=2)[0] == text
 
 
 @settings(max_examples=100, deadline=None)
@@ -253,6 +328,8 @@ def _default(typename: str):
         M.JOINT_STATE: lambda: msgtype(M.JOINT_STATE)(h, ["a", "bc"], np.ones(2), z, z),
         M.IMAGE: lambda: msgtype(M.IMAGE)(h, 1, 2, "mono8", 0, 2, np.ones(2, np.uint8)),
         M.RANGE: lambda: msgtype(M.RANGE)(h, 1, 0.5, 0.25, 5.0, 2.0),
+        M.CAMERA_INFO: lambda: M.camera_info(1.5, "abc", 64, 48, 50.0, 32.0, 24.0),
+        M.TF_MESSAGE: lambda: M.tf_message([M.transform_stamped(1.5, "m", "o", 1, 2, 3, 0.5)]),
     }[typename]()
 
 

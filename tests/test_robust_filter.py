@@ -150,3 +150,49 @@ def test_chi2_quantile_matches_scipy_stats() -> None:
     for dof in (1, 2, 3, 100, 1000):
         for p in (0.5, 0.95, 0.999):
             assert chi2_quantile(p, dof) == pytest.approx(chi2.ppf(p, dof), rel=1e-10)
+
+
+def test_chi2_tables_are_scipy_bit_for_bit() -> None:
+    """slam/chi2_values.py holds scipy.special's own floats (a regenerated table is the
+    same text); points outside it are computed by scipy, also bit for bit."""
+    from scipy.special import gammainc, gammaincinv
+
+    from fuzzyslam.slam import chi2_values
+    from fuzzyslam.slam.health import chi2_quantile, gate_level
+
+    gates, quantiles = chi2_values.compute()
+    assert (gates, quantiles) == (chi2_values.GATE_LEVELS, chi2_values.CHI2_QUANTILES)
+    assert chi2_values.table_text() in open(chi2_values.__file__, encoding="utf-8").read()
+    assert len(quantiles) == 190
+    for (p, dof), v in quantiles.items():
+        assert chi2_quantile(p, dof) == v == float(2.0 * gammaincinv(dof / 2.0, p))
+    assert gate_level(9.21) == float(gammainc(1.0, 9.21 / 2.0))
+    for p, dof in ((0.95, 7), (1.0 - 1e-3, 151), (0.5, 1000)):  # not in the table
+        assert (p, dof) not in quantiles
+        assert chi2_quantile(p, dof) == float(2.0 * gammaincinv(dof / 2.0, p))
+    assert gate_level(5.99) == float(gammainc(1.0, 5.99 / 2.0))
+
+
+@pytest.mark.slow
+def test_run_imports_neither_scipy_nor_rosbags(tmp_path) -> None:
+    """`run` on the sample log (lamps only) needs no scipy and no rosbags typestore: their
+    imports would cost 0.27 s and 0.12 s of CPU, a seventh of a paper run together."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    log = Path(__file__).resolve().parents[1] / "data" / "sample.mcap"
+    code = (
+        "import runpy, sys\n"
+        f"sys.argv = ['fuzzyslam', 'run', {str(log)!r}, '-o', {str(tmp_path / 'o')!r}]\n"
+        "try:\n    runpy.run_module('fuzzyslam', run_name='__main__')\n"
+        "except SystemExit as e:\n    assert not e.code, e.code\n"
+        "print(sorted(m for m in sys.modules if m.split('.')[0] in ('scipy', 'rosbags')))\n"
+    )
+    env = {**os.environ, "FUZZYSLAM_NO_PROGRESS": "1"}
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       cwd=tmp_path, env=env)  # fmt: skip
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert p.stdout.strip().splitlines()[-1] == "[]"
+    assert (tmp_path / "o" / "trajectory.tum").exists()

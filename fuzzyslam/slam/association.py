@@ -23,10 +23,9 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
-from scipy.special import gammainc
 
 from fuzzyslam.slam.ekf import EkfSlam
-from fuzzyslam.slam.health import chi2_quantile
+from fuzzyslam.slam.health import chi2_quantile, gate_level
 
 
 @lru_cache(maxsize=256)
@@ -36,7 +35,7 @@ def joint_threshold(gate_chi2: float, dof: int) -> float:
     chi2.cdf(x, k) = P(k/2, x/2) (regularised lower incomplete gamma), so
     chi2.ppf(p, k) = 2 P^-1(k/2, p); scipy.special avoids importing scipy.stats (1.5 s).
     """
-    return chi2_quantile(float(gammainc(1.0, gate_chi2 / 2.0)), dof)
+    return chi2_quantile(gate_level(gate_chi2), dof)
 
 
 def block_diag_cov(r: np.ndarray) -> np.ndarray:

@@ -26,7 +26,7 @@ from fuzzyslam.rundir import (
 )
 from fuzzyslam.se2 import compose, inverse
 from fuzzyslam.slam.events import SlamResult, TfFrames, UpdateRow
-from fuzzyslam.slam.markers import lamp_markers
+from fuzzyslam.slam.markers import lamp_markers_cdr
 from fuzzyslam.stamps import TIME_FORMAT, format_time
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.cdr import encode_pose_with_covariance_block, encode_tf_block
@@ -245,7 +245,8 @@ class StreamingOutputs:
             self._dr_t, self._dr_p = self._dr_t[keep:], self._dr_p[keep:]
         for lamps, tm, a, b in self._messages:  # in the order they came
             if lamps:
-                self._mcap.write(tp.slam_landmarks, M.MARKER_ARRAY, lamp_markers(tm, a, b), tm)
+                cdr_lamps = lamp_markers_cdr(tm, a, b)
+                self._mcap.write_cdr(tp.slam_landmarks, M.MARKER_ARRAY, cdr_lamps, tm)
             else:
                 self._mcap.write_cdr(tp.slam_pose, M.POSE_COV_STAMPED, next(cdr), tm)
                 self._mcap.write_cdr(tp.tf, M.TF_MESSAGE, next(tf), tm)

@@ -33,6 +33,7 @@ from fuzzyslam.streams.cdr_encode import (  # noqa: F401
 )
 from fuzzyslam.streams.cdr_messages import (
     F8,
+    CameraInfo,
     Header,
     Image,
     JointState,
@@ -44,7 +45,12 @@ from fuzzyslam.streams.cdr_messages import (
     PoseWithCovariance,
     Quaternion,
     Range,
+    RegionOfInterest,
+    TFMessage,
     Time,
+    Transform,
+    TransformStamped,
+    Vector3,
 )
 from fuzzyslam.streams.typestore import deserialize
 
@@ -228,18 +234,28 @@ def decode_joint_state(buf: bytes | memoryview) -> JointState:
         and len(buf) == lay[0]
         and buf[12 : lay[3]] == lay[2]
         and buf[:4] == lay[1]
-        and all(buf[c : c + 4] == cb for c, cb, _, _ in lay[6][1:])
+        and (
+            buf[lay[7] :] == lay[8]  # velocity and effort empty: their counts end the payload
+            if lay[7]
+            else all(buf[c : c + 4] == cb for c, cb, _, _ in lay[6][1:])
+        )
     ):
         sec, nsec = _STAMP.unpack_from(buf, 4)
+        if lay[7]:
+            _, _, d, n = lay[6][0]
+            pos = np.frombuffer(buf, _F8, n, d).copy() if n else _EMPTY[_F8]
+            return JointState(Header(Time(sec, nsec), lay[4]), list(lay[5]), pos, *lay[9])
         arrays = [
             np.frombuffer(buf, _F8, n, d).copy() if n else _EMPTY[_F8] for _, _, d, n in lay[6]
         ]
         return JointState(Header(Time(sec, nsec), lay[4]), list(lay[5]), *arrays)
     msg, a, seqs = _joint_state(buf)
     counts = tuple((c, bytes(buf[c : c + 4]), d, n) for c, d, n in seqs)
+    # with velocity and effort empty, the bytes from the velocity count on are all fixed
+    tail = seqs[1][0] if seqs[1][2] == 0 and seqs[2][2] == 0 else 0
     _joint_state_layout[0] = (
         len(buf), bytes(buf[:4]), bytes(buf[12:a]), a, msg.header.frame_id, tuple(msg.name),
-        counts,
+        counts, tail, bytes(buf[tail:]) if tail else b"", (msg.velocity, msg.effort),
     )  # fmt: skip
     return msg
 
@@ -311,6 +327,60 @@ def decode_range(buf: bytes | memoryview) -> Range:
     return Range(header, kind, fov, lo, hi, r)
 
 
+_U32X4 = struct.Struct("<4I")
+_CAMERA_MATRICES = struct.Struct("<30d")  # k (9), r (9), p (12)
+
+
+def decode_camera_info(buf: bytes | memoryview) -> CameraInfo:
+    """sensor_msgs/CameraInfo: header, height, width (u32), distortion_model, d (float64
+    sequence), k, r (float64[9]), p (float64[12]) aligned to 8, binning_x, binning_y,
+    roi (four u32 and a bool)."""
+    header, a = _header(buf)
+    a += (4 - a) % 4
+    height, width = _U32X2.unpack_from(buf, a)
+    model, a = _string(buf, a + 8)
+    a += (4 - a) % 4
+    d, a = _sequence(buf, a, _F8)
+    a += (4 - a) % 8
+    m = np.frombuffer(buf, _F8, 30, a).copy()  # ValueError if too short
+    a += 240
+    a += (4 - a) % 4
+    bx, by = _U32X2.unpack_from(buf, a)
+    roi = _U32X4.unpack_from(buf, a + 8)
+    a += 24
+    if a >= len(buf):
+        raise CdrError(f"CameraInfo of {len(buf)} bytes is truncated")
+    rect = bool(buf[a])
+    _end(buf, a + 1)
+    return CameraInfo(header, height, width, model, d, m[:9], m[9:18], m[18:], bx, by,
+                      RegionOfInterest(*roi, rect))  # fmt: skip
+
+
+def decode_tf_message(buf: bytes | memoryview) -> TFMessage:
+    """tf2_msgs/TFMessage: a sequence of geometry_msgs/TransformStamped (header,
+    child_frame_id, translation and rotation as float64 aligned to 8)."""
+    if buf[1] != 1 or buf[0]:
+        raise CdrError("not little-endian CDR")
+    (count,) = _U32.unpack_from(buf, 4)
+    if count > len(buf) // 40:
+        raise CdrError(f"TFMessage with {count} transforms in {len(buf)} bytes")
+    a = 8
+    out = []
+    for _ in range(count):
+        a += (4 - a) % 4
+        sec, nsec = _STAMP.unpack_from(buf, a)
+        frame, a = _string(buf, a + 8)
+        a += (4 - a) % 4
+        child, a = _string(buf, a)
+        a += (4 - a) % 8
+        v = _F64X7.unpack_from(buf, a)
+        a += 56
+        tf = Transform(Vector3(v[0], v[1], v[2]), Quaternion(v[3], v[4], v[5], v[6]))
+        out.append(TransformStamped(Header(Time(sec, nsec), frame), child, tf))
+    _end(buf, a)
+    return TFMessage(out)
+
+
 DECODERS: dict[str, Callable[[Any], Any]] = {
     "nav_msgs/msg/Odometry": decode_odometry,
     "geometry_msgs/msg/PoseArray": decode_pose_array,
@@ -318,6 +388,8 @@ DECODERS: dict[str, Callable[[Any], Any]] = {
     "sensor_msgs/msg/JointState": decode_joint_state,
     "sensor_msgs/msg/Image": decode_image,
     "sensor_msgs/msg/Range": decode_range,
+    "sensor_msgs/msg/CameraInfo": decode_camera_info,
+    "tf2_msgs/msg/TFMessage": decode_tf_message,
 }
 
 

@@ -130,8 +130,6 @@ def encode_image_mono8(t: float, frame: str, img: np.ndarray) -> bytes:
     return restamp(_image_template(frame, *img.shape), t) + img.tobytes()
 
 
-
-
 def encode_pose_with_covariance_block(
     t: np.ndarray, poses: np.ndarray, cov: np.ndarray, frame: str
 ) -> list[bytes]:
@@ -252,3 +250,163 @@ def encode_tf_block(
         a[f"tf{k}"][:, 3:] = yaw_to_quaternion(p[:, 2])
     raw = buf.tobytes()
     return [raw[k * size : (k + 1) * size] for k in range(n)]
+
+
+# sentinels of the marker template: distinctive bit patterns, found in its bytes
+_SENT_T, _SENT_ID = 1234.5, 0x7A5B3C1D
+_SENT_XY, _SENT_SCALE = (1.2345678901e-3, -9.87654321e-2), (3.14159e-4, -2.71828e-5)
+
+
+class _Cdr:
+    """A little-endian CDR payload written field by field (alignment from offset 4)."""
+
+    def __init__(self) -> None:
+        self.b = bytearray(b"\x00\x01\x00\x00")
+
+    def put(self, fmt: str, size: int, *values) -> None:
+        self.b += bytes(-(len(self.b) - 4) % size) + struct.pack("<" + fmt, *values)
+
+    def string(self, text: str) -> None:
+        data = text.encode() + b"\0"
+        self.put("I", 4, len(data))
+        self.b += data
+
+
+def _marker_array_cdr(frame: str, ns: str, mtype: int, rgba, markers: list[tuple]) -> bytes:
+    """visualization_msgs/MarkerArray (ROS 2 Humble) of markers (t, id, (x, y, z, qx, qy,
+    qz, qw), (sx, sy, sz)) in the frame, namespace, type and colour given, written
+    field by field (no points, colours, texture, uv coordinates, text or mesh; action 0,
+    lifetime 0): what rosbags serialises for ``messages.marker`` (tests/test_cdr.py)."""
+    w = _Cdr()
+    w.put("I", 4, len(markers))
+    for t, mid, pose, scale in markers:
+        sec, nsec = divmod(round(t * 1e9), 1_000_000_000)
+        w.put("iI", 4, sec, nsec)  # header
+        w.string(frame)
+        w.string(ns)
+        w.put("iii", 4, mid, mtype, 0)  # id, type, action
+        w.put("7d", 8, *pose)
+        w.put("3d", 8, *scale)
+        w.put("4f", 4, *rgba)
+        w.put("iI?", 4, 0, 0, False)  # lifetime, frame_locked
+        w.put("II", 4, 0, 0)  # points, colors
+        w.string("")  # texture_resource
+        w.put("iI", 4, sec, nsec)  # texture: header, format, data
+        w.string("")
+        w.string("")
+        w.put("I", 4, 0)
+        w.put("I", 4, 0)  # uv_coordinates
+        w.string("")  # text
+        w.string("")  # mesh_resource
+        w.string("")  # mesh_file: filename, data
+        w.put("I", 4, 0)
+        w.put("?", 1, False)  # mesh_use_embedded_materials
+    return bytes(w.b)
+
+
+@lru_cache(maxsize=16)
+def _marker_layout(
+    frame: str, ns: str, mtype: int, z: float, scale_z: float, rgba: tuple[float, ...]
+) -> tuple[bytes, int, int, np.dtype] | None:
+    """One Marker's bytes (``_marker_array_cdr``) with the padding to the next one, its
+    length, the number of stamps in it, and the structured dtype of the numbers that
+    change; None when a 3-marker array is not head + markers at that stride (then rosbags
+    serialises)."""
+
+    def one(i: int, t: float, xy, scale) -> tuple:
+        return (t, i, (*xy, z, *yaw_to_quaternion(0.0).tolist()), (*scale, scale_z))
+
+    def ser(markers: list) -> bytes:
+        return _marker_array_cdr(frame, ns, mtype, rgba, markers)
+
+    s1 = ser([one(_SENT_ID, _SENT_T, _SENT_XY, _SENT_SCALE)])
+    s3 = ser([one(_SENT_ID, _SENT_T, _SENT_XY, _SENT_SCALE)] * 3)
+    body = s1[8:]
+    stride = (len(s3) - len(s1)) // 2
+    pad = s3[8 + len(body) : 8 + stride]
+    if s3 != s3[:8] + (body + pad) * 2 + body or pad.strip(b"\0"):
+        return None
+    sec, nsec = divmod(round(_SENT_T * 1e9), 1_000_000_000)
+    stamps = [k for k in range(len(body) - 7) if body[k : k + 8] == _STAMP.pack(sec, nsec)]
+    at_id = body.find(struct.pack("<i", _SENT_ID))
+    at_pose = body.find(struct.pack("<2d", *_SENT_XY))
+    at_scale = body.find(struct.pack("<2d", *_SENT_SCALE))
+    if min(at_id, at_pose, at_scale) < 0 or not stamps:
+        return None
+    names = ["id", "pose", "scale"]
+    formats: list = ["<i4", ("<f8", (7,)), ("<f8", (2,))]
+    offsets = [at_id, at_pose, at_scale]
+    for k, o in enumerate(stamps):
+        names += [f"sec{k}", f"nsec{k}"]
+        formats += ["<i4", "<u4"]
+        offsets += [o, o + 4]
+    dt = np.dtype({"names": names, "formats": formats, "offsets": offsets, "itemsize": stride})
+    return body + pad, len(body), len(stamps), dt
+
+
+def encode_markers(
+    t: float,
+    frame: str,
+    ns: str,
+    mtype: int,
+    poses: np.ndarray,
+    z: float,
+    scales: np.ndarray,
+    scale_z: float,
+    rgba: tuple[float, float, float, float],
+) -> bytes:
+    """Little-endian CDR of the visualization_msgs/MarkerArray of ``messages.marker(t,
+    frame, ns, k, mtype, poses[k], z, (*scales[k], scale_z), rgba)`` for k = 0..n-1 (ids
+    0..n-1; no points, no text): the bytes ``typestore.serialize`` gives for it, from one
+    Marker written by ``_marker_array_cdr`` as a template (the stamps, id, pose and scale written
+    into n copies through a structured view).
+
+    Parameters
+    ----------
+    t : float
+        Stamp (s), rounded to ns as ``messages.stamp``.
+    frame, ns : str
+        header.frame_id and the markers' namespace.
+    mtype : int
+        Marker type (2 sphere, 3 cylinder).
+    poses : ndarray, shape (n, 3)
+        x, y, yaw (a yaw quaternion, as ``messages.marker``).
+    z : float
+        The poses' height.
+    scales : ndarray, shape (n, 2)
+        Scale x, y.
+    scale_z : float
+        Scale z.
+    rgba : tuple of 4 float
+        Colour.
+
+    Returns
+    -------
+    bytes
+        The payload.
+    """
+    poses = np.asarray(poses, dtype=float).reshape(-1, 3)
+    n = len(poses)
+    lay = _marker_layout(frame, ns, int(mtype), float(z), float(scale_z), tuple(map(float, rgba)))
+    if lay is None:  # a layout the template does not fit: rosbags, marker by marker
+        xs = [M.marker(t, frame, ns, k, mtype, tuple(poses[k]), z, (*scales[k], scale_z), rgba)
+              for k in range(n)]  # fmt: skip
+        return serialize(M.marker_array(xs), M.MARKER_ARRAY)
+    block, size, n_stamps, dt = lay
+    head = b"\x00\x01\x00\x00" + _U32.pack(n)
+    if n == 0:
+        return head
+    buf = np.frombuffer(block * n, dtype=np.uint8).copy()
+    a = buf.view(dt)
+    a["id"] = np.arange(n)
+    pose = a["pose"]
+    pose[:, :2] = poses[:, :2]
+    pose[:, 2] = z
+    # one yaw at a time, as messages.marker (the same sin and cos calls)
+    pose[:, 3:] = [yaw_to_quaternion(th) for th in poses[:, 2].tolist()]
+    a["scale"] = np.asarray(scales, dtype=float).reshape(n, 2)
+    sec, nsec = divmod(round(t * 1e9), 1_000_000_000)
+    for k in range(n_stamps):
+        a[f"sec{k}"] = sec
+        a[f"nsec{k}"] = nsec
+    return head + buf.tobytes()[: len(block) * (n - 1) + size]

@@ -209,3 +209,47 @@ class Range:
     min_range: float
     max_range: float
     range: float
+
+
+@dataclass(slots=True)
+class RegionOfInterest:
+    x_offset: int
+    y_offset: int
+    height: int
+    width: int
+    do_rectify: bool
+
+
+@dataclass(slots=True)
+class CameraInfo:
+    __msgtype__: ClassVar[str] = "sensor_msgs/msg/CameraInfo"
+    header: Header
+    height: int
+    width: int
+    distortion_model: str
+    d: np.ndarray  # float64
+    k: np.ndarray  # (9,) float64
+    r: np.ndarray  # (9,)
+    p: np.ndarray  # (12,)
+    binning_x: int
+    binning_y: int
+    roi: RegionOfInterest
+
+
+@dataclass(slots=True)
+class Transform:
+    translation: Vector3
+    rotation: Quaternion
+
+
+@dataclass(slots=True)
+class TransformStamped:
+    header: Header
+    child_frame_id: str
+    transform: Transform
+
+
+@dataclass(slots=True)
+class TFMessage:
+    __msgtype__: ClassVar[str] = "tf2_msgs/msg/TFMessage"
+    transforms: list[TransformStamped]

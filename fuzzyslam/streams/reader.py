@@ -24,7 +24,7 @@ from mcap.records import Attachment, Channel, Message, Metadata, Schema
 
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import check_input_file
-from fuzzyslam.streams.cdr import decoder
+from fuzzyslam.streams.cdr import DECODERS, decoder
 from fuzzyslam.streams.indexed import (
     IndexMismatch,
     Summary,
@@ -268,8 +268,8 @@ class LogReader:
 
     def _decoder(self, typename: str) -> Callable[[Any], Any] | None:
         """The payload decoder of a type (None: a type the typestore does not know)."""
-        if typename not in self._decoders:
-            known = typename in typestore().types
+        if typename not in self._decoders:  # the fast decoders' types need no typestore
+            known = typename in DECODERS or typename in typestore().types
             self._decoders[typename] = decoder(typename) if known else None
         return self._decoders[typename]
 
