@@ -46,3 +46,16 @@ def shared_dir(factory: pytest.TempPathFactory, name: str, build) -> Path:
             build(root)
             (root / ".built").write_text("")
     return root
+
+
+# The modules whose tests run whole ``reproduce`` or ``sweep`` plans (each step a process
+# of its own, two at a time) go first: under ``pytest -n 2`` the longest chains start at
+# once, and the many short tests fill the cores around them instead of leaving one long
+# plan running alone at the end (the tier's wall time is at least its longest chain).
+FIRST = ("test_reproduce_dask.py", "test_reproduce.py")
+
+
+def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
+    """Run the tests of :data:`FIRST` first, in that order; the rest keep theirs."""
+    rank = {name: k for k, name in enumerate(FIRST)}
+    items.sort(key=lambda item: rank.get(item.path.name, len(FIRST)))  # a stable sort

@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import shared_dir
 from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
@@ -116,23 +117,33 @@ class Tiny:
 
 @pytest.fixture(scope="session")
 def tiny(tmp_path_factory) -> Tiny:
-    d = tmp_path_factory.mktemp("robust")
-    cfg = d / "tiny.yaml"
-    cfg.write_text(TINY_YAML, encoding="utf-8")
-    log = d / "tiny.mcap"
-    code, _, err = cli("simulate", cfg, "-o", log)
-    assert code == 0, err
-    # 256 KiB chunks: more chunk boundaries for the truncation tests
-    small = rewrite(log, d / "small_chunks.mcap", chunk_size=256 * 1024)
-    code, out, err = cli("run", log, "-o", d / "est", "--config", cfg)
-    assert code == 0, err
-    run = json.loads(out)
-    code, out, err = cli(
-        "map", log, "--trajectory", d / "est" / "trajectory.tum", "-o", d / "fgm",
-        "--config", cfg, "--no-figures",
-    )  # fmt: skip
-    assert code == 0, err
-    return Tiny(d, cfg, log, small, d / "est", run, json.loads(out))
+    """A short simulated log, its run and its map, built once per test run
+    (conftest.shared_dir); the tests only read them."""
+
+    def build(d: Path) -> None:
+        cfg = d / "tiny.yaml"
+        cfg.write_text(TINY_YAML, encoding="utf-8")
+        log = d / "tiny.mcap"
+        code, _, err = cli("simulate", cfg, "-o", log)
+        assert code == 0, err
+        # 256 KiB chunks: more chunk boundaries for the truncation tests
+        rewrite(log, d / "small_chunks.mcap", chunk_size=256 * 1024)
+        code, out, err = cli("run", log, "-o", d / "est", "--config", cfg)
+        assert code == 0, err
+        (d / "run.json").write_text(out, encoding="utf-8")
+        code, out, err = cli(
+            "map", log, "--trajectory", d / "est" / "trajectory.tum", "-o", d / "fgm",
+            "--config", cfg, "--no-figures",
+        )  # fmt: skip
+        assert code == 0, err
+        (d / "map.json").write_text(out, encoding="utf-8")
+
+    d = shared_dir(tmp_path_factory, "robust-tiny", build)
+    run = json.loads((d / "run.json").read_text(encoding="utf-8"))
+    mapped = json.loads((d / "map.json").read_text(encoding="utf-8"))
+    return Tiny(
+        d, d / "tiny.yaml", d / "tiny.mcap", d / "small_chunks.mcap", d / "est", run, mapped
+    )
 
 
 # -- not MCAP, random bytes ---------------------------------------------------------------

@@ -307,12 +307,13 @@ def _mcap_messages(path: Path) -> dict:
 
 
 @pytest.mark.slow
-def test_streamed_outputs_do_not_depend_on_blocks(quick_log, tmp_path, monkeypatch):
+def test_streamed_outputs_do_not_depend_on_blocks(quick_log, quick_run, tmp_path, monkeypatch):
     """`run` streams its rows to files in blocks. With tiny blocks (7 rows, 5 odometry
     increments, so that many block boundaries are crossed) the files are the same bytes as
-    with the default blocks (estimates.mcap: the same messages, payloads, times, sequence
-    numbers); and they hold the rows of the in-memory run (MemorySink): the trajectory,
-    and the dead reckoning of ``robot.integrate`` on the whole increments at once."""
+    with the default blocks (the shared ``quick_run``: the same log and config through the
+    CLI; estimates.mcap: the same messages, payloads, times, sequence numbers); and they
+    hold the rows of the in-memory run (MemorySink): the trajectory, and the dead
+    reckoning of ``robot.integrate`` on the whole increments at once."""
     from fuzzyslam.slam.inputs import open_inputs
     from fuzzyslam.slam.outputs import StreamingOutputs
     from fuzzyslam.slam.runner import SlamRunner
@@ -320,12 +321,13 @@ def test_streamed_outputs_do_not_depend_on_blocks(quick_log, tmp_path, monkeypat
     from fuzzyslam.streams.tum import format_tum
 
     cfg = load_config("quick")
-    whole = run_stage(quick_log, tmp_path / "whole", cfg)
+    assert StreamingOutputs.rows_block != 7 and StreamingOutputs.odometry_block != 5
     monkeypatch.setattr(StreamingOutputs, "rows_block", 7)
     monkeypatch.setattr(StreamingOutputs, "odometry_block", 5)
     summary = run_stage(quick_log, tmp_path / "streamed", cfg)
 
-    a, b = tmp_path / "streamed", tmp_path / "whole"
+    default_blocks, whole = quick_run
+    a, b = tmp_path / "streamed", default_blocks
     for name in ("trajectory.tum", "odometry.tum", "covariance.csv", "updates.csv"):
         same = (a / name).read_bytes() == (b / name).read_bytes()  # no diff of megabytes
         assert same, name

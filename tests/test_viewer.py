@@ -13,6 +13,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import test_fixes_sim
 import yaml
 from click.testing import CliRunner
 from conftest import shared_dir
@@ -32,6 +33,8 @@ from fuzzyslam.streams.typestore import serialize
 from fuzzyslam.streams.writer import LogWriter
 
 _register()
+
+dark_case = test_fixes_sim.dark_case  # the session fixture the chain below starts from
 
 
 def decode_both(path: Path) -> dict[str, list]:
@@ -119,25 +122,21 @@ def invoke(args: list) -> dict:
 
 
 @pytest.fixture(scope="module")
-def chain(tmp_path_factory) -> Path:
-    """simulate, run, map, run --fix heading|pose, once per test run (conftest.shared_dir)."""
-    return shared_dir(tmp_path_factory, "viewer-chain", _build_chain)
+def chain(dark_case, tmp_path_factory) -> Path:
+    """simulate, run, map, run --fix heading|pose, once per test run (conftest.shared_dir).
 
+    The log, run A, the map and the pose-fix run are test_fixes_sim's ``dark_case`` (the
+    quick world, every lamp off in run 2, a box and a person): the same chain of commands,
+    built once for both modules; the heading-fix run is added here."""
+    log, dark, _ = dark_case
 
-def _build_chain(tmp: Path) -> None:
-    cfg = tmp / "scenario.yaml"
-    cfg.write_text(
-        yaml.safe_dump(
-            {"extends": "quick.yaml", "name": "viewer",
-             "scenario": {"lamp_failures": [{"run": 2, "lamps": list(range(15))}]}}
-        )
-    )  # fmt: skip
-    log = tmp / "log.mcap"
-    invoke(["simulate", cfg, "-o", log, "--seed", 4])
-    invoke(["run", log, "-o", tmp / "A", "--config", cfg])
-    invoke(["map", log, "--trajectory", tmp / "A" / "trajectory.tum", "-o", tmp / "fgm"])
-    for fix in ("heading", "pose"):
-        invoke(["run", log, "-o", tmp / fix, "--config", cfg, "--map", tmp / "fgm", "--fix", fix])
+    def build(tmp: Path) -> None:
+        for name in ("log.mcap", "scenario.yaml", "A", "fgm", "pose"):
+            (tmp / name).symlink_to(dark / name)
+        invoke(["run", log, "-o", tmp / "heading", "--config", dark / "scenario.yaml",
+                "--map", dark / "fgm", "--fix", "heading"])  # fmt: skip
+
+    return shared_dir(tmp_path_factory, "viewer-chain", build)
 
 
 def _tf_tree(tf_msgs, pose_msgs) -> None:
