@@ -1,76 +1,33 @@
 """The ros2msg definitions (schema texts) of the messages a lamps-only ``run`` writes into
 estimates.mcap, as rosbags' ROS 2 Humble typestore generates them, so that writing them needs
-no typestore (tests/test_cdr.py checks each equals the typestore's text)."""
+no typestore (tests/test_cdr.py checks each equals the typestore's text). Each message's
+own definition is written once; a type's text is its definition followed by those of the
+types it uses, each after a separator line and ``MSG: name``."""
 
 from __future__ import annotations
 
-MSGDEFS: dict[str, str] = {
-    "geometry_msgs/msg/PoseWithCovarianceStamped": (
-        "std_msgs/Header header\n"
-        "geometry_msgs/PoseWithCovariance pose\n"
-        "================================================================================\n"
-        "MSG: std_msgs/Header\n"
-        "builtin_interfaces/Time stamp\n"
-        "string frame_id\n"
-        "================================================================================\n"
-        "MSG: builtin_interfaces/Time\n"
-        "int32 sec\n"
-        "uint32 nanosec\n"
-        "================================================================================\n"
-        "MSG: geometry_msgs/PoseWithCovariance\n"
-        "geometry_msgs/Pose pose\n"
-        "float64[36] covariance\n"
-        "================================================================================\n"
-        "MSG: geometry_msgs/Pose\n"
-        "geometry_msgs/Point position\n"
-        "geometry_msgs/Quaternion orientation\n"
-        "================================================================================\n"
-        "MSG: geometry_msgs/Point\n"
-        "float64 x\n"
-        "float64 y\n"
-        "float64 z\n"
-        "================================================================================\n"
-        "MSG: geometry_msgs/Quaternion\n"
-        "float64 x\n"
-        "float64 y\n"
-        "float64 z\n"
-        "float64 w\n"
+_SEPARATOR = "=" * 80 + "\n"
+
+# the definition of each message type (ros2msg), once
+_DEFINITIONS: dict[str, str] = {
+    "std_msgs/Header": ("builtin_interfaces/Time stamp\nstring frame_id\n"),
+    "builtin_interfaces/Time": ("int32 sec\nuint32 nanosec\n"),
+    "geometry_msgs/PoseWithCovariance": ("geometry_msgs/Pose pose\nfloat64[36] covariance\n"),
+    "geometry_msgs/Pose": ("geometry_msgs/Point position\ngeometry_msgs/Quaternion orientation\n"),
+    "geometry_msgs/Point": ("float64 x\nfloat64 y\nfloat64 z\n"),
+    "geometry_msgs/Quaternion": ("float64 x\nfloat64 y\nfloat64 z\nfloat64 w\n"),
+    "geometry_msgs/PoseWithCovarianceStamped": (
+        "std_msgs/Header header\ngeometry_msgs/PoseWithCovariance pose\n"
     ),
-    "tf2_msgs/msg/TFMessage": (
-        "geometry_msgs/TransformStamped[] transforms\n"
-        "================================================================================\n"
-        "MSG: geometry_msgs/TransformStamped\n"
-        "std_msgs/Header header\n"
-        "string child_frame_id\n"
-        "geometry_msgs/Transform transform\n"
-        "================================================================================\n"
-        "MSG: std_msgs/Header\n"
-        "builtin_interfaces/Time stamp\n"
-        "string frame_id\n"
-        "================================================================================\n"
-        "MSG: builtin_interfaces/Time\n"
-        "int32 sec\n"
-        "uint32 nanosec\n"
-        "================================================================================\n"
-        "MSG: geometry_msgs/Transform\n"
-        "geometry_msgs/Vector3 translation\n"
-        "geometry_msgs/Quaternion rotation\n"
-        "================================================================================\n"
-        "MSG: geometry_msgs/Vector3\n"
-        "float64 x\n"
-        "float64 y\n"
-        "float64 z\n"
-        "================================================================================\n"
-        "MSG: geometry_msgs/Quaternion\n"
-        "float64 x\n"
-        "float64 y\n"
-        "float64 z\n"
-        "float64 w\n"
+    "geometry_msgs/TransformStamped": (
+        "std_msgs/Header header\nstring child_frame_id\ngeometry_msgs/Transform transform\n"
     ),
-    "visualization_msgs/msg/MarkerArray": (
-        "visualization_msgs/Marker[] markers\n"
-        "================================================================================\n"
-        "MSG: visualization_msgs/Marker\n"
+    "geometry_msgs/Transform": (
+        "geometry_msgs/Vector3 translation\ngeometry_msgs/Quaternion rotation\n"
+    ),
+    "geometry_msgs/Vector3": ("float64 x\nfloat64 y\nfloat64 z\n"),
+    "tf2_msgs/TFMessage": ("geometry_msgs/TransformStamped[] transforms\n"),
+    "visualization_msgs/Marker": (
         "int32 ARROW=0\n"
         "int32 CUBE=1\n"
         "int32 SPHERE=2\n"
@@ -106,56 +63,53 @@ MSGDEFS: dict[str, str] = {
         "string mesh_resource\n"
         "visualization_msgs/MeshFile mesh_file\n"
         "bool mesh_use_embedded_materials\n"
-        "================================================================================\n"
-        "MSG: std_msgs/Header\n"
-        "builtin_interfaces/Time stamp\n"
-        "string frame_id\n"
-        "================================================================================\n"
-        "MSG: builtin_interfaces/Time\n"
-        "int32 sec\n"
-        "uint32 nanosec\n"
-        "================================================================================\n"
-        "MSG: geometry_msgs/Pose\n"
-        "geometry_msgs/Point position\n"
-        "geometry_msgs/Quaternion orientation\n"
-        "================================================================================\n"
-        "MSG: geometry_msgs/Point\n"
-        "float64 x\n"
-        "float64 y\n"
-        "float64 z\n"
-        "================================================================================\n"
-        "MSG: geometry_msgs/Quaternion\n"
-        "float64 x\n"
-        "float64 y\n"
-        "float64 z\n"
-        "float64 w\n"
-        "================================================================================\n"
-        "MSG: geometry_msgs/Vector3\n"
-        "float64 x\n"
-        "float64 y\n"
-        "float64 z\n"
-        "================================================================================\n"
-        "MSG: std_msgs/ColorRGBA\n"
-        "float32 r\n"
-        "float32 g\n"
-        "float32 b\n"
-        "float32 a\n"
-        "================================================================================\n"
-        "MSG: builtin_interfaces/Duration\n"
-        "int32 sec\n"
-        "uint32 nanosec\n"
-        "================================================================================\n"
-        "MSG: sensor_msgs/CompressedImage\n"
-        "std_msgs/Header header\n"
-        "string format\n"
-        "uint8[] data\n"
-        "================================================================================\n"
-        "MSG: visualization_msgs/UVCoordinate\n"
-        "float32 u\n"
-        "float32 v\n"
-        "================================================================================\n"
-        "MSG: visualization_msgs/MeshFile\n"
-        "string filename\n"
-        "uint8[] data\n"
+    ),
+    "std_msgs/ColorRGBA": ("float32 r\nfloat32 g\nfloat32 b\nfloat32 a\n"),
+    "builtin_interfaces/Duration": ("int32 sec\nuint32 nanosec\n"),
+    "sensor_msgs/CompressedImage": ("std_msgs/Header header\nstring format\nuint8[] data\n"),
+    "visualization_msgs/UVCoordinate": ("float32 u\nfloat32 v\n"),
+    "visualization_msgs/MeshFile": ("string filename\nuint8[] data\n"),
+    "visualization_msgs/MarkerArray": ("visualization_msgs/Marker[] markers\n"),
+}
+
+# the types written, with the types their text includes, in the typestore's order
+_USES: dict[str, tuple[str, ...]] = {
+    "geometry_msgs/msg/PoseWithCovarianceStamped": (
+        "std_msgs/Header",
+        "builtin_interfaces/Time",
+        "geometry_msgs/PoseWithCovariance",
+        "geometry_msgs/Pose",
+        "geometry_msgs/Point",
+        "geometry_msgs/Quaternion",
+    ),
+    "tf2_msgs/msg/TFMessage": (
+        "geometry_msgs/TransformStamped",
+        "std_msgs/Header",
+        "builtin_interfaces/Time",
+        "geometry_msgs/Transform",
+        "geometry_msgs/Vector3",
+        "geometry_msgs/Quaternion",
+    ),
+    "visualization_msgs/msg/MarkerArray": (
+        "visualization_msgs/Marker",
+        "std_msgs/Header",
+        "builtin_interfaces/Time",
+        "geometry_msgs/Pose",
+        "geometry_msgs/Point",
+        "geometry_msgs/Quaternion",
+        "geometry_msgs/Vector3",
+        "std_msgs/ColorRGBA",
+        "builtin_interfaces/Duration",
+        "sensor_msgs/CompressedImage",
+        "visualization_msgs/UVCoordinate",
+        "visualization_msgs/MeshFile",
     ),
 }
+
+
+def _text(name: str) -> str:
+    own = _DEFINITIONS[name.replace("/msg/", "/")]
+    return own + "".join(f"{_SEPARATOR}MSG: {d}\n{_DEFINITIONS[d]}" for d in _USES[name])
+
+
+MSGDEFS: dict[str, str] = {name: _text(name) for name in _USES}
