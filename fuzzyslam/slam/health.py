@@ -32,20 +32,8 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
-from numpy.linalg import _umath_linalg
 
 from fuzzyslam.slam.chi2_values import CHI2_QUANTILES, GATE_LEVELS
-
-_F8 = np.dtype(np.float64)
-# np.linalg.cholesky and np.linalg.solve of float64 arrays are these gufuncs called in this
-# floating-point state (numpy/linalg/_linalg.py): called directly, the same LAPACK calls
-# give the same floats without the wrappers' type and shape checks (10 of the 35 us of a
-# filter's 2x2 or 4x4 solve_spd; 6,600 calls in the paper run)
-_LINALG_ERRSTATE = {"invalid": "call", "over": "ignore", "divide": "ignore", "under": "ignore"}
-
-
-def _linalg_error(err, flag) -> None:
-    raise np.linalg.LinAlgError("not positive definite or singular")
 
 
 def solve_spd(
@@ -78,18 +66,10 @@ def solve_spd(
     if not (np.isfinite(s).all() and np.isfinite(b).all()):
         raise np.linalg.LinAlgError("innovation covariance or innovation is not finite")
     try:
-        if s.dtype == _F8 and b.dtype == _F8:  # the filter's case (numpy's own gufuncs)
-            with np.errstate(call=_linalg_error, **_LINALG_ERRSTATE):
-                c = _umath_linalg.cholesky_lo(s, signature="d->d")
-                d = c.diagonal() ** 2
-                if d.min() > rel_eps * d.max():
-                    solve = _umath_linalg.solve1 if b.ndim == 1 else _umath_linalg.solve
-                    return solve(s, b, signature="dd->d"), False
-        else:
-            c = np.linalg.cholesky(s)
-            d = c.diagonal() ** 2
-            if d.min() > rel_eps * d.max():
-                return np.linalg.solve(s, b), False
+        c = np.linalg.cholesky(s)
+        d = c.diagonal() ** 2
+        if d.min() > rel_eps * d.max():
+            return np.linalg.solve(s, b), False
     except np.linalg.LinAlgError:
         pass
     k = s.shape[0]
