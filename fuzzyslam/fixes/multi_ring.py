@@ -79,7 +79,6 @@ class MultiRingWindow:
         self.sigmas_deg = (p.sigma_flm_deg * infl, p.sigma_junction_deg * scale * infl)
         self.since_fix = 0  # rings since the last multi-ring fix was formed
         self.travelled = 0.0  # dead-reckoned travel (m) since then
-        self._last_xy: np.ndarray | None = None
         self.single: list[HeadingDecision] = []  # the watchdog's recent decisions
         self.formed = 0  # multi-ring fixes formed
 
@@ -96,10 +95,7 @@ class MultiRingWindow:
             The filter (its dead reckoning, never corrected by the fixes).
         """
         odo = np.asarray(ekf.odometry_pose, dtype=float)
-        if self._last_xy is not None:
-            self.travelled += float(np.hypot(*(odo[:2] - self._last_xy)))
-        self._last_xy = odo[:2].copy()
-        self.recent.push(t, odo, ring.ranges, ring.max_range, ring.fov)
+        self.travelled += self.recent.push(t, odo, ring.ranges, ring.max_range, ring.fov)
         self.since_fix += 1
 
     def restart(self, t: float, ring: Any, ekf: FilterView) -> None:

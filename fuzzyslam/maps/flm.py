@@ -233,7 +233,7 @@ class RecentRings:
         ranges: np.ndarray,
         max_range: np.ndarray | float,
         fov: float,
-    ) -> None:
+    ) -> float:
         """Keep a ring (the oldest dropped beyond ``count`` rings or ``window`` s; a ring back in
 
         time or of another size starts afresh).
@@ -250,6 +250,11 @@ class RecentRings:
             The maximum ranges.
         fov : float
             The cone's full angle (rad).
+
+        Returns
+        -------
+        float
+            The travel (m) from the previous ring's pose to this one's (0 for the first).
         """
         ranges = np.asarray(ranges, dtype=float).ravel()
         if self._t and (t < self._t[-1] or len(ranges) != len(self._ranges[-1])):
@@ -269,6 +274,7 @@ class RecentRings:
         ):
             for buf in (self._s, self._t, self._poses, self._ranges, self._rmax):
                 buf.pop(0)
+        return step
 
     @property
     def span(self) -> float:
