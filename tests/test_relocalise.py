@@ -89,7 +89,7 @@ def test_relocaliser_counts_and_is_off_by_default():
     true = np.array([0.5, 0.5, 0.3])
     ekf = _filter(true + np.array([0.0, 0.0, np.radians(15.0)]))
     z, r = _detections(true, [0, 1, 2, 3, 4, 5])
-    _, known = rel(ekf, z, r, ekf.individual_compatibility(z, r))
+    _, known = rel(ekf, z, r, ekf.individual_compatibility(z, r), 0.0)
     assert known is None  # accepted: the association must be made again on the new d2
     assert rel.counts() == {"relocalisation_tests": 1, "relocalisations": 1}
 

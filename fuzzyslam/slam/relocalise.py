@@ -237,8 +237,13 @@ class Relocaliser:
         if self.window_s > 0:
             self._odo = se2.compose(self._odo, delta)
 
+    def _count(self, test: Relocalisation | None) -> None:
+        if test is not None and test.tested:
+            self.tests += 1
+            self.accepted += test.accepted
+
     def __call__(
-        self, ekf: EkfSlam, z: np.ndarray, r: np.ndarray, d2: np.ndarray, t: float = 0.0
+        self, ekf: EkfSlam, z: np.ndarray, r: np.ndarray, d2: np.ndarray, t: float
     ) -> tuple[np.ndarray, Association | None]:
         """Run :func:`relocalisation_test` on one frame (or its window) and count it.
 
@@ -266,15 +271,13 @@ class Relocaliser:
         d2_new, test = relocalisation_test(
             ekf, z, r, d2, self.gate_chi2, self.ambiguity_margin, self.q, self.min_gain
         )
-        if test is not None and test.tested:
-            self.tests += 1
-            self.accepted += test.accepted
+        self._count(test)
         if test is not None or self.window_s <= 0:
             if test is not None and test.accepted:
                 self._past.clear()
             return d2_new, None if test is None or test.accepted else test.before
         # too few detections on their own: pool the window's unexplained ones with them
-        self._past = [s for s in self._past if t - s.t <= self.window_s]
+        self._forget(t)
         if not self._past or ekf.n_lamps == 0:
             return d2, None
         zw, rw = pool_window(z, r, self._odo, self._past, self.gate_chi2)
@@ -284,11 +287,8 @@ class Relocaliser:
         dw, pooled = relocalisation_test(
             ekf, zw, rw, dw, self.gate_chi2, self.ambiguity_margin, self.q, self.min_gain
         )
-        if pooled is None or not pooled.tested:
-            return d2, None
-        self.tests += 1
-        self.accepted += pooled.accepted
-        if not pooled.accepted:
+        self._count(pooled)
+        if pooled is None or not pooled.accepted:
             return d2, None
         self._past.clear()
         # the pool's association decides the frame's pairings (the frame's detections come
@@ -318,10 +318,15 @@ class Relocaliser:
         """
         if self.window_s <= 0:
             return
+        self._forget(t)
         explained = {j for j, _ in assoc.best}
         rest = [j for j in range(len(z)) if j not in explained]
         if rest:
             self._past.append(_Sighting(t, self._odo.copy(), z[rest].copy(), r[rest].copy()))
+
+    def _forget(self, t: float) -> None:
+        """Drop the unexplained detections older than the window at time ``t``."""
+        self._past = [s for s in self._past if t - s.t <= self.window_s]
 
     def counts(self) -> dict[str, int]:
         """The summary's counts: tests run and disturbances accepted.
