@@ -78,7 +78,12 @@ from typing import Any
 import numpy as np
 
 from fuzzyslam.fixes.base import FixAid
-from fuzzyslam.fixes.bump_recovery import oblique, recovery_streak, streak_offset
+from fuzzyslam.fixes.bump_recovery import (
+    bump_position,
+    oblique,
+    recovery_streak,
+    streak_offset,
+)
 from fuzzyslam.fixes.heading_measure import (  # the paper's measurement; re-exported here
     HEADING_FIELDS,
     FlmSource,
@@ -178,7 +183,8 @@ class HeadingFixAid(FixAid):
             return
         wall = self.wall_direction(self.flm_source(ring, mounts))
         d = decide_heading_fix(t, wall, self.refs, pose, ekf.pose_cov, self.params)
-        d = replace(d, odometry=odo_heading, oblique=why == "junction" and oblique(cands))
+        d = replace(d, odometry=odo_heading, oblique=why == "junction" and oblique(cands),
+                    x=x0, y=y0)  # fmt: skip
         history = window.single if window is not None else self.decisions
         recover = d.reason == "gated"
         streak = recovery_streak(d, history, self.params) if recover else []
@@ -192,7 +198,12 @@ class HeadingFixAid(FixAid):
             # sec. 7.4) makes the prediction admit the innovation v: P_tt += v^2. The
             # heading was wrong by up to |v| somewhere along the path since the last
             # accepted fix (length d), so the position is off by up to |v| d in an unknown
-            # direction: P_xx, P_yy += (v d)^2, which lets the lamps re-associate.
+            # direction: P_xx, P_yy += (v d)^2, which lets the lamps re-associate. The
+            # heading error came in one step at the bump, between the streak's first ring
+            # and the last agreeing ring before it (bump_recovery.bump_position), and the
+            # position has since drifted by v J (p - p_bump), J the 90-degree turn: the
+            # inflation's heading column carries that lever, Q += v^2 g g^T, g = (J L, 1),
+            # L = p - p_bump, so the fix moves the position with the heading.
             offset, sigma, _ = streak_offset(streak)
             d = replace(d, measured=float(wrap_angle(d.odometry + offset)), sigma=sigma)
             v = float(wrap_angle(d.measured - d.predicted))
@@ -202,7 +213,9 @@ class HeadingFixAid(FixAid):
                 else 0.0
             )
             q_xy = (v * dist) ** 2
-            ekf.inflate_robot(np.diag([q_xy, q_xy, v * v]))
+            lever = pose[:2] - bump_position(streak, history, self._last_ok_xy)
+            g = np.array([-lever[1], lever[0], 1.0])
+            ekf.inflate_robot(np.diag([q_xy, q_xy, 0.0]) + v * v * np.outer(g, g))
             d = replace(d, accepted=True, reason="recovered")
             self.recoveries += 1
             if window is not None:  # the window's older rings are from before the bump
