@@ -22,22 +22,25 @@ corner (measured on paper_bumps.yaml: 40 cm drift, lamps duplicated).
 
 Bumps [ours]: ``recover_after`` consecutive gated single-ring fixes that agree mean the
 filter, not the map, is wrong: the robot covariance is inflated (heading by v^2,
-position by (v d)^2, d the path since the last accepted fix) and the streak's fix
-applied (``fixes.bump_recovery.recovery_streak``). A bump is a step between the true and the
-dead-reckoning headings, so the agreement is tested on the offsets measured -
-odometry heading (a constant plus each ring's noise; the filter's own heading moves
-with the lamp updates), by a chi-square test on their weighted scatter
-(``recover_spread_p``), and the fix applied is their weighted mean added to the current
-dead-reckoning heading. Rings forming no fix (no wall, ambiguous wall, no corridor)
-neither break nor extend a streak (``recover_window_s`` bounds its span), and rings at
-oblique junctions (candidate corridors not at right angles) are no evidence: there the
-FLM's wall was measured 7-14 deg off for 3-6 rings in a row (paper_bumps.yaml, the
-corners of the 70-degree corridor, 4 of 5 seeds), which consistency cannot tell from a bump.
-A bump is not in the covariance, so only the heading fixes can vouch for the pose from
-which a new lamp is initialised: the aid flags ``pose_suspect`` (``run`` then creates no
-new lamp, it would be a duplicate) unless the latest ring's fix agrees with the
-prediction (NIS <= ``suspect_chi2``), and from a disagreement (gated, NIS above
-``suspect_chi2``, or a recovery) until a fix that agrees is applied (``_update_suspicion``).
+position by (v d)^2, d the path since the last accepted fix, and the heading-position
+covariance by the lever the bump left: v^2 J L, L the path since the bump,
+``fixes.bump_recovery.bump_position``) and the streak's fix applied
+(``fixes.bump_recovery.recovery_streak``), which so moves the position with the heading.
+A bump is a step between the true and the dead-reckoning headings, so the agreement is
+tested on the offsets measured - odometry heading (a constant plus each ring's noise;
+the filter's own heading moves with the lamp updates), by a chi-square test on their
+weighted scatter (``recover_spread_p``), and the fix applied is their weighted mean
+added to the current dead-reckoning heading. Rings forming no fix (no wall, ambiguous
+wall, no corridor) neither break nor extend a streak (``recover_window_s`` bounds its
+span), and rings at oblique junctions (candidate corridors not at right angles) are no
+evidence: there the FLM's wall was measured 7-14 deg off for 3-6 rings in a row
+(paper_bumps.yaml, the corners of the 70-degree corridor, 4 of 5 seeds), which
+consistency cannot tell from a bump. A bump is not in the covariance, so only the
+heading fixes can vouch for the pose from which a new lamp is initialised: the aid flags
+``pose_suspect`` (``run`` then creates no new lamp, it would be a duplicate) unless the
+latest ring's fix agrees with the prediction (NIS <= ``suspect_chi2``), and from a
+disagreement (gated, NIS above ``suspect_chi2``, or a recovery) until a fix that agrees
+is applied (``_update_suspicion``).
 
 Multi-ring FLM [ours] (``fixes.flm_rings`` > 1, and a multi-ring FLM builder given; the
 window is :class:`fuzzyslam.fixes.multi_ring.MultiRingWindow`):
