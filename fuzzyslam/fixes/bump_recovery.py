@@ -137,3 +137,41 @@ def recovery_streak(
     if not math.isfinite(scatter):
         return []
     return last if scatter <= chi2_quantile(params.recover_spread_p, k - 1) else []
+
+
+def bump_position(
+    streak: Sequence[HeadingDecision],
+    history: Sequence[HeadingDecision],
+    last_ok_xy: np.ndarray | None,
+) -> np.ndarray:
+    """Where the bump happened (filter frame): midway between the streak's first ring
+    and the newest ring before it whose fix agreed (reason ok or recovered; else the
+    position of the last accepted fix, else the first ring itself). The heading was
+    right before that ring and wrong from the streak's first ring on.
+
+    Parameters
+    ----------
+    streak : sequence of HeadingDecision
+        The recovery's rings, newest first, with their positions ``x``, ``y``.
+    history : sequence of HeadingDecision
+        The earlier single-ring decisions, oldest first.
+    last_ok_xy : ndarray, shape (2,), or None
+        The position at the last accepted fix.
+
+    Returns
+    -------
+    ndarray, shape (2,)
+        The estimated position of the bump.
+    """
+    first = streak[-1]
+    hi = np.array([first.x, first.y], dtype=float)
+    lo = None
+    for x in reversed(history):
+        if x.t < first.t and x.reason in ("ok", "recovered") and math.isfinite(x.x):
+            lo = np.array([x.x, x.y], dtype=float)
+            break
+    if lo is None:
+        lo = hi if last_ok_xy is None else np.asarray(last_ok_xy, dtype=float)
+    if not np.all(np.isfinite(hi)):
+        return lo
+    return 0.5 * (lo + hi)

@@ -22,22 +22,25 @@ corner (measured on paper_bumps.yaml: 40 cm drift, lamps duplicated).
 
 Bumps [ours]: ``recover_after`` consecutive gated single-ring fixes that agree mean the
 filter, not the map, is wrong: the robot covariance is inflated (heading by v^2,
-position by (v d)^2, d the path since the last accepted fix) and the streak's fix
-applied (``fixes.bump_recovery.recovery_streak``). A bump is a step between the true and the
-dead-reckoning headings, so the agreement is tested on the offsets measured -
-odometry heading (a constant plus each ring's noise; the filter's own heading moves
-with the lamp updates), by a chi-square test on their weighted scatter
-(``recover_spread_p``), and the fix applied is their weighted mean added to the current
-dead-reckoning heading. Rings forming no fix (no wall, ambiguous wall, no corridor)
-neither break nor extend a streak (``recover_window_s`` bounds its span), and rings at
-oblique junctions (candidate corridors not at right angles) are no evidence: there the
-FLM's wall was measured 7-14 deg off for 3-6 rings in a row (paper_bumps.yaml, the
-corners of the 70-degree corridor, 4 of 5 seeds), which consistency cannot tell from a bump.
-A bump is not in the covariance, so only the heading fixes can vouch for the pose from
-which a new lamp is initialised: the aid flags ``pose_suspect`` (``run`` then creates no
-new lamp, it would be a duplicate) unless the latest ring's fix agrees with the
-prediction (NIS <= ``suspect_chi2``), and from a disagreement (gated, NIS above
-``suspect_chi2``, or a recovery) until a fix that agrees is applied (``_update_suspicion``).
+position by (v d)^2, d the path since the last accepted fix, and the heading-position
+covariance by the lever the bump left: v^2 J L, L the path since the bump,
+``fixes.bump_recovery.bump_position``) and the streak's fix applied
+(``fixes.bump_recovery.recovery_streak``), which so moves the position with the heading.
+A bump is a step between the true and the dead-reckoning headings, so the agreement is
+tested on the offsets measured - odometry heading (a constant plus each ring's noise;
+the filter's own heading moves with the lamp updates), by a chi-square test on their
+weighted scatter (``recover_spread_p``), and the fix applied is their weighted mean
+added to the current dead-reckoning heading. Rings forming no fix (no wall, ambiguous
+wall, no corridor) neither break nor extend a streak (``recover_window_s`` bounds its
+span), and rings at oblique junctions (candidate corridors not at right angles) are no
+evidence: there the FLM's wall was measured 7-14 deg off for 3-6 rings in a row
+(paper_bumps.yaml, the corners of the 70-degree corridor, 4 of 5 seeds), which
+consistency cannot tell from a bump. A bump is not in the covariance, so only the
+heading fixes can vouch for the pose from which a new lamp is initialised: the aid flags
+``pose_suspect`` (``run`` then creates no new lamp, it would be a duplicate) unless the
+latest ring's fix agrees with the prediction (NIS <= ``suspect_chi2``), and from a
+disagreement (gated, NIS above ``suspect_chi2``, or a recovery) until a fix that agrees
+is applied (``_update_suspicion``).
 
 Multi-ring FLM [ours] (``fixes.flm_rings`` > 1, and a multi-ring FLM builder given; the
 window is :class:`fuzzyslam.fixes.multi_ring.MultiRingWindow`):
@@ -78,7 +81,12 @@ from typing import Any
 import numpy as np
 
 from fuzzyslam.fixes.base import FixAid
-from fuzzyslam.fixes.bump_recovery import oblique, recovery_streak, streak_offset
+from fuzzyslam.fixes.bump_recovery import (
+    bump_position,
+    oblique,
+    recovery_streak,
+    streak_offset,
+)
 from fuzzyslam.fixes.heading_measure import (  # the paper's measurement; re-exported here
     HEADING_FIELDS,
     FlmSource,
@@ -178,7 +186,8 @@ class HeadingFixAid(FixAid):
             return
         wall = self.wall_direction(self.flm_source(ring, mounts))
         d = decide_heading_fix(t, wall, self.refs, pose, ekf.pose_cov, self.params)
-        d = replace(d, odometry=odo_heading, oblique=why == "junction" and oblique(cands))
+        d = replace(d, odometry=odo_heading, oblique=why == "junction" and oblique(cands),
+                    x=x0, y=y0)  # fmt: skip
         history = window.single if window is not None else self.decisions
         recover = d.reason == "gated"
         streak = recovery_streak(d, history, self.params) if recover else []
@@ -192,7 +201,12 @@ class HeadingFixAid(FixAid):
             # sec. 7.4) makes the prediction admit the innovation v: P_tt += v^2. The
             # heading was wrong by up to |v| somewhere along the path since the last
             # accepted fix (length d), so the position is off by up to |v| d in an unknown
-            # direction: P_xx, P_yy += (v d)^2, which lets the lamps re-associate.
+            # direction: P_xx, P_yy += (v d)^2, which lets the lamps re-associate. The
+            # heading error came in one step at the bump, between the streak's first ring
+            # and the last agreeing ring before it (bump_recovery.bump_position), and the
+            # position has since drifted by v J (p - p_bump), J the 90-degree turn: the
+            # inflation's heading column carries that lever, Q += v^2 g g^T, g = (J L, 1),
+            # L = p - p_bump, so the fix moves the position with the heading.
             offset, sigma, _ = streak_offset(streak)
             d = replace(d, measured=float(wrap_angle(d.odometry + offset)), sigma=sigma)
             v = float(wrap_angle(d.measured - d.predicted))
@@ -202,7 +216,9 @@ class HeadingFixAid(FixAid):
                 else 0.0
             )
             q_xy = (v * dist) ** 2
-            ekf.inflate_robot(np.diag([q_xy, q_xy, v * v]))
+            lever = pose[:2] - bump_position(streak, history, self._last_ok_xy)
+            g = np.array([-lever[1], lever[0], 1.0])
+            ekf.inflate_robot(np.diag([q_xy, q_xy, 0.0]) + v * v * np.outer(g, g))
             d = replace(d, accepted=True, reason="recovered")
             self.recoveries += 1
             if window is not None:  # the window's older rings are from before the bump
