@@ -154,9 +154,7 @@ def aids_for_map(fm: FrozenMap, mode: str, cfg: Any, start_time: float | None = 
     -------
     list of FixAid
     """
-    from fuzzyslam.fixes.changes import ChangeDetector
     from fuzzyslam.fixes.heading import FlmSource, HeadingFixAid
-    from fuzzyslam.fixes.pose_aid import PoseFixAid
     from fuzzyslam.maps.flm import build_flm
     from fuzzyslam.maps.hough import flm_wall_direction
 
@@ -187,6 +185,10 @@ def aids_for_map(fm: FrozenMap, mode: str, cfg: Any, start_time: float | None = 
         aid = heading_aid()
         aid.viewer_map = (fm.fgm, refs)  # the map used, in estimates.mcap (one aid shows it)
         return [aid]
+    # the pose match and change detection (scipy.ndimage, cv2) load for pose fixes only
+    from fuzzyslam.fixes.changes import ChangeDetector
+    from fuzzyslam.fixes.pose_aid import PoseFixAid
+
     pose = PoseFixAid(fm.fgm, cfg.fixes, source, t0)
     pose.viewer_map = (fm.fgm, refs)
     aids: list[Any] = [pose]

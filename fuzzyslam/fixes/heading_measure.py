@@ -129,6 +129,29 @@ def select_corridor(
     why : str
         "", "junction", or the reason there is none.
     """
+    key = (float(xy[0]), float(xy[1]), period, junction_margin)
+    last = _LAST_SELECTION
+    if (
+        last
+        and last[0] == key
+        and len(last[1]) == len(refs)
+        and all(a is b for a, b in zip(last[1], refs, strict=True))
+    ):  # the same question as the ring's previous call (on_ring, then the decisions)
+        return list(last[2][0]), last[2][1]
+    found = _select_corridor(xy, refs, period, junction_margin)
+    _LAST_SELECTION[:] = [key, tuple(refs), found]
+    return list(found[0]), found[1]
+
+
+# select_corridor's last question and answer: a ring asks it two or three times (the aid,
+# the single-ring and the multi-ring decisions) at the same pose
+_LAST_SELECTION: list = []
+
+
+def _select_corridor(
+    xy: Sequence[float], refs: Sequence[Reference], period: float, junction_margin: float
+) -> tuple[list[Reference], str]:
+    """:func:`select_corridor` without its memory."""
     inside = corridors_at(xy, refs)
     if not inside:
         near = corridors_near(xy, refs, junction_margin) if junction_margin > 0 else []

@@ -370,13 +370,23 @@ def refine_tangent(wd: WallDirection, readings, params: MapParams) -> WallDirect
     n1 = int(fit.inliers.sum())
     second = False
     rest = ~fit.inliers
-    if rest.sum() >= 3 and wd.second_strength > 0 and len(wd.peaks) > 1:
+    n_rest = int(rest.sum())
+    loose = fit.sigma > np.deg2rad(params.tangent_max_sigma_deg)
+    # the second wall fit can only flag the ring: it is not made when the ring is flagged
+    # already, or when the echoes left out (at most all of them the fit's inliers) are
+    # fewer than tangent_second_ratio of the first fit's (half of the fits on the paper log)
+    if (
+        n_rest >= 3
+        and wd.second_strength > 0
+        and len(wd.peaks) > 1
+        and not (wd.ambiguous or loose)
+        and n_rest >= params.tangent_second_ratio * n1
+    ):
         others = RingReadings(readings.sensors[rest], readings.ranges[rest], readings.half_angle)
         fit2 = fit_walls(others, wd.peaks[-1].theta, **kw)
         sep = abs(float(wrap_angle_period(fit2.psi - fit.psi, np.pi)))
         far = sep >= np.deg2rad(params.ambiguity_separation_deg)
         second = fit2.ok and far and fit2.inliers.sum() >= params.tangent_second_ratio * n1
-    loose = fit.sigma > np.deg2rad(params.tangent_max_sigma_deg)
     return replace(
         wd,
         angle=direction_mod_pi(fit.psi - np.pi / 2),

@@ -84,7 +84,12 @@ def detect_lamps(
     ex, ey = min(bx + bw + 3, wid), min(by + bh + 3, hgt)
     img = img[oy:ey, ox:ex]
     mask = full[oy:ey, ox:ex]
-    n, labels, stats, _ = cv2.connectedComponentsWithStats(mask, connectivity=8)
+    # 16-bit labels where they fit (the same labels, half the memory traffic: 2x faster
+    # on the paper's frames); OpenCV's default algorithm either way
+    ltype = cv2.CV_16U if mask.size < 65535 else cv2.CV_32S
+    n, labels, stats, _ = cv2.connectedComponentsWithStatsWithAlgorithm(
+        mask, 8, ltype, cv2.CCL_DEFAULT
+    )
     # the gates on the few components, in plain Python (numpy calls on arrays of a
     # handful of elements cost more than the arithmetic)
     kept = []
@@ -109,11 +114,14 @@ def detect_lamps(
         y1 = min(y - oy + h + 2, ch)
         crop = img[y0:y1, x0:x1]
         d1 = cv2.dilate((labels[y0:y1, x0:x1] == k).view(np.uint8), _KERNEL)
-        ring = (cv2.dilate(d1, _KERNEL) > d1) & (crop < threshold)
+        # the ring one pixel beyond d1 (d1 within its dilation: the XOR), its unlit pixels
+        ring = np.bitwise_xor(cv2.dilate(d1, _KERNEL), d1).view(bool)
+        ring &= crop < threshold
         lit = crop[ring]
         # mean of the unlit ring: an exact integer sum over a count (as ndarray.mean)
         background = int(lit.sum()) / lit.size if lit.size else 0.0
-        w = (crop - np.float32(background)) * d1  # d1 is 0/1
-        mom = cv2.moments(np.maximum(w, 0.0, dtype=np.float32), binaryImage=False)
+        w = np.subtract(crop, np.float32(background), dtype=np.float32)
+        w *= d1  # d1 is 0/1
+        mom = cv2.moments(np.maximum(w, 0.0, out=w), binaryImage=False)
         uv[a] = (ox + x0 + mom["m10"] / mom["m00"], oy + y0 + mom["m01"] / mom["m00"])
     return Blobs(uv, np.array([float(b[5]) for b in kept]), rejected)

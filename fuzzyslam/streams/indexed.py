@@ -167,12 +167,24 @@ RawMessage = tuple[int, int, int, memoryview]  # log time ns, channel id, sequen
 _HEAD = _MSG.size  # a Message record's bytes before its payload
 
 
+RECENT_CHUNKS = 4  # decompressed chunks a reader keeps for its other walks (see below)
+
+
 def indexed_messages(
-    f: BinaryIO, summary: Summary, wanted: set[int], start_ns: int, dmg: Damage
+    f: BinaryIO,
+    summary: Summary,
+    wanted: set[int],
+    start_ns: int,
+    dmg: Damage,
+    recent: dict[int, bytes] | None = None,
 ) -> Iterator[list[RawMessage]]:
     """Raw messages of the channels ``wanted`` logged at or after ``start_ns``, in log-time
     order (ties in file order), in batches (a chunk, or chunks whose time ranges overlap).
-    Raises :class:`IndexMismatch` at a chunk that does not match its index."""
+    Raises :class:`IndexMismatch` at a chunk that does not match its index.
+
+    ``recent``: the last ``RECENT_CHUNKS`` chunks read whole and intact (by file offset),
+    shared by walks of one file that advance together (``run``'s odometry and frames, and
+    its sonar rings): a chunk is then read and decompressed once, not once per walk."""
     chunks = [
         c
         for c in summary.chunks  # a chunk without Message Indexes may hold any channel
@@ -183,9 +195,15 @@ def indexed_messages(
     for group in _groups(chunks):
         batches = []
         for k, c in enumerate(group):
-            data = _chunk_data(f, c, resume, dmg)
+            data = recent.get(c.offset) if recent is not None else None
             if data is None:
-                continue
+                data = _chunk_data(f, c, resume, dmg)
+                if data is None:
+                    continue
+                if recent is not None:
+                    recent[c.offset] = data
+                    while len(recent) > RECENT_CHUNKS:
+                        del recent[next(iter(recent))]
             view = memoryview(data)
             batches.append(
                 [

@@ -75,6 +75,10 @@ class LogReader:
         self.end = 0.0
         self._damage = Damage()
         self._decoders: dict[str, Callable[[Any], Any] | None] = {}
+        # decompressed chunks shared by this reader's walks (indexed.indexed_messages),
+        # forgotten when the file changes (its size or modification time)
+        self._recent: dict[int, bytes] = {}
+        self._recent_of: tuple[int, int] | None = None
         s = self._summary
         if s is None:
             self._scan_stream()
@@ -198,8 +202,11 @@ class LogReader:
         last_ns, seen = -1, set()
         dmg = self._damage
         with open(self.path, "rb") as f:
+            st = os.fstat(f.fileno())
+            if (st.st_size, st.st_mtime_ns) != self._recent_of:
+                self._recent, self._recent_of = {}, (st.st_size, st.st_mtime_ns)
             try:
-                for batch in indexed_messages(f, s, set(chans), start_ns, dmg):
+                for batch in indexed_messages(f, s, set(chans), start_ns, dmg, self._recent):
                     for t_ns, cid, seq, payload in batch:
                         if t_ns != last_ns:
                             last_ns, seen = t_ns, set()
