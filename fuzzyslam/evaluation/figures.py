@@ -18,6 +18,7 @@ from numpy.typing import NDArray
 from fuzzyslam.evaluation.core import Estimate, Evaluation, Truth
 from fuzzyslam.evaluation.lamps import LampMatch
 from fuzzyslam.maps.grid import BeliefMap
+from fuzzyslam.slam.health import chi2_quantile
 from fuzzyslam.streams.logmeta import World
 
 Array = NDArray[np.float64]
@@ -281,15 +282,13 @@ def running_mean(v: Array, frac: float = 0.02) -> Array:
 def fig_consistency(path: Path, truth: Truth, est: Estimate, ev: Evaluation) -> bool:
     """NEES (3 dof) against time with its per-sample 95 % band, and NIS of accepted updates
     per kind, normalised by dof. Returns False (nothing drawn) without covariance or updates."""
-    from scipy.stats import chi2
-
     has_nis = est.updates is not None and est.updates.t.size > 0
     if ev.nees is None and not has_nis:
         return False
     fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
     ax = axes[0]
     if ev.nees is not None:
-        lo, hi = chi2.ppf([0.025, 0.975], 3)
+        lo, hi = chi2_quantile(0.025, 3), chi2_quantile(0.975, 3)
         ax.semilogy(
             ev.assoc.t,
             np.maximum(ev.nees, 1e-2),
