@@ -32,8 +32,8 @@ from fuzzyslam.fileio import OutputDir, check_input_file, check_outputs
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.progress import Progress, note
 from fuzzyslam.rundir import split_label  # LABEL=PATH of --compare
+from fuzzyslam.se2 import quaternion_to_yaw
 from fuzzyslam.streams.logmeta import read_scenario, read_world
-from fuzzyslam.streams.messages import pose_of
 from fuzzyslam.streams.reader import MCAP_MAGIC, LogReader
 from fuzzyslam.streams.topics import Topics
 from fuzzyslam.streams.tum import format_tum, read_tum, read_tum_planar
@@ -99,22 +99,26 @@ def read_truth(path: str | os.PathLike) -> Truth:
         topic = scenario.config.get("topics", {}).get("ground_truth", topic)
     if topic not in reader.topics:
         raise InputError(path, f"log has no ground truth (no topic {topic}); give a simulated log")
-    ts, ps = [], []
+    ts, rows = [], []  # (x, y, qx, qy, qz, qw) per message; the yaws at once below
     with Progress(reader.end - reader.start, "evaluate: reading ground truth") as bar:
         for lm in reader.messages([topic]):
+            p = lm.msg.pose.pose
+            o = p.orientation
             ts.append(lm.t)
-            ps.append(pose_of(lm.msg.pose.pose))
+            rows.append((p.position.x, p.position.y, o.x, o.y, o.z, o.w))
             bar.update_to(lm.t - reader.start)
     if len(ts) < 2:
         raise InputError(path, f"ground truth topic {topic} holds fewer than two poses")
     t = np.asarray(ts)
+    raw = np.asarray(rows, dtype=float)
+    ps = np.column_stack([raw[:, 0], raw[:, 1], quaternion_to_yaw(raw[:, 2:])])  # as pose_of
     order = np.argsort(t, kind="stable")
     freeze = None
     if scenario is not None:
         fr = scenario.config.get("fgm", {}).get("freeze_run")
         freeze = int(fr) if fr is not None else None
     return Truth(
-        t[order], np.asarray(ps)[order], world, scenario, freeze, str(path), reader.damage()
+        t[order], ps[order], world, scenario, freeze, str(path), reader.damage()
     )
 
 
