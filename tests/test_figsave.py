@@ -62,7 +62,8 @@ def test_one_draw_gives_the_tight_savefig_picture(tmp_path) -> None:
     best = _shifted_difference(a, b)
     assert best < 1.5, best
     assert Image.open(new).mode == "RGB"  # opaque: no alpha channel written
-    assert Image.open(new).info["dpi"] == pytest.approx((120, 120), abs=0.05)  # whole pixels per metre
+    # pHYs holds whole pixels per metre
+    assert Image.open(new).info["dpi"] == pytest.approx((120, 120), abs=0.05)
 
 
 def test_an_artist_outside_the_figure_grows_the_picture_as_savefig(tmp_path) -> None:

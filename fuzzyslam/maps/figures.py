@@ -22,7 +22,6 @@ from fuzzyslam.maps.references import Reference
 from fuzzyslam.rundir import read_landmarks
 from fuzzyslam.streams.logmeta import World
 
-
 DPI = 110  # figures are made at their PNG's dpi: the layout's text sizes are the drawing's
 
 
