@@ -117,9 +117,7 @@ def read_truth(path: str | os.PathLike) -> Truth:
     if scenario is not None:
         fr = scenario.config.get("fgm", {}).get("freeze_run")
         freeze = int(fr) if fr is not None else None
-    return Truth(
-        t[order], ps[order], world, scenario, freeze, str(path), reader.damage()
-    )
+    return Truth(t[order], ps[order], world, scenario, freeze, str(path), reader.damage())
 
 
 # --- estimate -----------------------------------------------------------------------------
@@ -211,8 +209,10 @@ def read_landmark_history(path: Path, topic: str) -> list[tuple[float, np.ndarra
     return out
 
 
-def read_estimate(path: str | os.PathLike, label: str | None = None) -> Estimate:
-    """An estimate from a run OUTDIR (every file it holds) or a TUM file (poses only)."""
+def read_estimate(path: str | os.PathLike, label: str | None = None, full: bool = True) -> Estimate:
+    """An estimate from a run OUTDIR (every file it holds) or a TUM file (poses only);
+    ``full=False``: only what a compared estimate's row and curve need (trajectory.tum and
+    landmarks.yaml: not the covariances, updates, dead reckoning, fixes or map history)."""
     kind = detect_kind(path)
     p = Path(path)
     if kind == KIND_TUM:
@@ -225,12 +225,14 @@ def read_estimate(path: str | os.PathLike, label: str | None = None) -> Estimate
         raise InputError(p, "not a run output directory (no trajectory.tum)")
     t, poses = read_tum(traj)
     est = Estimate(t, poses, label=label or p.name, source=str(p))
+    if (p / R.LANDMARKS).is_file():
+        est.landmarks, est.landmark_ids = R.read_landmarks(p / R.LANDMARKS)
+    if not full:
+        return est
     if (p / R.COVARIANCE).is_file():
         est.cov = read_covariance(p / R.COVARIANCE, t.size)
     if (p / R.ODOMETRY).is_file():
         est.odometry = read_tum(p / R.ODOMETRY)
-    if (p / R.LANDMARKS).is_file():
-        est.landmarks, est.landmark_ids = R.read_landmarks(p / R.LANDMARKS)
     if (p / R.UPDATES).is_file():
         est.updates = read_updates(p / R.UPDATES)
     if (p / R.HEADING_FIXES).is_file():
@@ -296,7 +298,9 @@ def run_evaluate(
     check_outputs([truth_path, estimate_path, *compare, *extra_inputs], [outdir])
     fgm = read_fgm(map_dir) if map_dir is not None else None
     est = read_estimate(estimate_path, label)
-    others = [read_estimate(c, lab) for lab, c in labelled]
+    # a compared estimate gives a row of the side-by-side table and a curve: its
+    # trajectory and lamps only
+    others = [read_estimate(c, lab, full=False) for lab, c in labelled]
     truth = read_truth(truth_path)
     if landmarks_truth is not None:
         truth.landmarks, _ = R.read_landmarks(Path(landmarks_truth))

@@ -1,0 +1,177 @@
+"""Benchmark of the ``evaluate`` and ``map`` steps of ``reproduce``: CPU per step, old
+against new code side by side.
+
+    python benchmarks/bench_evaluate.py --baseline main [--tree DIR] [--repeat 1]
+
+On one seed of ``reproduce --quick`` (``--tree``: an existing output made with its logs,
+``--keep-logs`` or one seed; else one is made first with the new code), every ``map``
+and ``evaluate`` step runs with the old code (git revision ``--baseline``, exported) and
+the new (the installed), alternately, into a scratch directory, two ways:
+
+- ``command``: the step as its ``fuzzyslam`` command line in a fresh process (what a
+  user pays: the imports included), CPU time (user + sys) of the process;
+- ``in_worker``: every step of the list run twice through ``reproduce``'s ``run_step``
+  in one process, as a pool worker runs them, the CPU time (``time.process_time``) of the
+  second run of each (the cost per step once the imports are paid), and the CPU of the
+  imports a worker pays once (the stage entries and what they load on demand).
+
+Prints one JSON object: per step and kind, old and new CPU seconds and their ratio, the
+load average before and after, and whether the two codes' outputs are the same (every
+non-PNG file byte for byte, summary.json's timings aside; the PNG files by name).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import os
+import shutil
+import subprocess
+import sys
+import tempfile
+import time
+from collections import defaultdict
+from pathlib import Path
+
+sys.path.insert(0, str(Path(__file__).parent))
+
+TIMINGS = ("build_seconds", "wall_seconds")  # summary.json of map: the stage's own times
+
+
+def worker(tree: Path, out: Path, keys: list[str]) -> None:
+    """Run the steps ``keys`` of seed 0 twice in this process; print JSON (CPU s)."""
+    os.environ["FUZZYSLAM_NO_PROGRESS"] = "1"
+    t0 = time.process_time()
+    import importlib
+
+    from fuzzyslam.reproduce import execute
+    from fuzzyslam.reproduce.plan import QUICK, build_plan
+
+    for m in execute.STAGES.values():
+        importlib.import_module(m)
+    steps = {s.key.split("/", 1)[1]: s for s in build_plan([0], QUICK)}
+    result: dict = {"import_s": 0.0, "first_s": {}, "steps_s": {}}
+    result["import_s"] = time.process_time() - t0
+    for rep in range(2):
+        for k in keys:
+            s = steps[k]
+            call = dict(s.call)
+            dest = out / f"run{rep}" / k
+            shutil.rmtree(dest, ignore_errors=True)
+            dest.parent.mkdir(parents=True, exist_ok=True)
+            call["outdir"] = str(dest)
+            c0 = time.process_time()
+            ok, _sec, _summary, err, *_ = execute.run_step(s.kind, tuple(call.items()), str(tree))
+            if not ok:
+                raise SystemExit(f"{k}: {err}")
+            result["first_s" if rep == 0 else "steps_s"][k] = time.process_time() - c0
+    print(json.dumps(result))
+
+
+def run_worker(tree: Path, out: Path, keys: list[str], src: Path | None) -> dict:
+    """``worker`` in a fresh process with the old (``src``) or the new code."""
+    env = {**os.environ, "FUZZYSLAM_NO_PROGRESS": "1", "MPLBACKEND": "Agg"}
+    env.pop("PYTHONPATH", None)
+    if src is not None:
+        env["PYTHONPATH"] = str(src)
+    cmd = [sys.executable, __file__, "--worker", str(tree), str(out), *keys]
+    p = subprocess.run(cmd, env=env, cwd=tempfile.gettempdir(), capture_output=True, text=True)
+    if p.returncode != 0:
+        raise RuntimeError(p.stderr.strip()[-800:])
+    return json.loads(p.stdout.strip().splitlines()[-1])
+
+
+def same_outputs(a: Path, b: Path) -> dict:
+    """Compare two output folders: non-PNG files byte for byte (summary.json's timings
+    aside), PNG files by name."""
+    fa = {p.relative_to(a) for p in a.rglob("*") if p.is_file()}
+    fb = {p.relative_to(b) for p in b.rglob("*") if p.is_file()}
+    differ = []
+    for r in sorted(fa & fb):
+        if r.suffix == ".png":
+            continue
+        x, y = (a / r).read_bytes(), (b / r).read_bytes()
+        if x != y and r.name == "summary.json":
+            jx, jy = json.loads(x), json.loads(y)
+            x, y = (json.dumps({k: v for k, v in j.items() if k not in TIMINGS}) for j in (jx, jy))
+        if x != y:
+            differ.append(str(r))
+    files = sum(1 for r in fa & fb if r.suffix != ".png")
+    return {"files_compared": files, "png_files": sum(1 for r in fa if r.suffix == ".png"),
+            "only_old": sorted(map(str, fa - fb)), "only_new": sorted(map(str, fb - fa)),
+            "different": differ}  # fmt: skip
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--baseline", metavar="REV", default="main")
+    ap.add_argument("--tree", type=Path, default=None,
+                    help="a `reproduce --quick` output with seed 0's logs")  # fmt: skip
+    ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument("--workdir", type=Path, default=None)
+    ap.add_argument("--worker", nargs="+", help=argparse.SUPPRESS)
+    args = ap.parse_args()
+    if args.worker:
+        worker(Path(args.worker[0]), Path(args.worker[1]), args.worker[2:])
+        return
+    from sidebyside import export_revision, load, run_cli
+
+    from fuzzyslam.reproduce.plan import QUICK, build_plan
+
+    work = args.workdir or Path(tempfile.mkdtemp(prefix="bench_evaluate."))
+    work.mkdir(parents=True, exist_ok=True)
+    tree = args.tree
+    if tree is None:
+        tree = work / "tree"
+        run_cli(["reproduce", "--quick", "--seeds", "1", "--keep-logs", "-o", str(tree)], None)
+    tree = tree.resolve()
+    src = export_revision(args.baseline)
+    before = load()
+    steps = [s for s in build_plan([0], QUICK) if s.kind in ("map", "evaluate")]
+    keys = [s.key.split("/", 1)[1] for s in steps]
+    kind = {s.key.split("/", 1)[1]: s.kind for s in steps}
+    cpu: dict[str, dict[str, list[float]]] = defaultdict(lambda: {"old": [], "new": []})
+    inw: dict[str, dict[str, list[float]]] = defaultdict(lambda: {"old": [], "new": []})
+    imports: dict[str, list[float]] = {"old": [], "new": []}
+    for _ in range(args.repeat):
+        for s, k in zip(steps, keys, strict=True):
+            for v in ("old", "new"):
+                argv = list(s.argv)
+                o = argv.index("-o")
+                argv[o + 1] = str(work / f"command_{v}" / k)
+                shutil.rmtree(argv[o + 1], ignore_errors=True)
+                Path(argv[o + 1]).parent.mkdir(parents=True, exist_ok=True)
+                _wall, c = run_cli(argv, src if v == "old" else None, cwd=tree)
+                cpu[k][v].append(c)
+        for v in ("old", "new"):
+            r = run_worker(tree, work / f"worker_{v}", keys, src if v == "old" else None)
+            imports[v].append(r["import_s"])
+            for k in keys:
+                inw[k][v].append(r["steps_s"][k])
+
+    def row(d: dict[str, list[float]]) -> dict:
+        old, new = min(d["old"]), min(d["new"])
+        return {"old_s": round(old, 2), "new_s": round(new, 2), "ratio": round(old / new, 2)}
+
+    def by_kind(d: dict) -> dict:
+        tot: dict[str, dict[str, list[float]]] = {}
+        for kd in ("map", "evaluate"):
+            ks = [k for k in keys if kind[k] == kd]
+            tot[kd] = {v: [sum(min(d[k][v]) for k in ks)] for v in ("old", "new")}
+        return {kd: row(x) for kd, x in tot.items()}
+
+    print(json.dumps({
+        "baseline": args.baseline, "tree": str(tree), "repeat": args.repeat,
+        "cpu_best_of_repeats": True,
+        "command": {"per_step": {k: row(cpu[k]) for k in keys}, "by_kind_total": by_kind(cpu)},
+        "in_worker": {"per_step": {k: row(inw[k]) for k in keys}, "by_kind_total": by_kind(inw),
+                      "stage_imports": row(imports)},
+        "same_outputs_command": same_outputs(work / "command_old", work / "command_new"),
+        "same_outputs_in_worker": same_outputs(work / "worker_old" / "run1",
+                                               work / "worker_new" / "run1"),
+        "load_before": before, "load_after": load(),
+    }, indent=1))  # fmt: skip
+
+
+if __name__ == "__main__":
+    main()
