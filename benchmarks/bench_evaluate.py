@@ -35,7 +35,8 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-TIMINGS = ("build_seconds", "wall_seconds")  # summary.json of map: the stage's own times
+# summary.json of map: the stage's own times, and its output folder (old and new differ)
+TIMINGS = ("build_seconds", "wall_seconds", "output")
 
 
 def worker(tree: Path, out: Path, keys: list[str]) -> None:
@@ -83,7 +84,7 @@ def run_worker(tree: Path, out: Path, keys: list[str], src: Path | None) -> dict
 
 def same_outputs(a: Path, b: Path) -> dict:
     """Compare two output folders: non-PNG files byte for byte (summary.json's timings
-    aside), PNG files by name."""
+    and output folder aside), PNG files by name."""
     fa = {p.relative_to(a) for p in a.rglob("*") if p.is_file()}
     fb = {p.relative_to(b) for p in b.rglob("*") if p.is_file()}
     differ = []
