@@ -18,6 +18,13 @@ the new (the installed), alternately, into a scratch directory, two ways:
 Prints one JSON object: per step and kind, old and new CPU seconds and their ratio, the
 load average before and after, and whether the two codes' outputs are the same (every
 non-PNG file byte for byte, summary.json's timings aside; the PNG files by name).
+
+``--reproduce``: instead, the whole ``reproduce --quick --seeds 1 --jobs 2``, old and new
+alternately ``--repeat`` times, each in a fresh process whose pool workers record the CPU
+time of every step (``run_step`` wrapped): per kind of step (simulate, run, map,
+evaluate) the CPU summed over the steps, the workers' CPU outside the steps (imports;
+the old code imports on demand, the new in the parent before the fork), the parent's own
+CPU and the whole tree's (user + sys of every process), and the wall time.
 """
 
 from __future__ import annotations
@@ -69,6 +76,101 @@ def worker(tree: Path, out: Path, keys: list[str]) -> None:
     print(json.dumps(result))
 
 
+def drive(out: Path, record: Path) -> None:
+    """``reproduce --quick --seeds 1 --jobs 2`` into ``out`` in this process, its pool
+    workers appending each step's CPU (s) to ``record`` (JSON lines)."""
+    import resource
+
+    os.environ["FUZZYSLAM_NO_PROGRESS"] = "1"
+    c0 = time.process_time()
+    from fuzzyslam.reproduce import execute, stage
+
+    real = execute.run_step
+
+    def run_step(kind, call, root):
+        t0, first = time.process_time(), not hasattr(run_step, "seen")
+        if first:  # the worker's CPU before its first step: the fork's and imports
+            run_step.seen = True
+            with open(record, "a") as f:
+                f.write(json.dumps({"pid": os.getpid(), "before_first_s": t0}) + "\n")
+        res = real(kind, call, root)
+        with open(record, "a") as f:
+            f.write(json.dumps({"pid": os.getpid(), "kind": kind, "cpu_s": time.process_time() - t0,
+                                "cpu_total_s": time.process_time()}) + "\n")  # fmt: skip
+        return res
+
+    run_step.__module__, run_step.__qualname__ = real.__module__, real.__qualname__
+    execute.run_step = run_step  # the forked workers run it (pickled by name)
+    w0 = time.perf_counter()
+    stage.reproduce(out, [0], quick=True, jobs=2)
+    wall = time.perf_counter() - w0
+    ch = resource.getrusage(resource.RUSAGE_CHILDREN)
+    print(json.dumps({"parent_cpu_s": time.process_time() - c0, "wall_s": wall,
+                      "children_cpu_s": ch.ru_utime + ch.ru_stime}))  # fmt: skip
+
+
+def reproduce_side_by_side(args, src: Path, work: Path) -> dict:
+    """``drive`` with the old and the new code alternately; CPU per kind of step."""
+    from sidebyside import load
+
+    before = load()
+    res: dict[str, list[dict]] = {"old": [], "new": []}
+    for rep in range(args.repeat):
+        for v in ("old", "new"):
+            out, record = work / f"reproduce_{v}{rep}", work / f"steps_{v}{rep}.jsonl"
+            shutil.rmtree(out, ignore_errors=True)
+            record.unlink(missing_ok=True)
+            env = {**os.environ, "FUZZYSLAM_NO_PROGRESS": "1", "MPLBACKEND": "Agg"}
+            env.pop("PYTHONPATH", None)
+            if v == "old":
+                env["PYTHONPATH"] = str(src)
+            cmd = [sys.executable, __file__, "--drive", str(out), str(record)]
+            p = subprocess.run(cmd, env=env, cwd=tempfile.gettempdir(), capture_output=True,
+                               text=True)  # fmt: skip
+            if p.returncode != 0:
+                raise RuntimeError(p.stderr.strip()[-800:])
+            top = json.loads(p.stdout.strip().splitlines()[-1])
+            rows = [json.loads(ln) for ln in record.read_text().splitlines()]
+            kinds: dict[str, float] = defaultdict(float)
+            last: dict[int, float] = {}
+            steps_cpu = defaultdict(float)
+            for r in rows:
+                if "kind" in r:
+                    kinds[r["kind"]] += r["cpu_s"]
+                    steps_cpu[r["pid"]] += r["cpu_s"]
+                    last[r["pid"]] = r["cpu_total_s"]
+            outside = sum(last[pid] - steps_cpu[pid] for pid in last)
+            res[v].append({"by_kind_s": dict(kinds), "workers_outside_steps_s": outside,
+                           "parent_s": top["parent_cpu_s"], "wall_s": top["wall_s"],
+                           "tree_cpu_s": top["parent_cpu_s"] + top["children_cpu_s"]})  # fmt: skip
+
+    def best(v: str, get) -> float:
+        return min(get(r) for r in res[v])
+
+    keys = ["simulate", "run", "map", "evaluate"]
+    table = {}
+    for k in keys:
+        table[f"{k} (sum over steps)"] = tuple(
+            best(v, lambda r, k=k: r["by_kind_s"].get(k, 0.0)) for v in ("old", "new")
+        )
+    table["workers outside steps (imports)"] = (
+        best("old", lambda r: r["workers_outside_steps_s"]),
+        best("new", lambda r: r["workers_outside_steps_s"]),
+    )
+    table["parent (plan, preload, report, summary.png)"] = (
+        best("old", lambda r: r["parent_s"]), best("new", lambda r: r["parent_s"]))  # fmt: skip
+    table["whole tree CPU"] = (best("old", lambda r: r["tree_cpu_s"]),
+                               best("new", lambda r: r["tree_cpu_s"]))  # fmt: skip
+    table["wall"] = (best("old", lambda r: r["wall_s"]), best("new", lambda r: r["wall_s"]))
+    return {"reproduce": "--quick --seeds 1 --jobs 2", "repeat": args.repeat,
+            "best_of_repeats_s": {k: {"old": round(o, 2), "new": round(n, 2),
+                                      "ratio": round(o / n, 2) if n else None}
+                                  for k, (o, n) in table.items()},
+            "runs": res, "same_outputs": same_outputs(work / "reproduce_old0",
+                                                      work / "reproduce_new0"),
+            "load_before": before, "load_after": load()}  # fmt: skip
+
+
 def run_worker(tree: Path, out: Path, keys: list[str], src: Path | None) -> dict:
     """``worker`` in a fresh process with the old (``src``) or the new code."""
     env = {**os.environ, "FUZZYSLAM_NO_PROGRESS": "1", "MPLBACKEND": "Agg"}
@@ -110,10 +212,16 @@ def main() -> None:
                     help="a `reproduce --quick` output with seed 0's logs")  # fmt: skip
     ap.add_argument("--repeat", type=int, default=1)
     ap.add_argument("--workdir", type=Path, default=None)
+    ap.add_argument("--reproduce", action="store_true",
+                    help="the whole reproduce --quick --seeds 1: CPU per kind of step")  # fmt: skip
     ap.add_argument("--worker", nargs="+", help=argparse.SUPPRESS)
+    ap.add_argument("--drive", nargs=2, help=argparse.SUPPRESS)
     args = ap.parse_args()
     if args.worker:
         worker(Path(args.worker[0]), Path(args.worker[1]), args.worker[2:])
+        return
+    if args.drive:
+        drive(Path(args.drive[0]), Path(args.drive[1]))
         return
     from sidebyside import export_revision, load, run_cli
 
@@ -121,6 +229,10 @@ def main() -> None:
 
     work = args.workdir or Path(tempfile.mkdtemp(prefix="bench_evaluate."))
     work.mkdir(parents=True, exist_ok=True)
+    if args.reproduce:
+        print(json.dumps(reproduce_side_by_side(args, export_revision(args.baseline), work),
+                         indent=1))  # fmt: skip
+        return
     tree = args.tree
     if tree is None:
         tree = work / "tree"
