@@ -42,8 +42,31 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-# summary.json of map: the stage's own times, and its output folder (old and new differ)
-TIMINGS = ("build_seconds", "wall_seconds", "output")
+# the times the outputs record, left out of the comparison: summary.json of map and run,
+# results.json (its step times and "Cost" rows); and the map's output folder (old and new
+# write to two)
+TIMINGS = {"build_seconds", "wall_seconds", "output", "real_time_factor", "wall_time_s",
+           "seconds", "pid", "wall_s"}  # fmt: skip
+
+
+def _untimed(name: str, data: bytes) -> bytes:
+    """A file's bytes without the times it records (JSON keys of TIMINGS, results.json's
+    Cost rows, report.md's Cost and wall-time lines)."""
+
+    def mask(obj):
+        if isinstance(obj, dict):
+            if str(obj.get("group", "")).startswith("Cost"):
+                return None
+            return {k: mask(v) for k, v in obj.items() if k not in TIMINGS}
+        return [mask(v) for v in obj] if isinstance(obj, list) else obj
+
+    if name.endswith(".json"):
+        return json.dumps(mask(json.loads(data)), sort_keys=True).encode()
+    if name == "report.md":
+        keep = [ln for ln in data.decode().splitlines()
+                if "Cost" not in ln and "wall time" not in ln]  # fmt: skip
+        return "\n".join(keep).encode()
+    return data
 
 
 def worker(tree: Path, out: Path, keys: list[str]) -> None:
@@ -185,8 +208,8 @@ def run_worker(tree: Path, out: Path, keys: list[str], src: Path | None) -> dict
 
 
 def same_outputs(a: Path, b: Path) -> dict:
-    """Compare two output folders: non-PNG files byte for byte (summary.json's timings
-    and output folder aside), PNG files by name."""
+    """Compare two output folders: non-PNG files byte for byte (the times they record
+    aside: :func:`_untimed`), PNG files by name."""
     fa = {p.relative_to(a) for p in a.rglob("*") if p.is_file()}
     fb = {p.relative_to(b) for p in b.rglob("*") if p.is_file()}
     differ = []
@@ -194,9 +217,8 @@ def same_outputs(a: Path, b: Path) -> dict:
         if r.suffix == ".png":
             continue
         x, y = (a / r).read_bytes(), (b / r).read_bytes()
-        if x != y and r.name == "summary.json":
-            jx, jy = json.loads(x), json.loads(y)
-            x, y = (json.dumps({k: v for k, v in j.items() if k not in TIMINGS}) for j in (jx, jy))
+        if x != y and r.name in ("summary.json", "results.json", "report.md"):
+            x, y = _untimed(r.name, x), _untimed(r.name, y)
         if x != y:
             differ.append(str(r))
     files = sum(1 for r in fa & fb if r.suffix != ".png")
