@@ -15,6 +15,8 @@ process of the run) of both, the speed-up, whether the two reports' tables are t
 and the target (one seed: <= 30 s wall on 2 cores).
 
     python benchmarks/bench_reproduce.py --seeds 1 --baseline main --only full
+
+``--quick``: the two-run scenarios (``reproduce --quick``), e.g. the test suite's plans.
 """
 
 from __future__ import annotations
@@ -52,16 +54,18 @@ def main() -> None:
     ap.add_argument("--baseline", metavar="REV", default=None,
                     help="git revision of the old code to time side by side")  # fmt: skip
     ap.add_argument("--repeat", type=int, default=1)
+    ap.add_argument("--quick", action="store_true", help="reproduce --quick")
     args = ap.parse_args()
     if args.baseline:
         side_by_side_reproduce(args)
         return
 
-    from fuzzyslam.reproduce.plan import FULL, build_plan
+    from fuzzyslam.reproduce.plan import FULL, QUICK, build_plan
 
     work = args.workdir or Path(tempfile.mkdtemp(prefix="bench_reproduce."))
     env = {**os.environ, "FUZZYSLAM_NO_PROGRESS": "1", "MPLBACKEND": "Agg"}
-    variants = [("paper", ["--paper-only"]), ("full", [])]
+    quick = ["--quick"] if args.quick else []
+    variants = [("paper", ["--paper-only", *quick]), ("full", quick)]
     for name, extra in variants:
         if args.only and name != args.only:
             continue
@@ -76,7 +80,8 @@ def main() -> None:
             continue
         res = json.loads((out / "results.json").read_text())
         steps = res["steps"]
-        plan = build_plan(list(range(args.seeds)), FULL, beyond=(name == "full"))
+        suite = QUICK if args.quick else FULL
+        plan = build_plan(list(range(args.seeds)), suite, beyond=(name == "full"))
         deps = {s.key: s.deps for s in plan}
         by_kind: dict[str, float] = defaultdict(float)
         for s in steps:
@@ -87,13 +92,38 @@ def main() -> None:
             "seeds": args.seeds,
             "jobs": args.jobs,
             "wall_s": round(wall, 1),
-            "target_wall_s": 60.0 if name == "paper" and args.seeds == 1 else None,
+            "quick": args.quick,
+            "target_wall_s": 60.0 if name == "paper" and args.seeds == 1 and not quick else None,
             "work_s": round(work_s, 1),
             "work_by_command_s": {k: round(v, 1) for k, v in sorted(by_kind.items())},
             "bound_longest_chain_s": round(chain_bound(steps, deps), 1),
             "bound_work_over_jobs_s": round(work_s / args.jobs, 1),
             "steps": len(steps),
         }))  # fmt: skip
+
+
+TIMINGS = {"build_seconds", "wall_seconds", "real_time_factor", "wall_time_s"}
+
+
+def same_files(a: Path, b: Path) -> dict:
+    """Two reproduce outputs file by file: every non-PNG file byte for byte, but for the
+    times they record (the steps' summary.json: those keys; results.json and report.md,
+    whose tables are compared as ``same_table``); PNG files by name."""
+    fa = {p.relative_to(a) for p in a.rglob("*") if p.is_file()}
+    fb = {p.relative_to(b) for p in b.rglob("*") if p.is_file()}
+    differ, compared = [], 0
+    for r in sorted(fa & fb):
+        if r.suffix == ".png" or r in (Path("results.json"), Path("report.md")):
+            continue
+        compared += 1
+        x, y = (a / r).read_bytes(), (b / r).read_bytes()
+        if x != y and r.name == "summary.json":
+            x, y = (json.dumps({k: v for k, v in json.loads(z).items() if k not in TIMINGS})
+                    for z in (x, y))  # fmt: skip
+        if x != y:
+            differ.append(str(r))
+    only = {"only_old": sorted(map(str, fa - fb)), "only_new": sorted(map(str, fb - fa))}
+    return {"compared": compared, "different": differ, **only}
 
 
 def side_by_side_reproduce(args) -> None:
@@ -104,7 +134,8 @@ def side_by_side_reproduce(args) -> None:
     src = export_revision(args.baseline)
     work = args.workdir or Path(tempfile.mkdtemp(prefix="bench_reproduce."))
     work.mkdir(parents=True, exist_ok=True)
-    for name, extra in (("paper", ["--paper-only"]), ("full", [])):
+    quick = ["--quick"] if args.quick else []
+    for name, extra in (("paper", ["--paper-only", *quick]), ("full", quick)):
         if args.only and name != args.only:
             continue
         outs = {v: work / f"{name}_{v}" for v in ("old", "new")}
@@ -115,9 +146,12 @@ def side_by_side_reproduce(args) -> None:
         tables = [[ln for ln in (outs[v] / "report.md").read_text().splitlines()
                    if ln.startswith("| ") and "Cost" not in ln and "time" not in ln]
                   for v in ("old", "new")]  # fmt: skip
-        print(json.dumps({"variant": name, "seeds": args.seeds, "jobs": args.jobs,
+        print(json.dumps({"variant": name, "quick": args.quick, "seeds": args.seeds,
+                          "same_files": same_files(outs["old"], outs["new"]),
+                          "jobs": args.jobs,
                           "baseline": args.baseline, **res,
-                          "target_wall_s": 30.0 if args.seeds == 1 and name == "full" else None,
+                          "target_wall_s": 30.0 if args.seeds == 1 and name == "full"
+                          and not args.quick else None,
                           "same_table": tables[0] == tables[1],
                           "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
 

@@ -32,8 +32,8 @@ from fuzzyslam.fileio import OutputDir, check_input_file, check_outputs
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.progress import Progress, note
 from fuzzyslam.rundir import split_label  # LABEL=PATH of --compare
+from fuzzyslam.se2 import quaternion_to_yaw
 from fuzzyslam.streams.logmeta import read_scenario, read_world
-from fuzzyslam.streams.messages import pose_of
 from fuzzyslam.streams.reader import MCAP_MAGIC, LogReader
 from fuzzyslam.streams.topics import Topics
 from fuzzyslam.streams.tum import format_tum, read_tum, read_tum_planar
@@ -99,23 +99,25 @@ def read_truth(path: str | os.PathLike) -> Truth:
         topic = scenario.config.get("topics", {}).get("ground_truth", topic)
     if topic not in reader.topics:
         raise InputError(path, f"log has no ground truth (no topic {topic}); give a simulated log")
-    ts, ps = [], []
+    ts, rows = [], []  # (x, y, qx, qy, qz, qw) per message; the yaws at once below
     with Progress(reader.end - reader.start, "evaluate: reading ground truth") as bar:
         for lm in reader.messages([topic]):
+            p = lm.msg.pose.pose
+            o = p.orientation
             ts.append(lm.t)
-            ps.append(pose_of(lm.msg.pose.pose))
+            rows.append((p.position.x, p.position.y, o.x, o.y, o.z, o.w))
             bar.update_to(lm.t - reader.start)
     if len(ts) < 2:
         raise InputError(path, f"ground truth topic {topic} holds fewer than two poses")
     t = np.asarray(ts)
+    raw = np.asarray(rows, dtype=float)
+    ps = np.column_stack([raw[:, 0], raw[:, 1], quaternion_to_yaw(raw[:, 2:])])  # as pose_of
     order = np.argsort(t, kind="stable")
     freeze = None
     if scenario is not None:
         fr = scenario.config.get("fgm", {}).get("freeze_run")
         freeze = int(fr) if fr is not None else None
-    return Truth(
-        t[order], np.asarray(ps)[order], world, scenario, freeze, str(path), reader.damage()
-    )
+    return Truth(t[order], ps[order], world, scenario, freeze, str(path), reader.damage())
 
 
 # --- estimate -----------------------------------------------------------------------------
@@ -207,8 +209,10 @@ def read_landmark_history(path: Path, topic: str) -> list[tuple[float, np.ndarra
     return out
 
 
-def read_estimate(path: str | os.PathLike, label: str | None = None) -> Estimate:
-    """An estimate from a run OUTDIR (every file it holds) or a TUM file (poses only)."""
+def read_estimate(path: str | os.PathLike, label: str | None = None, full: bool = True) -> Estimate:
+    """An estimate from a run OUTDIR (every file it holds) or a TUM file (poses only);
+    ``full=False``: only what a compared estimate's row and curve need (trajectory.tum and
+    landmarks.yaml: not the covariances, updates, dead reckoning, fixes or map history)."""
     kind = detect_kind(path)
     p = Path(path)
     if kind == KIND_TUM:
@@ -221,12 +225,14 @@ def read_estimate(path: str | os.PathLike, label: str | None = None) -> Estimate
         raise InputError(p, "not a run output directory (no trajectory.tum)")
     t, poses = read_tum(traj)
     est = Estimate(t, poses, label=label or p.name, source=str(p))
+    if (p / R.LANDMARKS).is_file():
+        est.landmarks, est.landmark_ids = R.read_landmarks(p / R.LANDMARKS)
+    if not full:
+        return est
     if (p / R.COVARIANCE).is_file():
         est.cov = read_covariance(p / R.COVARIANCE, t.size)
     if (p / R.ODOMETRY).is_file():
         est.odometry = read_tum(p / R.ODOMETRY)
-    if (p / R.LANDMARKS).is_file():
-        est.landmarks, est.landmark_ids = R.read_landmarks(p / R.LANDMARKS)
     if (p / R.UPDATES).is_file():
         est.updates = read_updates(p / R.UPDATES)
     if (p / R.HEADING_FIXES).is_file():
@@ -292,7 +298,9 @@ def run_evaluate(
     check_outputs([truth_path, estimate_path, *compare, *extra_inputs], [outdir])
     fgm = read_fgm(map_dir) if map_dir is not None else None
     est = read_estimate(estimate_path, label)
-    others = [read_estimate(c, lab) for lab, c in labelled]
+    # a compared estimate gives a row of the side-by-side table and a curve: its
+    # trajectory and lamps only
+    others = [read_estimate(c, lab, full=False) for lab, c in labelled]
     truth = read_truth(truth_path)
     if landmarks_truth is not None:
         truth.landmarks, _ = R.read_landmarks(Path(landmarks_truth))

@@ -17,16 +17,18 @@ from numpy.typing import NDArray
 
 from fuzzyslam.evaluation.core import Estimate, Evaluation, Truth
 from fuzzyslam.evaluation.lamps import LampMatch
+from fuzzyslam.figsave import save_png
 from fuzzyslam.maps.grid import BeliefMap
+from fuzzyslam.slam.health import chi2_quantile
 from fuzzyslam.streams.logmeta import World
 
 Array = NDArray[np.float64]
-DPI = 120
+DPI = 120  # figures are made at their PNG's dpi: the layout's text sizes are the drawing's
 C_TRUTH, C_EST, C_ODOM = "black", "tab:blue", "tab:red"
 
 
 def _save(fig: plt.Figure, path: Path) -> None:
-    fig.savefig(path, dpi=DPI, bbox_inches="tight", format="png")
+    save_png(fig, path, DPI, tight=True)  # one draw, cropped as bbox_inches="tight"
     plt.close(fig)
 
 
@@ -40,7 +42,7 @@ def fig1_paths(
 ) -> None:
     """Fig. 1: true, estimated and odometry-only paths; true and estimated lamps (duplicated and
     missed ones marked when lamp_match is given); walls; the FGM underneath when given."""
-    fig, ax = plt.subplots(figsize=(9, 6.5))
+    fig, ax = plt.subplots(figsize=(9, 6.5), dpi=DPI)
     if fgm is not None:
         im = ax.imshow(
             fgm.pignistic_occupied(),
@@ -199,7 +201,7 @@ def fig3_errors(path: Path, truth: Truth, ev: Evaluation, title: str = "") -> No
     """Fig. 3: x, y (cm) and heading (deg) errors against time, +-2 sigma from the covariance,
     run boundaries, the FGM freeze, lamp failures and bumps marked."""
     t = ev.assoc.t
-    fig, axes = plt.subplots(3, 1, figsize=(10, 7.5), sharex=True)
+    fig, axes = plt.subplots(3, 1, figsize=(10, 7.5), sharex=True, dpi=DPI)
     scale = [100.0, 100.0, 180.0 / np.pi]
     names = ["x error (cm)", "y error (cm)", "heading error (deg)"]
     for k, ax in enumerate(axes):
@@ -231,7 +233,7 @@ def fig4_lamp_errors(
 ) -> None:
     """Fig. 4: position error of each true lamp (cm), one bar group per lamp, one bar per
     labelled estimate (e.g. end of run 4, end of run 6, with bumps). Missed lamps: a cross."""
-    fig, ax = plt.subplots(figsize=(10, 4))
+    fig, ax = plt.subplots(figsize=(10, 4), dpi=DPI)
     labels = list(per_lamp)
     n = max((len(v) for v in per_lamp.values()), default=0)
     width = 0.8 / max(len(labels), 1)
@@ -281,15 +283,13 @@ def running_mean(v: Array, frac: float = 0.02) -> Array:
 def fig_consistency(path: Path, truth: Truth, est: Estimate, ev: Evaluation) -> bool:
     """NEES (3 dof) against time with its per-sample 95 % band, and NIS of accepted updates
     per kind, normalised by dof. Returns False (nothing drawn) without covariance or updates."""
-    from scipy.stats import chi2
-
     has_nis = est.updates is not None and est.updates.t.size > 0
     if ev.nees is None and not has_nis:
         return False
-    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True)
+    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True, dpi=DPI)
     ax = axes[0]
     if ev.nees is not None:
-        lo, hi = chi2.ppf([0.025, 0.975], 3)
+        lo, hi = chi2_quantile(0.025, 3), chi2_quantile(0.975, 3)
         ax.semilogy(
             ev.assoc.t,
             np.maximum(ev.nees, 1e-2),
@@ -359,7 +359,7 @@ def fig_compare(path: Path, truth: Truth, runs: Sequence[tuple[str, Evaluation]]
     """Position error (cm, log scale) against time of several estimates of one truth, with
     the run boundaries, the FGM freeze, lamp failures and bumps marked (``evaluate
     --compare``)."""
-    fig, ax = plt.subplots(figsize=(10, 4.2))
+    fig, ax = plt.subplots(figsize=(10, 4.2), dpi=DPI)
     for label, ev in runs:
         err = np.hypot(ev.errors[:, 0], ev.errors[:, 1]) * 100.0
         ax.plot(ev.assoc.t, np.maximum(err, 1e-3), lw=0.9, label=label)

@@ -12,6 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
+from fuzzyslam.figsave import save_png
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.maps.flm import build_flm
 from fuzzyslam.maps.grid import BeliefMap
@@ -21,10 +22,12 @@ from fuzzyslam.maps.references import Reference
 from fuzzyslam.rundir import read_landmarks
 from fuzzyslam.streams.logmeta import World
 
+DPI = 110  # figures are made at their PNG's dpi: the layout's text sizes are the drawing's
+
 
 def _save(fig, path: Path) -> None:
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", dpi=110)
+        save_png(fig, tmp, DPI)  # one draw, RGB at a cheaper zlib level
     plt.close(fig)
 
 
@@ -53,7 +56,7 @@ def fig_fgm(
     landmarks : ndarray, shape (K, 2), or None
         Estimated lamps.
     """
-    fig, ax = plt.subplots(figsize=(9, 6))
+    fig, ax = plt.subplots(figsize=(9, 6), dpi=DPI)
     im = ax.imshow(
         fgm.pignistic_occupied(),
         origin="lower",
@@ -93,7 +96,7 @@ def fig_conflict(path: Path, fgm: BeliefMap) -> None:
     fgm : BeliefMap
         The FGM.
     """
-    fig, ax = plt.subplots(figsize=(9, 6))
+    fig, ax = plt.subplots(figsize=(9, 6), dpi=DPI)
     im = ax.imshow(fgm.m_c, origin="lower", extent=fgm.grid.extent, cmap="magma", vmin=0)
     fig.colorbar(im, ax=ax, label="m(conflict) (mass)")
     ax.set_xlabel("x (m)")
@@ -172,7 +175,9 @@ def fig_hough(
     n = len(refs) + (1 if flm is not None else 0)
     cols = min(max(n, 1), HOUGH_COLUMNS)
     blocks = -(-max(n, 1) // cols)
-    fig, grid = plt.subplots(2 * blocks, cols, figsize=(3.6 * cols, 7 * blocks), squeeze=False)
+    fig, grid = plt.subplots(
+        2 * blocks, cols, figsize=(3.6 * cols, 7 * blocks), squeeze=False, dpi=DPI
+    )
     for ax in grid.ravel():
         ax.set_axis_off()
 

@@ -24,6 +24,7 @@ import json
 import multiprocessing
 import os
 import socket
+import sys
 import threading
 import time
 from collections.abc import Callable
@@ -69,12 +70,15 @@ _STEP_LOCK = threading.Lock()
 
 
 def _where() -> str:
-    """The address of the Dask worker running this task, or "local" outside Dask."""
+    """The address of the Dask worker running this task, or "local" outside Dask (a
+    process without ``distributed`` loaded is no Dask worker: importing it only to ask
+    would cost a local pool worker a second of CPU)."""
+    dist = sys.modules.get("distributed")
+    if dist is None:
+        return "local"
     try:
-        from distributed import get_worker
-
-        return get_worker().address
-    except (ImportError, ValueError):
+        return dist.get_worker().address
+    except ValueError:
         return "local"
 
 
@@ -85,6 +89,32 @@ STAGES = {
     "map": "fuzzyslam.maps.stage",
     "evaluate": "fuzzyslam.evaluation.stage",
 }
+
+
+# What the steps import on demand (inside functions), loaded with the stage entries by
+# :func:`preload` in the parent of a forked pool, which its workers then share
+PRELOAD = (
+    "fuzzyslam.sim.record",
+    "fuzzyslam.fixes.aids",
+    "fuzzyslam.maps.figures",
+    "fuzzyslam.maps.viewer",
+    "fuzzyslam.streams.writer",
+    "fuzzyslam.evaluation.changes",
+    "fuzzyslam.evaluation.figures",
+    "fuzzyslam.evaluation.report",
+)
+
+
+def preload() -> None:
+    """Import every stage's entry and what its steps import on demand, and build the
+    rosbags typestore, in this process. Called before a local pool forks its workers, so
+    that they inherit the modules instead of each importing them again (matplotlib,
+    scipy, the stages: about 2 s of CPU per worker)."""
+    for module in (*STAGES.values(), *PRELOAD):
+        importlib.import_module(module)
+    from fuzzyslam.streams.typestore import typestore
+
+    typestore()
 
 
 def _entry(kind: str) -> Callable[..., dict[str, Any]]:
@@ -177,6 +207,8 @@ class Engine:
         if scheduler is None:
             self.jobs = max(1, jobs or os.cpu_count() or 1)
             ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
+            if ctx.get_start_method() == "fork":
+                preload()  # the workers, forked at the first step, inherit the imports
             self.pool: Executor = ProcessPoolExecutor(self.jobs, mp_context=ctx)
             self.where = f"a local pool of {self.jobs} processes"
             return

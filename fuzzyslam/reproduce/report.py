@@ -146,6 +146,7 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
 
     from fuzzyslam.evaluation.evaluate import read_truth
     from fuzzyslam.evaluation.metrics import associate, pose_errors
+    from fuzzyslam.figsave import save_png
     from fuzzyslam.streams.tum import read_tum
 
     panels = [
@@ -159,7 +160,9 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
     panels = [p for p in panels if (root / seed_dir / f"{p[0]}.mcap").is_file()]
     if not panels:
         return False
-    fig, axes = plt.subplots(len(panels), 1, figsize=(10, 3.5 * len(panels)), squeeze=False)
+    fig, axes = plt.subplots(
+        len(panels), 1, figsize=(10, 3.5 * len(panels)), squeeze=False, dpi=110
+    )
     axes = axes[:, 0]
     for ax, (log, title, runs) in zip(axes, panels, strict=True):
         truth = read_truth(root / seed_dir / f"{log}.mcap")
@@ -183,7 +186,7 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
         ax.legend(fontsize=8, loc="upper left")
     axes[-1].set_xlabel("log time (s)")
     fig.tight_layout()
-    fig.savefig(out, dpi=110)
+    save_png(fig, out, 110)  # one draw, RGB (fuzzyslam/figsave.py)
     plt.close(fig)
     return True
 
