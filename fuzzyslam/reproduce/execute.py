@@ -95,7 +95,11 @@ STAGES = {
 # :func:`preload` in the parent of a forked pool, which its workers then share
 PRELOAD = (
     "fuzzyslam.sim.record",
-    "fuzzyslam.fixes.aids",
+    # the aids import their modules when a run asks for them (fixes/aids.py)
+    "fuzzyslam.fixes.heading",
+    "fuzzyslam.fixes.pose_aid",
+    "fuzzyslam.fixes.changes",
+    "fuzzyslam.maps.mapio",
     "fuzzyslam.maps.figures",
     "fuzzyslam.maps.viewer",
     "fuzzyslam.streams.writer",
