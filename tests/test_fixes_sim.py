@@ -40,13 +40,16 @@ def invoke(args: list[str]) -> dict:
 
 
 def chain(tmp: Path, scenario: dict, seed: int) -> tuple[Path, Path]:
-    """simulate, run (lamps only), map frozen at the end of run 1: (log, fgm dir)."""
+    """simulate, run (lamps only), map frozen at the end of run 1: (log, fgm dir). The
+    map's figures are not drawn (no test here or in test_viewer reads them; test_figures
+    and test_maps_cli check them): the map's files are the same either way."""
     cfg = tmp / "scenario.yaml"
     cfg.write_text(yaml.safe_dump({"extends": "quick.yaml", "name": "fixsim", **scenario}))
     log = tmp / "log.mcap"
     invoke(["simulate", cfg, "-o", log, "--seed", seed])
     invoke(["run", log, "-o", tmp / "A", "--config", cfg])
-    invoke(["map", log, "--trajectory", tmp / "A" / "trajectory.tum", "-o", tmp / "fgm"])
+    invoke(["map", log, "--trajectory", tmp / "A" / "trajectory.tum", "-o", tmp / "fgm",
+            "--no-figures"])  # fmt: skip
     return log, tmp / "fgm"
 
 

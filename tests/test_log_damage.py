@@ -1,10 +1,12 @@
 """Corrupt MCAP structure (issue 14, class 3): every structural field is bounds-checked.
 
-Real faults are injected into a copy of the committed sample log (data/sample.mcap): a
-bit flip in a chunk header's length fields, a Chunk Index offset off by 64 KiB, a
-Message Index whose length is not a multiple of 16, random byte flips in the summary
-and index region. ``run`` and ``run --map`` (sonar rings read through the same reader)
-must exit 0 with ``log_damage`` counting the damage, or 3 with one line, never 1.
+Real faults are injected into a copy of a short simulated log (test_robust_logs'
+``tiny``, 38 s written in 256 KiB chunks: 19 chunks, each with its Message Indexes,
+and the summary; the sample log of data/ has 9 chunks and costs twice as much to run
+and map): a bit flip in a chunk header's length fields, a Chunk Index offset off by
+64 KiB, a Message Index whose length is not a multiple of 16, random byte flips in the
+summary and index region. ``run`` and ``run --map`` (sonar rings read through the same
+reader) must exit 0 with ``log_damage`` counting the damage, or 3 with one line, never 1.
 Where the damage loses no message (a wrong index over intact data), the outputs must be
 the undamaged run's.
 """
@@ -21,15 +23,17 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+import test_robust_logs
 from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
-from test_robust_logs import cli  # the in-process CLI runner the robustness tests share
+from test_robust_logs import Tiny, cli  # the in-process CLI runner the robustness tests share
 
 from fuzzyslam.errors import InputError
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.typestore import deserialize
 
 SAMPLE = Path(__file__).resolve().parents[1] / "data" / "sample.mcap"
+tiny = test_robust_logs.tiny  # the session fixture: a short simulated log, its run and map
 FOOTER_TAIL = 8 + 29  # footer record (opcode, length, 2 x u64, crc) + magic
 OP_CHUNK_INDEX = 0x08
 
@@ -88,6 +92,7 @@ def channel_id(path: Path, topic: str) -> int:
 class Base:
     dir: Path
     log: Path
+    config: Path
     data: bytes
     chunks: list[ChunkAt]
     est: Path
@@ -97,23 +102,24 @@ class Base:
 
 
 @pytest.fixture(scope="module")
-def base(tmp_path_factory) -> Base:
+def base(tmp_path_factory, tiny: Tiny) -> Base:
     d = tmp_path_factory.mktemp("damage")
-    log = d / "sample.mcap"
-    shutil.copyfile(SAMPLE, log)
-    code, out, err = cli("run", log, "-o", d / "est")
+    log, cfg = d / "tiny.mcap", tiny.config
+    shutil.copyfile(tiny.small_chunks, log)
+    code, out, err = cli("run", log, "-o", d / "est", "--config", cfg)
     assert code == 0, err
     run = json.loads(out)
     code, _, err = cli(
-        "map", log, "--trajectory", d / "est" / "trajectory.tum", "-o", d / "fgm", "--no-figures"
-    )
+        "map", log, "--trajectory", d / "est" / "trajectory.tum", "-o", d / "fgm",
+        "--config", cfg, "--no-figures",
+    )  # fmt: skip
     assert code == 0, err
-    code, out, err = cli("run", log, "-o", d / "est_map", "--map", d / "fgm")
+    code, out, err = cli("run", log, "-o", d / "est_map", "--map", d / "fgm", "--config", cfg)
     assert code == 0, err
     data = log.read_bytes()
     chunks = chunks_of(data)
-    assert len(chunks) >= 4
-    return Base(d, log, data, chunks, d / "est", d / "fgm", run, json.loads(out))
+    assert len(chunks) >= 8
+    return Base(d, log, cfg, data, chunks, d / "est", d / "fgm", run, json.loads(out))
 
 
 def run_all(base: Base, data: bytes, td: Path) -> tuple[dict | None, ...]:
@@ -128,7 +134,8 @@ def run_all(base: Base, data: bytes, td: Path) -> tuple[dict | None, ...]:
         "fgm": ["map", log, "--trajectory", base.est / "trajectory.tum", "-o", td / "fgm"],
     }
     for name, args in commands.items():
-        code, stdout, stderr = cli(*args, *(["--no-figures"] if name == "fgm" else []))
+        extra = ["--config", base.config, *(["--no-figures"] if name == "fgm" else [])]
+        code, stdout, stderr = cli(*args, *extra)
         lines = [ln for ln in stderr.splitlines() if ln.strip()]
         assert code in (0, 3), stderr  # never 1 (an internal error)
         if code == 3:
@@ -162,8 +169,17 @@ def same_outputs(a: Path, b: Path) -> None:
 def test_bit_flip_in_a_chunk_header_length(base: Base, field: str, bit: int) -> None:
     """A flipped bit in a chunk's record length, compression-string length or records
     length: counted; the chunk is lost (or read whole by the record walk when only its
-    records length is wrong), every other chunk is read; never exit 1."""
+    records length is wrong, or whole through its Chunk Index when its record length is
+    wrong: then only the Message Index records after it are lost, never a message),
+    every other chunk is read; never exit 1."""
     c = base.chunks[len(base.chunks) // 2]
+    indexes = [  # its Message Index records, right after the chunk record
+        (off, off + 9 + struct.unpack_from("<Q", base.data, off + 1)[0])
+        for off in c.message_indexes.values()
+    ]
+    assert min(a for a, _ in indexes) == c.offset + c.length
+    index_bytes = max(b for _, b in indexes) - (c.offset + c.length)
+    assert index_bytes < c.length // 2  # the two outcomes below cannot be confused
     clen = struct.unpack_from("<I", base.data, c.offset + 9 + 28)[0]
     at = {
         "record": c.offset + 1,
@@ -182,7 +198,7 @@ def test_bit_flip_in_a_chunk_header_length(base: Base, field: str, bit: int) -> 
             dmg = s["log_damage"]
             assert dmg["damaged_records"] >= 1
             assert not dmg["truncated"]  # the summary is intact: read through it
-        if run["log_damage"]["lost_bytes"] == 0:  # the record walk still read the chunk
+        if run["log_damage"]["lost_bytes"] <= index_bytes:  # no message lost, if any index
             same_outputs(base.est, Path(td) / "est0")
         else:
             assert run["log_damage"]["lost_bytes"] >= c.length // 2
@@ -275,6 +291,9 @@ def damaged(base: Base, flip: list[tuple[int, int]], crc: bool) -> bytes:
     return bytes(data)
 
 
+START = 15.0  # seconds into the 38 s log: the reader's start seeks past its first 7 chunks
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize(
     "where",
@@ -289,9 +308,12 @@ def test_random_flips_never_break_the_reader(base: Base, where: str) -> None:
     anywhere (with the summary CRC stale or recomputed): only InputError, and the
     messages are a subset of the intact log's, none twice, each topic in log-time order."""
     topics = ["/joint_states", "/ceiling_camera/image_raw", "/sonar/s00", "/sonar/s09"]
-    intact = [(m.topic, m.t_ns) for m in LogReader(base.log).messages(topics)]
+    reader = LogReader(base.log)
+    intact = [(m.topic, m.t_ns) for m in reader.messages(topics)]
     full = set(intact)
     assert len(full) == len(intact)
+    later = [(m.topic, m.t_ns) for m in reader.messages(topics[2:], start=reader.start + START)]
+    assert 0 < len(later) < len(intact) / 2  # the intact log read from START: past chunks
 
     @settings(max_examples=30, deadline=None)
     @given(flips(base, where))
@@ -304,13 +326,13 @@ def test_random_flips_never_break_the_reader(base: Base, where: str) -> None:
             except InputError:
                 return
             a = [(m.topic, m.t_ns) for m in r.messages(topics)]
-            b = [(m.topic, m.t_ns) for m in r.messages(topics[2:], start=r.start + 30)]
+            b = [(m.topic, m.t_ns) for m in r.messages(topics[2:], start=r.start + START)]
         for got in (a, b):
             assert set(got) <= full and len(set(got)) == len(got)
             for tp in topics:
                 ts = [t for topic, t in got if topic == tp]
                 assert ts == sorted(ts)
-        assert all(t >= round((r.start + 30) * 1e9) for _, t in b)
+        assert all(t >= round((r.start + START) * 1e9) for _, t in b)
         assert all(v >= 0 for v in r.damage().values())
 
     check()

@@ -3,9 +3,11 @@ progress lines when stderr is a file, clean reruns and ``--keep-logs``."""
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
+import signal
 import struct
 import subprocess
 import sys
@@ -143,6 +145,7 @@ def dask_cluster(tmp_path_factory):
             [BIN / "dask", "scheduler", "--host", "127.0.0.1", "--port", "0",
              "--no-dashboard", "--scheduler-file", sched_file],
             stdout=subprocess.DEVNULL, stderr=open(logs / "scheduler.log", "w"), env=env,
+            start_new_session=True,  # a process group of its own, ended whole below
         )
     ]  # fmt: skip
     try:
@@ -158,7 +161,7 @@ def dask_cluster(tmp_path_factory):
                  "--nworkers", "1", "--host", "127.0.0.1", "--no-dashboard",
                  "--local-directory", home],
                 stdout=subprocess.DEVNULL, stderr=open(logs / f"worker{i}.log", "w"),
-                env={**env, "TMPDIR": str(home)}, cwd=home,
+                env={**env, "TMPDIR": str(home)}, cwd=home, start_new_session=True,
             ))  # fmt: skip
         with Client(scheduler_file=str(sched_file), timeout=30) as client:
             client.wait_for_workers(2, timeout=60)
@@ -166,13 +169,18 @@ def dask_cluster(tmp_path_factory):
             address = client.scheduler.address
         yield address, pids, tmp_path
     finally:
+        # SIGTERM to each process's own group: a worker's nanny and the worker process it
+        # started (SIGTERM to the nanny alone: it waits 8 s for a worker that ran a step,
+        # then kills it; an 8 s teardown of the module's last test)
         for p in reversed(procs):
-            p.terminate()
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(p.pid, signal.SIGTERM)
         for p in reversed(procs):
             try:
                 p.wait(timeout=20)
             except subprocess.TimeoutExpired:
-                p.kill()
+                os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
 
 
 TIMING = ("seconds", "wall_time_s", "real_time_factor", "wall_s")
@@ -338,8 +346,6 @@ def test_sweep_killed_halfway_goes_on_and_skips_the_finished_steps(tmp_path):
     """2 values x 2 seeds of sample.yaml (12 steps); SIGTERM after 4 finished steps; the
     rerun skips them (counted) and writes the table and the figure; every row's mean, sd,
     min and max equal numpy's over the two evaluations' metrics.json."""
-    import signal
-
     out = tmp_path / "sw"
     env = {k: v for k, v in os.environ.items() if k != "FUZZYSLAM_NO_PROGRESS"}
     proc = subprocess.Popen([sys.executable, "-m", "fuzzyslam", *SWEEP, "-o", str(out)],
