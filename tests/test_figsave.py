@@ -46,15 +46,21 @@ def _pixels(path) -> np.ndarray:
     return np.asarray(Image.open(path).convert("RGB"), dtype=float)
 
 
-def test_one_draw_gives_the_tight_savefig_picture(tmp_path) -> None:
+def _tight_pair(tmp_path, legend_x: float, dpi: int):
+    """The same figure written by savefig(bbox_inches="tight") and by save_png(tight=True):
+    their pixels (H, W, 3) and the new file's path."""
     ref, new = tmp_path / "ref.png", tmp_path / "new.png"
-    fig = _figure(legend_x=0.6)
-    fig.savefig(ref, dpi=120, bbox_inches="tight", format="png")
+    fig = _figure(legend_x=legend_x)
+    fig.savefig(ref, dpi=dpi, bbox_inches="tight", format="png")
     plt.close(fig)
-    fig = _figure(legend_x=0.6)
-    save_png(fig, new, 120, tight=True)
+    fig = _figure(legend_x=legend_x)
+    save_png(fig, new, dpi, tight=True)
     plt.close(fig)
-    a, b = _pixels(ref), _pixels(new)
+    return _pixels(ref), _pixels(new), new
+
+
+def test_one_draw_gives_the_tight_savefig_picture(tmp_path) -> None:
+    a, b, new = _tight_pair(tmp_path, legend_x=0.6, dpi=120)
     # the same box up to rounding to whole pixels
     assert abs(a.shape[0] - b.shape[0]) <= 2 and abs(a.shape[1] - b.shape[1]) <= 2
     # the same picture: the two agree but for anti-aliasing, once the crop's whole-pixel
@@ -67,14 +73,7 @@ def test_one_draw_gives_the_tight_savefig_picture(tmp_path) -> None:
 
 
 def test_an_artist_outside_the_figure_grows_the_picture_as_savefig(tmp_path) -> None:
-    ref, new = tmp_path / "ref.png", tmp_path / "new.png"
-    fig = _figure(legend_x=1.3)  # the legend right of the figure's edge
-    fig.savefig(ref, dpi=100, bbox_inches="tight", format="png")
-    plt.close(fig)
-    fig = _figure(legend_x=1.3)
-    save_png(fig, new, 100, tight=True)
-    plt.close(fig)
-    a, b = _pixels(ref), _pixels(new)
+    a, b, _ = _tight_pair(tmp_path, legend_x=1.3, dpi=100)  # the legend right of the edge
     assert a.shape[1] > 600 and a.shape == b.shape  # wider than the 6-inch figure: not cut
     assert _shifted_difference(a, b) < 0.5
 

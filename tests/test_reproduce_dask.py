@@ -67,8 +67,7 @@ def test_plan_progress_lines_and_heartbeat(monkeypatch):
     lines = out.getvalue().splitlines()
     assert lines == [
         "reproduce: 3 steps on here; writing into /x/.out.abc.part",
-        "reproduce: [1/3] seed4/AB done in 12.3 s (seed 4) on tcp://127.0.0.1:1234; "
-        "12 s elapsed",
+        "reproduce: [1/3] seed4/AB done in 12.3 s (seed 4) on tcp://127.0.0.1:1234; 12 s elapsed",
         "reproduce: [1/3] running: seed4/C 30 s, seed4/D 2 s; 42 s elapsed",
     ]
     monkeypatch.setenv("FUZZYSLAM_NO_PROGRESS", "1")
@@ -388,7 +387,8 @@ def test_sweep_killed_halfway_goes_on_and_skips_the_finished_steps(tmp_path):
             st = r["measures"][m]
             assert st["n"] == 2
             assert [st["mean"], st["sd"], st["min"], st["max"]] == pytest.approx(
-                [mean, sd, lo, hi], rel=1e-12)
+                [mean, sd, lo, hi], rel=1e-12
+            )
             assert cell == f"{mean:.2f}, {sd:.2f} [{lo:.2f}, {hi:.2f}]"
     # the seeds differ, so the statistics are not degenerate
     assert all(r["measures"]["mean position error (cm)"]["sd"] > 0 for r in summary["rows"])

@@ -124,5 +124,3 @@ def consistency(values: ArrayLike, dof: int) -> Consistency:
     frac = float(np.mean((v >= slo) & (v <= shi)))
     above = float(np.mean(v > 100.0))
     return Consistency(dof, int(v.size), m, lo, hi, bool(lo <= m <= hi), frac, above)
-
-

@@ -116,9 +116,7 @@ def recovery_streak(
     k = params.recover_after
     if k <= 0 or d.oblique or d.reason != "gated" or not formed(d):
         return []
-    if abs(float(wrap_angle(d.measured - d.predicted))) > math.radians(
-        params.recover_max_deg
-    ):
+    if abs(float(wrap_angle(d.measured - d.predicted))) > math.radians(params.recover_max_deg):
         return []  # as likely another corridor's walls as a bump (recover_max_deg)
     last = [d]
     for x in reversed(history):

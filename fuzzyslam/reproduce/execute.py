@@ -156,8 +156,10 @@ def run_step(kind: str, call: tuple[tuple[str, Any], ...], root: str) -> tuple:
 
     where, host, pid = _where(), socket.gethostname(), os.getpid()
     if not os.path.isdir(root):
-        msg = (f"{root}: the output directory is not visible on this worker ({where} on "
-               f"{host}); workers must share the filesystem at the same path")
+        msg = (
+            f"{root}: the output directory is not visible on this worker ({where} on "
+            f"{host}); workers must share the filesystem at the same path"
+        )
         return False, 0.0, None, msg, InputError.exit_code, "", where, host, pid
     with _STEP_LOCK:
         cwd = os.getcwd()
@@ -167,8 +169,11 @@ def run_step(kind: str, call: tuple[tuple[str, Any], ...], root: str) -> tuple:
         out, err = io.StringIO(), io.StringIO()
         t0 = time.perf_counter()
         try:
-            with threadpool_limits(limits=1), contextlib.redirect_stdout(out), \
-                    contextlib.redirect_stderr(err):
+            with (
+                threadpool_limits(limits=1),
+                contextlib.redirect_stdout(out),
+                contextlib.redirect_stderr(err),
+            ):
                 summary = _entry(kind)(**dict(call))
         except FuzzyslamError as exc:
             fail = " ".join(str(exc).split()), exc.exit_code
@@ -219,15 +224,17 @@ class Engine:
         try:
             from distributed import Client
         except ImportError:
-            raise InputError(scheduler, "--scheduler needs Dask: pip install "
-                             "'fuzzyslam[dask]'") from None
+            raise InputError(
+                scheduler, "--scheduler needs Dask: pip install 'fuzzyslam[dask]'"
+            ) from None
         try:
             self._client = Client(scheduler, timeout=10, set_as_default=False)
         except (OSError, TimeoutError) as exc:
             msg = " ".join(str(exc).split())
             raise InputError(scheduler, f"cannot reach the Dask scheduler: {msg}") from None
-        threads = sum(w.get("nthreads", 1) for w in
-                      self._client.scheduler_info()["workers"].values())
+        threads = sum(
+            w.get("nthreads", 1) for w in self._client.scheduler_info()["workers"].values()
+        )
         if threads == 0:
             self._client.close()
             raise InputError(scheduler, "the Dask scheduler has no workers")
@@ -350,8 +357,9 @@ def execute(
                 finished, _ = wait(running, timeout=bar.timeout(), return_when=FIRST_COMPLETED)
                 if not finished:
                     now = time.monotonic()
-                    bar.heartbeat(len(done), [(s.key, now - started[s.key])
-                                              for s in running.values()])
+                    bar.heartbeat(
+                        len(done), [(s.key, now - started[s.key]) for s in running.values()]
+                    )
                 for fut in finished:
                     s = running.pop(fut)
                     res = StepResult(s.key, *engine.result(fut, root))
@@ -359,8 +367,9 @@ def execute(
                         done[s.key] = res
                         if on_done is not None:
                             on_done(s, res)
-                        bar.step_done(s.key, res.seconds, len(done), res.worker,
-                                      sum(costs[k] for k in done))
+                        bar.step_done(
+                            s.key, res.seconds, len(done), res.worker, sum(costs[k] for k in done)
+                        )
                     elif failure is None:
                         failure = res
         except BaseException:
