@@ -185,7 +185,10 @@ class HeadingFixAid(FixAid):
                 window.single.append(self.decisions[-1])  # skipped by recovery_streak
             return
         wall = self.wall_direction(self.flm_source(ring, mounts))
-        d = decide_heading_fix(t, wall, self.refs, pose, ekf.pose_cov, self.params)
+        corridor = (cands, why)  # asked once per ring, at this pose
+        d = decide_heading_fix(
+            t, wall, self.refs, pose, ekf.pose_cov, self.params, corridor=corridor
+        )
         d = replace(d, odometry=odo_heading, oblique=why == "junction" and oblique(cands),
                     x=x0, y=y0)  # fmt: skip
         history = window.single if window is not None else self.decisions
@@ -227,7 +230,7 @@ class HeadingFixAid(FixAid):
         if window is not None:
             window.remember(t, d)  # the watchdog's memory: what recovery_streak may see
             if d.reason != "recovered":
-                d = window.decide(t, d, self.refs, mounts, ekf)
+                d = window.decide(t, d, self.refs, mounts, ekf, corridor)
         if d.accepted:
             res = ekf.update_robot(
                 [d.measured], [[d.sigma * d.sigma]], [2], gate_chi2=self.params.gate_chi2

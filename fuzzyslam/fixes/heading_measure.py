@@ -129,29 +129,6 @@ def select_corridor(
     why : str
         "", "junction", or the reason there is none.
     """
-    key = (float(xy[0]), float(xy[1]), period, junction_margin)
-    last = _LAST_SELECTION
-    if (
-        last
-        and last[0] == key
-        and len(last[1]) == len(refs)
-        and all(a is b for a, b in zip(last[1], refs, strict=True))
-    ):  # the same question as the ring's previous call (on_ring, then the decisions)
-        return list(last[2][0]), last[2][1]
-    found = _select_corridor(xy, refs, period, junction_margin)
-    _LAST_SELECTION[:] = [key, tuple(refs), found]
-    return list(found[0]), found[1]
-
-
-# select_corridor's last question and answer: a ring asks it two or three times (the aid,
-# the single-ring and the multi-ring decisions) at the same pose
-_LAST_SELECTION: list = []
-
-
-def _select_corridor(
-    xy: Sequence[float], refs: Sequence[Reference], period: float, junction_margin: float
-) -> tuple[list[Reference], str]:
-    """:func:`select_corridor` without its memory."""
     inside = corridors_at(xy, refs)
     if not inside:
         near = corridors_near(xy, refs, junction_margin) if junction_margin > 0 else []
@@ -179,6 +156,7 @@ def decide_heading_fix(
     pose_cov: np.ndarray,
     params: FixParams,
     sigmas_deg: tuple[float, float] | None = None,
+    corridor: tuple[Sequence[Reference], str] | None = None,
 ) -> HeadingDecision:
     """Form, check and gate the heading measurement of one ring (module docstring).
 
@@ -206,6 +184,9 @@ def decide_heading_fix(
         The fixes' constants.
     sigmas_deg : (float, float), optional
         Standard deviations (deg) replacing the configured ones.
+    corridor : (sequence of Reference, str), optional
+        :func:`select_corridor`'s answer at ``pose`` when the caller has it already (the
+        aid asks once per ring; default: asked here).
 
     Returns
     -------
@@ -219,7 +200,9 @@ def decide_heading_fix(
     if strength < params.min_strength:
         return HeadingDecision(t, -1, math.nan, predicted, False, "weak_peak", strength)
     period = math.pi / 2 if params.right_angles else math.pi
-    cands, why = select_corridor(pose[:2], refs, period, params.junction_margin)
+    if corridor is None:
+        corridor = select_corridor(pose[:2], refs, period, params.junction_margin)
+    cands, why = corridor
     # two wall directions in one FLM (a corner) disqualify it, unless the corner's
     # corridors all compete (junction_walls): the strongest wall is then one of theirs
     if wall.ambiguous and not (why == "junction" and params.junction_walls):

@@ -139,6 +139,7 @@ class MultiRingWindow:
         refs: Sequence[Reference],
         mounts: np.ndarray,
         ekf: FilterView,
+        corridor: tuple[Sequence[Reference], str] | None = None,
     ) -> HeadingDecision:
         """The multi-ring fix when one is due (``fix_every`` rings since the last, the
         window at least half full), else ``single`` as a row that is not applied.
@@ -155,6 +156,9 @@ class MultiRingWindow:
             The sonars' poses in base_link.
         ekf : FilterView
             The filter (pose (3,), pose covariance (3, 3)).
+        corridor : (sequence of Reference, str), optional
+            The candidate corridors at the filter's pose, when the caller has them
+            (:func:`fuzzyslam.fixes.heading_measure.select_corridor`).
 
         Returns
         -------
@@ -178,16 +182,24 @@ class MultiRingWindow:
         sig_c, sig_j = self.sigmas_deg
         fit = math.degrees(float(getattr(wall, "sigma", math.nan))) if wall is not None else 0.0
         if p.flm_fit_scatter:
-            return self._scatter_decision(t, wall, fit, refs, ekf)
+            return self._scatter_decision(t, wall, fit, refs, ekf, corridor)
         if p.flm_fit_sigma and math.isfinite(fit) and fit > p.sigma_flm_deg:
             # the tangent fit's own standard deviation (range noise through the fit's
             # Jacobian) when it exceeds the floor: a loose fit weighs less
             k = fit / p.sigma_flm_deg
             sig_c, sig_j = sig_c * k, sig_j * k
-        return decide_heading_fix(t, wall, refs, ekf.pose, ekf.pose_cov, p, (sig_c, sig_j))
+        return decide_heading_fix(
+            t, wall, refs, ekf.pose, ekf.pose_cov, p, (sig_c, sig_j), corridor
+        )
 
     def _scatter_decision(
-        self, t: float, wall: WallLike | None, fit_deg: float, refs: Sequence[Reference], ekf
+        self,
+        t: float,
+        wall: WallLike | None,
+        fit_deg: float,
+        refs: Sequence[Reference],
+        ekf: FilterView,
+        corridor: tuple[Sequence[Reference], str] | None = None,
     ) -> HeadingDecision:
         """The multi-ring decision with R from the wall fit's own scatter
         (``flm_fit_scatter``, see :class:`fuzzyslam.fixes.params.FixParams`): q =
@@ -206,4 +218,5 @@ class MultiRingWindow:
             )
         sig_c, sig_j = self.sigmas_deg
         k = max(1.0, p.flm_fit_scale * q / p.sigma_flm_deg) if math.isfinite(q) else 1.0
-        return decide_heading_fix(t, wall, refs, ekf.pose, ekf.pose_cov, p, (sig_c * k, sig_j * k))
+        sig = (sig_c * k, sig_j * k)
+        return decide_heading_fix(t, wall, refs, ekf.pose, ekf.pose_cov, p, sig, corridor)
