@@ -42,33 +42,6 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
-# the times the outputs record, left out of the comparison: summary.json of map and run,
-# results.json (its step times and "Cost" rows); and the map's output folder (old and new
-# write to two)
-TIMINGS = {"build_seconds", "wall_seconds", "output", "real_time_factor", "wall_time_s",
-           "seconds", "pid", "wall_s"}  # fmt: skip
-
-
-def _untimed(name: str, data: bytes) -> bytes:
-    """A file's bytes without the times it records (JSON keys of TIMINGS, results.json's
-    Cost rows, report.md's Cost and wall-time lines)."""
-
-    def mask(obj):
-        if isinstance(obj, dict):
-            if str(obj.get("group", "")).startswith("Cost"):
-                return None
-            return {k: mask(v) for k, v in obj.items() if k not in TIMINGS}
-        return [mask(v) for v in obj] if isinstance(obj, list) else obj
-
-    if name.endswith(".json"):
-        return json.dumps(mask(json.loads(data)), sort_keys=True).encode()
-    if name == "report.md":
-        keep = [ln for ln in data.decode().splitlines()
-                if "Cost" not in ln and "wall time" not in ln]  # fmt: skip
-        return "\n".join(keep).encode()
-    return data
-
-
 def worker(tree: Path, out: Path, keys: list[str]) -> None:
     """Run the steps ``keys`` of seed 0 twice in this process; print JSON (CPU s)."""
     os.environ["FUZZYSLAM_NO_PROGRESS"] = "1"
@@ -134,7 +107,7 @@ def drive(out: Path, record: Path) -> None:
 
 def reproduce_side_by_side(args, src: Path, work: Path) -> dict:
     """``drive`` with the old and the new code alternately; CPU per kind of step."""
-    from sidebyside import load
+    from sidebyside import load, same_outputs
 
     before = load()
     res: dict[str, list[dict]] = {"old": [], "new": []}
@@ -207,26 +180,6 @@ def run_worker(tree: Path, out: Path, keys: list[str], src: Path | None) -> dict
     return json.loads(p.stdout.strip().splitlines()[-1])
 
 
-def same_outputs(a: Path, b: Path) -> dict:
-    """Compare two output folders: non-PNG files byte for byte (the times they record
-    aside: :func:`_untimed`), PNG files by name."""
-    fa = {p.relative_to(a) for p in a.rglob("*") if p.is_file()}
-    fb = {p.relative_to(b) for p in b.rglob("*") if p.is_file()}
-    differ = []
-    for r in sorted(fa & fb):
-        if r.suffix == ".png":
-            continue
-        x, y = (a / r).read_bytes(), (b / r).read_bytes()
-        if x != y and r.name in ("summary.json", "results.json", "report.md"):
-            x, y = _untimed(r.name, x), _untimed(r.name, y)
-        if x != y:
-            differ.append(str(r))
-    files = sum(1 for r in fa & fb if r.suffix != ".png")
-    return {"files_compared": files, "png_files": sum(1 for r in fa if r.suffix == ".png"),
-            "only_old": sorted(map(str, fa - fb)), "only_new": sorted(map(str, fb - fa)),
-            "different": differ}  # fmt: skip
-
-
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--baseline", metavar="REV", default="main")
@@ -245,7 +198,7 @@ def main() -> None:
     if args.drive:
         drive(Path(args.drive[0]), Path(args.drive[1]))
         return
-    from sidebyside import export_revision, load, run_cli
+    from sidebyside import export_revision, load, run_cli, same_outputs
 
     from fuzzyslam.reproduce.plan import QUICK, build_plan
 

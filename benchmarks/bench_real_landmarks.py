@@ -88,8 +88,7 @@ def main() -> None:
 def side_by_side_runs(logs: list[Path], rev: str, repeat: int) -> None:
     """Old (``rev``) and new ``fuzzyslam run --config real_detections.yaml``, alternately."""
     sys.path.insert(0, str(Path(__file__).parent))
-    from bench_run import _same_outputs
-    from sidebyside import export_revision, load, side_by_side
+    from sidebyside import export_revision, load, same_outputs, side_by_side
 
     from fuzzyslam.streams.reader import LogReader
 
@@ -106,9 +105,10 @@ def side_by_side_runs(logs: list[Path], rev: str, repeat: int) -> None:
         for v in ("old", "new"):
             res[v]["real_time_factor_cpu"] = round(duration / res[v]["cpu_median_s"])
             res[v]["real_time_factor_wall"] = round(duration / res[v]["wall_median_s"])
+        same = same_outputs(outs["old"], outs["new"])["identical"]
         print(json.dumps({"run": log.name, "log_s": round(duration, 1), "baseline": rev,
                           "repeat": repeat, **res, "target_real_time_factor": 200,
-                          "outputs_byte_identical": _same_outputs(outs["old"], outs["new"]),
+                          "outputs_byte_identical": same,
                           "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
 
 

@@ -102,34 +102,10 @@ def main() -> None:
         }))  # fmt: skip
 
 
-TIMINGS = {"build_seconds", "wall_seconds", "real_time_factor", "wall_time_s"}
-
-
-def same_files(a: Path, b: Path) -> dict:
-    """Two reproduce outputs file by file: every non-PNG file byte for byte, but for the
-    times they record (the steps' summary.json: those keys; results.json and report.md,
-    whose tables are compared as ``same_table``); PNG files by name."""
-    fa = {p.relative_to(a) for p in a.rglob("*") if p.is_file()}
-    fb = {p.relative_to(b) for p in b.rglob("*") if p.is_file()}
-    differ, compared = [], 0
-    for r in sorted(fa & fb):
-        if r.suffix == ".png" or r in (Path("results.json"), Path("report.md")):
-            continue
-        compared += 1
-        x, y = (a / r).read_bytes(), (b / r).read_bytes()
-        if x != y and r.name == "summary.json":
-            x, y = (json.dumps({k: v for k, v in json.loads(z).items() if k not in TIMINGS})
-                    for z in (x, y))  # fmt: skip
-        if x != y:
-            differ.append(str(r))
-    only = {"only_old": sorted(map(str, fa - fb)), "only_new": sorted(map(str, fb - fa))}
-    return {"compared": compared, "different": differ, **only}
-
-
 def side_by_side_reproduce(args) -> None:
     """Old (``--baseline``) and new ``reproduce`` alternately, per variant."""
     sys.path.insert(0, str(Path(__file__).parent))
-    from sidebyside import export_revision, load, side_by_side
+    from sidebyside import export_revision, load, same_outputs, side_by_side
 
     src = export_revision(args.baseline)
     work = args.workdir or Path(tempfile.mkdtemp(prefix="bench_reproduce."))
@@ -147,7 +123,7 @@ def side_by_side_reproduce(args) -> None:
                    if ln.startswith("| ") and "Cost" not in ln and "time" not in ln]
                   for v in ("old", "new")]  # fmt: skip
         print(json.dumps({"variant": name, "quick": args.quick, "seeds": args.seeds,
-                          "same_files": same_files(outs["old"], outs["new"]),
+                          "same_files": same_outputs(outs["old"], outs["new"]),
                           "jobs": args.jobs,
                           "baseline": args.baseline, **res,
                           "target_wall_s": 30.0 if args.seeds == 1 and name == "full"

@@ -118,41 +118,13 @@ def bench_scaling() -> None:
         )
 
 
-TIMING = ("seconds", "wall", "real_time", "_s_per_", "cpu")
-
-
-def _untimed(obj):
-    if isinstance(obj, dict):
-        return {k: _untimed(v) for k, v in obj.items() if not any(t in k for t in TIMING)}
-    if isinstance(obj, list):
-        return [_untimed(v) for v in obj]
-    return obj
-
-
-def _same_outputs(a: Path, b: Path) -> bool:
-    import filecmp
-    import json
-
-    files = sorted(f.relative_to(a) for f in a.rglob("*") if f.is_file())
-    if files != sorted(f.relative_to(b) for f in b.rglob("*") if f.is_file()):
-        return False
-    for rel in files:
-        if rel.name == "summary.json":
-            sa, sb = (json.loads((d / rel).read_text()) for d in (a, b))
-            if _untimed(sa) != _untimed(sb):
-                return False
-        elif not filecmp.cmp(a / rel, b / rel, shallow=False):
-            return False
-    return True
-
-
 def side_by_side_run(log: Path, rev: str, repeat: int, candidate: str | None = None) -> None:
     """Old (``rev``) and new ``fuzzyslam run`` alternately: lamps only, heading, pose (new:
     the installed code, or git revision ``candidate``)."""
     import json
 
     sys.path.insert(0, str(Path(__file__).parent))
-    from sidebyside import export_revision, load, run_cli, side_by_side
+    from sidebyside import export_revision, load, run_cli, same_outputs, side_by_side
 
     from fuzzyslam.streams.reader import LogReader
 
@@ -176,10 +148,11 @@ def side_by_side_run(log: Path, rev: str, repeat: int, candidate: str | None = N
         for v in ("old", "new"):
             res[v]["real_time_factor_cpu"] = round(duration / res[v]["cpu_median_s"])
             res[v]["real_time_factor_wall"] = round(duration / res[v]["wall_median_s"])
+        same = same_outputs(outs["old"], outs["new"])["identical"]
         print(json.dumps({"run": name, "log_s": round(duration, 1), "baseline": rev,
                           "candidate": candidate or "installed",
                           "repeat": repeat, **res, "target_real_time_factor": target,
-                          "outputs_byte_identical": _same_outputs(outs["old"], outs["new"]),
+                          "outputs_byte_identical": same,
                           "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
 
 
@@ -190,7 +163,7 @@ def side_by_side_sample(rev: str, repeat: int, candidate: str | None = None) -> 
     import json
 
     sys.path.insert(0, str(Path(__file__).parent))
-    from sidebyside import export_revision, load, side_by_side
+    from sidebyside import export_revision, load, same_outputs, side_by_side
 
     log = Path(__file__).resolve().parents[1] / "data" / "sample.mcap"
     src = export_revision(rev)
@@ -198,9 +171,10 @@ def side_by_side_sample(rev: str, repeat: int, candidate: str | None = None) -> 
     work = Path(tempfile.mkdtemp(prefix="bench_run_sample."))
     before = load()
     res = side_by_side(lambda v: ["run", str(log), "-o", str(work / v)], src, repeat, new)
+    same = same_outputs(work / "old", work / "new")["identical"]
     print(json.dumps({"run": "sample log, lamps only", "baseline": rev,
                       "candidate": candidate or "installed", "repeat": repeat, **res,
-                      "outputs_byte_identical": _same_outputs(work / "old", work / "new"),
+                      "outputs_byte_identical": same,
                       "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
 
 

@@ -10,6 +10,7 @@ times, so both see the same load; a process's CPU time (user + sys, from
 from __future__ import annotations
 
 import io
+import json
 import os
 import resource
 import statistics
@@ -92,3 +93,50 @@ def load() -> str:
     """The machine's load averages and cores, for the printed figures."""
     a, b, c = os.getloadavg()
     return f"load average {a:.2f} {b:.2f} {c:.2f} on {os.cpu_count()} cores"
+
+
+# what the outputs record of the machine rather than of the maths, left out of a comparison:
+# JSON keys anywhere (run and map summary.json, results.json's step times), results.json's
+# Cost rows, report.md's Cost and wall-time lines; "output": the folder old and new wrote
+TIMINGS = frozenset({"build_seconds", "wall_seconds", "output", "real_time_factor",
+                     "wall_time_s", "seconds", "pid", "wall_s"})  # fmt: skip
+
+
+def untimed(name: str, data: bytes) -> bytes:
+    """A file's bytes without what :data:`TIMINGS` says it records of the machine."""
+
+    def mask(obj):
+        if isinstance(obj, dict):
+            if str(obj.get("group", "")).startswith("Cost"):
+                return None
+            return {k: mask(v) for k, v in obj.items() if k not in TIMINGS}
+        return [mask(v) for v in obj] if isinstance(obj, list) else obj
+
+    if name.endswith(".json"):
+        return json.dumps(mask(json.loads(data)), sort_keys=True).encode()
+    if name == "report.md":
+        keep = [ln for ln in data.decode().splitlines()
+                if "Cost" not in ln and "wall time" not in ln]  # fmt: skip
+        return "\n".join(keep).encode()
+    return data
+
+
+def same_outputs(a: Path, b: Path) -> dict:
+    """Two output folders (old and new code) file by file: every file byte for byte, but
+    summary.json, results.json and report.md without their timings (:func:`untimed`);
+    PNG files listed apart (``different_png``: a figure's bytes may change with the
+    drawing code, not with the maths). ``identical``: nothing differs, PNGs included."""
+    fa = {p.relative_to(a) for p in a.rglob("*") if p.is_file()}
+    fb = {p.relative_to(b) for p in b.rglob("*") if p.is_file()}
+    differ, png = [], []
+    for r in sorted(fa & fb):
+        x, y = (a / r).read_bytes(), (b / r).read_bytes()
+        if x != y and r.name in ("summary.json", "results.json", "report.md"):
+            x, y = untimed(r.name, x), untimed(r.name, y)
+        if x != y:
+            (png if r.suffix == ".png" else differ).append(str(r))
+    out = {"files_compared": len(fa & fb), "only_old": sorted(map(str, fa - fb)),
+           "only_new": sorted(map(str, fb - fa)), "different": differ,
+           "different_png": png}  # fmt: skip
+    out["identical"] = not (out["only_old"] or out["only_new"] or differ or png)
+    return out
