@@ -42,6 +42,7 @@ from pathlib import Path
 
 sys.path.insert(0, str(Path(__file__).parent))
 
+
 def worker(tree: Path, out: Path, keys: list[str]) -> None:
     """Run the steps ``keys`` of seed 0 twice in this process; print JSON (CPU s)."""
     os.environ["FUZZYSLAM_NO_PROGRESS"] = "1"
