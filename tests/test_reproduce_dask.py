@@ -25,9 +25,11 @@ from fuzzyslam.reproduce.plan import Step
 BIN = Path(sys.executable).parent
 
 
-def cli(*args: object, stderr=None, cwd: Path | None = None) -> subprocess.CompletedProcess:
+def cli(
+    *args: object, stderr=None, cwd: Path | None = None, env: dict | None = None
+) -> subprocess.CompletedProcess:
     """``fuzzyslam ARGS`` with progress on (stderr a file or a pipe: the lines mode)."""
-    env = {k: v for k, v in os.environ.items() if k != "FUZZYSLAM_NO_PROGRESS"}
+    env = {k: v for k, v in {**os.environ, **(env or {})}.items() if k != "FUZZYSLAM_NO_PROGRESS"}
     return subprocess.run(
         [sys.executable, "-m", "fuzzyslam", *map(str, args)],
         stdout=subprocess.PIPE,
@@ -104,11 +106,14 @@ def test_rerun_refuses_a_directory_that_is_not_a_reproduce_output(tmp_path):
 
 
 def test_scheduler_unreachable_is_one_line(tmp_path):
+    """One line, nothing written; Dask's connect timeout is taken from the environment."""
     p = cli("reproduce", "--quick", "--seeds", "1", "-o", tmp_path / "o",
-            "--scheduler", "tcp://127.0.0.1:9")  # fmt: skip
+            "--scheduler", "tcp://127.0.0.1:9",
+            env={"DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "1s"})  # fmt: skip
     assert p.returncode == 3
     lines = [ln for ln in p.stderr.splitlines() if ln.startswith("fuzzyslam:")]
     assert len(lines) == 1 and "Dask scheduler" in lines[0], p.stderr
+    assert "after 1 s" in lines[0], lines[0]
     assert not (tmp_path / "o").exists()
 
 

@@ -228,7 +228,9 @@ class Engine:
                 scheduler, "--scheduler needs Dask: pip install 'fuzzyslam[dask]'"
             ) from None
         try:
-            self._client = Client(scheduler, timeout=10, set_as_default=False)
+            # Dask's own connect timeout when the user set it in the environment, else 10 s
+            timeout = os.environ.get("DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT", "10s")
+            self._client = Client(scheduler, timeout=timeout, set_as_default=False)
         except (OSError, TimeoutError) as exc:
             msg = " ".join(str(exc).split())
             raise InputError(scheduler, f"cannot reach the Dask scheduler: {msg}") from None
