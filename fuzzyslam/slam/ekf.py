@@ -201,9 +201,13 @@ class EkfSlam(EkfUpdates):
         -------
         ndarray, shape (n, 2, 2)
         """
+        return self._lamp_blocks().copy()
+
+    def _lamp_blocks(self) -> np.ndarray:
+        """A read-only (n, 2, 2) view of the lamps' 2x2 diagonal blocks of P."""
         n, m0 = self.n_lamps, self.m0
         blocks = self._p[m0 : self.dim, m0 : self.dim].reshape(n, 2, n, 2)
-        return np.diagonal(blocks, axis1=0, axis2=2).transpose(2, 0, 1).copy()
+        return np.diagonal(blocks, axis1=0, axis2=2).transpose(2, 0, 1)
 
     # -- prediction ---------------------------------------------------------------------
 
@@ -375,11 +379,9 @@ class EkfSlam(EkfUpdates):
         prl = p[:3, self.m0 : end].reshape(3, n, 2)  # [row, lamp, col]
         gpl = -prl[:2].transpose(1, 0, 2) + dp[:, :, None] * prl[2][:, None, :]  # (n, 2, 2)
         w += gpl + gpl.transpose(0, 2, 1)
-        w += self.lamp_covs()
+        w += self._lamp_blocks()
         r = np.asarray(r, dtype=float).reshape(-1, 2, 2)
-        rw = rmat @ r @ rmat.T  # (m or 1, 2, 2)
-        if len(rw) == 1:
-            rw = np.repeat(rw, len(z), axis=0)
+        rw = rmat @ r @ rmat.T  # (m or 1, 2, 2): one R for all broadcasts below
         zw = z @ rmat.T  # R z_j
         v = zw[:, None, :] - d[None, :, :]  # R (z_j - h_i) = R z_j - d_i
         # the entries (a, b; b, dd) of S_ij = W_i + R R_j R^T, each (m, n)
