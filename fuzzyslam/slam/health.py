@@ -83,8 +83,10 @@ def solve_spd(
     s = 0.5 * (s + s.T)
     if not (np.isfinite(s).all() and np.isfinite(b).all()):
         raise np.linalg.LinAlgError("innovation covariance or innovation is not finite")
-    d = _cholesky(s).diagonal() ** 2  # NaN when S is not positive definite
-    if d.min() > rel_eps * d.max():
+    # diag(L)^2: all positive, or all NaN when S is not positive definite (then the test
+    # fails); on floats: k values
+    d = (_cholesky(s).diagonal() ** 2).tolist()
+    if min(d) > rel_eps * max(d):
         return _solve(s, b), False
     k = s.shape[0]
     eps = max(rel_eps * float(np.abs(np.trace(s))) / k, abs_eps)
