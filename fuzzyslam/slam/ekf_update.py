@@ -38,7 +38,7 @@ _XY = np.arange(2)  # a lamp's x, y offsets in the state
 
 
 @lru_cache(maxsize=16)
-def _lamp_blocks(k: int) -> tuple[np.ndarray, slice, np.ndarray]:
+def _h_lamp_index(k: int) -> tuple[np.ndarray, slice, np.ndarray]:
     """Index of the k lamps' 2x2 blocks of H viewed (k, 2, 3 + 2k) in
     :meth:`EkfUpdates.predict_lamps`: ``hv[index]`` is (k, 2, 2), its [a, c, r] the entry
     of row r of lamp a's two rows in column 3 + 2a + c (the advanced indices first), so
@@ -193,7 +193,7 @@ class EkfUpdates:
         hv[:, :, :2] = -rt
         hv[:, 0, 2] = h[:, 1]
         hv[:, 1, 2] = -h[:, 0]
-        hv[_lamp_blocks(k)] = rt.T  # dh_a / dl_a = R^T in columns 3 + 2a, 4 + 2a
+        hv[_h_lamp_index(k)] = rt.T  # dh_a / dl_a = R^T in columns 3 + 2a, 4 + 2a
         cols = np.concatenate([_POSE_COLS, jj.reshape(-1)])
         return h.reshape(-1), cols, hc
 
