@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from fuzzyslam.robot import motion_step
-from fuzzyslam.se2 import compose, jacobians_compose, rot, wrap_angle
+from fuzzyslam.se2 import compose, compose_with_jacobians, rot, wrap_angle
 from fuzzyslam.slam.ekf_update import EkfUpdates, UpdateResult  # updates; re-exported
 from fuzzyslam.slam.motion import (  # the motion model's home; re-exported here
     Preintegrator,
@@ -272,9 +272,7 @@ class EkfSlam(EkfUpdates):
 
             predict_calibrated(self, delta, q_delta, d_calib)
             return
-        pose = self._x[:3].copy()
-        ja, jb = jacobians_compose(pose, delta)
-        self._x[:3] = compose(pose, delta)
+        self._x[:3], ja, jb = compose_with_jacobians(self._x[:3], delta)
         self.odometry_pose = compose(self.odometry_pose, delta)
         self._propagate(ja, jb, q_delta)
 
