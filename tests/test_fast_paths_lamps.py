@@ -172,3 +172,26 @@ def test_register_imports_only_the_command():
     ).stdout.splitlines()
     assert out[0] == "['run'] False"
     assert out[1] == str(sorted(["evaluate", "map", "reproduce", "run", "simulate", "sweep"]))
+
+
+def test_last_stamp_equals_per_message_bookkeeping():
+    """reader._last_stamp once per batch against the per-message bookkeeping it replaced
+    (the last log time given and the (channel, sequence) given at it)."""
+    from fuzzyslam.streams.reader import _last_stamp
+
+    rng = np.random.default_rng(13)
+    for _ in range(300):
+        times = np.sort(rng.integers(0, 6, rng.integers(0, 12))).tolist()
+        cut = sorted(rng.integers(0, len(times) + 1, 3).tolist())
+        batches = [times[a:b] for a, b in zip([0, *cut], [*cut, len(times)], strict=True)]
+        last_ns, seen, ref_ns, ref_seen, k = -1, set(), -1, set(), 0
+        for b in batches:
+            batch = []
+            for t in b:
+                batch.append((t, k % 3, k, b""))
+                if t != ref_ns:
+                    ref_ns, ref_seen = t, set()
+                ref_seen.add((k % 3, k))
+                k += 1
+            last_ns, seen = _last_stamp(batch, last_ns, seen)
+            assert (last_ns, seen) == (ref_ns, ref_seen)
