@@ -78,9 +78,8 @@ class CeilingCamera:
         """Robot-frame ceiling points (N, 2) of pixels (N, 2)."""
         q = np.asarray(uv, dtype=float).reshape(-1, 2)
         s = self.height / self.f
-        return np.column_stack(
-            [(q[:, 0] - self.cx) * s + self.offset[0], (q[:, 1] - self.cy) * s + self.offset[1]]
-        )
+        # x = (u - cx) s + offset_x, y = (v - cy) s + offset_y, both columns at once
+        return (q - np.array([self.cx, self.cy])) * s + np.array(self.offset, dtype=float)
 
     def metric_sigma(self, sigma_px: float) -> float:
         """Ceiling-plane standard deviation (m) of a pixel standard deviation."""

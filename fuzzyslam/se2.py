@@ -134,9 +134,7 @@ def compose(a: ArrayLike, b: ArrayLike) -> Array:
     a = np.asarray(a, dtype=float)
     b = np.asarray(b, dtype=float)
     if a.shape == b.shape == (3,):  # two poses: the same arithmetic on floats (per step)
-        (ax, ay, at), (bx, by, bt) = a.tolist(), b.tolist()
-        c, s = math.cos(at), math.sin(at)
-        return np.array([ax + c * bx - s * by, ay + s * bx + c * by, wrap_angle(at + bt)])
+        return np.array(_compose_floats(a.tolist(), b.tolist()))
     c, s = np.cos(a[..., 2]), np.sin(a[..., 2])
     x = a[..., 0] + c * b[..., 0] - s * b[..., 1]
     y = a[..., 1] + s * b[..., 0] + c * b[..., 1]
@@ -228,6 +226,34 @@ def inverse_transform_points(pose: ArrayLike, pts: ArrayLike) -> Array:
     out[..., 0] = c * dx + s * dy
     out[..., 1] = -s * dx + c * dy
     return out
+
+
+def _compose_floats(a: list[float], b: list[float]) -> list[float]:
+    """a (+) b of two poses given as 3 floats each (:func:`compose`'s arithmetic)."""
+    (ax, ay, at), (bx, by, bt) = a, b
+    c, s = math.cos(at), math.sin(at)
+    return [ax + c * bx - s * by, ay + s * bx + c * by, wrap_angle(at + bt)]
+
+
+def compose_with_jacobians(a: ArrayLike, b: ArrayLike) -> tuple[Array, Array, Array]:
+    """compose(a, b) and jacobians_compose(a, b) of two poses in one call (a prediction
+    step needs both: the same floats, half the calls).
+
+    Parameters
+    ----------
+    a, b : array_like, shape (3,)
+        Poses (x, y, theta).
+
+    Returns
+    -------
+    pose : ndarray, shape (3,)
+        a (+) b, heading wrapped to (-pi, pi].
+    ja, jb : ndarray, shape (3, 3)
+        d(a (+) b)/da and d(a (+) b)/db.
+    """
+    a = np.asarray(a, dtype=float).tolist()
+    b = np.asarray(b, dtype=float).tolist()
+    return (np.array(_compose_floats(a, b)), *jacobians_compose(a, b))
 
 
 def jacobians_compose(a: ArrayLike, b: ArrayLike) -> tuple[Array, Array]:

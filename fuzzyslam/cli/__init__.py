@@ -156,11 +156,17 @@ def emit(summary: dict[str, Any]) -> None:
         raise write_error("<stdout>", exc, replaced=True) from exc
 
 
-def _register() -> None:
-    """Import the command modules so that they attach to ``cli``."""
+COMMANDS = ("simulate", "run", "map", "evaluate", "reproduce", "sweep")
+
+
+def _register(args: list[str] | None = None) -> None:
+    """Import the command modules so that they attach to ``cli``: with the command line
+    ``args``, only its command's when it names one (the group's options are flags, so the
+    first argument not starting with '-' is the command), else all (help, a typo)."""
     import importlib
 
-    for name in ("simulate", "run", "map", "evaluate", "reproduce", "sweep"):
+    first = next((a for a in args or () if not a.startswith("-")), None)
+    for name in (first,) if first in COMMANDS else COMMANDS:
         try:
             importlib.import_module(f"fuzzyslam.cli.{name}")
         except ModuleNotFoundError as exc:
@@ -196,7 +202,7 @@ def main(argv: list[str] | None = None) -> None:
         signal.signal(signal.SIGTERM, _on_sigterm)
     code = EXIT_OK
     try:
-        _register()
+        _register(args)
         cli.main(args=args, prog_name="fuzzyslam", standalone_mode=False)
     except click.exceptions.Exit as exc:
         code = exc.exit_code

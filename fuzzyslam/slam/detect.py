@@ -107,6 +107,7 @@ def detect_lamps(
     # per component, on its box grown by two pixels (a loop over the few blobs, not pixels)
     uv = np.empty((len(kept), 2))
     ch, cw = img.shape
+    unlit = mask == 0  # img < threshold, once for all blobs
     for a, (k, x, y, w, h, _area) in enumerate(kept):
         x0 = max(x - ox - 2, 0)
         y0 = max(y - oy - 2, 0)
@@ -116,10 +117,10 @@ def detect_lamps(
         d1 = cv2.dilate((labels[y0:y1, x0:x1] == k).view(np.uint8), _KERNEL)
         # the ring one pixel beyond d1 (d1 within its dilation: the XOR), its unlit pixels
         ring = np.bitwise_xor(cv2.dilate(d1, _KERNEL), d1).view(bool)
-        ring &= crop < threshold
+        ring &= unlit[y0:y1, x0:x1]
         lit = crop[ring]
         # mean of the unlit ring: an exact integer sum over a count (as ndarray.mean)
-        background = int(lit.sum()) / lit.size if lit.size else 0.0
+        background = int(np.add.reduce(lit)) / lit.size if lit.size else 0.0
         w = np.subtract(crop, np.float32(background), dtype=np.float32)
         w *= d1  # d1 is 0/1
         mom = cv2.moments(np.maximum(w, 0.0, out=w), binaryImage=False)

@@ -18,7 +18,7 @@ import math
 import numpy as np
 
 from fuzzyslam.robot import motion_step
-from fuzzyslam.se2 import compose, jacobians_compose, rot, wrap_angle
+from fuzzyslam.se2 import compose, compose_with_jacobians, rot, wrap_angle
 from fuzzyslam.slam.ekf_update import EkfUpdates, UpdateResult  # updates; re-exported
 from fuzzyslam.slam.motion import (  # the motion model's home; re-exported here
     Preintegrator,
@@ -29,6 +29,9 @@ from fuzzyslam.slam.motion import (  # the motion model's home; re-exported here
 
 __all__ = ["EkfSlam", "Preintegrator", "UpdateResult", "lamp_init", "lamp_measurement",
            "motion_jacobians", "motion_noise", "odometry_noise_tuple"]  # fmt: skip
+
+
+_PERP = np.array([1.0, -1.0])  # (d_y, d_x) * _PERP = d^perp
 
 
 def lamp_measurement(pose: np.ndarray, lamp: np.ndarray) -> tuple[np.ndarray, ...]:
@@ -201,9 +204,13 @@ class EkfSlam(EkfUpdates):
         -------
         ndarray, shape (n, 2, 2)
         """
+        return self._lamp_blocks().copy()
+
+    def _lamp_blocks(self) -> np.ndarray:
+        """A read-only (n, 2, 2) view of the lamps' 2x2 diagonal blocks of P."""
         n, m0 = self.n_lamps, self.m0
         blocks = self._p[m0 : self.dim, m0 : self.dim].reshape(n, 2, n, 2)
-        return np.diagonal(blocks, axis1=0, axis2=2).transpose(2, 0, 1).copy()
+        return np.diagonal(blocks, axis1=0, axis2=2).transpose(2, 0, 1)
 
     # -- prediction ---------------------------------------------------------------------
 
@@ -265,9 +272,7 @@ class EkfSlam(EkfUpdates):
 
             predict_calibrated(self, delta, q_delta, d_calib)
             return
-        pose = self._x[:3].copy()
-        ja, jb = jacobians_compose(pose, delta)
-        self._x[:3] = compose(pose, delta)
+        self._x[:3], ja, jb = compose_with_jacobians(self._x[:3], delta)
         self.odometry_pose = compose(self.odometry_pose, delta)
         self._propagate(ja, jb, q_delta)
 
@@ -362,28 +367,26 @@ class EkfSlam(EkfUpdates):
         x = self._x
         c, s = math.cos(x[2]), math.sin(x[2])
         rmat = np.array([[c, -s], [s, c]])
-        d = self.lamps - x[:2]  # (n, 2)
-        dp = np.empty_like(d)  # d^perp = (d_y, -d_x)
-        dp[:, 0] = d[:, 1]
-        dp[:, 1] = -d[:, 0]
-        end = self.dim
+        m0, end = self.m0, self.dim
+        d = x[m0:end].reshape(n, 2) - x[:2]  # d_i = l_i - p  (n, 2)
+        dp = d[:, ::-1] * _PERP  # d^perp = (d_y, -d_x)
+        dpc = dp[:, :, None]  # (n, 2, 1)
         # G P_rr G^T = Pxx - (p_t dp^T + dp p_t^T) + q_tt dp dp^T
         pxx, pt, qtt = p[:2, :2], p[:2, 2], p[2, 2]
-        w = pxx - (pt[None, :, None] * dp[:, None, :] + dp[:, :, None] * pt[None, None, :])
-        w += qtt * dp[:, :, None] * dp[:, None, :]
-        # G P_rl = -P_rl[:2] + dp P_rl[2]  (each 2x2); P_rl rows 0..2, lamp columns
-        prl = p[:3, self.m0 : end].reshape(3, n, 2)  # [row, lamp, col]
-        gpl = -prl[:2].transpose(1, 0, 2) + dp[:, :, None] * prl[2][:, None, :]  # (n, 2, 2)
+        ptdp = pt[:, None] * dp[:, None, :]  # p_t dp^T (n, 2, 2); dp p_t^T is its transpose
+        w = pxx - (ptdp + ptdp.transpose(0, 2, 1))
+        w += qtt * dpc * dp[:, None, :]
+        # G P_rl = dp P_rl[2] - P_rl[:2]  (each 2x2); P_rl rows 0..2, lamp columns
+        prl = p[:3, m0:end].reshape(3, n, 2)  # [row, lamp, col]
+        gpl = dpc * prl[2][:, None, :] - prl[:2].transpose(1, 0, 2)  # (n, 2, 2)
         w += gpl + gpl.transpose(0, 2, 1)
-        w += self.lamp_covs()
+        w += self._lamp_blocks()
         r = np.asarray(r, dtype=float).reshape(-1, 2, 2)
-        rw = rmat @ r @ rmat.T  # (m or 1, 2, 2)
-        if len(rw) == 1:
-            rw = np.repeat(rw, len(z), axis=0)
+        rw = rmat @ r @ rmat.T  # (m or 1, 2, 2): one R for all broadcasts below
         zw = z @ rmat.T  # R z_j
         v = zw[:, None, :] - d[None, :, :]  # R (z_j - h_i) = R z_j - d_i
         # the entries (a, b; b, dd) of S_ij = W_i + R R_j R^T, each (m, n)
-        a = w[None, :, 0, 0] + rw[:, None, 0, 0]
-        b = w[None, :, 0, 1] + rw[:, None, 0, 1]
-        dd = w[None, :, 1, 1] + rw[:, None, 1, 1]
+        a = w[:, 0, 0] + rw[:, None, 0, 0]
+        b = w[:, 0, 1] + rw[:, None, 0, 1]
+        dd = w[:, 1, 1] + rw[:, None, 1, 1]
         return mahalanobis_2x2(a, b, dd, v[..., 0], v[..., 1])

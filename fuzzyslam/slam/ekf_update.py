@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -34,6 +35,16 @@ class UpdateResult:
 _BLOCK = 256
 _POSE_COLS = np.arange(3)  # the robot pose's columns of H
 _XY = np.arange(2)  # a lamp's x, y offsets in the state
+
+
+@lru_cache(maxsize=16)
+def _h_lamp_index(k: int) -> tuple[np.ndarray, slice, np.ndarray]:
+    """Index of the k lamps' 2x2 blocks of H viewed (k, 2, 3 + 2k) in
+    :meth:`EkfUpdates.predict_lamps`: ``hv[index]`` is (k, 2, 2), its [a, c, r] the entry
+    of row r of lamp a's two rows in column 3 + 2a + c (the advanced indices first), so
+    that ``hv[index] = R^T.T`` puts R^T in every lamp's block."""
+    rows = np.arange(k)
+    return rows[:, None], slice(None), 3 + 2 * rows[:, None] + _XY
 
 
 def _add_symmetric_update(p: np.ndarray, a: np.ndarray, b: np.ndarray) -> None:
@@ -102,7 +113,7 @@ class EkfUpdates:
         self._x[:n] += k @ v
         self._x[2] = wrap_angle(self._x[2])
         y = 0.5 * (k @ s) - pht
-        _add_symmetric_update(p, np.hstack([k, y]), np.hstack([y, k]))
+        _add_symmetric_update(p, np.concatenate((k, y), 1), np.concatenate((y, k), 1))
         d = np.diagonal(p)
         if not 0.0 < d.min() <= d.max() < np.inf:  # finite and > 0 (NaN fails): O(n)
             self.check_covariance()
@@ -178,13 +189,11 @@ class EkfUpdates:
         jj = j[:, None] + _XY  # the lamps' (x, y) indices (k, 2)
         h = (x[jj] - x[:2]) @ rt.T  # (k, 2)
         hc = np.zeros((2 * k, 3 + 2 * k))
-        rows = np.arange(k)
         hv = hc.reshape(k, 2, 3 + 2 * k)
         hv[:, :, :2] = -rt
         hv[:, 0, 2] = h[:, 1]
         hv[:, 1, 2] = -h[:, 0]
-        hv[rows, :, 3 + 2 * rows] = rt[:, 0]
-        hv[rows, :, 4 + 2 * rows] = rt[:, 1]
+        hv[_h_lamp_index(k)] = rt.T  # dh_a / dl_a = R^T in columns 3 + 2a, 4 + 2a
         cols = np.concatenate([_POSE_COLS, jj.reshape(-1)])
         return h.reshape(-1), cols, hc
 

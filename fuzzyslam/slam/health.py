@@ -32,8 +32,26 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
+from numpy.linalg import _umath_linalg  # the LAPACK gufuncs behind numpy.linalg
 
 from fuzzyslam.slam.chi2_values import CHI2_QUANTILES, GATE_LEVELS
+
+
+def _cholesky(s: np.ndarray) -> np.ndarray:
+    """Lower Cholesky factor L of a float64 S (k, k), all NaN when S is not positive
+    definite: LAPACK ``potrf`` through the gufunc ``numpy.linalg.cholesky`` calls (the same
+    bits), without its Python wrapper (type and shape checks, the error-raising errstate),
+    which costs 5x the factorisation of the 2x2-6x6 S of a lamp update."""
+    with np.errstate(invalid="ignore"):  # a failed factorisation: NaN, no warning
+        return _umath_linalg.cholesky_lo(s, signature="d->d")
+
+
+def _solve(s: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """S^-1 b for a float64 S (k, k) known to be well conditioned (LU, LAPACK ``gesv``):
+    the gufuncs ``numpy.linalg.solve`` calls (the same bits), without its wrapper."""
+    if b.ndim == 1:
+        return _umath_linalg.solve1(s, b, signature="dd->d")
+    return _umath_linalg.solve(s, b, signature="dd->d")
 
 
 def solve_spd(
@@ -65,22 +83,18 @@ def solve_spd(
     s = 0.5 * (s + s.T)
     if not (np.isfinite(s).all() and np.isfinite(b).all()):
         raise np.linalg.LinAlgError("innovation covariance or innovation is not finite")
-    try:
-        c = np.linalg.cholesky(s)
-        d = c.diagonal() ** 2
-        if d.min() > rel_eps * d.max():
-            return np.linalg.solve(s, b), False
-    except np.linalg.LinAlgError:
-        pass
+    # diag(L)^2: all positive, or all NaN when S is not positive definite (then the test
+    # fails); on floats: k values
+    d = (_cholesky(s).diagonal() ** 2).tolist()
+    if min(d) > rel_eps * max(d):
+        return _solve(s, b), False
     k = s.shape[0]
     eps = max(rel_eps * float(np.abs(np.trace(s))) / k, abs_eps)
     for _ in range(40):
-        try:
-            reg = s + eps * np.eye(k)
-            np.linalg.cholesky(reg)  # the test of positive definiteness
-            return np.linalg.solve(reg, b), True
-        except np.linalg.LinAlgError:
-            eps *= 10.0
+        reg = s + eps * np.eye(k)
+        if not np.isnan(_cholesky(reg)[0, 0]):  # the test of positive definiteness
+            return _solve(reg, b), True
+        eps *= 10.0
     raise np.linalg.LinAlgError("innovation covariance cannot be regularised")
 
 

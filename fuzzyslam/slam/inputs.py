@@ -163,8 +163,8 @@ class LogInputs:
                 yield ev
 
     def _odometry(self, t: float, msg, prev):
-        names = list(msg.name)
-        if names != self._names:
+        if msg.name != self._names:
+            names = list(msg.name)
             try:
                 self._idx = [names.index(n) for n in WHEEL_NAMES]
             except ValueError:
@@ -172,11 +172,12 @@ class LogInputs:
                 return None, prev
             self._names = names
         idx = self._idx
-        pos = msg.position
+        pos = np.asarray(msg.position, dtype=float)
         if len(pos) <= max(idx):
             self.warn("nan_odometry", f"missing wheel angle at t={t:.3f} s")
             return None, prev
-        cur = (float(pos[idx[0]]), float(pos[idx[1]]), t)
+        pos = pos.tolist()  # Python floats (two numpy scalars cost more)
+        cur = (pos[idx[0]], pos[idx[1]], t)
         if not (math.isfinite(cur[0]) and math.isfinite(cur[1])):
             self.warn("nan_odometry", f"NaN wheel angle at t={t:.3f} s")
             return None, prev

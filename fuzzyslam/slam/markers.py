@@ -11,14 +11,14 @@ _Z, _SCALE_Z, _RGBA = 2.5, 0.02, (1.0, 0.8, 0.1, 0.8)  # height, thickness, colo
 
 
 def _ellipses(lamps: np.ndarray, covs: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Per lamp (x, y, angle of the major axis) and the 3-sigma axes (at least 5 cm)."""
-    poses, scales = [], []
-    for xy, c in zip(lamps, covs, strict=True):
-        w, v = np.linalg.eigh(c)
-        ang = float(np.arctan2(v[1, 1], v[0, 1]))
-        poses.append((xy[0], xy[1], ang))
-        scales.append([max(6.0 * float(np.sqrt(max(e, 0.0))), 0.05) for e in (w[1], w[0])])
-    return np.array(poses, dtype=float).reshape(-1, 3), np.array(scales).reshape(-1, 2)
+    """Per lamp (x, y, angle of the major axis) and the 3-sigma axes (at least 5 cm): the
+    eigen-decompositions of all covariances in one call (LAPACK per 2x2 matrix)."""
+    lamps = np.asarray(lamps, dtype=float).reshape(-1, 2)
+    covs = np.asarray(covs, dtype=float).reshape(-1, 2, 2)
+    w, v = np.linalg.eigh(covs)  # ascending eigenvalues (n, 2), eigenvectors in columns
+    poses = np.column_stack([lamps, np.arctan2(v[:, 1, 1], v[:, 0, 1])])
+    scales = np.maximum(6.0 * np.sqrt(np.maximum(w[:, ::-1], 0.0)), 0.05)  # major, minor
+    return poses, scales
 
 
 def lamp_markers(t: float, lamps: np.ndarray, covs: np.ndarray) -> object:

@@ -46,6 +46,7 @@ class DetectionNoiseEstimate:
             samples, detection_sigma_range, detection_sigma_range_per_m,
             detection_sigma_bearing_deg (None: not measurable).
         """
+
         def rnd(v: float | None, k: int) -> float | None:
             return None if v is None else round(v, k)
 
@@ -77,14 +78,19 @@ class DetectionNoiseEstimator:
         r : ndarray, shape (2, 2)
             The detection covariance.
         """
-        rng = math.hypot(float(z[0]), float(z[1]))
+        (z0, z1), (v0, v1) = np.asarray(z, dtype=float).tolist(), np.asarray(v).tolist()
+        rng = math.hypot(z0, z1)
         if rng <= 0:
             return
-        u = np.asarray(z, dtype=float) / rng
-        n = np.array([-u[1], u[0]])
-        hph = np.asarray(s, dtype=float) - np.asarray(r, dtype=float)
-        vr, vt = float(u @ v), float(n @ v)
-        self._rows.append((rng, vr * vr - float(u @ hph @ u), (vt * vt - float(n @ hph @ n))))
+        # on floats (2-vectors: numpy calls cost more than the arithmetic), in numpy's order
+        u0, u1 = z0 / rng, z1 / rng  # u = z / |z|, n = (-u1, u0)
+        (s00, s01), (s10, s11) = np.asarray(s, dtype=float).tolist()
+        (r00, r01), (r10, r11) = np.asarray(r, dtype=float).tolist()
+        h00, h01, h10, h11 = s00 - r00, s01 - r01, s10 - r10, s11 - r11  # H P H^T = S - R
+        vr, vt = u0 * v0 + u1 * v1, -u1 * v0 + u0 * v1  # u.v, n.v
+        uhu = (u0 * h00 + u1 * h10) * u0 + (u0 * h01 + u1 * h11) * u1  # u^T (S - R) u
+        nhn = (-u1 * h00 + u0 * h10) * -u1 + (-u1 * h01 + u0 * h11) * u0  # n^T (S - R) n
+        self._rows.append((rng, vr * vr - uhu, vt * vt - nhn))
 
     def __len__(self) -> int:
         return len(self._rows)

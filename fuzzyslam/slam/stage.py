@@ -91,9 +91,7 @@ def make_summary(
         calibration=res.calibration if res.calibration is not None else OMIT,
         aids={type(a).__name__: a.summary() for a in aids} if aids else OMIT,
         rings=inputs.ring_stats.as_dict() if aids else OMIT,
-        range_sensor=(
-            inputs.ranges.describe() if aids and inputs.ranges is not None else OMIT
-        ),
+        range_sensor=(inputs.ranges.describe() if aids and inputs.ranges is not None else OMIT),
     )
 
 
@@ -151,10 +149,14 @@ def run(
     """
     from fuzzyslam.config import load_config
     from fuzzyslam.errors import UsageError
-    from fuzzyslam.fixes.aids import aids_for_log  # the plug-ins (fixes/) sit above slam/
 
     cfg = load_config(config, seed)
-    aids = aids_for_log(Path(map_dir) if map_dir is not None else None, fix, cfg, log, fix_from)
+    if map_dir is None and fix in (None, "none"):
+        aids = []  # lamps only (aids_for_log's answer), the plug-ins not even imported
+    else:
+        from fuzzyslam.fixes.aids import aids_for_log  # the plug-ins (fixes/) sit above slam/
+
+        aids = aids_for_log(Path(map_dir) if map_dir is not None else None, fix, cfg, log, fix_from)
     if adapt_noise and aids:
         raise UsageError("--adapt-noise cannot be combined with heading or pose fixes")
     if calibration is None and map_dir is not None and cfg.slam.calibrate:

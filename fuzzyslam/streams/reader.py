@@ -50,6 +50,27 @@ class LogMessage(NamedTuple):
     t_ns: int
 
 
+def _last_stamp(
+    batch: list, last_ns: int, seen: set[tuple[int, int]]
+) -> tuple[int, set[tuple[int, int]]]:
+    """After a batch of (log time, channel id, sequence, payload) in time order: the last
+    log time given and the (channel id, sequence) given at it, ``seen`` of the batches
+    before included when they end at that time too (a walk resuming after an index
+    mismatch starts there and leaves them out). Once per batch, not per message."""
+    if not batch:
+        return last_ns, seen
+    t_last = batch[-1][0]
+    at = set()
+    for t, cid, seq, _ in reversed(batch):
+        if t != t_last:
+            break
+        at.add((cid, seq))
+    else:  # the whole batch at t_last: the run may go on from the batches before
+        if t_last == last_ns:
+            at |= seen
+    return t_last, at
+
+
 class LogReader:
     """Read a ROS 2 MCAP recording.
 
@@ -207,10 +228,7 @@ class LogReader:
                 self._recent, self._recent_of = {}, (st.st_size, st.st_mtime_ns)
             try:
                 for batch in indexed_messages(f, s, set(chans), start_ns, dmg, self._recent):
-                    for t_ns, cid, seq, payload in batch:
-                        if t_ns != last_ns:
-                            last_ns, seen = t_ns, set()
-                        seen.add((cid, seq))
+                    for t_ns, cid, _seq, payload in batch:
                         topic, typename, fn = fns[cid]
                         if fn is None:
                             dmg.undecodable += 1
@@ -221,6 +239,7 @@ class LogReader:
                             dmg.undecodable += 1
                             continue
                         yield LogMessage(topic, t_ns / 1e9, typename, msg, t_ns)
+                    last_ns, seen = _last_stamp(batch, last_ns, seen)
                 return
             except IndexMismatch as exc:
                 mismatch = exc
