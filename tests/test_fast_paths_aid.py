@@ -74,6 +74,7 @@ def _plain_flm(ranges, max_range, fov, mounts, params):
 def test_flm_reading_cache_equals_ring_evidence(fov_deg):
     from fuzzyslam.maps import flm
     from fuzzyslam.maps.params import MapParams
+    from fuzzyslam.maps.tangent import readings_in_frame
 
     rng = np.random.default_rng(9)
     params = MapParams()
@@ -90,6 +91,11 @@ def test_flm_reading_cache_equals_ring_evidence(fov_deg):
         old = _plain_flm(ranges, max_range, fov, mounts, params)
         for m in ("m_e", "m_o", "m_t", "m_c"):
             assert np.array_equal(getattr(new, m), getattr(old, m))
+        # the echoes from the composed mounts: readings_in_frame's, bit for bit
+        echoes = readings_in_frame(np.zeros((1, 3)), ranges[None], max_range, fov, mounts)
+        assert np.array_equal(new.readings.sensors, echoes.sensors)
+        assert np.array_equal(new.readings.ranges, echoes.ranges)
+        assert new.readings.half_angle == echoes.half_angle
     # the cache was used: fewer pieces than readings
     assert 0 < len(flm._READINGS.pieces) < np.isfinite(rings).sum() / 2
     # a ring that does not fit the mounts goes the plain way (the same error)
