@@ -219,3 +219,33 @@ def test_fit_walls_equals_wall_by_wall_fit():
             assert np.array_equal(getattr(new, f), getattr(old, f), equal_nan=True), f
         fits += new.ok
     assert fits > 50  # most trials converge: the comparison covers full fits
+
+
+def test_conjunctive_grouped_equals_one_bincount_per_commonality():
+    """tbm.conjunctive_grouped (the three commonalities in one bincount) against the plain
+    form, one bincount per commonality, bit for bit, with zero commonalities and empty
+    groups."""
+    from fuzzyslam.maps.tbm import commonality, conjunctive_grouped, from_commonality
+
+    def plain(m, groups, ngroups):
+        out = []
+        for q in commonality(m):
+            q = np.asarray(q, dtype=float)
+            zero = q <= 0.0
+            logq = np.log(np.where(zero, 1.0, q))
+            s = np.bincount(groups, weights=logq, minlength=ngroups)
+            nz = np.bincount(groups, weights=zero.astype(float), minlength=ngroups)
+            out.append(np.where(nz > 0, 0.0, np.exp(s)))
+        return from_commonality(*out)
+
+    rng = np.random.default_rng(8)
+    for n, ngroups in ((0, 3), (1, 1), (50, 7), (3000, 400)):
+        raw = rng.dirichlet([1.0, 1.0, 1.0], n)
+        raw[rng.random(n) < 0.2, 0] = 0.0  # m(E) = 0 and m(T) = 0: q(E) = 0
+        e, o = raw[:, 0], raw[:, 1]
+        t = np.where(rng.random(n) < 0.1, 0.0, 1.0 - e - o)
+        m = (e, o, t, np.zeros(n))
+        groups = rng.integers(0, ngroups, n)
+        new, old = conjunctive_grouped(m, groups, ngroups), plain(m, groups, ngroups)
+        for a, b in zip(new, old, strict=True):
+            assert a.shape == (ngroups,) and np.array_equal(a, b)

@@ -131,28 +131,28 @@ class _ReadingCells:
         missing = [k for k in keys if k not in self.pieces]
         if missing:  # computed together (each entry depends on its own reading only)
             self._add(grid, missing, half, params)
-        near = [self.pieces[k][0] for k in keys]
-        far = [self.pieces[k][1] for k in keys]
-        if not near:  # no reading: the plain path
+        if not keys:  # no reading: the plain path
             return None
-        parts = near + far
-        cells, m_e, m_o = (np.concatenate([p[k] for p in parts]) for k in range(3))
+        got = [self.pieces[k] for k in keys]
+        # rows cell, m(E), m(O): the near sectors' entries, then the far ones'
+        entries = np.concatenate([g[0] for g in got] + [g[1] for g in got], axis=1)
         ncell = grid.shape[0] * grid.shape[1]
-        b = combine_cells(cells, m_e, m_o, 1, ncell, int(ok.sum()))
+        b = combine_cells(entries[0].astype(np.int64), entries[1], entries[2], 1, ncell, len(keys))
         echoes = RingReadings(self.sensors[echo_all], r_all[echo_all], half)
         return RingEvidence(b.cells, b.masses, b.pairs, b.readings), echoes
 
     def _add(self, grid, keys: list, half: float, params) -> None:
-        """Remember the (cells, m_e, m_o) of the near and of the far sector of each
-        reading (sensor, range, echo) in ``keys``."""
+        """Remember the entries of the near and of the far sector of each reading (sensor,
+        range, echo) in ``keys``: (3, n) arrays of rows cell (a float: exact below 2^53),
+        m(E), m(O), so that a ring's entries are one concatenation."""
         idx = [k[0] for k in keys]
         r = np.array([k[1] for k in keys])
         echo = np.array([k[2] for k in keys])
         rid, cell, m_e, m_o, second = readings_cells(grid, self.sensors[idx], r, echo, half, params)
+        rows = np.array([cell, m_e, m_o])
         for j, key in enumerate(keys):
             mine = rid == j
-            a, b = mine & ~second, mine & second
-            self.pieces[key] = ((cell[a], m_e[a], m_o[a]), (cell[b], m_e[b], m_o[b]))
+            self.pieces[key] = (rows[:, mine & ~second], rows[:, mine & second])
 
 
 _READINGS = _ReadingCells()
