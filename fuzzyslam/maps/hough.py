@@ -27,11 +27,16 @@ Reference: Golub & Van Loan, "Matrix computations", sec. 12.3 (TLS); K. Kanatani
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 
 import numpy as np
 
 from fuzzyslam.maps.grid import BeliefMap
-from fuzzyslam.maps.hough_accumulator import HoughPlane, hough_accumulator  # re-exported
+from fuzzyslam.maps.hough_accumulator import (  # hough_accumulator re-exported
+    HoughPlane,
+    _theta_table,
+    hough_accumulator,
+)
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.se2 import direction_mod_pi, wrap_angle_period
 
@@ -143,6 +148,16 @@ def _angdist_pi(a: np.ndarray, b: float) -> np.ndarray:
     return np.abs(wrap_angle_period(np.asarray(a) - b, np.pi))
 
 
+@lru_cache(maxsize=1024)
+def _far_from(theta_step: float, j: int, separation: float) -> np.ndarray:
+    """Which of the accumulator's angles (``theta_step`` apart) lie at least ``separation``
+    (rad, mod pi) from angle j: a fixed table per peak bin (read-only)."""
+    thetas = _theta_table(theta_step)[0]
+    out = _angdist_pi(thetas, float(thetas[j])) >= separation
+    out.flags.writeable = False
+    return out
+
+
 def _parabolic_offset(prof: np.ndarray, j: int) -> float:
     """Sub-bin offset of the maximum of a periodic profile at bin j: the vertex of the
     parabola through bins j-1, j, j+1 (in bins, within +-0.5)."""
@@ -222,7 +237,7 @@ def dominant_direction(
     energy = direction_profile(acc)
     j = int(np.argmax(energy))
     t0 = float(plane.thetas[j])
-    far = _angdist_pi(plane.thetas, t0) >= np.deg2rad(params.ambiguity_separation_deg)
+    far = _far_from(float(dtheta), j, float(np.deg2rad(params.ambiguity_separation_deg)))
     j2 = int(np.argmax(np.where(far, energy, -1.0)))
     s1 = float(acc[:, j].max()) * params.resolution
     s2 = float(acc[:, j2].max()) * params.resolution if far.any() else 0.0

@@ -153,8 +153,9 @@ def predict_ranges(
     ns, dns = prod[0::2], prod[1::2]
     p = c_w - ns
     off = wrap_angle(psi_w - sensors[:, 2])
-    outside = np.abs(off) > half
-    delta = np.where(outside, np.abs(off) - half, 0.0)
+    abs_off = np.abs(off)
+    outside = abs_off > half
+    delta = np.where(outside, abs_off - half, 0.0)
     sec = 1.0 / np.cos(delta)
     r = p * sec
     dp_dpsi = -dns
