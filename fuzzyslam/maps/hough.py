@@ -99,14 +99,15 @@ def wall_weights(bm: BeliefMap, threshold: float) -> np.ndarray:
 def _rho_peaks(col: np.ndarray, min_frac: float = 0.3, min_sep: int = 3) -> np.ndarray:
     """Indices of local maxima of a 1-D profile above min_frac * max, greedy non-max
     suppression over +-min_sep bins, strongest first (at most 4)."""
-    order = np.argsort(-col, kind="stable")
-    top = col[order[0]] if len(col) else 0.0
+    order = np.argsort(-col, kind="stable")[:64]  # a handful of candidates, as floats
+    vals = col[order].tolist()
+    floor = min_frac * vals[0] if vals else 0.0
     chosen: list[int] = []
-    for i in order[:64]:  # a handful of candidates; not a loop over cells
-        if col[i] < min_frac * top or len(chosen) >= 4:
+    for i, v in zip(order.tolist(), vals, strict=True):  # not a loop over cells
+        if v < floor or len(chosen) >= 4:
             break
-        if all(abs(int(i) - c) > min_sep for c in chosen):
-            chosen.append(int(i))
+        if all(abs(i - c) > min_sep for c in chosen):
+            chosen.append(i)
     return np.array(chosen, dtype=np.int64)
 
 
@@ -164,7 +165,7 @@ def _parabolic_offset(prof: np.ndarray, j: int) -> float:
     n = len(prof)
     a, b, c = prof[(j - 1) % n], prof[j], prof[(j + 1) % n]
     den = a - 2.0 * b + c
-    return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5)) if den < 0 else 0.0
+    return min(max(float(0.5 * (a - c) / den), -0.5), 0.5) if den < 0 else 0.0
 
 
 def direction_profile(acc: np.ndarray) -> np.ndarray:
