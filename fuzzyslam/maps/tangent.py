@@ -238,10 +238,14 @@ def fit_walls(
         active = np.flatnonzero(np.isfinite(cs))
         if active.size == 0:
             break
+        every = active.size == rel.size  # every wall active (the usual case): no gathers
         # every active wall's prediction at once (A, N); each reading is assigned to the
         # wall predicting it best within tolerance, the first such wall on ties
         r, dpsi, dc, delta, p = predict_ranges(
-            psi + rel[active], cs[active], rd.sensors, rd.half_angle
+            psi + (rel if every else rel[active]),
+            cs if every else cs[active],
+            rd.sensors,
+            rd.half_angle,
         )
         e = rd.ranges - r
         ae = np.abs(e)
@@ -254,22 +258,26 @@ def fit_walls(
         if nsel < 3:
             return TangentFit(psi, cs, sel, assign, float("inf"))
         # per selected reading: d r / d psi and d r / d c of its wall, and the residual
-        # (the Jacobian's rows are [d psi, 0 .., d c at 1 + wall, .. 0]), weighted
-        q_sel = q[sel]
-        s_sel = sig[sel]
+        # (the Jacobian's rows are [d psi, 0 .., d c at 1 + wall, .. 0]), weighted: one
+        # gather of the three
+        q_sel = q[rows]
+        g = np.array([dpsi, dc, e])[:, q_sel, rows] / sig[rows]
         # the weighted Jacobian of the active walls, column-major as a column selection of
         # a row-major array is (a.T @ a then multiplies the same layout: the same floats)
         a = np.zeros((nsel, 1 + active.size), order="F")
-        a[:, 0] = dpsi[q_sel, rows] / s_sel
-        a[np.arange(nsel), 1 + q_sel] = dc[q_sel, rows] / s_sel
-        b = e[q_sel, rows] / s_sel
+        a[:, 0] = g[0]
+        a[np.arange(nsel), 1 + q_sel] = g[1]
+        b = g[2]
         normal = a.T @ a
         try:
             dx = np.linalg.solve(normal, a.T @ b)
         except np.linalg.LinAlgError:
             return TangentFit(psi, cs, sel, assign, float("inf"))
         psi += float(dx[0])
-        cs[active] += dx[1:]
+        if every:
+            cs += dx[1:]
+        else:
+            cs[active] += dx[1:]
         last = (a, b, dx)
     if normal is None or last is None:
         return TangentFit(psi, cs, assign >= 0, assign, float("inf"))
