@@ -74,6 +74,7 @@ def _plain_flm(ranges, max_range, fov, mounts, params):
 def test_flm_reading_cache_equals_ring_evidence(fov_deg):
     from fuzzyslam.maps import flm
     from fuzzyslam.maps.params import MapParams
+    from fuzzyslam.maps.tangent import readings_in_frame
 
     rng = np.random.default_rng(9)
     params = MapParams()
@@ -90,8 +91,161 @@ def test_flm_reading_cache_equals_ring_evidence(fov_deg):
         old = _plain_flm(ranges, max_range, fov, mounts, params)
         for m in ("m_e", "m_o", "m_t", "m_c"):
             assert np.array_equal(getattr(new, m), getattr(old, m))
+        # the echoes from the composed mounts: readings_in_frame's, bit for bit
+        echoes = readings_in_frame(np.zeros((1, 3)), ranges[None], max_range, fov, mounts)
+        assert np.array_equal(new.readings.sensors, echoes.sensors)
+        assert np.array_equal(new.readings.ranges, echoes.ranges)
+        assert new.readings.half_angle == echoes.half_angle
     # the cache was used: fewer pieces than readings
     assert 0 < len(flm._READINGS.pieces) < np.isfinite(rings).sum() / 2
     # a ring that does not fit the mounts goes the plain way (the same error)
     with pytest.raises(ValueError):
         flm.build_flm(rings[0][:5], 5.0, fov, mounts, params)
+
+
+def _plain_fit_walls(rd, psi0, sigma_frac, quantum, tolerance, delta_max, walls, iterations):
+    """The tangent fit written wall by wall (one prediction per wall, readings assigned
+    in the walls' order, the Jacobian's columns filled per wall): the fit before its
+    walls were predicted together."""
+    from fuzzyslam.maps.tangent import TangentFit, predict_ranges
+    from fuzzyslam.se2 import wrap_angle
+
+    def offset(psi):
+        n = np.array([np.cos(psi), np.sin(psi)])
+        delta = np.maximum(np.abs(wrap_angle(psi - rd.sensors[:, 2])) - rd.half_angle, 0.0)
+        ok = delta < delta_max
+        if not ok.any():
+            return float("nan")
+        ci = rd.sensors[ok, :2] @ n + rd.ranges[ok] * np.cos(delta[ok])
+        ci = ci[ci > 0]
+        if ci.size == 0:
+            return float("nan")
+        support = (np.abs(ci[:, None] - ci[None, :]) < tolerance).sum(axis=1)
+        return float(ci[support == support.max()].min())
+
+    psi = float(psi0)
+    cs = np.array([offset(psi + w) for w in walls])
+    n = len(rd)
+    sig = np.hypot(sigma_frac * rd.ranges, quantum / np.sqrt(12.0))
+    assign = np.full(n, -1)
+    normal = None
+    for _ in range(iterations):
+        active = np.flatnonzero(np.isfinite(cs))
+        if active.size == 0:
+            break
+        best, assign = np.full(n, np.inf), np.full(n, -1)
+        j_psi, j_c, resid = np.zeros(n), np.zeros(n), np.zeros(n)
+        for j in active:
+            r, dpsi, dc, delta, p = predict_ranges(psi + walls[j], cs[j], rd.sensors, rd.half_angle)
+            e = rd.ranges - r
+            take = (delta < delta_max) & (p > 0) & (np.abs(e) < tolerance) & (np.abs(e) < best)
+            best[take], assign[take] = np.abs(e)[take], j
+            j_psi[take], j_c[take], resid[take] = dpsi[take], dc[take], e[take]
+        sel = assign >= 0
+        if sel.sum() < 3:
+            return TangentFit(psi, cs, sel, assign, float("inf"))
+        a = np.zeros((int(sel.sum()), 1 + active.size), order="F")
+        a[:, 0] = j_psi[sel] / sig[sel]
+        for q, j in enumerate(active):
+            rows = assign[sel] == j
+            a[rows, 1 + q] = (j_c[sel] / sig[sel])[rows]
+        b = resid[sel] / sig[sel]
+        normal = a.T @ a
+        try:
+            dx = np.linalg.solve(normal, a.T @ b)
+        except np.linalg.LinAlgError:
+            return TangentFit(psi, cs, sel, assign, float("inf"))
+        psi += float(dx[0])
+        cs[active] += dx[1:]
+        dof = int(sel.sum()) - 1 - active.size
+        res = b - a @ dx
+        birge = float(np.sqrt(res @ res / dof)) if dof > 0 else float("nan")
+    if normal is None:
+        return TangentFit(psi, cs, assign >= 0, assign, float("inf"))
+    try:
+        var = float(np.linalg.inv(normal)[0, 0])
+    except np.linalg.LinAlgError:
+        var = float("inf")
+    sigma = float(np.sqrt(var)) if np.isfinite(var) and var >= 0 else float("inf")
+    return TangentFit(float(wrap_angle(psi)), cs, assign >= 0, assign, sigma, birge)
+
+
+def test_predict_ranges_of_several_walls_equals_one_by_one():
+    from fuzzyslam.maps.tangent import predict_ranges
+
+    rng = np.random.default_rng(5)
+    for n in (1, 3, 16, 37, 160):
+        sensors = np.column_stack([rng.uniform(-3, 3, (n, 2)), rng.uniform(-4, 4, n)])
+        psi = rng.uniform(-4.0, 4.0, 3)
+        c = rng.uniform(-1.0, 3.0, 3)
+        many = predict_ranges(psi, c, sensors, 0.2)
+        for k in range(3):
+            one = predict_ranges(float(psi[k]), float(c[k]), sensors, 0.2)
+            for x, y in zip(one, many, strict=True):
+                assert np.array_equal(x, y[k], equal_nan=True)
+
+
+def test_fit_walls_equals_wall_by_wall_fit():
+    """fit_walls (walls predicted together) against the plain wall-by-wall fit, bit for
+    bit, on corridor rings with noise, outliers and missing echoes, from starts near and
+    far from the truth, with one, two and three walls."""
+    from maps_synth import corridor_lines, ring_in_lines
+
+    from fuzzyslam.maps.tangent import fit_walls, readings_in_frame
+    from fuzzyslam.robot import sonar_mounts
+
+    rng = np.random.default_rng(6)
+    mounts, fov = sonar_mounts(), np.deg2rad(25.0)
+    kw = {"sigma_frac": 0.01, "quantum": 0.0254, "tolerance": 0.06,
+          "delta_max": np.deg2rad(20.0), "iterations": 4}  # fmt: skip
+    fits = 0
+    for trial in range(150):
+        k = 1 + trial % 4
+        poses = np.column_stack([rng.uniform(-1, 1, k), rng.uniform(-0.3, 0.3, k),
+                                 rng.uniform(-0.6, 0.6, k)])  # fmt: skip
+        ranges = np.array([ring_in_lines(p, mounts, corridor_lines(0.0, 1.2), fov, 6.5)
+                           for p in poses])  # fmt: skip
+        ranges = ranges * (1 + rng.normal(0, 0.01, ranges.shape))
+        ranges[rng.random(ranges.shape) < 0.15] = rng.uniform(0.2, 3.0)  # bounces
+        ranges[rng.random(ranges.shape) < 0.1] = np.nan
+        rd = readings_in_frame(poses - poses[-1] * [0, 0, 0], ranges, 6.5, fov, mounts)
+        psi0 = np.pi / 2 + rng.normal(0, [0.02, 0.3][trial % 2])
+        walls = [(0.0, np.pi), (0.0,), (0.0, np.pi, np.pi / 2)][trial % 3]
+        new = fit_walls(rd, psi0, walls=walls, **kw)
+        old = _plain_fit_walls(rd, psi0, walls=walls, **kw)
+        for f in ("psi", "sigma", "birge"):
+            assert np.array_equal(getattr(new, f), getattr(old, f), equal_nan=True), f
+        for f in ("offsets", "inliers", "wall_of"):
+            assert np.array_equal(getattr(new, f), getattr(old, f), equal_nan=True), f
+        fits += new.ok
+    assert fits > 50  # most trials converge: the comparison covers full fits
+
+
+def test_conjunctive_grouped_equals_one_bincount_per_commonality():
+    """tbm.conjunctive_grouped (the three commonalities in one bincount) against the plain
+    form, one bincount per commonality, bit for bit, with zero commonalities and empty
+    groups."""
+    from fuzzyslam.maps.tbm import commonality, conjunctive_grouped, from_commonality
+
+    def plain(m, groups, ngroups):
+        out = []
+        for q in commonality(m):
+            q = np.asarray(q, dtype=float)
+            zero = q <= 0.0
+            logq = np.log(np.where(zero, 1.0, q))
+            s = np.bincount(groups, weights=logq, minlength=ngroups)
+            nz = np.bincount(groups, weights=zero.astype(float), minlength=ngroups)
+            out.append(np.where(nz > 0, 0.0, np.exp(s)))
+        return from_commonality(*out)
+
+    rng = np.random.default_rng(8)
+    for n, ngroups in ((0, 3), (1, 1), (50, 7), (3000, 400)):
+        raw = rng.dirichlet([1.0, 1.0, 1.0], n)
+        raw[rng.random(n) < 0.2, 0] = 0.0  # m(E) = 0 and m(T) = 0: q(E) = 0
+        e, o = raw[:, 0], raw[:, 1]
+        t = np.where(rng.random(n) < 0.1, 0.0, 1.0 - e - o)
+        m = (e, o, t, np.zeros(n))
+        groups = rng.integers(0, ngroups, n)
+        new, old = conjunctive_grouped(m, groups, ngroups), plain(m, groups, ngroups)
+        for a, b in zip(new, old, strict=True):
+            assert a.shape == (ngroups,) and np.array_equal(a, b)

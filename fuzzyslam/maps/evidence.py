@@ -22,6 +22,7 @@ cone is not known to be empty far away). Constants and their justification:
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import lru_cache
 
 import numpy as np
 
@@ -84,6 +85,21 @@ def reading_masses(
     return a * d_e * f_e, ad * f_o
 
 
+@lru_cache(maxsize=8)
+def _arc_bearings(half_angle: float) -> np.ndarray:
+    """The 9 bearings (rad) at which :func:`cone_cells` samples a sector's arcs, about the
+    axis (read-only; one table per cone, not one per call)."""
+    out = np.linspace(-half_angle, half_angle, 9)
+    out.flags.writeable = False
+    return out
+
+
+def _bound(x: np.ndarray, lo, hi) -> np.ndarray:
+    """min(max(x, lo), hi) elementwise: ``np.clip(x, lo, hi)`` for integers and whole
+    numbers (no NaN) without np.clip's Python overhead."""
+    return np.minimum(np.maximum(x, lo), hi)
+
+
 def cone_cells(
     grid: Grid, sensors: np.ndarray, r0: np.ndarray, r1: np.ndarray, half_angle: float
 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -119,7 +135,7 @@ def cone_cells(
     if n == 0:
         e = np.zeros(0, dtype=np.int64)
         return e, e, e
-    bear = sensors[:, 2:3] + np.linspace(-half_angle, half_angle, 9)[None, :]
+    bear = sensors[:, 2:3] + _arc_bearings(float(half_angle))[None, :]
     c, s = np.cos(bear), np.sin(bear)
     ax = np.concatenate([sensors[:, 0:1] + r0[:, None] * c, sensors[:, 0:1] + r1[:, None] * c], 1)
     ay = np.concatenate([sensors[:, 1:2] + r0[:, None] * s, sensors[:, 1:2] + r1[:, None] * s], 1)
@@ -128,10 +144,11 @@ def cone_cells(
     pad = np.asarray(r1, dtype=float) * (1.0 - np.cos(half_angle / 8.0)) + 1e-9
     # cell ix has its centre at ox + (ix + 0.5) res: centres in [xmin, xmax] are
     # ix in [ceil((xmin - ox) / res - 0.5), floor((xmax - ox) / res - 0.5)]
-    ix0 = np.clip(np.ceil((ax.min(1) - pad - ox) / res - 0.5).astype(np.int64), 0, nx)
-    ix1 = np.clip(np.floor((ax.max(1) + pad - ox) / res - 0.5).astype(np.int64) + 1, 0, nx)
-    iy0 = np.clip(np.ceil((ay.min(1) - pad - oy) / res - 0.5).astype(np.int64), 0, ny)
-    iy1 = np.clip(np.floor((ay.max(1) + pad - oy) / res - 0.5).astype(np.int64) + 1, 0, ny)
+    # (integer bounds: np.minimum / np.maximum are np.clip's values, without its overhead)
+    ix0 = _bound(np.ceil((ax.min(1) - pad - ox) / res - 0.5).astype(np.int64), 0, nx)
+    ix1 = _bound(np.floor((ax.max(1) + pad - ox) / res - 0.5).astype(np.int64) + 1, 0, nx)
+    iy0 = _bound(np.ceil((ay.min(1) - pad - oy) / res - 0.5).astype(np.int64), 0, ny)
+    iy1 = _bound(np.floor((ay.max(1) + pad - oy) / res - 0.5).astype(np.int64) + 1, 0, ny)
     # rows of each box, then per row the x-interval of the cell centres that can lie in
     # the sector: inside the disc rho <= r1 and between the cone's two edge rays
     wy = np.maximum(iy1 - iy0, 0)
@@ -155,8 +172,10 @@ def cone_cells(
         hi = np.where(su < -1e-12, np.minimum(hi, bound + eps), hi)
         hi = np.where((np.abs(su) <= 1e-12) & (sv > eps), -np.inf, hi)
     xs = sensors[rp, 0] - ox
-    a = np.clip(np.ceil((xs + lo) / res - 0.5), ix0[rp], ix1[rp]).astype(np.int64)
-    z = np.clip(np.floor((xs + np.maximum(hi, lo - res)) / res - 0.5) + 1, ix0[rp], ix1[rp])
+    # whole numbers (finite or infinite: lo, hi and their sums are never NaN) clamped to the
+    # row's box, then made integers (np.clip's values)
+    a = _bound(np.ceil((xs + lo) / res - 0.5), ix0[rp], ix1[rp]).astype(np.int64)
+    z = _bound(np.floor((xs + np.maximum(hi, lo - res)) / res - 0.5) + 1, ix0[rp], ix1[rp])
     count = np.maximum(z.astype(np.int64) - a, 0)
     total = int(count.sum())
     row = np.repeat(np.arange(nrow), count)

@@ -81,13 +81,16 @@ def build_flm(
     params = params if params is not None else MapParams()
     grid = flm_grid(params)
     bm = BeliefMap.vacuous(grid)
-    ev = _READINGS.evidence(grid, ranges, max_range, fov, mounts, params)
-    if ev is None:  # a ring the cache does not take (not one range per mount)
+    cached = _READINGS.evidence(grid, ranges, max_range, fov, mounts, params)
+    if cached is None:  # a ring the cache does not take (not one range per mount)
         ev = ring_evidence(grid, np.zeros(3), ranges, max_range, fov, mounts, params)
+        ranges = np.asarray(ranges, dtype=float).reshape(1, -1)
+        echoes = readings_in_frame(np.zeros((1, 3)), ranges, max_range, fov, mounts)
+    else:
+        ev, echoes = cached
     for arr, val in zip((bm.m_e, bm.m_o, bm.m_t, bm.m_c), clip_masses(ev.masses), strict=True):
         arr.ravel()[ev.cells] = val
-    ranges = np.asarray(ranges, dtype=float).reshape(1, -1)
-    return LocalMap.of(bm, readings_in_frame(np.zeros((1, 3)), ranges, max_range, fov, mounts))
+    return LocalMap.of(bm, echoes)
 
 
 class _ReadingCells:
@@ -97,16 +100,19 @@ class _ReadingCells:
     so the same readings come back ring after ring. The entries are concatenated in
     ``readings_cells``' order (near sectors, then far ones) and combined by
     ``combine_cells``: the same evidence as ``ring_evidence``, bit for bit
-    (tests/test_fast_paths_aid.py)."""
+    (tests/test_fast_paths_aid.py). The ring's echoes come with it, their sensor poses
+    taken from the mounts composed once at the origin (``readings_in_frame``'s floats)."""
 
     def __init__(self) -> None:
         self.setup: tuple | None = None
         self.sensors = np.zeros((0, 3))
         self.pieces: dict[tuple[int, float, bool], tuple] = {}
 
-    def evidence(self, grid, ranges, max_range, fov, mounts, params) -> RingEvidence | None:
-        """:func:`ring_evidence` at the origin (None when the ring does not fit the mounts or
-        has no reading)."""
+    def evidence(
+        self, grid, ranges, max_range, fov, mounts, params
+    ) -> tuple[RingEvidence, RingReadings] | None:
+        """:func:`ring_evidence` at the origin and the ring's echoes (:func:`readings_in_frame`
+        at the origin), or None when the ring does not fit the mounts or has no reading."""
         mounts = np.asarray(mounts, dtype=float).reshape(-1, 3)
         r_all = np.asarray(ranges, dtype=float).reshape(-1)
         if len(r_all) != len(mounts):
@@ -125,27 +131,28 @@ class _ReadingCells:
         missing = [k for k in keys if k not in self.pieces]
         if missing:  # computed together (each entry depends on its own reading only)
             self._add(grid, missing, half, params)
-        near = [self.pieces[k][0] for k in keys]
-        far = [self.pieces[k][1] for k in keys]
-        if not near:  # no reading: the plain path
+        if not keys:  # no reading: the plain path
             return None
-        parts = near + far
-        cells, m_e, m_o = (np.concatenate([p[k] for p in parts]) for k in range(3))
+        got = [self.pieces[k] for k in keys]
+        # rows cell, m(E), m(O): the near sectors' entries, then the far ones'
+        entries = np.concatenate([g[0] for g in got] + [g[1] for g in got], axis=1)
         ncell = grid.shape[0] * grid.shape[1]
-        b = combine_cells(cells, m_e, m_o, 1, ncell, int(ok.sum()))
-        return RingEvidence(b.cells, b.masses, b.pairs, b.readings)
+        b = combine_cells(entries[0].astype(np.int64), entries[1], entries[2], 1, ncell, len(keys))
+        echoes = RingReadings(self.sensors[echo_all], r_all[echo_all], half)
+        return RingEvidence(b.cells, b.masses, b.pairs, b.readings), echoes
 
     def _add(self, grid, keys: list, half: float, params) -> None:
-        """Remember the (cells, m_e, m_o) of the near and of the far sector of each
-        reading (sensor, range, echo) in ``keys``."""
+        """Remember the entries of the near and of the far sector of each reading (sensor,
+        range, echo) in ``keys``: (3, n) arrays of rows cell (a float: exact below 2^53),
+        m(E), m(O), so that a ring's entries are one concatenation."""
         idx = [k[0] for k in keys]
         r = np.array([k[1] for k in keys])
         echo = np.array([k[2] for k in keys])
         rid, cell, m_e, m_o, second = readings_cells(grid, self.sensors[idx], r, echo, half, params)
+        rows = np.array([cell, m_e, m_o])
         for j, key in enumerate(keys):
             mine = rid == j
-            a, b = mine & ~second, mine & second
-            self.pieces[key] = ((cell[a], m_e[a], m_o[a]), (cell[b], m_e[b], m_o[b]))
+            self.pieces[key] = (rows[:, mine & ~second], rows[:, mine & second])
 
 
 _READINGS = _ReadingCells()

@@ -27,11 +27,16 @@ Reference: Golub & Van Loan, "Matrix computations", sec. 12.3 (TLS); K. Kanatani
 from __future__ import annotations
 
 from dataclasses import dataclass, field, replace
+from functools import lru_cache
 
 import numpy as np
 
 from fuzzyslam.maps.grid import BeliefMap
-from fuzzyslam.maps.hough_accumulator import HoughPlane, hough_accumulator  # re-exported
+from fuzzyslam.maps.hough_accumulator import (  # hough_accumulator re-exported
+    HoughPlane,
+    _theta_table,
+    hough_accumulator,
+)
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.se2 import direction_mod_pi, wrap_angle_period
 
@@ -94,14 +99,15 @@ def wall_weights(bm: BeliefMap, threshold: float) -> np.ndarray:
 def _rho_peaks(col: np.ndarray, min_frac: float = 0.3, min_sep: int = 3) -> np.ndarray:
     """Indices of local maxima of a 1-D profile above min_frac * max, greedy non-max
     suppression over +-min_sep bins, strongest first (at most 4)."""
-    order = np.argsort(-col, kind="stable")
-    top = col[order[0]] if len(col) else 0.0
+    order = np.argsort(-col, kind="stable")[:64]  # a handful of candidates, as floats
+    vals = col[order].tolist()
+    floor = min_frac * vals[0] if vals else 0.0
     chosen: list[int] = []
-    for i in order[:64]:  # a handful of candidates; not a loop over cells
-        if col[i] < min_frac * top or len(chosen) >= 4:
+    for i, v in zip(order.tolist(), vals, strict=True):  # not a loop over cells
+        if v < floor or len(chosen) >= 4:
             break
-        if all(abs(int(i) - c) > min_sep for c in chosen):
-            chosen.append(int(i))
+        if all(abs(i - c) > min_sep for c in chosen):
+            chosen.append(i)
     return np.array(chosen, dtype=np.int64)
 
 
@@ -143,13 +149,23 @@ def _angdist_pi(a: np.ndarray, b: float) -> np.ndarray:
     return np.abs(wrap_angle_period(np.asarray(a) - b, np.pi))
 
 
+@lru_cache(maxsize=1024)
+def _far_from(theta_step: float, j: int, separation: float) -> np.ndarray:
+    """Which of the accumulator's angles (``theta_step`` apart) lie at least ``separation``
+    (rad, mod pi) from angle j: a fixed table per peak bin (read-only)."""
+    thetas = _theta_table(theta_step)[0]
+    out = _angdist_pi(thetas, float(thetas[j])) >= separation
+    out.flags.writeable = False
+    return out
+
+
 def _parabolic_offset(prof: np.ndarray, j: int) -> float:
     """Sub-bin offset of the maximum of a periodic profile at bin j: the vertex of the
     parabola through bins j-1, j, j+1 (in bins, within +-0.5)."""
     n = len(prof)
     a, b, c = prof[(j - 1) % n], prof[j], prof[(j + 1) % n]
     den = a - 2.0 * b + c
-    return float(np.clip(0.5 * (a - c) / den, -0.5, 0.5)) if den < 0 else 0.0
+    return min(max(float(0.5 * (a - c) / den), -0.5), 0.5) if den < 0 else 0.0
 
 
 def direction_profile(acc: np.ndarray) -> np.ndarray:
@@ -222,7 +238,7 @@ def dominant_direction(
     energy = direction_profile(acc)
     j = int(np.argmax(energy))
     t0 = float(plane.thetas[j])
-    far = _angdist_pi(plane.thetas, t0) >= np.deg2rad(params.ambiguity_separation_deg)
+    far = _far_from(float(dtheta), j, float(np.deg2rad(params.ambiguity_separation_deg)))
     j2 = int(np.argmax(np.where(far, energy, -1.0)))
     s1 = float(acc[:, j].max()) * params.resolution
     s2 = float(acc[:, j2].max()) * params.resolution if far.any() else 0.0

@@ -119,16 +119,17 @@ class TangentFit:
 
 
 def predict_ranges(
-    psi: float, c: float, sensors: np.ndarray, half: float
+    psi: float | np.ndarray, c: float | np.ndarray, sensors: np.ndarray, half: float
 ) -> tuple[np.ndarray, ...]:
-    """r(psi, c) of every sensor (module docstring) with dr/dpsi, dr/dc, delta, p.
+    """r(psi, c) of every sensor (module docstring) with dr/dpsi, dr/dc, delta, p; of one
+    wall, or of W walls at once (``psi`` and ``c`` of shape (W,)).
 
     Parameters
     ----------
-    psi : float
-        The wall's normal direction (rad).
-    c : float
-        The wall's offset along the normal (m).
+    psi : float or ndarray, shape (W,)
+        The walls' normal directions (rad).
+    c : float or ndarray, shape (W,)
+        The walls' offsets along their normals (m).
     sensors : ndarray, shape (N, 3)
         The sensors' poses (x, y, axis).
     half : float
@@ -136,38 +137,53 @@ def predict_ranges(
 
     Returns
     -------
-    r, dr_dpsi, dr_dc, delta, p : ndarray, shape (N,)
+    r, dr_dpsi, dr_dc, delta, p : ndarray, shape (N,), or (W, N) for W walls
         Predicted ranges, their derivatives, the angle outside the cone, the
         perpendicular distances.
     """
-    n = np.array([np.cos(psi), np.sin(psi)])
-    dn = np.array([-np.sin(psi), np.cos(psi)])
-    p = c - sensors[:, :2] @ n
-    off = wrap_angle(psi - sensors[:, 2])
-    outside = np.abs(off) > half
-    delta = np.where(outside, np.abs(off) - half, 0.0)
+    one = np.ndim(psi) == 0
+    psi_w = np.asarray(psi, dtype=float).reshape(-1, 1)  # (W, 1)
+    c_w = np.asarray(c, dtype=float).reshape(-1, 1)
+    cos_p, sin_p = np.cos(psi_w[:, 0]), np.sin(psi_w[:, 0])
+    # n . s and dn . s (dn = dn/dpsi) of every wall: a stack of (N, 2) @ (2, 1) products,
+    # each one BLAS matrix-vector product as (N, 2) @ (2,) is (a (N, 2) @ (2, W) matrix
+    # product rounds differently: one wall or W give the same floats this way)
+    vec = np.array([cos_p, sin_p, -sin_p, cos_p]).T.reshape(-1, 2, 1)  # n, dn per wall
+    prod = np.matmul(sensors[:, :2], vec)[:, :, 0]  # (2 W, N)
+    ns, dns = prod[0::2], prod[1::2]
+    p = c_w - ns
+    off = wrap_angle(psi_w - sensors[:, 2])
+    abs_off = np.abs(off)
+    outside = abs_off > half
+    delta = np.where(outside, abs_off - half, 0.0)
     sec = 1.0 / np.cos(delta)
     r = p * sec
-    dp_dpsi = -(sensors[:, :2] @ dn)
+    dp_dpsi = -dns
     dr_dpsi = dp_dpsi * sec + np.where(outside, np.sign(off), 0.0) * r * np.tan(delta)
-    return r, dr_dpsi, sec, delta, p
+    out = (r, dr_dpsi, sec, delta, p)
+    return tuple(a[0] for a in out) if one else out
 
 
-def _initial_offset(psi: float, rd: RingReadings, delta_max: float, tolerance: float) -> float:
-    """The offset c most readings agree on (within ``tolerance``), the nearest on ties:
+def _initial_offsets(
+    psi: np.ndarray, rd: RingReadings, delta_max: float, tolerance: float
+) -> np.ndarray:
+    """Per wall of normal ``psi`` (W,), the offset c most readings agree on (within
+    ``tolerance``), the nearest on ties (NaN when no reading can see the wall):
     c_i = n . s_i + r_i cos(delta_i) inverts each reading's model."""
-    n = np.array([np.cos(psi), np.sin(psi)])
-    off = np.abs(wrap_angle(psi - rd.sensors[:, 2]))
+    psi = np.asarray(psi, dtype=float)
+    off = np.abs(wrap_angle(psi[:, None] - rd.sensors[:, 2]))  # (W, N)
     delta = np.maximum(off - rd.half_angle, 0.0)
     ok = delta < delta_max
-    if not ok.any():
-        return float("nan")
-    ci = rd.sensors[ok, :2] @ n + rd.ranges[ok] * np.cos(delta[ok])
-    ci = ci[ci > 0]
-    if ci.size == 0:
-        return float("nan")
-    support = (np.abs(ci[:, None] - ci[None, :]) < tolerance).sum(axis=1)
-    return float(ci[support == support.max()].min())
+    out = np.full(len(psi), np.nan)
+    for j in np.flatnonzero(ok.any(axis=1)).tolist():  # one pass per wall (2)
+        okj = ok[j]
+        n = np.array([np.cos(psi[j]), np.sin(psi[j])])
+        ci = rd.sensors[okj, :2] @ n + rd.ranges[okj] * np.cos(delta[j, okj])
+        ci = ci[ci > 0]
+        if ci.size:
+            support = (np.abs(ci[:, None] - ci[None, :]) < tolerance).sum(axis=1)
+            out[j] = ci[support == support.max()].min()
+    return out
 
 
 def fit_walls(
@@ -211,59 +227,64 @@ def fit_walls(
     TangentFit
     """
     psi = float(psi0)
-    cs = np.array([_initial_offset(psi + w, rd, delta_max, tolerance) for w in walls])
+    rel = np.asarray(walls, dtype=float)
+    cs = _initial_offsets(psi + rel, rd, delta_max, tolerance)
     nread = len(rd)
     sig = np.hypot(sigma_frac * rd.ranges, quantum / np.sqrt(12.0))
     assign = np.full(nread, -1)
     normal = None
+    last = None  # (a, b, dx) of the last step: the Birge ratio's residuals
     for _ in range(iterations):
         active = np.flatnonzero(np.isfinite(cs))
         if active.size == 0:
             break
-        best = np.full(nread, np.inf)
-        assign = np.full(nread, -1)
-        # per reading: d r / d psi and d r / d c of the wall it is assigned to, and the
-        # residual (the Jacobian's rows are [d psi, 0 .., d c at 1 + wall, .. 0])
-        j_psi = np.zeros(nread)
-        j_c = np.zeros(nread)
-        resid = np.zeros(nread)
-        for j in active:  # one pass per wall (2)
-            r, dpsi, dc, delta, p = predict_ranges(psi + walls[j], cs[j], rd.sensors, rd.half_angle)
-            e = rd.ranges - r
-            ae = np.abs(e)
-            take = (delta < delta_max) & (p > 0) & (ae < tolerance) & (ae < best)
-            best[take] = ae[take]
-            assign[take] = j
-            j_psi[take] = dpsi[take]
-            j_c[take] = dc[take]
-            resid[take] = e[take]
-        sel = assign >= 0
-        nsel = int(np.count_nonzero(sel))
+        every = active.size == rel.size  # every wall active (the usual case): no gathers
+        # every active wall's prediction at once (A, N); each reading is assigned to the
+        # wall predicting it best within tolerance, the first such wall on ties
+        r, dpsi, dc, delta, p = predict_ranges(
+            psi + (rel if every else rel[active]),
+            cs if every else cs[active],
+            rd.sensors,
+            rd.half_angle,
+        )
+        e = rd.ranges - r
+        ae = np.abs(e)
+        near = (delta < delta_max) & (p > 0) & (ae < tolerance)
+        q = np.argmin(np.where(near, ae, np.inf), axis=0)  # (N,) the wall's row in active
+        sel = near.any(axis=0)
+        assign = np.where(sel, active[q], -1)
+        rows = np.flatnonzero(sel)
+        nsel = rows.size
         if nsel < 3:
             return TangentFit(psi, cs, sel, assign, float("inf"))
-        s_sel = sig[sel]
+        # per selected reading: d r / d psi and d r / d c of its wall, and the residual
+        # (the Jacobian's rows are [d psi, 0 .., d c at 1 + wall, .. 0]), weighted: one
+        # gather of the three
+        q_sel = q[rows]
+        g = np.array([dpsi, dc, e])[:, q_sel, rows] / sig[rows]
         # the weighted Jacobian of the active walls, column-major as a column selection of
         # a row-major array is (a.T @ a then multiplies the same layout: the same floats)
         a = np.zeros((nsel, 1 + active.size), order="F")
-        a[:, 0] = j_psi[sel] / s_sel
-        jc_w = j_c[sel] / s_sel
-        on = assign[sel]
-        for q, j in enumerate(active):
-            rows = on == j
-            a[rows, 1 + q] = jc_w[rows]
-        b = resid[sel] / s_sel
+        a[:, 0] = g[0]
+        a[np.arange(nsel), 1 + q_sel] = g[1]
+        b = g[2]
         normal = a.T @ a
         try:
             dx = np.linalg.solve(normal, a.T @ b)
         except np.linalg.LinAlgError:
             return TangentFit(psi, cs, sel, assign, float("inf"))
         psi += float(dx[0])
-        cs[active] += dx[1:]
-        dof = nsel - 1 - active.size  # residuals after the step, to first order b - a dx
-        res = b - a @ dx
-        birge = float(np.sqrt(res @ res / dof)) if dof > 0 else float("nan")
-    if normal is None:
+        if every:
+            cs += dx[1:]
+        else:
+            cs[active] += dx[1:]
+        last = (a, b, dx)
+    if normal is None or last is None:
         return TangentFit(psi, cs, assign >= 0, assign, float("inf"))
+    a, b, dx = last
+    dof = b.size - a.shape[1]  # residuals after the step, to first order b - a dx
+    res = b - a @ dx
+    birge = float(np.sqrt(res @ res / dof)) if dof > 0 else float("nan")
     try:
         var = float(np.linalg.inv(normal)[0, 0])
     except np.linalg.LinAlgError:

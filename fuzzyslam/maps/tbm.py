@@ -156,15 +156,16 @@ def conjunctive_grouped(m: Masses, groups: np.ndarray, ngroups: int) -> Masses:
     tuple of 4 ndarray, shape (ngroups,)
         The combination per group (vacuous for an empty group).
     """
-    out = []
-    for q in commonality(m):
-        q = np.asarray(q, dtype=float)
-        zero = q <= 0.0
-        logq = np.log(np.where(zero, 1.0, q))
-        s = np.bincount(groups, weights=logq, minlength=ngroups)
-        nz = np.bincount(groups, weights=zero.astype(float), minlength=ngroups)
-        out.append(np.where(nz > 0, 0.0, np.exp(s)))
-    return from_commonality(*out)
+    q = np.array(commonality(m), dtype=float)  # (3, N): q(E), q(O), q(Theta)
+    zero = q <= 0.0
+    logq = np.log(np.where(zero, 1.0, q))
+    # the three commonalities' sums as one bincount over 3 ngroups bins (row k's group g
+    # in bin k ngroups + g: each bin adds the same terms in the same order as its own)
+    bins = (np.asarray(groups).reshape(1, -1) + ngroups * np.arange(3)[:, None]).ravel()
+    s = np.bincount(bins, weights=logq.ravel(), minlength=3 * ngroups).reshape(3, ngroups)
+    nz = np.bincount(bins, weights=zero.ravel().astype(float), minlength=3 * ngroups)
+    out = np.where(nz.reshape(3, ngroups) > 0, 0.0, np.exp(s))
+    return from_commonality(out[0], out[1], out[2])
 
 
 def clip_masses(m: Masses) -> Masses:
