@@ -38,6 +38,7 @@ from fuzzyslam.slam.events import FilterView
 from fuzzyslam.stamps import format_time
 
 CHANGE_FIELDS = ("t", "x", "y", "size", "cells")
+DPI = 100  # changes.png
 
 
 @dataclass(frozen=True)
@@ -327,17 +328,19 @@ def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change]) -> None:
     changes : sequence of Change
         The detections.
     """
-    import matplotlib
+    # a Figure without pyplot (its import and figure manager are not needed for one
+    # PNG), drawn once and cropped as savefig(bbox_inches="tight") (fuzzyslam/figsave.py)
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from fuzzyslam.figsave import save_png
 
     g = fgm.grid
     ny, nx = g.shape
     x0, y0 = g.origin
     extent = (x0, x0 + nx * g.resolution, y0, y0 + ny * g.resolution)
     occ = fgm.m_o + 0.5 * fgm.m_t
-    fig, ax = plt.subplots(figsize=(8, 6), dpi=100)
+    fig = Figure(figsize=(8, 6), dpi=DPI)
+    ax = fig.add_subplot()
     ax.imshow(occ, origin="lower", extent=extent, cmap="gray_r", vmin=0, vmax=1)
     if changes:
         xy = np.array([[c.x, c.y] for c in changes])
@@ -349,7 +352,4 @@ def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change]) -> None:
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", bbox_inches="tight")
-    plt.close(fig)
-
-
+        save_png(fig, tmp, DPI, tight=True)
