@@ -90,7 +90,13 @@ def free_space(fgm: BeliefMap, erode_cells: int) -> np.ndarray:
     return cv2.erode(m_e, k, borderType=cv2.BORDER_CONSTANT, borderValue=0.0)
 
 
-def conflict_image(flm: BeliefMap, pose: np.ndarray, fgm_grid: Any, free: np.ndarray) -> np.ndarray:
+def conflict_image(
+    flm: BeliefMap,
+    pose: np.ndarray,
+    fgm_grid: Any,
+    free: np.ndarray,
+    cells: np.ndarray | None = None,
+) -> np.ndarray:
     """m_O(FLM) * m_E(FGM) on the FLM's grid, FLM placed at ``pose`` (0 off the map).
 
     Parameters
@@ -103,18 +109,27 @@ def conflict_image(flm: BeliefMap, pose: np.ndarray, fgm_grid: Any, free: np.nda
         The FGM's grid.
     free : ndarray, shape (H, W)
         :func:`free_space`.
+    cells : ndarray of int, shape (n,), optional
+        Flat indices of the only FLM cells computed (0 elsewhere); default all. Each
+        cell's value is the same computed alone or with the others (element-wise).
 
     Returns
     -------
     ndarray, shape (h, w)
     """
     xs, ys = flm.grid.centres()
-    world = transform_points(pose, np.stack([xs.ravel(), ys.ravel()], axis=1))
+    m_o = flm.m_o.ravel()
+    if cells is None:
+        cells = np.arange(m_o.size)
+    world = transform_points(pose, np.stack([xs.ravel()[cells], ys.ravel()[cells]], axis=1))
     iy, ix = fgm_grid.cell_of(world)
     inside = fgm_grid.inside(iy, ix)
     m_e = np.zeros(world.shape[0], dtype=np.float32)
     m_e[inside] = free[iy[inside], ix[inside]]
-    return flm.m_o * m_e.reshape(flm.grid.shape)
+    k = m_o[cells] * m_e
+    out = np.zeros(m_o.size, dtype=k.dtype)
+    out[cells] = k
+    return out.reshape(flm.grid.shape)
 
 
 def detect_changes(
@@ -152,7 +167,14 @@ def detect_changes(
     -------
     list of Change
     """
-    k = conflict_image(flm, np.asarray(pose, float), fgm_grid, free)
+    # K = m_O(FLM) m_E(FGM) <= m_O(FLM) max m_E (rounding is monotonic): only cells whose
+    # bound exceeds the threshold can conflict above it, and only the conflicting cells'
+    # K is used below
+    m_o = flm.m_o.ravel()
+    cells = np.flatnonzero(m_o * free.max(initial=0.0).astype(m_o.dtype) > min_conflict)
+    if cells.size == 0:
+        return []
+    k = conflict_image(flm, np.asarray(pose, float), fgm_grid, free, cells)
     mask = (k > min_conflict).astype(np.uint8)
     if not mask.any():
         return []
