@@ -271,6 +271,9 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
         config=config_to_dict(cfg),
     )
     sonar_topics = [topics.sonar(i) for i in range(cfg.sonar.count)]
+    sonar_types = [M.RANGE] * cfg.sonar.count
+    robot_topics = [topics.joint_states, topics.odom, topics.ground_truth]  # robot_payloads'
+    robot_types = [M.JOINT_STATE, M.ODOMETRY, M.ODOMETRY]
     frames = [sonar_frame(i) for i in range(cfg.sonar.count)]
     st = Stats()
     lit = np.ones(len(lamps), dtype=bool)
@@ -293,10 +296,7 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
                 w.write(topics.events, M.STRING, M.json_msg(asdict(ev)), t)
                 lit = lamps_lit(plan.events, len(lamps), t)
             elif kind == ROBOT:  # step i: the robot payloads come in step order
-                joints, odom, truth = next(robot)
-                w.write_cdr(topics.joint_states, M.JOINT_STATE, joints, t)
-                w.write_cdr(topics.odom, M.ODOMETRY, odom, t)
-                w.write_cdr(topics.ground_truth, M.ODOMETRY, truth, t)
+                w.write_cdr_at(robot_topics, robot_types, next(robot), t)
                 bar.update_to(t)
             elif kind == SONAR:
                 # the ideal ranges of up to RING_BLOCK rings at a time (the same floats as
@@ -309,8 +309,7 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
                 st.no_echo += int(np.sum(r >= cfg.sonar.max_range))
                 cdrs = E.encode_ranges(t, frames, r, fov, cfg.sonar.min_range,
                                        cfg.sonar.max_range)  # fmt: skip
-                for topic, data in zip(sonar_topics, cdrs, strict=True):
-                    w.write_cdr(topic, M.RANGE, data, t)
+                w.write_cdr_at(sonar_topics, sonar_types, cdrs, t)
             else:
                 pose = interpolate_pose(dr.t, dr.pose, t)
                 rel = inverse_transform_points(pose, lamps[lit])
