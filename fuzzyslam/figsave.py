@@ -53,10 +53,16 @@ def tight_pixels(fig: Figure, canvas: FigureCanvasAgg) -> tuple[slice, slice] | 
     return slice(r0, r1), slice(c0, c1)
 
 
-def save_png(fig: Figure, path: str | os.PathLike, dpi: float, tight: bool = False) -> None:
+def save_png(
+    fig: Figure, path: str | os.PathLike, dpi: float, tight: bool = False, grows: bool = False
+) -> None:
     """Write ``fig`` to ``path`` as a PNG at ``dpi`` with one draw; ``tight``: cropped to
     the tight bounding box, as ``savefig(bbox_inches="tight")`` (which it falls back to
     when the box leaves the figure). The figure is left open.
+
+    ``grows`` (with ``tight``): the caller knows the box leaves the figure (a legend
+    placed outside the axes): ``savefig`` at once, without the draw that would find it
+    out (``savefig`` draws once without output to find the box, then once for real).
 
     Parameters
     ----------
@@ -68,9 +74,14 @@ def save_png(fig: Figure, path: str | os.PathLike, dpi: float, tight: bool = Fal
         Dots per inch.
     tight : bool
         Crop to the drawn artists.
+    grows : bool
+        The drawn artists leave the figure (``tight`` only).
     """
     from PIL import Image, PngImagePlugin
 
+    if tight and grows:
+        _savefig_tight(fig, path, dpi)
+        return
     fig.set_dpi(dpi)
     canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
     canvas.draw()
@@ -78,8 +89,7 @@ def save_png(fig: Figure, path: str | os.PathLike, dpi: float, tight: bool = Fal
     if tight:
         crop = tight_pixels(fig, canvas)
         if crop is None:  # an artist outside the figure: savefig grows the canvas
-            fig.savefig(path, dpi=dpi, format="png", bbox_inches="tight",
-                        pil_kwargs={"compress_level": COMPRESS_LEVEL})  # fmt: skip
+            _savefig_tight(fig, path, dpi)
             return
         rgba = rgba[crop]
     pixels = rgba[..., :3] if bool((rgba[..., 3] == 255).all()) else rgba
@@ -88,3 +98,9 @@ def save_png(fig: Figure, path: str | os.PathLike, dpi: float, tight: bool = Fal
     Image.fromarray(np.ascontiguousarray(pixels)).save(
         path, format="png", compress_level=COMPRESS_LEVEL, dpi=(dpi, dpi), pnginfo=info
     )
+
+
+def _savefig_tight(fig: Figure, path: str | os.PathLike, dpi: float) -> None:
+    """``savefig(bbox_inches="tight")`` as PNG at the zlib level of :func:`save_png`."""
+    fig.savefig(path, dpi=dpi, format="png", bbox_inches="tight",
+                pil_kwargs={"compress_level": COMPRESS_LEVEL})  # fmt: skip

@@ -20,12 +20,12 @@ def enabled() -> bool:
 class Progress:
     """A stderr progress bar over a known amount of work (e.g. seconds of log)."""
 
-    def __init__(self, total: float, label: str) -> None:
+    def __init__(self, total: float, label: str, show: bool = True) -> None:
         self.total = max(float(total), 1e-9)
         self.label = label
         self._bar = None
         self._done = 0
-        if enabled():
+        if show and enabled():  # show=False: a caller drawing beside another display
             self._bar = click.progressbar(
                 length=1000, label=label, file=sys.stderr, show_eta=True, show_percent=True
             )
@@ -147,8 +147,10 @@ class PlanProgress:
         parts = [x[4:] for x in key.split("/") if x.startswith("seed") and x[4:].isdigit()]
         seed = parts[0] if parts else "-"
         place = "" if where in ("", "local") else f" on {where}"
-        self.line(f"[{n_done}/{self.n_steps}] {key} done in {seconds:.1f} s "
-                  f"(seed {seed}){place}; {self._clock_text()}")
+        self.line(
+            f"[{n_done}/{self.n_steps}] {key} done in {seconds:.1f} s "
+            f"(seed {seed}){place}; {self._clock_text()}"
+        )
 
     def heartbeat(self, n_done: int, running: list[tuple[str, float]]) -> None:
         """A line if nothing was said for ``heartbeat_s`` seconds (lines mode)."""

@@ -81,8 +81,9 @@ def detect_kind(path: str | os.PathLike) -> str:
 # --- truth --------------------------------------------------------------------------------
 
 
-def read_truth(path: str | os.PathLike) -> Truth:
-    """Ground truth from a simulated log (with world, scenario, freeze run) or a TUM file."""
+def read_truth(path: str | os.PathLike, progress: bool = True) -> Truth:
+    """Ground truth from a simulated log (with world, scenario, freeze run) or a TUM file;
+    ``progress``: the reading's progress bar (when progress is enabled)."""
     kind = detect_kind(path)
     if kind == KIND_TUM:
         t, poses, planar = read_tum_planar(path)
@@ -100,7 +101,7 @@ def read_truth(path: str | os.PathLike) -> Truth:
     if topic not in reader.topics:
         raise InputError(path, f"log has no ground truth (no topic {topic}); give a simulated log")
     ts, rows = [], []  # (x, y, qx, qy, qz, qw) per message; the yaws at once below
-    with Progress(reader.end - reader.start, "evaluate: reading ground truth") as bar:
+    with Progress(reader.end - reader.start, "evaluate: reading ground truth", progress) as bar:
         for lm in reader.messages([topic]):
             p = lm.msg.pose.pose
             o = p.orientation

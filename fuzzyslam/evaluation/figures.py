@@ -27,8 +27,10 @@ DPI = 120  # figures are made at their PNG's dpi: the layout's text sizes are th
 C_TRUTH, C_EST, C_ODOM = "black", "tab:blue", "tab:red"
 
 
-def _save(fig: plt.Figure, path: Path) -> None:
-    save_png(fig, path, DPI, tight=True)  # one draw, cropped as bbox_inches="tight"
+def _save(fig: plt.Figure, path: Path, grows: bool = False) -> None:
+    # one draw, cropped as bbox_inches="tight"; ``grows``: an artist leaves the figure,
+    # savefig at once (fuzzyslam/figsave.py)
+    save_png(fig, path, DPI, tight=True, grows=grows)
     plt.close(fig)
 
 
@@ -140,7 +142,7 @@ def fig1_paths(
     )
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, framealpha=0.85)
-    _save(fig, path)
+    _save(fig, path, grows=True)  # the legend right of the axes leaves the figure
 
 
 def _mark_events(axes: list[plt.Axes], truth: Truth) -> None:

@@ -38,6 +38,7 @@ from fuzzyslam.slam.events import FilterView
 from fuzzyslam.stamps import format_time
 
 CHANGE_FIELDS = ("t", "x", "y", "size", "cells")
+DPI = 100  # changes.png
 
 
 @dataclass(frozen=True)
@@ -89,7 +90,13 @@ def free_space(fgm: BeliefMap, erode_cells: int) -> np.ndarray:
     return cv2.erode(m_e, k, borderType=cv2.BORDER_CONSTANT, borderValue=0.0)
 
 
-def conflict_image(flm: BeliefMap, pose: np.ndarray, fgm_grid: Any, free: np.ndarray) -> np.ndarray:
+def conflict_image(
+    flm: BeliefMap,
+    pose: np.ndarray,
+    fgm_grid: Any,
+    free: np.ndarray,
+    cells: np.ndarray | None = None,
+) -> np.ndarray:
     """m_O(FLM) * m_E(FGM) on the FLM's grid, FLM placed at ``pose`` (0 off the map).
 
     Parameters
@@ -102,18 +109,27 @@ def conflict_image(flm: BeliefMap, pose: np.ndarray, fgm_grid: Any, free: np.nda
         The FGM's grid.
     free : ndarray, shape (H, W)
         :func:`free_space`.
+    cells : ndarray of int, shape (n,), optional
+        Flat indices of the only FLM cells computed (0 elsewhere); default all. Each
+        cell's value is the same computed alone or with the others (element-wise).
 
     Returns
     -------
     ndarray, shape (h, w)
     """
     xs, ys = flm.grid.centres()
-    world = transform_points(pose, np.stack([xs.ravel(), ys.ravel()], axis=1))
+    m_o = flm.m_o.ravel()
+    if cells is None:
+        cells = np.arange(m_o.size)
+    world = transform_points(pose, np.stack([xs.ravel()[cells], ys.ravel()[cells]], axis=1))
     iy, ix = fgm_grid.cell_of(world)
     inside = fgm_grid.inside(iy, ix)
     m_e = np.zeros(world.shape[0], dtype=np.float32)
     m_e[inside] = free[iy[inside], ix[inside]]
-    return flm.m_o * m_e.reshape(flm.grid.shape)
+    k = m_o[cells] * m_e
+    out = np.zeros(m_o.size, dtype=k.dtype)
+    out[cells] = k
+    return out.reshape(flm.grid.shape)
 
 
 def detect_changes(
@@ -151,7 +167,14 @@ def detect_changes(
     -------
     list of Change
     """
-    k = conflict_image(flm, np.asarray(pose, float), fgm_grid, free)
+    # K = m_O(FLM) m_E(FGM) <= m_O(FLM) max m_E (rounding is monotonic): only cells whose
+    # bound exceeds the threshold can conflict above it, and only the conflicting cells'
+    # K is used below
+    m_o = flm.m_o.ravel()
+    cells = np.flatnonzero(m_o * free.max(initial=0.0).astype(m_o.dtype) > min_conflict)
+    if cells.size == 0:
+        return []
+    k = conflict_image(flm, np.asarray(pose, float), fgm_grid, free, cells)
     mask = (k > min_conflict).astype(np.uint8)
     if not mask.any():
         return []
@@ -327,17 +350,19 @@ def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change]) -> None:
     changes : sequence of Change
         The detections.
     """
-    import matplotlib
+    # a Figure without pyplot (its import and figure manager are not needed for one
+    # PNG), drawn once and cropped as savefig(bbox_inches="tight") (fuzzyslam/figsave.py)
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from fuzzyslam.figsave import save_png
 
     g = fgm.grid
     ny, nx = g.shape
     x0, y0 = g.origin
     extent = (x0, x0 + nx * g.resolution, y0, y0 + ny * g.resolution)
     occ = fgm.m_o + 0.5 * fgm.m_t
-    fig, ax = plt.subplots(figsize=(8, 6), dpi=100)
+    fig = Figure(figsize=(8, 6), dpi=DPI)
+    ax = fig.add_subplot()
     ax.imshow(occ, origin="lower", extent=extent, cmap="gray_r", vmin=0, vmax=1)
     if changes:
         xy = np.array([[c.x, c.y] for c in changes])
@@ -349,7 +374,4 @@ def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change]) -> None:
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
     with atomic_path(path) as tmp:
-        fig.savefig(tmp, format="png", bbox_inches="tight")
-    plt.close(fig)
-
-
+        save_png(fig, tmp, DPI, tight=True)

@@ -68,7 +68,6 @@ from dataclasses import dataclass
 
 import cv2
 import numpy as np
-from scipy import ndimage
 
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.maps.grid import BeliefMap
@@ -94,7 +93,10 @@ def olson_blur(m_o: np.ndarray, sigma_cells: float) -> np.ndarray:
     """Ob(x) = max_c m_o(c) exp(-|x - c|^2 / (2 sigma^2)) (Olson 2009, rasterised cost table).
 
     Computed as exp of a grey dilation of log m_o with the non-flat structuring element
-    -d^2 / (2 sigma^2) (scipy.ndimage.grey_dilation: max over the footprint of input + s).
+    s(d) = -|d|^2 / (2 sigma^2), |d_x|, |d_y| <= r = ceil(2.5 sigma): the maximum over the
+    (2r + 1)^2 offsets d of log m_o(x + d) + s(d), log m_o taken as -30 off the map (the
+    definition of ``scipy.ndimage.grey_dilation(..., mode="constant", cval=-30)``, whose
+    values these are to the bit: the same sums, and max is exact).
 
     Parameters
     ----------
@@ -114,10 +116,74 @@ def olson_blur(m_o: np.ndarray, sigma_cells: float) -> np.ndarray:
     r = max(1, math.ceil(2.5 * sigma_cells))
     d = np.arange(-r, r + 1, dtype=np.float64)
     struct = -(d[:, None] ** 2 + d[None, :] ** 2) / (2.0 * sigma_cells**2)
-    logm = np.log(np.maximum(m, 1e-9))
-    return np.exp(
-        ndimage.grey_dilation(logm, structure=struct, mode="constant", cval=-30.0)
-    ).astype(np.float32)
+    logm = np.pad(np.log(np.maximum(m, 1e-9)), r, mode="constant", constant_values=-30.0)
+    h, w = m.shape
+    out = np.full((h, w), -np.inf)
+    for i in range(2 * r + 1):  # over the structuring element's offsets, not the cells
+        for j in range(2 * r + 1):
+            np.maximum(out, logm[i : i + h, j : j + w] + struct[i, j], out=out)
+    return np.exp(out).astype(np.float32)
+
+
+def label_26(mask: np.ndarray) -> tuple[np.ndarray, int]:
+    """Connected components of a 3-D mask, 26-connectivity (every voxel of the 3x3x3
+    neighbourhood), as ``scipy.ndimage.label(mask, structure=np.ones((3, 3, 3)))`` up to
+    the numbering of the components.
+
+    Each slice is labelled 8-connected (``cv2.connectedComponents``); a component of
+    slice k and one of slice k + 1 join when one of their voxels lies within one cell
+    (rows and columns) of the other's, and the joined labels are merged by union-find
+    (Tarjan, "Efficiency of a good but not linear set union algorithm", JACM 1975) over
+    the distinct pairs.
+
+    Parameters
+    ----------
+    mask : ndarray of bool, shape (K, H, W)
+        The voxels.
+
+    Returns
+    -------
+    labels : ndarray of int, shape (K, H, W)
+        0 off the mask, 1..n on its components.
+    n : int
+        The number of components.
+    """
+    k, h, w = mask.shape
+    labels = np.zeros(mask.shape, dtype=np.int32)
+    count = 0
+    m8 = np.asarray(mask, dtype=bool).view(np.uint8)
+    for i in range(k):  # over the slices
+        n, lab = cv2.connectedComponents(m8[i], connectivity=8, ltype=cv2.CV_32S)
+        labels[i] = np.where(lab > 0, lab + count, 0) if count else lab
+        count += n - 1
+    if k == 1 or count <= 1:
+        return labels, count
+    # (lower, upper) label pairs of voxels of slices i and i + 1 within one row and column
+    codes = []
+    for dy in (-1, 0, 1):
+        for dx in (-1, 0, 1):
+            lo = labels[:-1, max(dy, 0) : h + min(dy, 0), max(dx, 0) : w + min(dx, 0)]
+            up = labels[1:, max(-dy, 0) : h + min(-dy, 0), max(-dx, 0) : w + min(-dx, 0)]
+            on = (lo > 0) & (up > 0)
+            codes.append(lo[on].astype(np.int64) * (count + 1) + up[on])
+    links = np.unique(np.concatenate(codes))
+    if links.size == 0:
+        return labels, count
+    parent = list(range(count + 1))
+
+    def root(x: int) -> int:
+        while parent[x] != x:
+            parent[x] = parent[parent[x]]
+            x = parent[x]
+        return x
+
+    for code in links.tolist():  # over the distinct pairs of touching components
+        ra, rb = root(code // (count + 1)), root(code % (count + 1))
+        if ra != rb:
+            parent[max(ra, rb)] = min(ra, rb)
+    roots = np.array([root(x) for x in range(count + 1)])
+    _, compact = np.unique(roots, return_inverse=True)  # roots[0] = 0: the background
+    return compact[labels], int(compact.max())
 
 
 def flm_evidence(flm: BeliefMap, min_mass: float) -> tuple[np.ndarray, np.ndarray]:
@@ -346,9 +412,9 @@ class PoseMatcher:
         d = xs - mu
         cov = (d * pw[:, None]).T @ d
         # modes: connected components of the high-likelihood region
-        labels, nlab = ndimage.label(ll > -3.0, structure=np.ones((3, 3, 3), bool))
+        labels, nlab = label_26(ll > -3.0)
         if nlab > 1:
-            mass = ndimage.sum_labels(lik, labels, index=np.arange(1, nlab + 1)) / total
+            mass = np.bincount(labels.ravel(), weights=lik.ravel())[1:] / total
             if np.sort(mass)[-2] > p.pose_max_second_mode:
                 return PoseMatch(False, "multimodal", nan3, nan33, smax, 0, ncand)
         # unconstrained directions: variance near that of a uniform over the window. The

@@ -135,37 +135,43 @@ def write_commands(path: Path, steps: list[Step]) -> None:
     path.write_text("\n".join(lines) + "\n", encoding="utf-8")
 
 
+# summary.png's panels: (log, title, [(run directory, label)])
+SUMMARY_PANELS = [
+    ("paper", "7 of 15 lamps fail after the freeze",
+     [("AB", "lamps only (A, B)"), ("C", "heading fixes (C, paper)"),
+      ("C_pose", "pose fixes (beyond)")]),
+    ("dark", "every lamp fails after the freeze (beyond the paper)",
+     [("dark_none", "lamps only"), ("dark_heading", "heading fixes"),
+      ("dark_pose", "pose fixes")]),
+]  # fmt: skip
+
+
+def summary_inputs(seed_dir: str) -> set[str]:
+    """The keys of the steps whose files :func:`draw_summary` reads for ``seed_dir`` (the
+    logs and the runs of its panels; a plan's steps of them must be done before it)."""
+    return {f"{seed_dir}/{k}" for log, _title, runs in SUMMARY_PANELS
+            for k in (f"{log}.mcap", *(name for name, _label in runs))}  # fmt: skip
+
+
 def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
     """Position error against time for one seed: lamps only (B), heading fixes (C), pose
     fixes, and with every lamp off, with the run and freeze boundaries; False if the files
-    are missing."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    are missing. Drawn on a Figure without pyplot (no global figure state: ``reproduce``
+    draws it in a thread while the last steps run)."""
+    from matplotlib.figure import Figure
 
     from fuzzyslam.evaluation.evaluate import read_truth
     from fuzzyslam.evaluation.metrics import associate, pose_errors
     from fuzzyslam.figsave import save_png
     from fuzzyslam.streams.tum import read_tum
 
-    panels = [
-        ("paper", "7 of 15 lamps fail after the freeze",
-         [("AB", "lamps only (A, B)"), ("C", "heading fixes (C, paper)"),
-          ("C_pose", "pose fixes (beyond)")]),
-        ("dark", "every lamp fails after the freeze (beyond the paper)",
-         [("dark_none", "lamps only"), ("dark_heading", "heading fixes"),
-          ("dark_pose", "pose fixes")]),
-    ]  # fmt: skip
-    panels = [p for p in panels if (root / seed_dir / f"{p[0]}.mcap").is_file()]
+    panels = [p for p in SUMMARY_PANELS if (root / seed_dir / f"{p[0]}.mcap").is_file()]
     if not panels:
         return False
-    fig, axes = plt.subplots(
-        len(panels), 1, figsize=(10, 3.5 * len(panels)), squeeze=False, dpi=110
-    )
-    axes = axes[:, 0]
+    fig = Figure(figsize=(10, 3.5 * len(panels)), dpi=110)
+    axes = fig.subplots(len(panels), 1, squeeze=False)[:, 0]
     for ax, (log, title, runs) in zip(axes, panels, strict=True):
-        truth = read_truth(root / seed_dir / f"{log}.mcap")
+        truth = read_truth(root / seed_dir / f"{log}.mcap", progress=False)  # beside the plan's
         for name, label in runs:
             tum = root / seed_dir / name / "trajectory.tum"
             if not tum.is_file():
@@ -187,7 +193,6 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
     axes[-1].set_xlabel("log time (s)")
     fig.tight_layout()
     save_png(fig, out, 110)  # one draw, RGB (fuzzyslam/figsave.py)
-    plt.close(fig)
     return True
 
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import os
+import threading
 import time
 from pathlib import Path
 from typing import Any
@@ -25,6 +26,7 @@ from fuzzyslam.reproduce.report import (
     RunInfo,
     StepRecord,
     draw_summary,
+    summary_inputs,
     write_commands,
     write_report,
     write_results,
@@ -58,6 +60,62 @@ def seed_result(
     return SeedResult(seed, evals, runs, maps, seconds)
 
 
+class SummaryDrawing:
+    """summary.png (:func:`~fuzzyslam.reproduce.report.draw_summary`) drawn in a thread of
+    the parent as soon as the steps whose files it reads are done, while the last steps
+    (the evaluations) run in the workers, instead of after them: the parent only waits
+    for the workers meanwhile, and the picture is the same (its inputs are finished
+    files). ``step_done`` is execute's ``on_done``; ``result`` waits for the picture.
+
+    Parameters
+    ----------
+    root : Path
+        The (temporary) output directory.
+    seed_dir : str
+        The seed drawn ("seed0").
+    keys : set of str
+        The plan's step keys.
+    """
+
+    def __init__(self, root: Path, seed_dir: str, keys: set[str]) -> None:
+        self.root, self.seed_dir = root, seed_dir
+        self.waiting = summary_inputs(seed_dir) & keys
+        self.thread: threading.Thread | None = None
+        self.drawn = False
+        self.error: BaseException | None = None  # no thread before the pool forks
+
+    def _draw(self) -> None:
+        try:
+            self.drawn = draw_summary(self.root, self.seed_dir, self.root / "summary.png")
+        except BaseException as exc:  # raised again by result(), in the parent's thread
+            self.error = exc
+
+    def _start(self) -> None:
+        self.thread = threading.Thread(target=self._draw, name="summary.png", daemon=True)
+        self.thread.start()
+
+    def step_done(self, step: Any, _result: Any) -> None:
+        """Execute's ``on_done``: start drawing when the last input is done."""
+        if self.thread is None and self.waiting and step.key in self.waiting:
+            self.waiting.discard(step.key)
+            if not self.waiting:
+                self._start()
+
+    def join(self) -> None:
+        """Wait for the drawing, if it started."""
+        if self.thread is not None:
+            self.thread.join()
+
+    def result(self) -> bool:
+        """Whether summary.png was drawn (every step done: started now if it was not)."""
+        if self.thread is None:
+            self._start()
+        self.join()
+        if self.error is not None:
+            raise self.error
+        return self.drawn
+
+
 # Files that mark a directory as a reproduce output (which a rerun may replace whole).
 MARKERS = ("results.json", "commands.sh")
 
@@ -68,11 +126,17 @@ def check_outdir(outdir: Path) -> None:
     if not outdir.is_dir() or not any(outdir.iterdir()):
         return
     if not any((outdir / m).is_file() for m in MARKERS):
-        raise InputError(outdir, "exists and is not a reproduce output (no results.json); "
-                         "refusing to replace it: remove it or choose another -o")
+        raise InputError(
+            outdir,
+            "exists and is not a reproduce output (no results.json); "
+            "refusing to replace it: remove it or choose another -o",
+        )
     if _in_place_only(outdir.resolve()):
-        raise InputError(outdir, "is the working directory (or holds it) and cannot be "
-                         "replaced whole; refusing: run from elsewhere or choose another -o")
+        raise InputError(
+            outdir,
+            "is the working directory (or holds it) and cannot be "
+            "replaced whole; refusing: run from elsewhere or choose another -o",
+        )
 
 
 def reproduce(
@@ -124,12 +188,18 @@ def reproduce(
         for s in seeds:
             (tmp / f"seed{s}").mkdir()
         write_commands(tmp / "commands.sh", steps)
-        done = execute(steps, tmp, jobs, scheduler=scheduler, final=Path(outdir), ship=ship)
+        summary = SummaryDrawing(tmp, f"seed{seeds[0]}", {st.key for st in steps})
+        try:
+            done = execute(steps, tmp, jobs, scheduler=scheduler, final=Path(outdir),
+                           ship=ship, on_done=summary.step_done)  # fmt: skip
+            drawn = summary.result()
+        finally:
+            summary.join()  # before a failure removes the directory it writes into
         workers = sorted({r.worker for r in done.values()})
         kinds = {st.key: st.kind for st in steps}
         results = [seed_result(tmp, s, done, beyond, kinds) for s in seeds]
         aggs = aggregate(results)
-        png = "summary.png" if draw_summary(tmp, f"seed{seeds[0]}", tmp / "summary.png") else None
+        png = "summary.png" if drawn else None
         info = RunInfo(
             command="fuzzyslam reproduce"
             + (" --quick" if quick else "")

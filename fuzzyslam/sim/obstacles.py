@@ -235,18 +235,19 @@ def ray_circle_hits(origins: np.ndarray, dirs: np.ndarray, discs: np.ndarray) ->
         Ray origins.
     dirs : ndarray, shape (R, 2)
         Unit directions.
-    discs : ndarray, shape (J, 3)
-        Circles (x, y, radius).
+    discs : ndarray, shape (J, 3) or (R, J, 3)
+        Circles (x, y, radius), the same for every ray or each ray's own.
 
     Returns
     -------
     ndarray, shape (R,)
     """
-    if len(discs) == 0:
+    if discs.shape[-2] == 0:
         return np.full(len(origins), np.inf)
-    pc = origins[:, None, :] - discs[None, :, :2]
+    per_ray = discs if discs.ndim == 3 else discs[None]
+    pc = origins[:, None, :] - per_ray[:, :, :2]
     b = np.sum(dirs[:, None, :] * pc, axis=2)
-    k = np.sum(pc * pc, axis=2) - discs[None, :, 2] ** 2
+    k = np.sum(pc * pc, axis=2) - per_ray[:, :, 2] ** 2
     disc = b * b - k
     with np.errstate(invalid="ignore"):
         t = -b - np.sqrt(disc)

@@ -213,10 +213,23 @@ def robot_payloads(plan: Plan, block: int = 1024) -> Iterator[tuple[bytes, bytes
 RING_BLOCK = 32  # sonar rings traced together
 
 
-def _ideal_block(dr, times: np.ndarray, walls, mounts, params) -> np.ndarray:
-    """Ideal ranges (K, M) of the rings at ``times`` from the true drive (no people)."""
+def _ideal_block(dr, times: np.ndarray, walls, mounts, params, obstacles=()) -> np.ndarray:
+    """Ideal ranges (K', M) of the first K' <= K rings at ``times`` from the true drive:
+    the rings that meet the same obstacles as the first (boxes reflect like walls, people
+    are discs; ``sim.obstacles``), so that they share the walls and their numbers of people.
+    """
+    if obstacles:
+        there = [tr.present(times[0]) for tr in obstacles]
+        k = next((j for j, t in enumerate(times.tolist())
+                  if [tr.present(t) for tr in obstacles] != there), len(times))  # fmt: skip
+        times = times[:k]
     poses = np.array([interpolate_pose(dr.t, dr.pose, t) for t in times.tolist()])
-    return simsonar.ideal_ranges_many(walls, poses.reshape(-1, 3), mounts, params)
+    discs = None
+    if obstacles:
+        walls = np.vstack([walls, box_segments(obstacles, times[0])])
+        people = np.stack([discs_at(obstacles, t) for t in times.tolist()])
+        discs = people if people.shape[1] else None
+    return simsonar.ideal_ranges_many(walls, poses.reshape(-1, 3), mounts, params, discs)
 
 
 def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tuple[dict, Plan]:
@@ -258,6 +271,9 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
         config=config_to_dict(cfg),
     )
     sonar_topics = [topics.sonar(i) for i in range(cfg.sonar.count)]
+    sonar_types = [M.RANGE] * cfg.sonar.count
+    robot_topics = [topics.joint_states, topics.odom, topics.ground_truth]  # robot_payloads'
+    robot_types = [M.JOINT_STATE, M.ODOMETRY, M.ODOMETRY]
     frames = [sonar_frame(i) for i in range(cfg.sonar.count)]
     st = Stats()
     lit = np.ones(len(lamps), dtype=bool)
@@ -280,29 +296,20 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
                 w.write(topics.events, M.STRING, M.json_msg(asdict(ev)), t)
                 lit = lamps_lit(plan.events, len(lamps), t)
             elif kind == ROBOT:  # step i: the robot payloads come in step order
-                joints, odom, truth = next(robot)
-                w.write_cdr(topics.joint_states, M.JOINT_STATE, joints, t)
-                w.write_cdr(topics.odom, M.ODOMETRY, odom, t)
-                w.write_cdr(topics.ground_truth, M.ODOMETRY, truth, t)
+                w.write_cdr_at(robot_topics, robot_types, next(robot), t)
                 bar.update_to(t)
             elif kind == SONAR:
-                if plan.obstacles:  # boxes reflect like walls; people are discs
-                    pose = interpolate_pose(dr.t, dr.pose, t)
-                    r = simsonar.ring(
-                        np.vstack([walls, box_segments(plan.obstacles, t)]), pose, mounts,
-                        cfg.sonar, rngs["sonar"], discs_at(plan.obstacles, t),
-                    )  # fmt: skip
-                else:  # the ideal ranges of RING_BLOCK rings at a time (the same floats)
-                    if not i0 <= i < i0 + len(ideal):
-                        i0, ideal = i, _ideal_block(dr, ring_t[i : i + RING_BLOCK], walls, mounts,
-                                                    cfg.sonar)  # fmt: skip
-                    r = simsonar.measure(ideal[i - i0], cfg.sonar, rngs["sonar"])
+                # the ideal ranges of up to RING_BLOCK rings at a time (the same floats as
+                # ring by ring: simsonar.ideal_ranges_many)
+                if not i0 <= i < i0 + len(ideal):
+                    i0, ideal = i, _ideal_block(dr, ring_t[i : i + RING_BLOCK], walls, mounts,
+                                                cfg.sonar, plan.obstacles)  # fmt: skip
+                r = simsonar.measure(ideal[i - i0], cfg.sonar, rngs["sonar"])
                 st.rings += 1
                 st.no_echo += int(np.sum(r >= cfg.sonar.max_range))
                 cdrs = E.encode_ranges(t, frames, r, fov, cfg.sonar.min_range,
                                        cfg.sonar.max_range)  # fmt: skip
-                for topic, data in zip(sonar_topics, cdrs, strict=True):
-                    w.write_cdr(topic, M.RANGE, data, t)
+                w.write_cdr_at(sonar_topics, sonar_types, cdrs, t)
             else:
                 pose = interpolate_pose(dr.t, dr.pose, t)
                 rel = inverse_transform_points(pose, lamps[lit])

@@ -106,8 +106,8 @@ def ideal_ranges(
         The transducers' world poses.
     params : SonarParams
         The sonar model (cone, incidence, range).
-    discs : ndarray, shape (J, 3), optional
-        People (x, y, radius).
+    discs : ndarray, shape (J, 3) or (M, J, 3), optional
+        People (x, y, radius), or each sensor's own (:func:`ideal_ranges_many`).
 
     Returns
     -------
@@ -128,9 +128,11 @@ def ideal_ranges(
     path = np.zeros(len(ang))
     echo = np.full(len(ang), np.inf)
     alive = np.ones(len(ang), dtype=bool)
+    if discs is not None and discs.ndim == 3:
+        discs = np.repeat(discs, n, axis=0)  # each ray its sensor's people
     for bounce in range(params.max_bounces + 1):
         t, seg = cast_rays(walls, org, d)
-        if discs is not None and len(discs):
+        if discs is not None and discs.shape[-2]:
             tc = ray_circle_hits(org, d, discs)
             person = alive & (tc < t)
             echo = np.where(person, path + tc, echo)
@@ -245,12 +247,16 @@ def ring(
 
 
 def ideal_ranges_many(
-    walls: np.ndarray, poses: np.ndarray, mounts: np.ndarray, params: SonarParams
+    walls: np.ndarray,
+    poses: np.ndarray,
+    mounts: np.ndarray,
+    params: SonarParams,
+    discs: np.ndarray | None = None,
 ) -> np.ndarray:
-    """:func:`ideal_ranges` of K rings at once (no people): every ray is traced on its own
+    """:func:`ideal_ranges` of K rings at once: every ray is traced on its own
     (element-wise operations and per-ray minima), so ring k's row is bit for bit
-    ``ideal_ranges(walls, sensor_poses(poses[k], mounts), params)``, with the numpy call
-    overhead paid once for the K rings (tests/test_fast_paths.py).
+    ``ideal_ranges(walls, sensor_poses(poses[k], mounts), params, discs[k])``, with the
+    numpy call overhead paid once for the K rings (tests/test_fast_paths.py).
 
     Parameters
     ----------
@@ -262,6 +268,8 @@ def ideal_ranges_many(
         The sensors' poses on the robot.
     params : SonarParams
         The sonar model.
+    discs : ndarray, shape (K, J, 3), optional
+        The people (x, y, radius) each ring sees (the same J for every ring).
 
     Returns
     -------
@@ -269,4 +277,6 @@ def ideal_ranges_many(
         Ranges (m); inf: no echo.
     """
     sensors = np.concatenate([sensor_poses(p, mounts) for p in poses])
-    return ideal_ranges(walls, sensors, params).reshape(len(poses), len(mounts))
+    if discs is not None:
+        discs = np.repeat(np.asarray(discs, dtype=float), len(mounts), axis=0)
+    return ideal_ranges(walls, sensors, params, discs).reshape(len(poses), len(mounts))

@@ -50,34 +50,20 @@ def read_tum_planar(path: str | os.PathLike, sort: bool = False, report: bool = 
     within 1 mm and 1e-3); a 3-D trajectory is read as its projection on the plane.
     With ``report``, the sorting counts of :func:`read_tum` come fourth."""
     p = check_input_file(path, "trajectory")
-    rows, linenos = [], []
     try:
         text = p.read_text(encoding="utf-8")
     except UnicodeDecodeError:
         raise InputError(p, "not a TUM trajectory (not text)") from None
-    for lineno, line in enumerate(text.splitlines(), 1):
-        s = line.strip()
-        if not s or s.startswith("#"):
-            continue
-        parts = s.replace(",", " ").split()
-        if len(parts) != 8:
-            raise InputError(p, f"line {lineno}: expected 8 columns (TUM), got {len(parts)}")
-        try:
-            vals = [float(v) for v in parts]
-        except ValueError:
-            raise InputError(p, f"line {lineno}: non-numeric value") from None
-        if not np.all(np.isfinite(vals)):
-            raise InputError(p, f"line {lineno}: NaN or infinite value")
-        rows.append(vals)
-        linenos.append(lineno)
-    if not rows:
-        raise InputError(p, "trajectory holds no poses")
-    a = np.array(rows)
+    a, linenos = _regular_rows(text), None
+    if a is None:
+        a, linenos = _parse_lines(p, text)
     t = a[:, 0]
     step = np.diff(t)
     bad = np.flatnonzero(step <= 0)
     fixes = {"out_of_order": int(np.count_nonzero(step < 0)), "repeats_dropped": 0}
     if len(bad) and not sort:
+        if linenos is None:
+            linenos = _parse_lines(p, text)[1]
         k = int(bad[0]) + 1
         what = "repeats" if step[bad[0]] == 0 else "goes back before"
         raise InputError(
@@ -98,3 +84,49 @@ def read_tum_planar(path: str | os.PathLike, sort: bool = False, report: bool = 
     planar = bool(np.all(np.abs(a[:, 3]) <= 1e-3) and np.all(np.abs(q[:, :2]) <= 1e-3))
     poses = np.column_stack([a[:, 1], a[:, 2], yaw])
     return (t, poses, planar, fixes) if report else (t, poses, planar)
+
+
+def _parse_lines(p: Path, text: str) -> tuple[np.ndarray, list[int]]:
+    """The rows (N, 8) of a TUM text read line by line and their line numbers; the first
+    malformed line is an InputError naming it."""
+    rows, linenos = [], []
+    for lineno, line in enumerate(text.splitlines(), 1):
+        s = line.strip()
+        if not s or s.startswith("#"):
+            continue
+        parts = s.replace(",", " ").split()
+        if len(parts) != 8:
+            raise InputError(p, f"line {lineno}: expected 8 columns (TUM), got {len(parts)}")
+        try:
+            vals = [float(v) for v in parts]
+        except ValueError:
+            raise InputError(p, f"line {lineno}: non-numeric value") from None
+        if not np.all(np.isfinite(vals)):
+            raise InputError(p, f"line {lineno}: NaN or infinite value")
+        rows.append(vals)
+        linenos.append(lineno)
+    if not rows:
+        raise InputError(p, "trajectory holds no poses")
+    return np.array(rows), linenos
+
+
+def _regular_rows(text: str) -> np.ndarray | None:
+    """The rows (N, 8) of a TUM text whose every line is a comment (``#`` first), blank or
+    eight finite numbers separated by blanks, parsed at once (``np.loadtxt``: each number
+    by ``PyOS_string_to_double``, as ``float``); None for any other text (commas, a ``#``
+    within a line, a wrong column count, a value float() reads but loadtxt does not, NaN),
+    which :func:`_parse_lines` then reads, naming the faulty line."""
+    if "," in text:
+        return None
+    lines = text.splitlines()
+    if "#" in text:
+        lines = [ln for ln in lines if not ln.lstrip().startswith("#")]
+    if not "".join(lines).strip():
+        return None  # no poses (loadtxt would warn)
+    try:
+        a = np.loadtxt(lines, dtype=np.float64, comments=None, ndmin=2)
+    except ValueError:
+        return None
+    if a.ndim != 2 or a.shape[0] == 0 or a.shape[1] != 8 or not np.isfinite(a).all():
+        return None
+    return a

@@ -102,6 +102,41 @@ class _LeanWriter(Writer):
         if rec.count > self._limit:
             self._finalize()
 
+    def add_messages(
+        self, channel_ids: list[int], log_time: int, datas: list[bytes], sequences: list[int]
+    ) -> None:
+        """:meth:`add_message` of several messages of one log (and publish) time, in order:
+        the same records, statistics and indices, the bookkeeping of the time once."""
+        if not self.lean:
+            for cid, data, seq in zip(channel_ids, datas, sequences, strict=True):
+                super().add_message(cid, log_time, data, log_time, seq)
+            return
+        st, cb, pack, limit = self._stats, self._chunks, _MESSAGE_HEAD.pack, self._limit
+        counts = st.channel_message_counts
+        for cid, data, seq in zip(channel_ids, datas, sequences, strict=True):
+            if st.message_count == 0:
+                st.message_start_time = log_time
+            else:
+                st.message_start_time = min(log_time, st.message_start_time)
+            st.message_end_time = max(log_time, st.message_end_time)
+            counts[cid] += 1
+            st.message_count += 1
+            if cb.num_messages == 0:
+                cb.message_start_time = log_time
+            else:
+                cb.message_start_time = min(cb.message_start_time, log_time)
+            cb.message_end_time = max(cb.message_end_time, log_time)
+            index = cb.message_indices.get(cid)
+            if index is None:
+                index = cb.message_indices[cid] = _PackedIndex(channel_id=cid, records=[])
+            rec = cb.record_writer
+            index.records.append((log_time, rec.count))
+            cb.num_messages += 1
+            rec.write(pack(_MESSAGE_OPCODE, 22 + len(data), cid, seq, log_time, log_time))
+            rec.write(data)
+            if rec.count > limit:
+                self._finalize()
+
 
 class LogWriter:
     """Write ROS 2 messages to one MCAP file.
@@ -169,6 +204,24 @@ class LogWriter:
         )
         self._seq[topic] += 1
         self.counts[topic] += 1
+
+    def write_cdr_at(
+        self, topics: list[str], typenames: list[str], datas: list[bytes], t: float
+    ) -> None:
+        """:meth:`write_cdr` of one already serialised message per topic, all at time ``t``
+        (a sonar ring, a robot step's messages), in order: the same file."""
+        known = self._known
+        ids = [known.get(key) for key in zip(topics, typenames, strict=True)]
+        if None in ids:  # a new channel's record goes before its first message
+            for args in zip(topics, typenames, datas, strict=True):
+                self.write_cdr(*args, t)
+            return
+        seqs = []
+        for topic in topics:
+            seqs.append(self._seq[topic])
+            self._seq[topic] += 1
+            self.counts[topic] += 1
+        self._writer.add_messages(ids, sec_to_ns(t), datas, seqs)
 
     def metadata(self, name: str, data: dict[str, str]) -> None:
         """Add an MCAP metadata record (string to string map)."""
