@@ -47,6 +47,7 @@ from fuzzyslam.slam.noise import DetectionNoiseEstimator
 from fuzzyslam.slam.params import SlamParams
 from fuzzyslam.slam.relocalise import Relocaliser
 from fuzzyslam.slam.run_results import RunCounts, slam_result
+from fuzzyslam.slam.start_anchor import StartAnchor
 
 CALIB_PERIOD_S = 1.0  # calibration.csv: a row at most this often (s)
 # the upper triangle of the pose covariance, row by row (a trajectory row's covariance)
@@ -114,6 +115,10 @@ class SlamRunner:
             0,
         )
         self.relocaliser = Relocaliser.from_params(p)
+        # the map's first lamps are born at their first sighting (slam/start_anchor.py):
+        # the filter at the first frame with detections, until a lamp is born or an update
+        self._anchor: StartAnchor | None = None
+        self._anchor_open = True
         self.map_motion = MapMotionMonitor()
         if self.sink is None:
             self.sink = MemorySink()
@@ -174,6 +179,11 @@ class SlamRunner:
             return
         if self.relocaliser is not None:
             self.relocaliser.moved(pre.delta)
+        self._predict()
+
+    def _predict(self) -> None:
+        """The prediction of :meth:`flush` (the preintegrated odometry into the filter)."""
+        pre = self.preint
         if self.calibration is None:
             self.ekf.predict_relative(pre.delta, pre.q)
             pre.reset()
@@ -193,13 +203,18 @@ class SlamRunner:
             The increment (d_trans m, d_rot rad) ending at ``ev.t`` (s).
         """
         self._last_odometry = ev.t
-        if self.calibration is not None and not self.preint.steps:
-            self.preint.reset(self.ekf.calib)  # the factors as the last update left them
-        self.preint.add(ev.d_trans, ev.d_rot)
+        self._preintegrate(ev.d_trans, ev.d_rot)
+        if self._anchor is not None:
+            self._anchor.increments.append((ev.d_trans, ev.d_rot))
         self.sink.odometry(ev.t, ev.d_trans, ev.d_rot)  # type: ignore[union-attr]
         self.counts["odometry"] += 1
         if ev.t - self._last_record >= self.params.record_period:
             self._record(ev.t)
+
+    def _preintegrate(self, d_trans: float, d_rot: float) -> None:
+        if self.calibration is not None and not self.preint.steps:
+            self.preint.reset(self.ekf.calib)  # the factors as the last update left them
+        self.preint.add(d_trans, d_rot)
 
     def frame(self, ev: Frame) -> None:
         """Associate the frame's detections, update, then manage new lamps.
@@ -230,6 +245,8 @@ class SlamRunner:
         m = len(z)
         self.counts["detections"] += m
         self.tentative.expire(ev.t)
+        if m and self._anchor_open and self._anchor is None and not ekf.n_lamps:
+            self._anchor = StartAnchor.take(ekf, self.preint, ev.t, z, r)
         if m:
             d2 = ekf.individual_compatibility(z, r)
             known = None  # JCBB's association, when the relocalisation test made it
@@ -298,6 +315,7 @@ class SlamRunner:
             d2[:, sorted(taken)] = np.inf
         pose, prr = ekf.pose, ekf.pose_cov
         tentative_taken: set[int] = set()
+        confirmed: list[tuple[int, np.ndarray]] = []  # the map's first lamps (the anchor's)
         for j in range(len(z)):
             if d2.shape[1]:
                 i = int(np.argmin(d2[j]))
@@ -313,12 +331,43 @@ class SlamRunner:
             world, jr, jz = lamp_init(pose, z[j])
             cov = jr @ prr @ jr.T + jz @ r[j] @ jz.T
             if self.tentative.observe(t, world, tentative_taken, cov):
+                if self._anchor is not None:
+                    confirmed.append((j, world))
+                    continue
                 ekf.add_lamp(z[j], r[j])
-                self.health.observe_birth(t, prr)
-                self._first_seen.append(t)
-                self._last_seen.append(t)
-                self._obs.append(1)
-                self.counts["lamps_created"] += 1
+                self._born(t, prr)
+        if confirmed:
+            self._born_at_anchor(t, z, r, confirmed)
+        if ekf.n_lamps:
+            self._anchor, self._anchor_open = None, False
+
+    def _born(self, t: float, prr: np.ndarray) -> None:
+        """Bookkeeping of a lamp just added to the filter."""
+        self.health.observe_birth(t, prr)
+        self._first_seen.append(t)
+        self._last_seen.append(t)
+        self._obs.append(1)
+        self.counts["lamps_created"] += 1
+
+    def _born_at_anchor(
+        self, t: float, z: np.ndarray, r: np.ndarray, confirmed: list[tuple[int, np.ndarray]]
+    ) -> None:
+        """The map's first lamps, confirmed now, born from their sightings in the anchor
+        frame: the filter rewound to the anchor, the lamps added, the odometry since then
+        replayed (slam/start_anchor.py). A lamp the anchor frame did not see is born from
+        this frame's sighting, after the replay."""
+        anchor, ekf = self._anchor, self.ekf
+        unseen = anchor.give_birth(ekf, [w for _, w in confirmed], self.params.tentative_radius)
+        if len(unseen) < len(confirmed):  # rewound: replay the odometry since the anchor
+            self.preint = anchor.preint
+            for inc in anchor.increments:
+                self._preintegrate(*inc)
+            if self.preint.steps:
+                self._predict()
+        for a in unseen:
+            ekf.add_lamp(z[confirmed[a][0]], r[confirmed[a][0]])
+        for _ in confirmed:
+            self._born(t, ekf.pose_cov)
 
     def ring(self, ev: RingEvent) -> None:
         """Hand a sonar ring to every aid whose start time has come; their robot updates
@@ -336,6 +385,8 @@ class SlamRunner:
                 aid.on_ring(ev.t, ev.ring, self.mounts, self.ekf)
                 self.counts["aid_calls"] += 1
         for idx, res in self.ekf.robot_updates:
+            if res.accepted:
+                self._anchor, self._anchor_open = None, False  # the rewind is no longer exact
             if res.accepted and self.calibration is not None:
                 self.preint.mark()
             kind = "heading" if idx == (2,) else "pose"
