@@ -1,7 +1,7 @@
 """The map's first lamps born at their first sighting (slam/start_anchor.py), on the real
 SlamRunner and EkfSlam: the rewound filter against a second, straight-line construction;
 the lamps anchored to the start pose where the confirming frame's pose has drifted; an
-update before the first birth ends the anchor."""
+update before the first birth moves the snapshot to the next frame."""
 
 from __future__ import annotations
 
@@ -104,12 +104,23 @@ class _HeadingAid:
         ekf.update_robot([0.0], [[1e-4]], [2], gate_chi2=1e6)
 
 
-def test_update_before_first_birth_ends_anchor():
+def test_update_before_first_birth_moves_the_snapshot():
+    """A heading update at 0.1 s drops the snapshot of the frame at 0 s (it would no
+    longer rewind exactly): the lamps confirmed at 0.4 s are born from the next frame's
+    sightings (0.2 s), at the filter's pose there, not from the confirming frame's."""
     p = SlamParams(tentative_hits=3)
     runner = SlamRunner(p, np.zeros(3), aids=[_HeadingAid()])
+    poses, frame = {}, runner.frame
+
+    def spy(ev):
+        runner.flush()
+        poses[round(ev.t, 2)] = runner.ekf.pose
+        frame(ev)
+
+    runner.frame = spy
     frames, _ = drive(runner, aid_at=0.1)
     assert runner.ekf.n_lamps == len(LAMPS)
-    # born from the confirming frame's pose, as without the anchor
-    late = np.array([lamp_init(runner.ekf.pose, z)[0] for z in frames[-1]])
-    np.testing.assert_allclose(runner.ekf.lamps, late, rtol=0, atol=1e-12)
-    assert np.abs(runner.ekf.lamps - LAMPS).max() > 1e-3
+    at = {t: np.array([lamp_init(poses[t], z)[0] for z in frames[k]]) for k, t in
+          enumerate((0.0, 0.2, 0.4))}  # fmt: skip
+    np.testing.assert_allclose(runner.ekf.lamps, at[0.2], rtol=0, atol=1e-12)
+    assert np.abs(at[0.4] - at[0.2]).max() > 1e-3 and np.abs(at[0.0] - at[0.2]).max() > 1e-4

@@ -115,10 +115,7 @@ class SlamRunner:
             0,
         )
         self.relocaliser = Relocaliser.from_params(p)
-        # the map's first lamps are born at their first sighting (slam/start_anchor.py):
-        # the filter at the first frame with detections, until a lamp is born or an update
-        self._anchor: StartAnchor | None = None
-        self._anchor_open = True
+        self.anchor = StartAnchor()  # the map's first lamps at first sight (start_anchor.py)
         self.map_motion = MapMotionMonitor()
         if self.sink is None:
             self.sink = MemorySink()
@@ -179,18 +176,17 @@ class SlamRunner:
             return
         if self.relocaliser is not None:
             self.relocaliser.moved(pre.delta)
-        self._predict()
+        self.predict()
 
-    def _predict(self) -> None:
-        """The prediction of :meth:`flush` (the preintegrated odometry into the filter)."""
-        pre = self.preint
-        if self.calibration is None:
+    def predict(self) -> None:
+        """Apply the preintegrated odometry to the filter (:meth:`flush`'s prediction)."""
+        pre, cm = self.preint, self.calibration
+        if cm is None:
             self.ekf.predict_relative(pre.delta, pre.q)
             pre.reset()
             return
         # x' = x (+) delta(c), D = d delta / dc; then the factors' random walk
         self.ekf.predict_relative(pre.delta, pre.q_calib(self.ekf.calib_cov), pre.d_calib)
-        cm = self.calibration
         cal.diffuse(self.ekf, cm.var_per_m * pre.dist + cm.var_per_rad * pre.turn)
         pre.reset(self.ekf.calib)
 
@@ -203,18 +199,14 @@ class SlamRunner:
             The increment (d_trans m, d_rot rad) ending at ``ev.t`` (s).
         """
         self._last_odometry = ev.t
-        self._preintegrate(ev.d_trans, ev.d_rot)
-        if self._anchor is not None:
-            self._anchor.increments.append((ev.d_trans, ev.d_rot))
+        if self.calibration is not None and not self.preint.steps:
+            self.preint.reset(self.ekf.calib)  # the factors as the last update left them
+        self.preint.add(ev.d_trans, ev.d_rot)
+        self.anchor.odometry(ev.d_trans, ev.d_rot)
         self.sink.odometry(ev.t, ev.d_trans, ev.d_rot)  # type: ignore[union-attr]
         self.counts["odometry"] += 1
         if ev.t - self._last_record >= self.params.record_period:
             self._record(ev.t)
-
-    def _preintegrate(self, d_trans: float, d_rot: float) -> None:
-        if self.calibration is not None and not self.preint.steps:
-            self.preint.reset(self.ekf.calib)  # the factors as the last update left them
-        self.preint.add(d_trans, d_rot)
 
     def frame(self, ev: Frame) -> None:
         """Associate the frame's detections, update, then manage new lamps.
@@ -245,8 +237,7 @@ class SlamRunner:
         m = len(z)
         self.counts["detections"] += m
         self.tentative.expire(ev.t)
-        if m and self._anchor_open and self._anchor is None and not ekf.n_lamps:
-            self._anchor = StartAnchor.take(ekf, self.preint, ev.t, z, r)
+        self.anchor.frame(ekf, self.preint, ev.t, z, r)
         if m:
             d2 = ekf.individual_compatibility(z, r)
             known = None  # JCBB's association, when the relocalisation test made it
@@ -315,7 +306,6 @@ class SlamRunner:
             d2[:, sorted(taken)] = np.inf
         pose, prr = ekf.pose, ekf.pose_cov
         tentative_taken: set[int] = set()
-        confirmed: list[tuple[int, np.ndarray]] = []  # the map's first lamps (the anchor's)
         for j in range(len(z)):
             if d2.shape[1]:
                 i = int(np.argmin(d2[j]))
@@ -331,43 +321,13 @@ class SlamRunner:
             world, jr, jz = lamp_init(pose, z[j])
             cov = jr @ prr @ jr.T + jz @ r[j] @ jz.T
             if self.tentative.observe(t, world, tentative_taken, cov):
-                if self._anchor is not None:
-                    confirmed.append((j, world))
-                    continue
-                ekf.add_lamp(z[j], r[j])
-                self._born(t, prr)
-        if confirmed:
-            self._born_at_anchor(t, z, r, confirmed)
-        if ekf.n_lamps:
-            self._anchor, self._anchor_open = None, False
-
-    def _born(self, t: float, prr: np.ndarray) -> None:
-        """Bookkeeping of a lamp just added to the filter."""
-        self.health.observe_birth(t, prr)
-        self._first_seen.append(t)
-        self._last_seen.append(t)
-        self._obs.append(1)
-        self.counts["lamps_created"] += 1
-
-    def _born_at_anchor(
-        self, t: float, z: np.ndarray, r: np.ndarray, confirmed: list[tuple[int, np.ndarray]]
-    ) -> None:
-        """The map's first lamps, confirmed now, born from their sightings in the anchor
-        frame: the filter rewound to the anchor, the lamps added, the odometry since then
-        replayed (slam/start_anchor.py). A lamp the anchor frame did not see is born from
-        this frame's sighting, after the replay."""
-        anchor, ekf = self._anchor, self.ekf
-        unseen = anchor.give_birth(ekf, [w for _, w in confirmed], self.params.tentative_radius)
-        if len(unseen) < len(confirmed):  # rewound: replay the odometry since the anchor
-            self.preint = anchor.preint
-            for inc in anchor.increments:
-                self._preintegrate(*inc)
-            if self.preint.steps:
-                self._predict()
-        for a in unseen:
-            ekf.add_lamp(z[confirmed[a][0]], r[confirmed[a][0]])
-        for _ in confirmed:
-            self._born(t, ekf.pose_cov)
+                self.anchor.confirmed.append((j, world))
+        for _ in range(self.anchor.give_birth(self, z, r)):  # ekf.add_lamp (start_anchor.py)
+            self.health.observe_birth(t, prr)
+            self._first_seen.append(t)
+            self._last_seen.append(t)
+            self._obs.append(1)
+            self.counts["lamps_created"] += 1
 
     def ring(self, ev: RingEvent) -> None:
         """Hand a sonar ring to every aid whose start time has come; their robot updates
@@ -385,8 +345,7 @@ class SlamRunner:
                 aid.on_ring(ev.t, ev.ring, self.mounts, self.ekf)
                 self.counts["aid_calls"] += 1
         for idx, res in self.ekf.robot_updates:
-            if res.accepted:
-                self._anchor, self._anchor_open = None, False  # the rewind is no longer exact
+            self.anchor.updated(res.accepted)  # the rewind would not be exact
             if res.accepted and self.calibration is not None:
                 self.preint.mark()
             kind = "heading" if idx == (2,) else "pose"

@@ -20,8 +20,10 @@ that frame (``EkfSlam.add_lamp``: the standard initialisation, lamp and pose cor
 and replays the odometry (the same prediction, composed): the filter is then the one that
 had made those lamps landmarks at their first sighting, with their 3-hit confirmation
 still required. The confirming frame's own sightings are not applied as updates (the
-next frame's are). Any update before the first birth (a heading fix) ends the anchor:
-the rewind would no longer be exact.
+next frame's are). An update before the first birth (a heading fix from t = 0) drops
+the snapshot, which would no longer rewind exactly; the next frame with detections takes
+a new one. Every lamp is born through :meth:`StartAnchor.give_birth`; later ones (no
+snapshot) from their confirming sighting, as before.
 """
 
 from __future__ import annotations
@@ -31,11 +33,12 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fuzzyslam.slam.calibration import CalibratedPreintegrator
 from fuzzyslam.slam.ekf import EkfSlam, lamp_init
 
 
 @dataclass
-class StartAnchor:
+class Snapshot:
     """The filter at the first frame with detections, while the map is empty.
 
     Parameters
@@ -49,7 +52,7 @@ class StartAnchor:
     odometry_pose : ndarray, shape (3,)
         The filter's dead reckoning.
     preint : Preintegrator
-        A copy of the runner's preintegrator (its calibration instrument included).
+        A copy of the runner's preintegrator (flushed; its calibration instrument included).
     z : ndarray, shape (m, 2)
         The frame's detections (robot frame).
     r : ndarray, shape (m, 2, 2)
@@ -70,83 +73,138 @@ class StartAnchor:
     world: np.ndarray
     increments: list[tuple[float, float]] = field(default_factory=list)
 
-    @classmethod
-    def take(cls, ekf: EkfSlam, preint, t: float, z: np.ndarray, r: np.ndarray) -> StartAnchor:
-        """The anchor of the filter as it stands (an empty map, no update so far).
+    def restore(self, ekf: EkfSlam):
+        """Put ``ekf`` (no lamps) back as it was, and return the preintegrator of the
+        odometry since then (to be applied by the runner's ``predict``).
 
         Parameters
         ----------
         ekf : EkfSlam
-            The filter (no lamps).
+            The filter (updated in place).
+
+        Returns
+        -------
+        Preintegrator
+        """
+        ekf.x[:] = self.x
+        ekf.P[:, :] = self.p
+        ekf.odometry_pose = self.odometry_pose.copy()
+        pre = copy.deepcopy(self.preint)
+        if isinstance(pre, CalibratedPreintegrator):
+            pre.reset(ekf.calib)  # the factors as the anchor had them (no update since)
+        for inc in self.increments:
+            pre.add(*inc)
+        return pre
+
+
+@dataclass
+class StartAnchor:
+    """The lamps confirmed in a frame, born as landmarks (:meth:`give_birth`), the map's
+    first ones at their first sighting (module docstring): :meth:`frame` and
+    :meth:`odometry` keep the snapshot while the map is empty, :meth:`updated` drops it
+    at an update (the next frame with detections takes a new one). A snapshot older than
+    ``horizon`` seconds is replaced by the next frame's."""
+
+    horizon: float = 6.0
+    snapshot: Snapshot | None = None
+    # the lamps confirmed in the current frame: (detection index, world position)
+    confirmed: list[tuple[int, np.ndarray]] = field(default_factory=list)
+
+    def frame(self, ekf: EkfSlam, preint, t: float, z: np.ndarray, r: np.ndarray) -> None:
+        """A frame: the snapshot, if it has detections, the map is empty and there is none.
+
+        Parameters
+        ----------
+        ekf : EkfSlam
+            The filter (flushed).
         preint : Preintegrator
-            The runner's preintegrator (flushed: no pending step).
+            The runner's preintegrator (no pending step).
         t : float
             The frame's time (s).
         z : ndarray, shape (m, 2)
             The frame's detections.
         r : ndarray, shape (m, 2, 2)
             Their covariances.
-
-        Returns
-        -------
-        StartAnchor
         """
+        if self.snapshot is not None and t - self.snapshot.t > self.horizon:
+            self.snapshot = None
+        if self.snapshot is not None or not len(z) or ekf.n_lamps:
+            return
         pose = ekf.pose
         world = np.array([lamp_init(pose, zj)[0] for zj in z]).reshape(-1, 2)
-        return cls(
-            t,
-            ekf.x.copy(),
-            ekf.P.copy(),
-            ekf.odometry_pose.copy(),
-            copy.deepcopy(preint),
-            np.array(z, dtype=float).reshape(-1, 2),
-            np.array(r, dtype=float).reshape(-1, 2, 2),
+        self.snapshot = Snapshot(
+            t, ekf.x.copy(), ekf.P.copy(), ekf.odometry_pose.copy(), copy.deepcopy(preint),
+            np.array(z, dtype=float).reshape(-1, 2), np.array(r, dtype=float).reshape(-1, 2, 2),
             world,
-        )
+        )  # fmt: skip
 
-    def give_birth(self, ekf: EkfSlam, worlds: list[np.ndarray], radius: float) -> list[int]:
-        """Rewind the filter to the anchor and add the lamps confirmed at ``worlds`` from
-        their sightings in the anchor frame (each the nearest detection there within
-        ``radius``, one lamp per detection); the caller replays the odometry since. The
-        filter is left as it was when the anchor frame saw none of them.
+    def odometry(self, d_trans: float, d_rot: float) -> None:
+        """An odometry increment (kept while the snapshot stands).
 
         Parameters
         ----------
-        ekf : EkfSlam
-            The filter (no lamps; updated in place).
-        worlds : list of ndarray, shape (2,)
-            The confirming sightings (world frame).
-        radius : float
-            The tentative lamps' radius (m).
+        d_trans, d_rot : float
+            The increment (m, rad).
+        """
+        if self.snapshot is not None:
+            self.snapshot.increments.append((d_trans, d_rot))
+
+    def updated(self, accepted: bool) -> None:
+        """An update of the filter (``accepted``): the snapshot no longer rewinds exactly.
+
+        Parameters
+        ----------
+        accepted : bool
+            Whether the update changed the filter.
+        """
+        if accepted:
+            self.snapshot = None
+
+    def give_birth(self, runner, z: np.ndarray, r: np.ndarray) -> int:
+        """Make the lamps ``confirmed`` in this frame landmarks (``runner.ekf.add_lamp``).
+
+        With a snapshot (the map's first lamps), each is born from the snapshot frame's
+        nearest detection within the tentative radius (one lamp per detection), on the
+        filter rewound to the snapshot, and the odometry since is replayed
+        (``runner.predict``); the others, and all without a snapshot, from this frame's
+        detections ``z``, ``r``.
+
+        Parameters
+        ----------
+        runner : SlamRunner
+            Its ``ekf``, ``preint``, ``params.tentative_radius`` and ``predict``.
+        z : ndarray, shape (m, 2)
+            This frame's detections.
+        r : ndarray, shape (m, 2, 2)
+            Their covariances.
 
         Returns
         -------
-        list of int
-            The indices into ``worlds`` that the anchor frame did not see (not added).
+        int
+            The lamps born.
         """
-        taken: list[int] = []
-        for w in worlds:
-            d = np.hypot(*(self.world - np.asarray(w, dtype=float)).T)
-            d[[k for k in taken if k >= 0]] = np.inf
-            k = int(np.argmin(d)) if len(d) else -1
-            taken.append(k if k >= 0 and d[k] <= radius else -1)
-        born = [k for k in taken if k >= 0]
-        if born:
-            self.restore(ekf)
-            for k in born:
-                ekf.add_lamp(self.z[k], self.r[k])
-        return [a for a, k in enumerate(taken) if k < 0]
-
-    def restore(self, ekf: EkfSlam) -> None:
-        """Put the filter back as it was at the anchor (its map still empty).
-
-        Parameters
-        ----------
-        ekf : EkfSlam
-            The filter (updated in place).
-        """
-        if ekf.n_lamps:
-            raise ValueError("StartAnchor.restore: the map is no longer empty")
-        ekf.x[:] = self.x
-        ekf.P[:, :] = self.p
-        ekf.odometry_pose = self.odometry_pose.copy()
+        held, snap, ekf = self.confirmed, self.snapshot, runner.ekf
+        if not held:
+            return 0
+        self.confirmed = []
+        first = [-1] * len(held)
+        if snap is not None:
+            self.snapshot = None
+            taken: list[int] = []
+            for a, (_, w) in enumerate(held):
+                d = np.hypot(*(snap.world - w).T)
+                d[taken] = np.inf
+                k = int(np.argmin(d))
+                if d[k] <= runner.params.tentative_radius:
+                    first[a] = k
+                    taken.append(k)
+            if taken:
+                runner.preint = snap.restore(ekf)
+                for k in taken:
+                    ekf.add_lamp(snap.z[k], snap.r[k])
+                if runner.preint.steps:
+                    runner.predict()
+        for (j, _), k in zip(held, first, strict=True):
+            if k < 0:
+                ekf.add_lamp(z[j], r[j])
+        return len(held)
