@@ -47,6 +47,7 @@ from fuzzyslam.slam.noise import DetectionNoiseEstimator
 from fuzzyslam.slam.params import SlamParams
 from fuzzyslam.slam.relocalise import Relocaliser
 from fuzzyslam.slam.run_results import RunCounts, slam_result
+from fuzzyslam.slam.start_anchor import StartAnchor
 
 CALIB_PERIOD_S = 1.0  # calibration.csv: a row at most this often (s)
 # the upper triangle of the pose covariance, row by row (a trajectory row's covariance)
@@ -114,6 +115,7 @@ class SlamRunner:
             0,
         )
         self.relocaliser = Relocaliser.from_params(p)
+        self.anchor = StartAnchor()  # the map's first lamps at first sight (start_anchor.py)
         self.map_motion = MapMotionMonitor()
         if self.sink is None:
             self.sink = MemorySink()
@@ -174,13 +176,17 @@ class SlamRunner:
             return
         if self.relocaliser is not None:
             self.relocaliser.moved(pre.delta)
-        if self.calibration is None:
+        self.predict()
+
+    def predict(self) -> None:
+        """Apply the preintegrated odometry to the filter (:meth:`flush`'s prediction)."""
+        pre, cm = self.preint, self.calibration
+        if cm is None:
             self.ekf.predict_relative(pre.delta, pre.q)
             pre.reset()
             return
         # x' = x (+) delta(c), D = d delta / dc; then the factors' random walk
         self.ekf.predict_relative(pre.delta, pre.q_calib(self.ekf.calib_cov), pre.d_calib)
-        cm = self.calibration
         cal.diffuse(self.ekf, cm.var_per_m * pre.dist + cm.var_per_rad * pre.turn)
         pre.reset(self.ekf.calib)
 
@@ -196,6 +202,7 @@ class SlamRunner:
         if self.calibration is not None and not self.preint.steps:
             self.preint.reset(self.ekf.calib)  # the factors as the last update left them
         self.preint.add(ev.d_trans, ev.d_rot)
+        self.anchor.odometry(ev.d_trans, ev.d_rot)
         self.sink.odometry(ev.t, ev.d_trans, ev.d_rot)  # type: ignore[union-attr]
         self.counts["odometry"] += 1
         if ev.t - self._last_record >= self.params.record_period:
@@ -230,6 +237,7 @@ class SlamRunner:
         m = len(z)
         self.counts["detections"] += m
         self.tentative.expire(ev.t)
+        self.anchor.frame(ekf, self.preint, ev.t, z, r)
         if m:
             d2 = ekf.individual_compatibility(z, r)
             known = None  # JCBB's association, when the relocalisation test made it
@@ -313,12 +321,13 @@ class SlamRunner:
             world, jr, jz = lamp_init(pose, z[j])
             cov = jr @ prr @ jr.T + jz @ r[j] @ jz.T
             if self.tentative.observe(t, world, tentative_taken, cov):
-                ekf.add_lamp(z[j], r[j])
-                self.health.observe_birth(t, prr)
-                self._first_seen.append(t)
-                self._last_seen.append(t)
-                self._obs.append(1)
-                self.counts["lamps_created"] += 1
+                self.anchor.confirmed.append((j, world))
+        for _ in range(self.anchor.give_birth(self, z, r)):  # ekf.add_lamp (start_anchor.py)
+            self.health.observe_birth(t, prr)
+            self._first_seen.append(t)
+            self._last_seen.append(t)
+            self._obs.append(1)
+            self.counts["lamps_created"] += 1
 
     def ring(self, ev: RingEvent) -> None:
         """Hand a sonar ring to every aid whose start time has come; their robot updates
@@ -336,6 +345,7 @@ class SlamRunner:
                 aid.on_ring(ev.t, ev.ring, self.mounts, self.ekf)
                 self.counts["aid_calls"] += 1
         for idx, res in self.ekf.robot_updates:
+            self.anchor.updated(res.accepted)  # the rewind would not be exact
             if res.accepted and self.calibration is not None:
                 self.preint.mark()
             kind = "heading" if idx == (2,) else "pose"
