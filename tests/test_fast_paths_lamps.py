@@ -195,3 +195,20 @@ def test_last_stamp_equals_per_message_bookkeeping():
                 k += 1
             last_ns, seen = _last_stamp(batch, last_ns, seen)
             assert (last_ns, seen) == (ref_ns, ref_seen)
+
+
+def test_solve_spd_without_the_private_gufuncs(monkeypatch):
+    """numpy without ``numpy.linalg._umath_linalg``: the public calls, the same floats."""
+    from fuzzyslam.slam import health
+
+    rng = np.random.default_rng(4)
+    cases = []
+    for k in (2, 4):
+        a = rng.normal(size=(k, k))
+        cases.append((a @ a.T + np.eye(k) * 1e-3, rng.normal(size=k)))
+    cases.append((np.array([[1.0, 1.0], [1.0, 1.0]]), np.array([1.0, 2.0])))  # singular
+    want = [solve_spd(s, b) for s, b in cases]
+    monkeypatch.setattr(health, "_umath_linalg", None)
+    for (s, b), (x, reg) in zip(cases, want, strict=True):
+        x2, reg2 = solve_spd(s, b)
+        assert reg2 == reg and np.array_equal(x2, x)

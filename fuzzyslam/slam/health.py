@@ -32,9 +32,13 @@ from dataclasses import dataclass, field
 from functools import lru_cache
 
 import numpy as np
-from numpy.linalg import _umath_linalg  # the LAPACK gufuncs behind numpy.linalg
 
 from fuzzyslam.slam.chi2_values import CHI2_QUANTILES, GATE_LEVELS
+
+try:  # the LAPACK gufuncs behind numpy.linalg (private: the public calls if it moves)
+    from numpy.linalg import _umath_linalg
+except ImportError:  # pragma: no cover - a numpy without the module
+    _umath_linalg = None
 
 
 def _cholesky(s: np.ndarray) -> np.ndarray:
@@ -42,6 +46,11 @@ def _cholesky(s: np.ndarray) -> np.ndarray:
     definite: LAPACK ``potrf`` through the gufunc ``numpy.linalg.cholesky`` calls (the same
     bits), without its Python wrapper (type and shape checks, the error-raising errstate),
     which costs 5x the factorisation of the 2x2-6x6 S of a lamp update."""
+    if _umath_linalg is None:
+        try:
+            return np.linalg.cholesky(s)
+        except np.linalg.LinAlgError:
+            return np.full_like(s, np.nan)
     with np.errstate(invalid="ignore"):  # a failed factorisation: NaN, no warning
         return _umath_linalg.cholesky_lo(s, signature="d->d")
 
@@ -49,6 +58,8 @@ def _cholesky(s: np.ndarray) -> np.ndarray:
 def _solve(s: np.ndarray, b: np.ndarray) -> np.ndarray:
     """S^-1 b for a float64 S (k, k) known to be well conditioned (LU, LAPACK ``gesv``):
     the gufuncs ``numpy.linalg.solve`` calls (the same bits), without its wrapper."""
+    if _umath_linalg is None:
+        return np.linalg.solve(s, b)
     if b.ndim == 1:
         return _umath_linalg.solve1(s, b, signature="dd->d")
     return _umath_linalg.solve(s, b, signature="dd->d")
