@@ -185,7 +185,7 @@ def aids_for_map(fm: FrozenMap, mode: str, cfg: Any, start_time: float | None = 
         aid = heading_aid()
         aid.viewer_map = (fm.fgm, refs)  # the map used, in estimates.mcap (one aid shows it)
         return [aid]
-    # the pose match and change detection (scipy.ndimage, cv2) load for pose fixes only
+    # the pose match and change detection (their kernels, the figure) load for pose fixes only
     from fuzzyslam.fixes.changes import ChangeDetector
     from fuzzyslam.fixes.pose_aid import PoseFixAid
 
