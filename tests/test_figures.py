@@ -71,7 +71,7 @@ def drawn(tmp_path_factory) -> dict[str, plt.Figure]:
     for mod in (map_figures, eval_figures):
         real = mod._save
 
-        def keep(fig, path, real=real):
+        def keep(fig, path, real=real, **options):  # options: save_png's (grows=)
             fig.canvas.draw()
             figs[Path(path).name] = fig
             fig.savefig(Path(path), format="png")  # written, not closed
