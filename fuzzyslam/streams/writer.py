@@ -73,34 +73,7 @@ class _LeanWriter(Writer):
         if not self.lean:
             super().add_message(channel_id, log_time, data, publish_time, sequence)
             return
-        st = self._stats
-        if st.message_count == 0:
-            st.message_start_time = log_time
-        else:
-            st.message_start_time = min(log_time, st.message_start_time)
-        st.message_end_time = max(log_time, st.message_end_time)
-        st.channel_message_counts[channel_id] += 1
-        st.message_count += 1
-        cb = self._chunks
-        if cb.num_messages == 0:
-            cb.message_start_time = log_time
-        else:
-            cb.message_start_time = min(cb.message_start_time, log_time)
-        cb.message_end_time = max(cb.message_end_time, log_time)
-        index = cb.message_indices.get(channel_id)
-        if index is None:
-            index = cb.message_indices[channel_id] = _PackedIndex(channel_id=channel_id, records=[])
-        rec = cb.record_writer
-        index.records.append((log_time, rec.count))
-        cb.num_messages += 1
-        rec.write(
-            _MESSAGE_HEAD.pack(
-                _MESSAGE_OPCODE, 22 + len(data), channel_id, sequence, log_time, publish_time
-            )
-        )
-        rec.write(data)
-        if rec.count > self._limit:
-            self._finalize()
+        self._add_lean((channel_id,), log_time, (data,), (sequence,), publish_time)
 
     def add_messages(
         self, channel_ids: list[int], log_time: int, datas: list[bytes], sequences: list[int]
@@ -111,6 +84,11 @@ class _LeanWriter(Writer):
             for cid, data, seq in zip(channel_ids, datas, sequences, strict=True):
                 super().add_message(cid, log_time, data, log_time, seq)
             return
+        self._add_lean(channel_ids, log_time, datas, sequences, log_time)
+
+    def _add_lean(self, channel_ids, log_time: int, datas, sequences, publish_time: int) -> None:
+        """The chunked ``Writer.add_message``'s records, statistics and indices for
+        messages of one log and publish time, in order (mcap 1.x's internals)."""
         st, cb, pack, limit = self._stats, self._chunks, _MESSAGE_HEAD.pack, self._limit
         counts = st.channel_message_counts
         for cid, data, seq in zip(channel_ids, datas, sequences, strict=True):
@@ -132,7 +110,7 @@ class _LeanWriter(Writer):
             rec = cb.record_writer
             index.records.append((log_time, rec.count))
             cb.num_messages += 1
-            rec.write(pack(_MESSAGE_OPCODE, 22 + len(data), cid, seq, log_time, log_time))
+            rec.write(pack(_MESSAGE_OPCODE, 22 + len(data), cid, seq, log_time, publish_time))
             rec.write(data)
             if rec.count > limit:
                 self._finalize()
