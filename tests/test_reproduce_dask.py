@@ -19,6 +19,7 @@ import pytest
 from conftest import shared_dir
 
 from fuzzyslam.progress import PlanProgress
+from fuzzyslam.reproduce.dask_preload import stages_loaded
 from fuzzyslam.reproduce.execute import execute
 from fuzzyslam.reproduce.plan import Step
 
@@ -163,7 +164,9 @@ def dask_cluster(tmp_path_factory):
             procs.append(subprocess.Popen(
                 [BIN / "dask", "worker", "--scheduler-file", sched_file, "--nthreads", "1",
                  "--nworkers", "1", "--host", "127.0.0.1", "--no-dashboard",
-                 "--local-directory", home],
+                 "--local-directory", home,
+                 # the first worker with the README's preload, the second without
+                 *(["--preload", "fuzzyslam.reproduce.dask_preload"] if i == 0 else [])],
                 stdout=subprocess.DEVNULL, stderr=open(logs / f"worker{i}.log", "w"),
                 env={**env, "TMPDIR": str(home)}, cwd=home, start_new_session=True,
             ))  # fmt: skip
@@ -171,6 +174,9 @@ def dask_cluster(tmp_path_factory):
             client.wait_for_workers(2, timeout=60)
             pids = client.run(os.getpid)
             address = client.scheduler.address
+            # before any step: which workers hold the stages' modules already
+            loaded = client.run(stages_loaded)
+            (tmp_path / "stages_at_start.json").write_text(json.dumps(loaded))
         yield address, pids, tmp_path
     finally:
         # SIGTERM to each process's own group: a worker's nanny and the worker process it
@@ -185,6 +191,15 @@ def dask_cluster(tmp_path_factory):
             except subprocess.TimeoutExpired:
                 os.killpg(p.pid, signal.SIGKILL)
                 p.wait()
+
+
+@pytest.mark.slow
+def test_dask_preload_imports_the_stages_at_worker_start(dask_cluster):
+    """``--preload fuzzyslam.reproduce.dask_preload``: the worker started with it holds the
+    stages before its first step; the one started without it does not."""
+    _, pids, tmp_path = dask_cluster
+    loaded = json.loads((tmp_path / "stages_at_start.json").read_text())
+    assert sorted(loaded) == sorted(pids) and sorted(loaded.values()) == [False, True]
 
 
 TIMING = ("seconds", "wall_time_s", "real_time_factor", "wall_s")
