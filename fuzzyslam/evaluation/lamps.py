@@ -1,5 +1,5 @@
-"""Estimated lamps against the true ones: a one-to-one matching (the linear assignment
-problem, :func:`linear_assignment`), duplicates, spurious and missed lamps."""
+"""Estimated lamps against the true ones: a one-to-one matching (Kuhn-Munkres assignment,
+``scipy.optimize.linear_sum_assignment``), duplicates, spurious and missed lamps."""
 
 from __future__ import annotations
 
@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 from numpy.typing import ArrayLike, NDArray
+from scipy.optimize import linear_sum_assignment
 
 from fuzzyslam.evaluation.metrics import stats
 
@@ -118,7 +119,7 @@ def match_lamps(est_xy: ArrayLike, true_xy: ArrayLike, max_dist: float) -> LampM
     d = np.hypot(e[:, None, 0] - t[None, :, 0], e[:, None, 1] - t[None, :, 1])
     feasible = d <= max_dist
     big = max_dist * (e.shape[0] + t.shape[0]) + 1.0
-    rows, cols = linear_assignment(np.where(feasible, d, big))
+    rows, cols = linear_sum_assignment(np.where(feasible, d, big))
     ok = feasible[rows, cols]
     rows, cols = rows[ok], cols[ok]
     per_true[cols] = d[rows, cols]
@@ -135,87 +136,3 @@ def match_lamps(est_xy: ArrayLike, true_xy: ArrayLike, max_dist: float) -> LampM
         missed=[int(k) for k in np.flatnonzero(~matched_true)],
         max_dist=max_dist,
     )
-
-
-def linear_assignment(cost: ArrayLike) -> tuple[NDArray[np.int64], NDArray[np.int64]]:
-    """Minimum-cost one-to-one assignment of the rows and columns of ``cost`` (min(R, C)
-    pairs): the shortest augmenting path algorithm of D. F. Crouse, "On implementing 2D
-    rectangular assignment algorithms", IEEE Trans. Aerospace and Electronic Systems 52(4),
-    2016 (Jonker-Volgenant with dual variables), as ``scipy.optimize.linear_sum_assignment``
-    implements it, step for step (the same scan order and choice among equal path costs,
-    so the same pairs even where several assignments cost the same; tests compare the
-    two), without importing scipy.optimize (0.5 s of CPU: ``evaluate`` needs only this).
-    A tall matrix (R > C) is solved transposed. Each augmenting path is found with numpy
-    over the columns left; the loops run over rows and path steps, a few per lamp.
-
-    Parameters
-    ----------
-    cost : array_like, shape (R, C)
-        Finite costs.
-
-    Returns
-    -------
-    rows, cols : ndarray of int64, shape (min(R, C),)
-        The pairs, ``rows`` ascending.
-    """
-    c = np.asarray(cost, dtype=np.float64)
-    if c.ndim != 2 or not np.isfinite(c).all():
-        raise ValueError("cost must be a finite 2-D array")
-    nr, nc = c.shape
-    if nr == 0 or nc == 0:
-        return np.zeros(0, np.int64), np.zeros(0, np.int64)
-    transpose = nc < nr
-    if transpose:
-        c = np.ascontiguousarray(c.T)
-        nr, nc = nc, nr
-    u, v = np.zeros(nr), np.zeros(nc)
-    path = np.full(nc, -1, np.int64)
-    col4row = np.full(nr, -1, np.int64)
-    row4col = np.full(nc, -1, np.int64)
-    for cur in range(nr):
-        # shortest augmenting path from row ``cur`` (Crouse, Algorithm 2)
-        spc = np.full(nc, np.inf)  # shortest path costs
-        in_sr = np.zeros(nr, bool)
-        in_sc = np.zeros(nc, bool)
-        remaining = np.arange(nc - 1, -1, -1)  # reversed: a constant matrix gives the identity
-        left = nc
-        min_val, i, sink = 0.0, cur, -1
-        while sink == -1:
-            in_sr[i] = True
-            rem = remaining[:left]
-            r = min_val + c[i, rem] - u[i] - v[rem]
-            better = r < spc[rem]
-            path[rem[better]] = i
-            spc[rem[better]] = r[better]
-            s = spc[rem]
-            lowest = s.min()
-            ties = np.flatnonzero(s == lowest)
-            free = ties[row4col[rem[ties]] == -1]
-            # scanned in order: the first at the lowest cost, or else the last free column
-            index = int(free[-1]) if free.size else int(ties[0])
-            min_val = float(lowest)
-            j = int(rem[index])
-            if row4col[j] == -1:
-                sink = j
-            else:
-                i = int(row4col[j])
-            in_sc[j] = True
-            left -= 1
-            remaining[index] = remaining[left]
-        # dual update, then the augmentation along the path
-        u[cur] += min_val
-        others = np.flatnonzero(in_sr)
-        others = others[others != cur]
-        u[others] += min_val - spc[col4row[others]]
-        v[in_sc] -= min_val - spc[in_sc]
-        j = sink
-        while True:
-            i = int(path[j])
-            row4col[j] = i
-            col4row[i], j = j, int(col4row[i])
-            if i == cur:
-                break
-    if transpose:
-        order = np.argsort(col4row)
-        return col4row[order], order.astype(np.int64)
-    return np.arange(nr, dtype=np.int64), col4row
