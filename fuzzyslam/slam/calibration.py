@@ -109,6 +109,41 @@ def prior(kind: str, slam, wheel_base: float) -> Calibration:
     )
 
 
+def true_factors(robot) -> np.ndarray:
+    """The simulator's true wheel factors (s_L, s_R, s_B), in the order of
+    ``NAMES["wheels"]``: the config's ``robot.left_scale``, ``right_scale``,
+    ``base_scale`` (sim/encoders.py: true radii r s_L, r s_R and base b s_B, as the
+    ``wheels`` model has them).
+
+    Parameters
+    ----------
+    robot : RobotParams
+        The ``robot`` section of the config the log was simulated from.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+    """
+    return np.array([float(getattr(robot, n)) for n in NAMES["wheels"]])
+
+
+def errors_in_sigma(factors, sigma, truth) -> np.ndarray:
+    """Each factor's error against the truth in its own standard deviations,
+    (c - c_true) / sigma_c: within 2 sigma when its magnitude is at most 2.
+
+    Parameters
+    ----------
+    factors, sigma, truth : sequence of float, length k
+        The estimated factors, their standard deviations and the true factors.
+
+    Returns
+    -------
+    ndarray, shape (k,)
+    """
+    c, s, t = (np.asarray(v, dtype=float) for v in (factors, sigma, truth))
+    return (c - t) / s
+
+
 def calibrated_increment(kind: str, b: float, c, dt_n: float, dr_n: float):
     """Calibrated increment (dt, dr) and its Jacobian F = d(dt, dr)/dc as two row tuples.
 
