@@ -19,6 +19,13 @@ run), with the real-time factors (log duration / CPU and / wall time) against th
 
     python benchmarks/bench_run.py [LOG.mcap] --baseline main --repeat 3
 
+``--calibration`` (with ``--baseline``) times the lamps-only run with the odometry
+self-calibration off and on (``slam.calibrate``, a config that extends paper.yaml), old
+and new code alternating, and prints each code's on/off CPU ratio (the calibration's
+cost) and whether the outputs of both settings are byte-identical to the old code's.
+
+    python benchmarks/bench_run.py LOG.mcap --baseline main --calibration --repeat 5
+
 ``--sample`` (with ``--baseline``) times ``fuzzyslam run data/sample.mcap`` (121 s of log)
 instead, old and new alternately: the command's start-up weighs most there.
 """
@@ -156,6 +163,50 @@ def side_by_side_run(log: Path, rev: str, repeat: int, candidate: str | None = N
                           "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
 
 
+def side_by_side_calibration(log: Path, rev: str, repeat: int,
+                              candidate: str | None = None) -> None:  # fmt: skip
+    """Old (``rev``) and new ``fuzzyslam run`` lamps only, calibration off and on, the four
+    alternating: each code's CPU medians and its on/off ratio, outputs compared."""
+    import json
+    import statistics
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from sidebyside import compiled, export_revision, load, run_cli, same_outputs
+
+    from fuzzyslam.reproduce.overrides import override_text
+    from fuzzyslam.streams.reader import LogReader
+
+    reader = LogReader(log)
+    duration = reader.end - reader.start
+    codes = {"old": export_revision(rev), "new": export_revision(candidate) if candidate else None}
+    for code in codes.values():
+        compiled(code or Path(__file__).resolve().parents[1] / "fuzzyslam")
+    work = Path(tempfile.mkdtemp(prefix="bench_run_calibration."))
+    on = work / "calibrated.yaml"
+    on.write_text(override_text("paper.yaml", {"slam.calibrate": True}, "bench_run.py"))
+    configs = {"off": "paper", "on": str(on)}
+    cpu: dict[str, list[float]] = {}
+    before = load()
+    for _ in range(repeat):
+        for v, code in codes.items():
+            for c, cfg in configs.items():
+                out = work / f"{v}_{c}"
+                cpu.setdefault(f"{v}_{c}", []).append(
+                    run_cli(["run", str(log), "-o", str(out), "--config", cfg], code)[1]
+                )
+    med = {k: round(statistics.median(t), 3) for k, t in cpu.items()}
+    print(json.dumps({"run": "lamps only, calibration off and on", "log_s": round(duration, 1),
+                      "baseline": rev, "candidate": candidate or "installed",
+                      "repeat": repeat, "cpu_median_s": med,
+                      "on_off_ratio": {v: round(med[f"{v}_on"] / med[f"{v}_off"], 3)
+                                       for v in codes},
+                      "speedup_on_cpu_median": round(med["old_on"] / med["new_on"], 3),
+                      "outputs_byte_identical": {
+                          c: same_outputs(work / f"old_{c}", work / f"new_{c}")["identical"]
+                          for c in configs},
+                      "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
+
+
 def side_by_side_sample(rev: str, repeat: int, candidate: str | None = None) -> None:
     """Old (``rev``) and new ``fuzzyslam run`` of the committed sample log (121 s, lamps
     only) alternately: a short run, where the command's start-up (imports, typestores)
@@ -187,6 +238,8 @@ def main() -> None:
     ap.add_argument("--repeat", type=int, default=3)
     ap.add_argument("--sample", action="store_true",
                     help="with --baseline: run the sample log instead (start-up)")  # fmt: skip
+    ap.add_argument("--calibration", action="store_true",
+                    help="with --baseline: lamps only, calibration off and on")  # fmt: skip
     ap.add_argument("--candidate", metavar="REV", default=None,
                     help="the new code: a git revision (default: the installed code)")  # fmt: skip
     args = ap.parse_args()
@@ -203,6 +256,9 @@ def main() -> None:
                 check=True,
                 stdout=subprocess.DEVNULL,
             )
+    if args.baseline and args.calibration:
+        side_by_side_calibration(log.resolve(), args.baseline, args.repeat, args.candidate)
+        return
     if args.baseline:
         side_by_side_run(log.resolve(), args.baseline, args.repeat, args.candidate)
         return

@@ -6,7 +6,9 @@ For each ``seedN`` it reads the calibration of the lamps-only run (``AB/calibrat
 the end of run 6), of the map (``fgm/calibration.yaml``, the freeze time: what phases C
 and D start from) and of the C and D runs, and prints each factor with its 2-sigma bound
 against the config's ``robot.left_scale``, ``right_scale``, ``base_scale`` (the
-simulator's true wheels), and whether it is within 2 sigma (docs/models.md sec. 4b).
+simulator's true wheels, ``slam.calibration.true_factors``), its error in sigmas
+(``errors_in_sigma``, as reproduce's table has it for the map, C and D) and whether all
+three are within 2 sigma (docs/models.md sec. 4b).
 
 Then, from the evaluations (``eval_AB``, ``eval_C``, ``eval_D``), the issue-18 figures per
 seed: phase A's mean position error, phase C's mean and its ratio to A, phase D's max x
@@ -30,6 +32,7 @@ import numpy as np
 import yaml
 
 from fuzzyslam.config import load_config
+from fuzzyslam.slam.calibration import errors_in_sigma, true_factors
 
 
 def _phases(path: Path) -> dict | None:
@@ -93,11 +96,11 @@ def main() -> None:
     ap.add_argument("outdir", type=Path)
     ap.add_argument("--config", default="paper.yaml")
     a = ap.parse_args()
-    robot = load_config(a.config).robot
-    truth = np.array([robot.left_scale, robot.right_scale, robot.base_scale])
+    truth = true_factors(load_config(a.config).robot)
     seeds = sorted(a.outdir.glob("seed*"), key=lambda p: int(p.name[4:]))
     print(f"truth: left {truth[0]:.5f}, right {truth[1]:.5f}, base {truth[2]:.5f}")
-    print("seed | estimate | left_scale | right_scale | base_scale | within 2 sigma")
+    print("seed | estimate | left_scale | right_scale | base_scale | errors (sigma) | "
+          "within 2 sigma")  # fmt: skip
     ok_all, any_cal = True, False
     for seed in seeds:
         for est in ("fgm", "AB", "C", "D"):
@@ -107,10 +110,12 @@ def main() -> None:
             any_cal = True
             d = yaml.safe_load(f.read_text())
             c, s = np.array(d["factors"]), np.array(d["sigma"])
-            within = np.abs(c - truth) <= 2 * s
+            err = errors_in_sigma(c, s, truth)
+            within = np.abs(err) <= 2.0
             ok_all &= bool(within.all())
             cells = " | ".join(f"{v:.5f} ± {2 * e:.5f}" for v, e in zip(c, s, strict=True))
-            print(f"{seed.name} | {est} | {cells} | {'yes' if within.all() else 'no'}")
+            errs = ", ".join(f"{e:+.2f}" for e in err)
+            print(f"{seed.name} | {est} | {cells} | {errs} | {'yes' if within.all() else 'no'}")
     print(f"all within 2 sigma: {'yes' if ok_all and any_cal else 'no'}")
     print()
     print("seed | A mean | C mean | C/A | C in the map's frame | D max x | D max y  (cm)")

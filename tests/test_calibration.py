@@ -193,6 +193,76 @@ def test_instrumented_jacobian_is_f_at_the_mean_step_between_updates():
         np.testing.assert_allclose(pre.delta, exact.delta, rtol=0, atol=0)
 
 
+def _chain_reference(kind, c, inst, inst_steps, incs, n0=0):
+    """A second implementation of CalibratedPreintegrator's D and E over one interval,
+    as its docstring writes them: per step F (exact, or at the instrument while the
+    interval has at most twice its steps), G = F_exact - F_inst, and D' = A D + B G_u F,
+    E' = A E + B G_u G row by row (3 x k lists, the same float operations in the same
+    order); the composition's own delta and Q come from the plain Preintegrator. ``n0``:
+    the steps since the last update before this interval's."""
+    k = len(c)
+    d = [[0.0] * k for _ in range(3)]
+    e = [[0.0] * k for _ in range(3)]
+    plain = Preintegrator(NOISE)
+    for n, (d_trans, d_rot) in enumerate(incs, n0 + 1):
+        dt, dr, f0, f1 = cal.calibrated_increment(kind, B, c, d_trans, d_rot)
+        g = None
+        if n <= 2 * inst_steps:
+            i0, i1 = cal.calibrated_increment(kind, B, c, *inst)[2:]
+            g = (
+                [x - y for x, y in zip(f0, i0, strict=True)],
+                [x - y for x, y in zip(f1, i1, strict=True)],
+            )
+            f0, f1 = i0, i1
+        h = 0.5 * dr
+        mx, my = dt * math.cos(h), dt * math.sin(h)
+        co, si = math.cos(plain.dth), math.sin(plain.dth)
+        a, b = -si * mx - co * my, co * mx - si * my
+        ch, sh, kk = math.cos(plain.dth + h), math.sin(plain.dth + h), 0.5 * dt
+        for m, (u, v) in ((d, (f0, f1)), (e, g)) if g is not None else ((d, (f0, f1)),):
+            m[0] = [m[0][j] + a * m[2][j] + ch * u[j] - kk * sh * v[j] for j in range(k)]
+            m[1] = [m[1][j] + b * m[2][j] + sh * u[j] + kk * ch * v[j] for j in range(k)]
+            m[2] = [m[2][j] + v[j] for j in range(k)]
+        plain.add(dt, dr)
+    return np.array(d), np.array(e), plain
+
+
+@pytest.mark.parametrize("kind,k", [("wheels", 3), ("odom", 2)])
+def test_preintegrated_jacobians_bit_for_bit_against_the_chain_rule_written_out(kind, k):
+    """D, E, delta and Q of the preintegrator (columns, F at the instrument cached per
+    instrument and factors, a reset with no step in between skipped) equal, bit for bit,
+    the row-by-row chain rule of :func:`_chain_reference` over intervals of 1-12 random
+    steps, updates (``mark``, after 80 % of the intervals) and new factors at random, the
+    instrument standing for part of the steps and not for the rest; and q_calib is
+    Q + E P_cc E^T of those E."""
+    rng = np.random.default_rng(5)
+    m = _model(kind, [0.01] * k)
+    pre = cal.CalibratedPreintegrator(NOISE, m)
+    c = tuple(m.factors.tolist())
+    inst, inst_steps, since = (0.0, 0.0), 0, []  # since: the steps since the last mark
+    p_cc = np.diag(rng.uniform(1e-6, 1e-4, k))
+    for _ in range(60):
+        if rng.random() < 0.5:
+            c = tuple((1.0 + 0.01 * rng.standard_normal(k)).tolist())
+        pre.reset(np.array(c))
+        pre.reset(np.array(c))  # again, as the runner does: nothing to undo
+        incs = [(rng.uniform(-0.01, 0.03), rng.uniform(-0.08, 0.08))
+                for _ in range(int(rng.integers(1, 13)))]  # fmt: skip
+        for u in incs:
+            pre.add(*u)
+        d, e, plain = _chain_reference(kind, c, inst, inst_steps, incs, len(since))
+        since += incs
+        assert np.array_equal(pre.d_calib, d) and np.array_equal(pre._matrices()[1], e)
+        assert np.array_equal(pre.delta, plain.delta) and np.array_equal(pre.q, plain.q)
+        assert np.array_equal(pre.q_calib(p_cc), plain.q + e @ p_cc @ e.T)
+        if rng.random() < 0.8:  # an update: the next instrument
+            pre.mark()
+            inst_steps = len(since)
+            inst = (sum(u[0] for u in since) / inst_steps, sum(u[1] for u in since) / inst_steps)
+            since = []
+    assert 0 < inst_steps
+
+
 def test_encoder_noise_does_not_bias_the_base_factor():
     """The errors-in-variables bias (CalibratedPreintegrator docstring): heading noise of
     3 cm/sqrt(m) on straight corridors and precise lamps at every step. With F at the

@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import numpy as np
 import pytest
 from conftest import shared_dir
 
@@ -23,7 +24,7 @@ from fuzzyslam.reproduce.plan import (
     compare_label,
     critical_path,
 )
-from fuzzyslam.reproduce.table import ROWS, Row, aggregate, phase_stat, run_labels
+from fuzzyslam.reproduce.table import CAL, ROWS, Row, aggregate, phase_stat, run_labels
 
 pytestmark = pytest.mark.slow  # end to end: the quick reproduce fixture runs every stage
 
@@ -154,10 +155,22 @@ def test_run_labels_follow_the_phases():
 def test_a_failing_step_stops_the_plan_with_its_one_line_error(tmp_path):
     """The step's own error (naming the file) and exit code come back; later steps never run."""
     steps = [
-        Step("s/run", ("run", "missing.mcap", "-o", "est"), (), 1.0, "run",
-             (("log", "missing.mcap"), ("outdir", "est"))),
-        Step("s/eval", ("evaluate", "missing.mcap", "est", "-o", "ev"), ("s/run",), 1.0,
-             "evaluate", (("truth", "missing.mcap"), ("estimate", "est"), ("outdir", "ev"))),
+        Step(
+            "s/run",
+            ("run", "missing.mcap", "-o", "est"),
+            (),
+            1.0,
+            "run",
+            (("log", "missing.mcap"), ("outdir", "est")),
+        ),
+        Step(
+            "s/eval",
+            ("evaluate", "missing.mcap", "est", "-o", "ev"),
+            ("s/run",),
+            1.0,
+            "evaluate",
+            (("truth", "missing.mcap"), ("estimate", "est"), ("outdir", "ev")),
+        ),
     ]
     with pytest.raises(StepFailed) as info:
         execute(steps, tmp_path, jobs=1)
@@ -202,10 +215,16 @@ def test_quick_reproduce_report_has_every_row_with_a_number(quick_run):
         measure = row.measure.format(**labels)
         hits = [ln for ln in table if f"| {row.group} | {measure} |" in ln]
         assert len(hits) == 1, f"row missing from report.md: {row.group}: {measure}"
-        value = hits[0].split("|")[5].strip()
+        value, met = (c.strip() for c in hits[0].split("|")[5:7])
+        if row.group == CAL:  # the shipped configs do not calibrate: n/a, nothing met
+            assert (value, met) == ("n/a", ""), f"{measure}: {value!r} {met!r}"
+            continue
         assert re.match(r"^-?\d", value), f"{row.group}: {measure} has no value: {value!r}"
     assert len(results["rows"]) == len(ROWS)
-    assert all(r["mean"] is not None for r in results["rows"])
+    assert all((r["mean"] is None) == (r["group"] == CAL) for r in results["rows"])
+    assert all(r["met"] is None for r in results["rows"] if r["group"] == CAL)
+    assert results["info"]["overrides"] == {}
+    assert not list(out.glob("set_*.yaml"))
 
 
 def test_quick_reproduce_table_agrees_with_the_evaluations(quick_run):
@@ -245,6 +264,75 @@ def test_quick_reproduce_writes_the_chain_as_commands_and_figures(quick_run):
         assert (out / rel).is_file(), rel
     assert (out / "summary.png").stat().st_size > 10_000
     assert not list(out.parent.glob(".*.part"))
+
+
+@pytest.fixture(scope="module")
+def calibrated_run(tmp_path_factory) -> Path:
+    """``reproduce --quick --paper-only --seeds 1 --set slam.calibrate=true`` once."""
+
+    def build(root: Path) -> None:
+        p = cli("reproduce", "--quick", "--paper-only", "--seeds", "1", "-o", root / "out",
+                "--jobs", "2", "--set", "slam.calibrate=true")  # fmt: skip
+        assert p.returncode == 0, p.stderr
+
+    return shared_dir(tmp_path_factory, "quick-reproduce-calibrated", build) / "out"
+
+
+def test_calibration_rows_are_the_calibration_files_against_the_configs_truth(calibrated_run):
+    """With ``--set slam.calibrate=true`` the steps name set_*.yaml configs that calibrate,
+    and the table's calibration rows are the map's and the C and D runs' calibration.yaml
+    against the simulator's robot.*_scale of those configs, computed here from the files:
+    the factors, (c - truth) / sigma and the largest of its magnitudes; the target met
+    where that is at most 2."""
+    import yaml
+
+    from fuzzyslam.config import load_config
+
+    out = calibrated_run
+    results = json.loads((out / "results.json").read_text())
+    assert results["info"]["overrides"] == {"slam.calibrate": True}
+    assert "--set slam.calibrate=true" in results["info"]["command"]
+    cmds = (out / "commands.sh").read_text()
+    assert "--set slam.calibrate=true" in cmds and "--config set_quick_failures.yaml" in cmds
+    assert "--config quick_failures.yaml" not in cmds
+    labels = results["labels"]
+    rows = {r["measure"].format(**labels): r for r in results["rows"] if r["group"] == CAL}
+    freeze = labels["freeze"]
+    for log, cfg in (("paper", "set_quick_failures.yaml"), ("bumps", "set_quick_bumps.yaml")):
+        robot = load_config(str(out / cfg)).robot
+        truth = np.array([robot.left_scale, robot.right_scale, robot.base_scale])
+        for est, measure in (("fgm", f"the map's at the end of run {freeze}"),
+                             ("C", "end of phase C (heading fixes)"),
+                             ("D", "end of phase D (bumps)")):  # fmt: skip
+            if (est == "D") != (log == "bumps"):
+                continue
+            d = yaml.safe_load((out / "seed0" / est / "calibration.yaml").read_text())
+            assert d["names"] == ["left_scale", "right_scale", "base_scale"]
+            err = (np.array(d["factors"]) - truth) / np.array(d["sigma"])
+            worst = rows[f"largest abs. error of s_L, s_R, s_B, {measure}"]
+            assert worst["values"] == [pytest.approx(np.abs(err).max(), rel=1e-12)]
+            assert worst["met"] == [int(np.abs(err).max() <= 2.0), 1]
+            if est != "fgm":
+                continue
+            for i, (name, sym) in enumerate((("left wheel scale", "s_L"),
+                                             ("right wheel scale", "s_R"),
+                                             ("wheel-base scale", "s_B"))):  # fmt: skip
+                assert rows[f"{name} {sym}, the simulator's truth"]["values"] == [truth[i]]
+                got = rows[f"{name} {sym}, {measure}"]["values"]
+                assert got == [d["factors"][i]]
+                got = rows[f"{sym} error, {measure}"]["values"]
+                assert got == [pytest.approx(err[i], rel=1e-12)]
+    # the table's figures are those of benchmarks/calibration_vs_truth.py's lines
+    bench = Path(__file__).resolve().parents[1] / "benchmarks" / "calibration_vs_truth.py"
+    cfg = str(out / "set_quick_failures.yaml")
+    p = subprocess.run([sys.executable, str(bench), str(out), "--config", cfg],
+                       capture_output=True, text=True)  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    line = next(ln for ln in p.stdout.splitlines() if ln.startswith("seed0 | fgm |"))
+    errs = [float(v) for v in line.split("|")[5].split(",")]
+    got = [rows[f"{s} error, the map's at the end of run {freeze}"]["values"][0]
+           for s in ("s_L", "s_R", "s_B")]  # fmt: skip
+    assert got == pytest.approx(errs, abs=0.006)
 
 
 def test_paper_only_plan_is_the_paper_phases_subset():

@@ -64,6 +64,15 @@ from fuzzyslam.cli import cli, emit
     help="Keep each seed's simulated MCAP logs (4 per seed, 44 MB each on the full "
     "scenario). Default: kept for one seed, removed for more.",
 )
+@click.option(
+    "--set",
+    "sets",
+    multiple=True,
+    metavar="KEY=VALUE",
+    help="Set a config key (dotted, e.g. slam.calibrate=true) in every config of the suite: "
+    "the steps name set_*.yaml files in OUTDIR that extend the embedded configs "
+    "(commands.sh and results.json record it); repeat for more keys.",
+)
 @click.option("--ship-files", is_flag=True,
               help="Send each step's input files with its task and take its outputs back: "
               "for Dask workers that do not share OUTDIR's filesystem.")  # fmt: skip
@@ -77,6 +86,7 @@ def reproduce_command(
     scheduler: str | None,
     keep_logs: bool | None,
     ship_files: bool,
+    sets: tuple[str, ...],
 ) -> None:
     """Reproduce the paper's experiment: simulate, run, map, run with fixes, evaluate.
 
@@ -98,14 +108,21 @@ def reproduce_command(
       commands.sh    every step as a plain stage command
       seedN/         each step's files (logs, estimates, maps, evaluations)
 
+    --set KEY=VALUE sets a config key in every config of the suite, e.g.
+    --set slam.calibrate=true: the odometry self-calibration, whose factors the
+    table compares with the simulator's true wheels (n/a without it).
+
     A previous reproduce output in OUTDIR is replaced whole; any other non-empty
     directory is refused. Steps run in parallel on the machine's cores, or on a Dask
     cluster with --scheduler; progress goes to stderr (a bar on a terminal, else one
     line per finished step), the path of the report and the headline figures to
     stdout (JSON).
     """
+    from fuzzyslam.reproduce.overrides import parse_one
     from fuzzyslam.reproduce.stage import run
 
     seed_list = list(range(first_seed, first_seed + seeds))
+    overrides = dict(parse_one(s) for s in sets)
     emit(run(outdir, seed_list, quick, jobs, beyond=not paper_only,
-             scheduler=scheduler, keep_logs=keep_logs, ship=ship_files))
+             scheduler=scheduler, keep_logs=keep_logs, ship=ship_files,
+             overrides=overrides))  # fmt: skip

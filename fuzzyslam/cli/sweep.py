@@ -55,7 +55,8 @@ def sweep_command(config: str, sets: tuple[str, ...], seeds: int | None,
     import glob
 
     from fuzzyslam.errors import InputError
-    from fuzzyslam.reproduce.sweep import parse_set, sweep
+    from fuzzyslam.reproduce.overrides import parse_set
+    from fuzzyslam.reproduce.sweep import sweep
 
     parsed = [parse_set(s) for s in sets]
     logs = None

@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from fuzzyslam.reproduce.overrides import set_options
 from fuzzyslam.reproduce.plan import Step, evaluations
 from fuzzyslam.reproduce.table import (
     Aggregate,
@@ -22,12 +23,13 @@ from fuzzyslam.summary import as_json
 
 @dataclass(frozen=True, kw_only=True)
 class RunInfo:
-    """results.json's ``info``: the command, suite, configs, seeds, where the steps ran,
-    and the wall time."""
+    """results.json's ``info``: the command, suite, configs (with ``--set``, the files
+    in OUTDIR that set ``overrides``), seeds, where the steps ran, and the wall time."""
 
     command: str
     suite: str
     configs: list[str]
+    overrides: dict[str, Any]
     seeds: list[int]
     jobs: int
     engine: str
@@ -120,14 +122,18 @@ def seed_table(aggs: list[Aggregate], seeds: list[int], labels: dict[str, str]) 
     return "\n".join(lines)
 
 
-def write_commands(path: Path, steps: list[Step]) -> None:
-    """The plan as a plain shell script of stage commands (run it from OUTDIR)."""
+def write_commands(path: Path, steps: list[Step], sets: str = "") -> None:
+    """The plan as a plain shell script of stage commands (run it from OUTDIR); ``sets``:
+    reproduce's ``--set`` options (reproduce/overrides.py ``set_options``), whose config
+    files (``set_*.yaml``, in OUTDIR) the commands name."""
     lines = [
         "#!/bin/sh",
         "# Every step of 'fuzzyslam reproduce', as stage commands; run from this directory.",
         "# The same commands with the same seeds write the same files.",
-        "set -e",
     ]
+    if sets:
+        lines.append(f"# Configs set_*.yaml (in this directory): the suite's with{sets}.")
+    lines.append("set -e")
     seeds = sorted({s.key.split("/")[0] for s in steps})
     for sd in seeds:
         lines.append(f"mkdir -p {sd}")
@@ -213,7 +219,13 @@ def write_report(
         "",
         f"`{info.command}`: suite `{info.suite}` (configs {', '.join(info.configs)}), "
         f"seeds {', '.join(map(str, seeds))}, {info.jobs} worker processes, "
-        f"{info.wall_s:.0f} s wall time, fuzzyslam {info.version}.",
+        f"{info.wall_s:.0f} s wall time, fuzzyslam {info.version}."
+        + (
+            " Config keys set in every config (`set_*.yaml`): "
+            f"`{set_options(info.overrides).strip()}`."
+            if info.overrides
+            else ""
+        ),
         "Every number below comes from the `metrics.json` of an `evaluate` step "
         "(`seedN/eval_*/`); `commands.sh` lists every step as a stage command.",
         "",
@@ -236,6 +248,12 @@ def write_report(
         "on the mean. The Hough accuracy is the error of the accepted heading fixes against "
         "the true heading. Lamp duplicates are estimated lamps left unmatched within "
         "the matching distance of a true lamp after a one-to-one assignment. "
+        "The odometry self-calibration rows compare the factors of the map (the lamps-only "
+        "run's at the freeze time, which phases C and D start from) and of the C and D runs "
+        "with the simulator's true wheels (the config's `robot.left_scale`, `right_scale`, "
+        "`base_scale`), the errors in the estimate's own sigmas; n/a when the runs do not "
+        "calibrate (`slam.calibrate` off, as in the shipped configs: `reproduce --set "
+        "slam.calibrate=true` turns it on). "
         "The real-time factors of the Cost rows are measured while reproduce's jobs share the "
         "machine's cores; the isolated figures come from the benchmarks.",
         "",

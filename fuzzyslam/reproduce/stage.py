@@ -21,7 +21,8 @@ from fuzzyslam import __version__
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, _in_place_only
 from fuzzyslam.reproduce.execute import StepResult, execute
-from fuzzyslam.reproduce.plan import FULL, QUICK, build_plan, evaluations
+from fuzzyslam.reproduce.overrides import set_options, suite_with
+from fuzzyslam.reproduce.plan import FULL, QUICK, Suite, build_plan, evaluations
 from fuzzyslam.reproduce.report import (
     RunInfo,
     StepRecord,
@@ -34,15 +35,46 @@ from fuzzyslam.reproduce.report import (
 from fuzzyslam.reproduce.table import SeedResult, aggregate, headline_key, run_labels
 
 
+def calibration_truth(suite: Suite, root: Path) -> dict[str, list[float]]:
+    """The simulator's true wheel factors of each log of the table's calibration rows
+    (paper, bumps) whose config calibrates the odometry (``slam.calibrate``): its
+    ``robot.left_scale``, ``right_scale``, ``base_scale`` (``SeedResult.calibration_truth``).
+
+    Parameters
+    ----------
+    suite : Suite
+        The plan's configs (embedded names, or files in ``root``: ``--set``).
+    root : Path
+        The plan's directory.
+
+    Returns
+    -------
+    dict
+        Log name -> [s_L, s_R, s_B].
+    """
+    from fuzzyslam.config import load_config
+    from fuzzyslam.slam.calibration import true_factors
+
+    out = {}
+    for log in ("paper", "bumps"):
+        name = getattr(suite, log)
+        cfg = load_config(str(root / name) if (root / name).is_file() else name)
+        if cfg.slam.calibrate:
+            out[log] = [float(v) for v in true_factors(cfg.robot)]
+    return out
+
+
 def seed_result(
     root: Path,
     seed: int,
     done: dict[str, StepResult],
     beyond: bool = True,
     kinds: dict[str, str] | None = None,
+    truth: dict[str, list[float]] | None = None,
 ) -> SeedResult:
     """The evaluations' metrics and the runs' and maps' summaries of one seed; ``kinds``:
-    each step's kind (``Step.kind``) by key (default: told from the summaries)."""
+    each step's kind (``Step.kind``) by key (default: told from the summaries);
+    ``truth``: :func:`calibration_truth`."""
     d = f"seed{seed}"
     evals = {}
     for name in evaluations(beyond):
@@ -57,7 +89,7 @@ def seed_result(
         runs = {k: v for k, v in mine.items() if v and v.get("command") == "run"}
         maps = {k: v for k, v in mine.items() if v and "reference_truth" in v}
     seconds = sum(r.seconds for k, r in done.items() if k.startswith(f"{d}/"))
-    return SeedResult(seed, evals, runs, maps, seconds)
+    return SeedResult(seed, evals, runs, maps, seconds, dict(truth or {}))
 
 
 class SummaryDrawing:
@@ -148,6 +180,7 @@ def reproduce(
     scheduler: str | None = None,
     keep_logs: bool | None = None,
     ship: bool = False,
+    overrides: dict[str, Any] | None = None,
 ) -> dict[str, Any]:
     """Run the experiment for ``seeds`` into ``outdir``; return the stdout summary.
 
@@ -170,6 +203,10 @@ def reproduce(
         one seed.
     ship : bool
         Send the steps' files with their tasks (workers without a shared filesystem).
+    overrides : dict or None
+        Config keys (dotted) and values set in every config of the suite (``--set``):
+        the steps name ``set_NAME.yaml`` files in OUTDIR that extend the embedded ones
+        (reproduce/overrides.py).
 
     Returns
     -------
@@ -178,16 +215,18 @@ def reproduce(
     """
     if not seeds:
         raise InputError(outdir, "no seeds to run")
-    suite = QUICK if quick else FULL
+    overrides = dict(overrides or {})
     if keep_logs is None:
         keep_logs = len(seeds) == 1
-    steps = build_plan(seeds, suite, beyond)
     t0 = time.perf_counter()
     check_outdir(Path(outdir))
     with OutputDir(outdir, owns=("*",)) as tmp:
+        suite = suite_with(QUICK if quick else FULL, overrides, tmp)
+        truth = calibration_truth(suite, tmp)
+        steps = build_plan(seeds, suite, beyond)
         for s in seeds:
             (tmp / f"seed{s}").mkdir()
-        write_commands(tmp / "commands.sh", steps)
+        write_commands(tmp / "commands.sh", steps, set_options(overrides))
         summary = SummaryDrawing(tmp, f"seed{seeds[0]}", {st.key for st in steps})
         try:
             done = execute(steps, tmp, jobs, scheduler=scheduler, final=Path(outdir),
@@ -197,16 +236,18 @@ def reproduce(
             summary.join()  # before a failure removes the directory it writes into
         workers = sorted({r.worker for r in done.values()})
         kinds = {st.key: st.kind for st in steps}
-        results = [seed_result(tmp, s, done, beyond, kinds) for s in seeds]
+        results = [seed_result(tmp, s, done, beyond, kinds, truth) for s in seeds]
         aggs = aggregate(results)
         png = "summary.png" if drawn else None
         info = RunInfo(
             command="fuzzyslam reproduce"
             + (" --quick" if quick else "")
             + f" --seeds {len(seeds)}"
-            + ("" if beyond else " --paper-only"),
+            + ("" if beyond else " --paper-only")
+            + set_options(overrides),
             suite="quick" if quick else "paper",
             configs=[suite.paper, suite.bumps] + ([suite.dark, suite.people] if beyond else []),
+            overrides=overrides,
             seeds=seeds,
             jobs=jobs or (len(workers) if scheduler else os.cpu_count() or 1),
             engine=f"dask {scheduler}" if scheduler else "local",

@@ -38,13 +38,12 @@ import shutil
 from pathlib import Path
 from typing import Any
 
-import yaml
-
 from fuzzyslam import __version__
 from fuzzyslam.config import load_config
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.reproduce.execute import StepResult, execute
+from fuzzyslam.reproduce.overrides import override_text
 from fuzzyslam.reproduce.plan import Step, _topological
 
 # (name, path in metrics.json's phases.overall, scale, unit)
@@ -53,28 +52,6 @@ MEASURES = (
     ("max position error", ("position_m", "max"), 100.0, "cm"),
     ("mean heading error", ("heading_deg", "mean"), 1.0, "deg"),
 )
-
-
-def parse_set(text: str) -> tuple[str, list[Any]]:
-    """``KEY=V1,V2,...`` -> (KEY, [values]); each value is read as YAML (0.5, true, text)."""
-    key, sep, values = text.partition("=")
-    if not sep or not key.strip() or not values.strip():
-        raise InputError(text, "--set must be KEY=V1,V2,... (e.g. fgm.freeze_run=1,2)")
-    return key.strip(), [yaml.safe_load(v) for v in values.split(",")]
-
-
-def _nested(key: str, value: Any) -> dict[str, Any]:
-    out: Any = value
-    for part in reversed(key.split(".")):
-        out = {part: out}
-    return out
-
-
-def _merge(a: dict, b: dict) -> dict:
-    out = dict(a)
-    for k, v in b.items():
-        out[k] = _merge(out[k], v) if isinstance(out.get(k), dict) and isinstance(v, dict) else v
-    return out
 
 
 def grid_configs(
@@ -93,11 +70,8 @@ def grid_configs(
     points = []
     for i, values in enumerate(itertools.product(*(v for _, v in sets))):
         overrides = dict(zip(keys, values, strict=True))
-        doc: dict[str, Any] = {"extends": base}
-        for k, v in overrides.items():
-            doc = _merge(doc, _nested(k, v))
         name = f"g{i}.yaml"
-        text = f"# sweep grid point {i}: {overrides}\n" + yaml.safe_dump(doc, sort_keys=True)
+        text = override_text(base, overrides, f"sweep grid point {i}: {overrides}")
         path = outdir / name
         if not path.is_file() or path.read_text(encoding="utf-8") != text:
             path.write_text(text, encoding="utf-8")

@@ -6,7 +6,10 @@ and maps, the summed step times. Each :class:`Row` extracts one number per seed
 (:func:`metric`: a key the table reads that the results lack is an error,
 :class:`MissingMetric`, never a blank cell; a blank is a metric written as null or not
 finite, or an evaluation or run outside the plan); :func:`aggregate` gives its mean and
-spread and whether the target is met.
+spread and whether the target is met. The odometry self-calibration's rows compare the
+runs' and the map's factors (their summaries' ``calibration``) with the simulator's true
+wheels (:attr:`SeedResult.calibration_truth`, from the configs), n/a when the runs do not
+calibrate (``slam.calibrate`` off).
 """
 
 from __future__ import annotations
@@ -15,6 +18,8 @@ import math
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
+
+from fuzzyslam.slam.calibration import NAMES, errors_in_sigma
 
 
 class MissingMetric(KeyError):
@@ -26,22 +31,26 @@ class SeedResult:
     """One seed's results (reproduce/stage.py ``seed_result``).
 
     ``eval``: metrics.json of each evaluation of the plan; ``run``, ``map``: the JSON
-    summaries of its runs and maps by step name; ``seconds``: its steps' summed times."""
+    summaries of its runs and maps by step name; ``seconds``: its steps' summed times;
+    ``calibration_truth``: per log of the plan (paper, bumps) whose config calibrates
+    the odometry (``slam.calibrate``), the simulator's true wheel factors (s_L, s_R,
+    s_B; ``slam.calibration.true_factors``); a log without an entry does not calibrate."""
 
     seed: int
     eval: dict[str, dict[str, Any]] = field(default_factory=dict)
     run: dict[str, dict[str, Any]] = field(default_factory=dict)
     map: dict[str, dict[str, Any]] = field(default_factory=dict)
     seconds: float | None = None
+    calibration_truth: dict[str, list[float]] = field(default_factory=dict)
 
     @classmethod
     def of(cls, r: SeedResult | dict[str, Any]) -> SeedResult:
         """``r`` itself, or the SeedResult of its dict form (``{seed, eval, run, map,
-        seconds}``, parts left out empty)."""
+        seconds, calibration_truth}``, parts left out empty)."""
         if isinstance(r, SeedResult):
             return r
         parts = (r.get("eval", {}), r.get("run", {}), r.get("map", {}))
-        return cls(r.get("seed", 0), *parts, r.get("seconds"))
+        return cls(r.get("seed", 0), *parts, r.get("seconds"), r.get("calibration_truth", {}))
 
 
 def metric(tree: Any, *path: str) -> Any:
@@ -142,6 +151,38 @@ def change_score(key: str):
     return get
 
 
+# The calibration rows' estimates: step name -> (summaries it is in, the log it ran on)
+CALIBRATED = {"fgm": ("map", "paper"), "C": ("run", "paper"), "D": ("run", "bumps")}
+
+
+def calibration(est: str, what: str, i: int = 0):
+    """Extractor of the odometry self-calibration of estimate ``est`` (:data:`CALIBRATED`:
+    the map's, at the freeze time, or a run's, at its end) against the simulator's true
+    wheels: ``what`` 'truth', 'factor' (factor ``i`` of s_L, s_R, s_B), 'error' (its
+    error in sigmas, ``slam.calibration.errors_in_sigma``) or 'worst' (the largest
+    magnitude of the three errors). None when the log's runs do not calibrate, for an
+    estimate outside the plan, and for a model other than the wheels' (no true factors);
+    MissingMetric when they calibrate and the summary has no ``calibration``."""
+    kind, log = CALIBRATED[est]
+
+    def get(r: SeedResult) -> float | None:
+        truth = r.calibration_truth.get(log)
+        s = (r.map if kind == "map" else r.run).get(est)
+        if truth is None or s is None:
+            return None
+        if what == "truth":
+            return _num(truth[i])
+        c = metric(s, "calibration")
+        if c is None or tuple(metric(c, "names")) != NAMES["wheels"]:
+            return None
+        if what == "factor":
+            return _num(metric(c, "factors")[i])
+        err = errors_in_sigma(metric(c, "factors"), metric(c, "sigma"), truth)
+        return _num(err[i] if what == "error" else max(abs(e) for e in err))
+
+    return get
+
+
 @dataclass(frozen=True)
 class Row:
     """One line of the table: what is measured, the paper's figure, the target, how to get it."""
@@ -161,12 +202,18 @@ def _le(limit: float) -> Callable[[float], bool]:
     return lambda v: v <= limit
 
 
+def _within(limit: float) -> Callable[[float], bool]:
+    return lambda v: abs(v) <= limit
+
+
 def _eq0(v: float) -> bool:
     return v == 0
 
 
 CM = 100.0
 A_POS = phase_stat("AB", "A", "position_m", "mean", scale=CM)
+CAL = "Odometry self-calibration"
+WHEELS = (("left wheel scale", "s_L"), ("right wheel scale", "s_R"), ("wheel-base scale", "s_B"))
 
 ROWS: tuple[Row, ...] = (
     Row("A. SLAM and map building", "mean position error, {A}", "< 5 cm", "<= 3 cm",
@@ -230,6 +277,20 @@ ROWS: tuple[Row, ...] = (
         change_score("precision"), ""),
     Row("Beyond: people and boxes", "change detection recall", "-", "-",
         change_score("recall"), ""),
+    *(row for i, (name, sym) in enumerate(WHEELS) for row in (
+        Row(CAL, f"{name} {sym}, the simulator's truth", "-", "-",
+            calibration("fgm", "truth", i), "", None, 5),
+        Row(CAL, f"{name} {sym}, the map's at the end of run {{freeze}}", "-", "-",
+            calibration("fgm", "factor", i), "", None, 5),
+        Row(CAL, f"{sym} error, the map's at the end of run {{freeze}}", "-",
+            "within 2 sigma", calibration("fgm", "error", i), "sigma", _within(2.0)),
+    )),
+    Row(CAL, "largest abs. error of s_L, s_R, s_B, the map's at the end of run {freeze}", "-",
+        "<= 2 sigma", calibration("fgm", "worst"), "sigma", _le(2.0)),
+    Row(CAL, "largest abs. error of s_L, s_R, s_B, end of phase C (heading fixes)", "-",
+        "<= 2 sigma", calibration("C", "worst"), "sigma", _le(2.0)),
+    Row(CAL, "largest abs. error of s_L, s_R, s_B, end of phase D (bumps)", "-", "<= 2 sigma",
+        calibration("D", "worst"), "sigma", _le(2.0)),
     # Under reproduce's own load (its jobs share the machine's cores): the isolated figures
     # come from benchmarks/bench_run.py and bench_fixes.py.
     Row("Cost", "run real-time factor, lamps only (A+B), under load", "-", "-",
@@ -323,13 +384,14 @@ class RowResult:
     key: str | None
 
 
-HEADLINE_UNITS = ("cm", "deg", "m", "s", "x", "count", "ratio")
+HEADLINE_UNITS = ("cm", "deg", "m", "s", "x", "sigma", "count", "ratio")
 
 
 def unit_suffix(row: Row) -> str:
     """The unit a headline key ends with: the row's unit (cm, deg, m, s; x for a ratio shown
-    as a multiple), else ``count`` for counts and ``ratio`` for other dimensionless values
-    (NEES, precision, recall)."""
+    as a multiple; sigma for an error in the estimate's own standard deviations), else
+    ``count`` for counts and ``ratio`` for other dimensionless values (NEES, precision,
+    recall, the calibration factors)."""
     unit = row.unit or ("count" if row.integer else "ratio")
     if unit not in HEADLINE_UNITS:
         raise ValueError(f"row {row.measure!r}: unit {unit!r} is not one of {HEADLINE_UNITS}")

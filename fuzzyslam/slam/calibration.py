@@ -34,7 +34,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fuzzyslam.se2 import compose, jacobians_compose
+from fuzzyslam.se2 import compose, compose_with_jacobians
 from fuzzyslam.slam.ekf import Preintegrator
 
 NAMES = {
@@ -109,6 +109,41 @@ def prior(kind: str, slam, wheel_base: float) -> Calibration:
     )
 
 
+def true_factors(robot) -> np.ndarray:
+    """The simulator's true wheel factors (s_L, s_R, s_B), in the order of
+    ``NAMES["wheels"]``: the config's ``robot.left_scale``, ``right_scale``,
+    ``base_scale`` (sim/encoders.py: true radii r s_L, r s_R and base b s_B, as the
+    ``wheels`` model has them).
+
+    Parameters
+    ----------
+    robot : RobotParams
+        The ``robot`` section of the config the log was simulated from.
+
+    Returns
+    -------
+    ndarray, shape (3,)
+    """
+    return np.array([float(getattr(robot, n)) for n in NAMES["wheels"]])
+
+
+def errors_in_sigma(factors, sigma, truth) -> np.ndarray:
+    """Each factor's error against the truth in its own standard deviations,
+    (c - c_true) / sigma_c: within 2 sigma when its magnitude is at most 2.
+
+    Parameters
+    ----------
+    factors, sigma, truth : sequence of float, length k
+        The estimated factors, their standard deviations and the true factors.
+
+    Returns
+    -------
+    ndarray, shape (k,)
+    """
+    c, s, t = (np.asarray(v, dtype=float) for v in (factors, sigma, truth))
+    return (c - t) / s
+
+
 def calibrated_increment(kind: str, b: float, c, dt_n: float, dr_n: float):
     """Calibrated increment (dt, dr) and its Jacobian F = d(dt, dr)/dc as two row tuples.
 
@@ -172,17 +207,22 @@ class CalibratedPreintegrator(Preintegrator):
         self.c = tuple(float(v) for v in model.factors)
         self.inst = (0.0, 0.0)  # F's increment: the mean step between the last two updates
         self.inst_steps = 0  # the steps it is the mean of (0: no instrument yet)
-        self._sum = [0.0, 0.0, 0]  # the nominal increments since the last update, and steps
+        # the nominal increments since the last update, and their steps
+        self._sum_t = self._sum_r = 0.0
+        self._n = 0
+        self._f_inst = None  # F at the instrument for the factors c (cached: both fixed)
         super().__init__(noise)
 
     def mark(self) -> None:
         """An update was made: the steps since the previous one give the instrument (their
         mean step), and a new interval begins."""
-        n = self._sum[2]
+        n = self._n
         if n:
-            self.inst = (self._sum[0] / n, self._sum[1] / n)
+            self.inst = (self._sum_t / n, self._sum_r / n)
             self.inst_steps = n
-        self._sum = [0.0, 0.0, 0]
+            self._f_inst = None
+        self._sum_t = self._sum_r = 0.0
+        self._n = 0
 
     @property
     def instrument_valid(self) -> bool:
@@ -190,7 +230,7 @@ class CalibratedPreintegrator(Preintegrator):
         update are at most twice those it was measured on (past that, with no update, the
         motion may have changed and the exact F is used: the bias it brings grows with the
         updates, which are then rare)."""
-        return self.instrumented and 0 < self._sum[2] <= 2 * self.inst_steps
+        return self.instrumented and 0 < self._n <= 2 * self.inst_steps
 
     def reset(self, factors=None) -> None:
         """Start a new preintegration (delta = 0, D = 0) from the filter's factors.
@@ -200,51 +240,76 @@ class CalibratedPreintegrator(Preintegrator):
         factors : sequence of float, length k, optional
             The filter's current factors (None: keep the last).
         """
-        super().reset()
         if factors is not None:
-            self.c = tuple(float(v) for v in factors)
-        k = len(self.c)
-        self._d = [[0.0] * k for _ in range(3)]
-        self._e = [[0.0] * k for _ in range(3)]  # E: D's error (F's error, chained)
+            c = tuple(factors.tolist() if isinstance(factors, np.ndarray) else map(float, factors))
+            if c != self.c:
+                self.c = c
+                self._f_inst = None  # F at the instrument: for the new factors
+        if hasattr(self, "_de") and self.steps == 0:
+            return  # nothing added since the last reset: delta, Q, D, E are zero already
+        super().reset()
+        # D and E (D's error: F's error, chained) column by column, a column of each per
+        # factor: (D_0j, D_1j, D_2j, E_0j, E_1j, E_2j)
+        self._de = [(0.0,) * 6] * len(self.c)
+        self._arrays = None  # D and E as arrays (_matrices), until the next add
         self.dist = self.turn = 0.0  # |dt| and |dr| summed: the random walk's clock
 
     def add(self, d_trans: float, d_rot: float) -> None:
+        """Compose one nominal increment, calibrated with the factors c; D and E chained.
+
+        Parameters
+        ----------
+        d_trans : float
+            Nominal translation increment (m).
+        d_rot : float
+            Nominal rotation increment (rad).
+        """
         dt, dr, f0, f1 = calibrated_increment(self.kind, self.b, self.c, d_trans, d_rot)
-        self._sum[0] += d_trans
-        self._sum[1] += d_rot
-        self._sum[2] += 1
-        g0 = g1 = None
-        if self.instrument_valid:  # F at the instrument, F's error apart (class docstring)
-            e0, e1 = calibrated_increment(self.kind, self.b, self.c, *self.inst)[2:]
-            g0 = [a - b for a, b in zip(f0, e0, strict=True)]
-            g1 = [a - b for a, b in zip(f1, e1, strict=True)]
-            f0, f1 = e0, e1
+        self._sum_t += d_trans
+        self._sum_r += d_rot
+        self._n += 1
         h = 0.5 * dr
         mx, my = dt * math.cos(h), dt * math.sin(h)
-        c, s = math.cos(self.dth), math.sin(self.dth)
+        dth = self.dth
+        c, s = math.cos(dth), math.sin(dth)
         a = -s * mx - c * my  # A = [[1, 0, a], [0, 1, b], [0, 0, 1]]
         b = c * mx - s * my
-        ch, sh, kk = math.cos(self.dth + h), math.sin(self.dth + h), 0.5 * dt
-
-        def chain(d, f0, f1):  # A D + B G_u F, B G_u = [[ch, -kk sh], [sh, kk ch], [0, 1]]
-            d0, d1, d2 = d
-            return [
-                [d0[j] + a * d2[j] + ch * f0[j] - kk * sh * f1[j] for j in range(len(f0))],
-                [d1[j] + b * d2[j] + sh * f0[j] + kk * ch * f1[j] for j in range(len(f0))],
-                [d2[j] + f1[j] for j in range(len(f0))],
+        ch, sh, kk = math.cos(dth + h), math.sin(dth + h), 0.5 * dt
+        ks, kc = kk * sh, kk * ch
+        # D' = A D + B G_u F, B G_u = [[ch, -kk sh], [sh, kk ch], [0, 1]], a column (x, y,
+        # z) per factor; with the instrument (instrument_valid, written out) F is taken at
+        # it (u, v) and E' = A E + B G_u G (p, q, r) with G = F_exact - F_inst (gu, gv)
+        if self.instrumented and self._n <= 2 * self.inst_steps:
+            if self._f_inst is None:
+                self._f_inst = calibrated_increment(self.kind, self.b, self.c, *self.inst)[2:]
+            e0, e1 = self._f_inst
+            self._de = [
+                (x + a * z + ch * u - ks * v, y + b * z + sh * u + kc * v, z + v,
+                 p + a * r + ch * (gu := fu - u) - ks * (gv := fv - v),
+                 q + b * r + sh * gu + kc * gv, r + gv)
+                for (x, y, z, p, q, r), u, v, fu, fv in zip(self._de, e0, e1, f0, f1, strict=True)
+            ]  # fmt: skip
+        else:  # the exact F; E unchanged
+            self._de = [
+                (x + a * z + ch * u - ks * v, y + b * z + sh * u + kc * v, z + v, p, q, r)
+                for (x, y, z, p, q, r), u, v in zip(self._de, f0, f1, strict=True)
             ]
-
-        self._d = chain(self._d, f0, f1)
-        if g0 is not None:
-            self._e = chain(self._e, g0, g1)
+        self._arrays = None
         self.dist += abs(dt)
         self.turn += abs(dr)
         super().add(dt, dr)
 
+    def _matrices(self) -> tuple[np.ndarray, np.ndarray]:
+        """D and E (3, k) each, from their columns (built once per preintegration)."""
+        if self._arrays is None:
+            de = np.array(self._de).T  # (6, k)
+            self._arrays = (de[:3].copy(), de[3:].copy())
+        return self._arrays
+
     @property
     def d_calib(self) -> np.ndarray:
         """D = d delta / d c, (3, k)."""
-        return np.array(self._d)
+        return self._matrices()[0]
 
     def q_calib(self, p_cc: np.ndarray) -> np.ndarray:
         """The covariance (3, 3) of delta with what the instrument leaves out: Q + E P_cc E^T,
@@ -260,7 +325,7 @@ class CalibratedPreintegrator(Preintegrator):
         -------
         ndarray, shape (3, 3)
         """
-        e = np.array(self._e)
+        e = self._matrices()[1]
         return self.q + e @ p_cc @ e.T
 
 
@@ -286,10 +351,8 @@ def predict_calibrated(ekf, delta: np.ndarray, q: np.ndarray, d: np.ndarray) -> 
     m0, n = ekf.m0, ekf.dim
     p = ekf.P  # views of the filter's arrays: updated in place
     x = ekf.x
-    pose = x[:3].copy()
-    ja, jb = jacobians_compose(pose, delta)
-    t = np.hstack([ja, jb @ d])  # (3, m0)
-    x[:3] = compose(pose, delta)
+    x[:3], ja, jb = compose_with_jacobians(x[:3], delta)
+    t = np.concatenate((ja, jb @ d), axis=1)  # (3, m0)
     ekf.odometry_pose = compose(ekf.odometry_pose, delta)
     rows = t @ p[:m0, :n]  # (3, n)
     prr = rows[:, :m0] @ t.T + jb @ q @ jb.T
@@ -309,8 +372,9 @@ def diffuse(ekf, var: float) -> None:
         The variance added to each factor.
     """
     if var > 0.0:
-        i = np.arange(3, ekf.m0)
-        ekf.P[i, i] += var
+        p = ekf.P
+        for i in range(3, ekf.m0):  # k scalars: cheaper than an index array
+            p[i, i] += var
 
 
 def freeze_gain(k: np.ndarray, frozen: np.ndarray, c0: int, c1: int) -> np.ndarray:
