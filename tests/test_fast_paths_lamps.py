@@ -24,6 +24,7 @@ import pytest
 
 from fuzzyslam import se2
 from fuzzyslam.camera import CeilingCamera
+from fuzzyslam.slam.association import block_diag_cov
 from fuzzyslam.slam.ekf import EkfSlam
 from fuzzyslam.slam.events import UpdateRow
 from fuzzyslam.slam.health import solve_spd
@@ -85,6 +86,26 @@ def test_noise_add_equals_matrix_formula():
         # release to the next: equal to a few ulps of the terms, not bit for bit
         for g, sq, q in ((got[1], vr * vr, uhu), (got[2], vt * vt, nhn)):
             assert abs(g - (sq - q)) <= 1e-14 * (sq + abs(q))
+
+
+def test_noise_add_joint_equals_add_per_detection():
+    """add_joint on a real joint update (the runner's call) gives add's rows, bit for bit."""
+    rng = np.random.default_rng(5)
+    ekf = EkfSlam([0.3, -0.2, 0.7], np.diag([1e-3, 2e-3, 1e-3]), [0.01, 0.001, 0.01, 0.001])
+    for _ in range(6):
+        ekf.add_lamp(rng.uniform(-3, 3, 2), np.eye(2) * rng.uniform(1e-4, 1e-3))
+        ekf.predict(rng.uniform(0.0, 0.2), rng.uniform(-0.2, 0.2))
+    ids = [4, 1, 3]
+    z = np.array([ekf.predict_lamps([i])[0] for i in ids]) + rng.normal(size=(3, 2)) * 1e-2
+    r = np.array([np.eye(2) * rng.uniform(1e-4, 1e-3) for _ in ids])
+    res = ekf.update_lamps(ids, z, block_diag_cov(r))
+    joint, single = DetectionNoiseEstimator(), DetectionNoiseEstimator()
+    joint.add_joint(z, res.innovation, res.s, r)
+    for a in range(3):
+        b = slice(2 * a, 2 * a + 2)
+        single.add(z[a], res.innovation[b], res.s[b, b], r[a])
+    assert len(joint) == 3
+    assert joint._rows == single._rows
 
 
 def test_individual_compatibility_equals_joint_innovation():

@@ -36,7 +36,7 @@ from __future__ import annotations
 import heapq
 import math
 import os
-from collections.abc import Iterator
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -87,6 +87,7 @@ class LogInputs:
     _idx: list = field(default_factory=list)
     _rejected_in_row: int = 0
     _cov_cache: tuple | None = None
+    _detect: Callable | None = None  # slam/detect.py's detect_lamps, from the first frame
     ranges: RangeSensor | None = None
     _gate: OdomGate = field(default_factory=OdomGate)
     frames: TfFrames = field(default_factory=TfFrames)
@@ -264,11 +265,12 @@ class LogInputs:
             )
             return None
         p = self.cfg.slam
-        from fuzzyslam.slam.detect import detect_lamps  # OpenCV, loaded for frames only
+        detect = self._detect
+        if detect is None:  # OpenCV, loaded for frames only (once: not an import per frame)
+            from fuzzyslam.slam.detect import detect_lamps as detect
 
-        blobs = detect_lamps(
-            img, p.threshold, p.min_area, p.max_area, p.min_fill, p.max_aspect, p.border
-        )
+            self._detect = detect
+        blobs = detect(img, p.threshold, p.min_area, p.max_area, p.min_fill, p.max_aspect, p.border)
         if blobs.rejected:
             self.warnings["blobs_rejected"] = (
                 self.warnings.get("blobs_rejected", 0) + blobs.rejected

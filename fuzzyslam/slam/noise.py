@@ -79,13 +79,42 @@ class DetectionNoiseEstimator:
             The detection covariance.
         """
         (z0, z1), (v0, v1) = np.asarray(z, dtype=float).tolist(), np.asarray(v).tolist()
+        (s00, s01), (s10, s11) = np.asarray(s, dtype=float).tolist()
+        (r00, r01), (r10, r11) = np.asarray(r, dtype=float).tolist()
+        self._add(z0, z1, v0, v1, s00, s01, s10, s11, r00, r01, r10, r11)
+
+    def add_joint(self, z: np.ndarray, v: np.ndarray, s: np.ndarray, r: np.ndarray) -> None:
+        """The k detections of one joint update, in order: :meth:`add` of each (detection
+        a's v and S the a-th 2-block of the joint innovation and its covariance), the
+        arrays turned into floats once for all.
+
+        Parameters
+        ----------
+        z : ndarray, shape (k, 2)
+            The detections (robot frame, m).
+        v : ndarray, shape (2k,)
+            The joint innovation.
+        s : ndarray, shape (2k, 2k)
+            Its covariance.
+        r : ndarray, shape (k, 2, 2)
+            The detections' covariances.
+        """
+        zs, vs = np.asarray(z, dtype=float).tolist(), np.asarray(v).tolist()
+        ss, rs = np.asarray(s, dtype=float).tolist(), np.asarray(r, dtype=float).tolist()
+        for a, ((z0, z1), ((r00, r01), (r10, r11))) in enumerate(zip(zs, rs, strict=True)):
+            s0, s1 = ss[2 * a], ss[2 * a + 1]
+            self._add(
+                z0, z1, vs[2 * a], vs[2 * a + 1], s0[2 * a], s0[2 * a + 1], s1[2 * a],
+                s1[2 * a + 1], r00, r01, r10, r11,
+            )  # fmt: skip
+
+    def _add(self, z0, z1, v0, v1, s00, s01, s10, s11, r00, r01, r10, r11) -> None:
+        """:meth:`add` on floats."""
         rng = math.hypot(z0, z1)
         if rng <= 0:
             return
         # on floats (2-vectors: numpy calls cost more than the arithmetic), in numpy's order
         u0, u1 = z0 / rng, z1 / rng  # u = z / |z|, n = (-u1, u0)
-        (s00, s01), (s10, s11) = np.asarray(s, dtype=float).tolist()
-        (r00, r01), (r10, r11) = np.asarray(r, dtype=float).tolist()
         h00, h01, h10, h11 = s00 - r00, s01 - r01, s10 - r10, s11 - r11  # H P H^T = S - R
         vr, vt = u0 * v0 + u1 * v1, -u1 * v0 + u0 * v1  # u.v, n.v
         uhu = (u0 * h00 + u1 * h10) * u0 + (u0 * h01 + u1 * h11) * u1  # u^T (S - R) u

@@ -239,13 +239,14 @@ class StreamingOutputs:
         if len(t):
             keep = max(int(np.searchsorted(self._dr_t, t[-1], "right")) - 1, 0)
             self._dr_t, self._dr_p = self._dr_t[keep:], self._dr_p[keep:]
+        pose_tf = [tp.slam_pose, tp.tf], [M.POSE_COV_STAMPED, M.TF_MESSAGE]
+        mcap = self._mcap
         for lamps, tm, a, b in self._messages:  # in the order they came
             if lamps:
                 cdr_lamps = lamp_markers_cdr(tm, a, b)
-                self._mcap.write_cdr(tp.slam_landmarks, M.MARKER_ARRAY, cdr_lamps, tm)
-            else:
-                self._mcap.write_cdr(tp.slam_pose, M.POSE_COV_STAMPED, next(cdr), tm)
-                self._mcap.write_cdr(tp.tf, M.TF_MESSAGE, next(tf), tm)
+                mcap.write_cdr(tp.slam_landmarks, M.MARKER_ARRAY, cdr_lamps, tm)
+            else:  # the pose, then its /tf: write_cdr of each, the time's bookkeeping once
+                mcap.write_cdr_at(*pose_tf, [next(cdr), next(tf)], tm)
         self._messages.clear()
         if not self._rows:
             return

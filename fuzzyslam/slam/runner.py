@@ -81,6 +81,9 @@ class SlamRunner:
     sink: RowSink | None = None  # default: a MemorySink
     # odometry self-calibration (slam/calibration.py): None, or the model and its prior
     calibration: cal.Calibration | None = None
+    # collect the innovations for the detection noise estimate (slam/noise.py): off, the
+    # runner's ``noise`` is None (the run stage's frames, whose summary has no estimate)
+    estimate_noise: bool = True
 
     def __post_init__(self) -> None:
         p = self.params
@@ -104,7 +107,8 @@ class SlamRunner:
         self.calib_rows: list[list[str]] = []
         self._last_calib = -np.inf
         self.health = DivergenceMonitor()  # NIS and association-rate windows (health.py)
-        self.noise = DetectionNoiseEstimator()  # the detection noise the innovations imply
+        # the detection noise the innovations imply
+        self.noise = DetectionNoiseEstimator() if self.estimate_noise else None
         self.tentative = TentativeLamps(
             p.tentative_hits, p.tentative_radius, p.tentative_timeout, p.gate_chi2
         )
@@ -265,12 +269,9 @@ class SlamRunner:
                     )
                     self._last_seen[i] = ev.t
                     self._obs[i] += 1
-                    self.noise.add(
-                        z[j],
-                        res.innovation[2 * a : 2 * a + 2],
-                        res.s[2 * a : 2 * a + 2, 2 * a : 2 * a + 2],
-                        r[j],
-                    )
+                if self.noise is not None:
+                    det = [j for j, _ in pairs]
+                    self.noise.add_joint(z[det], res.innovation, res.s, r[det])
                 self.counts["associated"] += len(pairs)
                 for j, i in pairs:
                     self.health.observe(ev.t, float(d2[j, i]), 2)

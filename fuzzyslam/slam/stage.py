@@ -349,6 +349,8 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs, model=N
         cfg.slam.landmarks_period,
         sink,
         calibration=model,
+        # only detections' summaries give the noise estimate (make_summary)
+        estimate_noise=inputs.lamp_source == "detections",
     )
     # frames are tiny: OpenCV's thread pool only costs here (OpenCV is not even loaded
     # for logs whose lamps come as detections and that have no aids: 0.3 s of start-up)
@@ -371,7 +373,7 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs, model=N
     res.ekf.check_covariance()
     if model is not None:
         res.calibration = _write_calibration(runner, model, sink.tmp)
-    res.noise_estimate = runner.noise.estimate()
+    res.noise_estimate = runner.noise.estimate() if runner.noise is not None else None
     if tap is not None:  # the odometry latency the bearings imply (slam/latency.py)
         res.delay_estimate = tap.estimate(cfg.slam.odometry_delay_s)
     # numerical guards, the divergence tests, orphan landmarks (slam/run_results.py)
