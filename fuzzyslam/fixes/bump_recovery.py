@@ -23,10 +23,11 @@ uniform over one period, so the evidence is the Bayes factor
 and a recovery is due when B >= 1 / alpha (Wald's bound A = (1 - beta) / alpha, beta
 -> 0: the rings that follow keep testing). The outlier term caps what one ring can
 say: a ring far from the prediction gives at most about 1 / eps_i, whatever its
-innovation, so one ring decides alone only where its gross errors are rarer than
-alpha (a corridor fix whose wall fit is within the model's sigma), and weaker rings
-(loose fits, ambiguous_wall rings in one corridor, whose dominant wall is still a
-measurement with its fit's sigma) add what they carry.
+innovation, so one ring could decide alone only where its gross errors were rarer than
+alpha; with the defaults none does (1 / eps_i <= 2300 < 1 / alpha = 5000,
+``fixes.recover_alpha``): a second agreeing ring decides, and so do weaker rings that
+lean the same way (loose fits, ambiguous_wall rings in one corridor, whose dominant
+wall is still a measurement with its fit's sigma), each adding what it carries.
 
 The product over rings assumes independent gross errors. In corridors none of the
 tight or ambiguous rings had one (paper log, seeds 0-2, phases C and D away from the

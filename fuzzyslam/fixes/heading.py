@@ -34,9 +34,10 @@ added to the current dead-reckoning heading. A recovery is also due as soon as t
 rings since the last agreeing fix favour a jump by a Bayes factor of 1 /
 ``recover_alpha`` (the sequential test, ``fixes.bump_recovery.sequential_streak``:
 each corridor ring weighed by its own wall fit's sigma and gross-error rate, the
-ambiguous_wall rings' dominant walls included as weak evidence; one ring whose fit is
-tight can decide); the fix applied is then the formed rings' weighted mean, and the
-bump is placed before the test's first ring. Rings forming no fix (no wall, ambiguous
+ambiguous_wall rings' dominant walls included as weak evidence; no ring decides
+alone, a second agreeing one, or ambiguous rings leaning the same way, can); the fix
+applied is then the formed rings' weighted mean, and the bump is placed midway between
+the last agreeing ring and the test's first ring. Rings forming no fix (no wall, ambiguous
 wall, no corridor) neither break nor extend a streak (``recover_window_s`` bounds its
 span), and rings at oblique junctions (candidate corridors not at right angles) are no
 evidence: there the FLM's wall was measured 7-14 deg off for 3-6 rings in a row
