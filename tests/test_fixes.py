@@ -194,7 +194,6 @@ def test_points_in_polygon_agrees_with_matplotlib():
     assert np.array_equal(ours, ref)
 
 
-
 def test_reference_contains_is_the_polygon_test():
     """Reference.contains (bounding box first) answers as points_in_polygon for points
     inside, outside, on and a hair off the vertices, of random and L-shaped polygons."""
@@ -207,6 +206,7 @@ def test_reference_contains_is_the_polygon_test():
         expect = points_in_polygon(pts, poly)
         assert [ref.contains(q) for q in pts] == expect.tolist()
         assert k > 0 or expect.sum() >= 10
+
 
 def test_references_parse_bbox_and_reject_bad():
     refs = references_from_dicts(
@@ -341,7 +341,7 @@ def test_ambiguous_corridor_fix_is_skipped_not_applied():
     assert ekf.updates == 0
 
 
-def _drive_with_heading_fixes(theta_err: float, sigma_pred: float, rings: int):
+def _drive_with_heading_fixes(theta_err: float, sigma_pred: float, rings: int, params=None):
     angle = 0.3
     walls = corridor_walls(angle)
     ref = corridor_ref(angle)
@@ -352,7 +352,8 @@ def _drive_with_heading_fixes(theta_err: float, sigma_pred: float, rings: int):
     def flm_source(r, m):
         return src["flm"]
 
-    aid = HeadingFixAid([ref], FixParams(), flm_source, lambda f: flm_wall_direction(f, MP), 0.0)
+    params = params or FixParams()
+    aid = HeadingFixAid([ref], params, flm_source, lambda f: flm_wall_direction(f, MP), 0.0)
     errs = []
     for k in range(rings):
         true = compose(true, [0.1, 0.0, 0.0])
@@ -370,11 +371,17 @@ def test_ten_degree_heading_error_corrected_within_a_few_rings():
     assert np.all(np.linalg.eigvalsh(ekf.P) > 0)
 
 
-def test_unseen_bump_recovered_by_covariance_inflation():
-    """A 10 deg bump the filter is sure it did not take: gated, then recovered."""
-    errs, aid, _ = _drive_with_heading_fixes(10 * DEG, 0.5 * DEG, 8)
+@pytest.mark.parametrize("alpha, first", [(0.0, 2), (1e-3, 1)])
+def test_unseen_bump_recovered_by_covariance_inflation(alpha, first):
+    """A 10 deg bump the filter is sure it did not take: gated, then recovered. By the
+    streak rule alone (recover_alpha 0) on the third agreeing gated ring; by the
+    sequential test on the second: this FLM's wall has no fit sigma, so each ring's
+    gross-error rate is recover_outlier_loose, one ring's Bayes factor at most 1 / eps
+    (130 < 1 / alpha), two agreeing rings' about 1 / eps^2."""
+    p = FixParams(recover_alpha=alpha)
+    errs, aid, _ = _drive_with_heading_fixes(10 * DEG, 0.5 * DEG, 8, p)
     reasons = [d.reason for d in aid.decisions]
-    assert reasons[:2] == ["gated", "gated"] and "recovered" in reasons
+    assert reasons[: first + 1] == ["gated"] * first + ["recovered"], reasons
     assert errs[-1] < 1.0
 
 
@@ -833,7 +840,7 @@ def test_multi_ring_bump_recovered_by_the_single_ring_watchdog():
     state = {}
     aid = HeadingFixAid(
         [ref],
-        FixParams(flm_rings=4, flm_fix_every=0),
+        FixParams(flm_rings=4, flm_fix_every=0, recover_alpha=0.0),  # the streak rule
         lambda r, m: state["flm"],
         lambda f: flm_wall_direction(f, MP),
         0.0,
@@ -862,12 +869,17 @@ def _bump_walk(refs, noise_deg, drift_deg, xy=(0.0, 0.0), params=None):
     """A robot at ``xy`` whose true heading was turned 10 deg (unseen: the filter and the
     dead reckoning both keep 0.05 rad); ring j measures the true heading + noise_deg[j]
     (None: no wall), and the filter's heading is moved by drift_deg[j] after ring j
-    (lamp updates) while the dead reckoning is not. Single-ring fixes."""
+    (lamp updates) while the dead reckoning is not. Single-ring fixes; the streak rule
+    alone (recover_alpha 0) unless ``params`` says otherwise."""
     true_heading = 0.05 + 10 * DEG
     ekf = OdoEkf([*xy, 0.05], np.diag([1e-4, 1e-4, (0.5 * DEG) ** 2]))
     state = {}
     aid = HeadingFixAid(
-        refs, params or FixParams(flm_rings=1), lambda r, m: None, lambda f: state["wall"], 0.0
+        refs,
+        params or FixParams(flm_rings=1, recover_alpha=0.0),
+        lambda r, m: None,
+        lambda f: state["wall"],
+        0.0,
     )
     for j, (e, dr) in enumerate(zip(noise_deg, drift_deg, strict=True)):
         state["wall"] = (
@@ -905,7 +917,7 @@ def test_bump_recovered_from_noisy_rings_while_the_filter_heading_moves():
     aid, _, _ = _bump_walk([corridor_ref(0.0)], [0.0, 0.0, -10.0, 0.0], [0.0] * 4)
     assert [d.reason for d in aid.decisions] == ["gated", "gated", "ok", "gated"]
     # nor rings further apart than recover_window_s
-    p = FixParams(flm_rings=1, recover_window_s=0.6)
+    p = FixParams(flm_rings=1, recover_window_s=0.6, recover_alpha=0.0)
     aid, _, _ = _bump_walk([corridor_ref(0.0)], [0.0, None, 0.0, 0.0], [0.0] * 4, params=p)
     assert [d.reason for d in aid.decisions] == ["gated", "no_wall", "gated", "gated"]
 
@@ -924,6 +936,9 @@ def test_consistent_gated_rings_at_an_oblique_junction_do_not_recover(other_deg,
     assert set(reasons[3:]) == ({"ok"} if recovers else {"gated"})
     if not recovers:
         assert ekf.updates == 0 and aid.pose_suspect  # and no lamp from the pose meanwhile
+        # nor does the sequential test recover from them
+        aid, _, _ = _bump_walk(refs, [0.0] * 6, [0.0] * 6, params=FixParams(flm_rings=1))
+        assert aid.recoveries == 0
 
 
 # --- what the fixes need from the SLAM stage ----------------------------------------------
@@ -1002,7 +1017,7 @@ def test_one_agreeing_ring_between_fixes_does_not_clear_a_suspect_pose():
     """Multi-ring fixes: a gated ring flags the pose; a later single ring near the
     prediction is not applied (between fixes), so the heading it would vouch for is the
     one found wrong: the pose stays suspect until a fix that agrees is applied."""
-    p = FixParams(flm_rings=4, flm_fix_every=0)
+    p = FixParams(flm_rings=4, flm_fix_every=0, recover_alpha=0.0)  # one gated ring
     wall = {"single": 0.0}
 
     def direction(flm):

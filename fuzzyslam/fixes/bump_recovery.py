@@ -1,8 +1,43 @@
 """Bump recovery of the heading aid (fixes/heading.py, its module docstring "Bumps"):
 the streak of consistent gated single-ring fixes that calls for a recovery
-(:func:`recovery_streak`), their common offset from dead reckoning
-(:func:`streak_offset`), and which rings count as evidence (:func:`formed`, not at an
-:func:`oblique` junction).
+(:func:`recovery_streak`), the sequential test that calls for one as soon as the rings'
+evidence suffices (:func:`sequential_streak`, :func:`jump_log_odds`), their common
+offset from dead reckoning (:func:`streak_offset`), and which rings count as evidence
+(:func:`formed`, not at an :func:`oblique` junction; :func:`ring_evidence`).
+
+The sequential test [ours, after Wald, "Sequential tests of statistical hypotheses",
+Ann. Math. Stat. 16(2), 1945, with a mixture over the unknown jump]. A bump turns the
+true heading by delta in one step; the rings since then measure it, each with its own
+noise and its own rate of gross errors. Ring i (candidate heading z_i, mapped to the
+current ring by the dead reckoning, which does not see the bump: v_i = z_i - o_i + o_k
+- theta_pred) has, with s_i its standard deviation and eps_i its gross-error rate,
+
+    H1 (jump delta):  p1(v_i | delta) = (1 - eps_i) N(v_i; delta, s_i^2) + eps_i / T
+    H0 (no jump):     p0(v_i)         = (1 - eps_i) N(v_i; 0, s_i^2 + P_tt) + eps_i / T
+
+T the comb's period (a gross error is any wall direction). delta is unknown and
+uniform over one period, so the evidence is the Bayes factor
+
+    B = (1/T) integral prod_i p1(v_i | delta) d delta  /  prod_i p0(v_i)
+
+and a recovery is due when B >= 1 / alpha (Wald's bound A = (1 - beta) / alpha, beta
+-> 0: the rings that follow keep testing). The outlier term caps what one ring can
+say: a ring far from the prediction gives at most about 1 / eps_i, whatever its
+innovation, so one ring could decide alone only where its gross errors were rarer than
+alpha; with the defaults none does (1 / eps_i <= 2300 < 1 / alpha = 5000,
+``fixes.recover_alpha``): a second agreeing ring decides, and so do weaker rings that
+lean the same way (loose fits, ambiguous_wall rings in one corridor, whose dominant
+wall is still a measurement with its fit's sigma), each adding what it carries.
+
+The product over rings assumes independent gross errors. In corridors none of the
+tight or ambiguous rings had one (paper log, seeds 0-2, phases C and D away from the
+bumps: 0 of 7045 and 0 of 774). At junctions they come in runs that agree (the other
+corridor's wall, several rings long): 6.0 % of the junction fixes are gross, 13.5 % of
+those after a gross one, and 13 % of such pairs agree within 3 deg (3 % if independent),
+so two agreeing junction rings are about 9 times as common as the model says, and they
+did recover a correct heading (seed 1 of paper_bumps, 0.6 s before a bump). Junction
+rings are left to the streak rule (:func:`recovery_streak`, ``recover_after`` agreeing
+rings), which was made for them.
 """
 
 from __future__ import annotations
@@ -52,6 +87,136 @@ def oblique(refs: Sequence[Reference]) -> bool:
     return any(
         abs(float(wrap_angle_period(r.angle - a0, math.pi / 2))) > math.radians(1.0) for r in refs
     )
+
+
+def ring_evidence(x: HeadingDecision, params: FixParams) -> tuple[float, float, float] | None:
+    """A ring's heading candidate for the jump test, its standard deviation and its
+    gross-error rate (module docstring), or None when it carries none.
+
+    Formed corridor fixes: the measurement, s = sigma_heading_deg and
+    ``recover_outlier_fit`` when the wall fit's sigma is within it, else
+    s = max(fit, sigma_heading_deg) and ``recover_outlier_loose`` (also without a fit:
+    the Hough's peak alone). An ambiguous_wall ring in one corridor with a fit: its
+    dominant wall's candidate, s = max(fit, sigma_heading_deg),
+    ``recover_outlier_ambiguous``. Junction rings and any other ring: None.
+
+    Parameters
+    ----------
+    x : HeadingDecision
+        The ring's single-ring decision (``measured``, ``candidate``, ``fit_sigma``).
+    params : FixParams
+        The sigmas and the ``recover_outlier_*`` rates.
+
+    Returns
+    -------
+    (float, float, float) or None
+        Candidate heading (rad), its sigma (rad), its gross-error rate.
+    """
+    sh = math.radians(params.sigma_heading_deg)
+    known = math.isfinite(x.fit_sigma)
+    fit = x.fit_sigma if known else 0.0
+    if x.junction:
+        return None  # gross errors in agreeing runs (module docstring): the streak rule's
+    if formed(x):
+        if known and fit <= sh:
+            return x.measured, sh, params.recover_outlier_fit
+        return x.measured, max(sh, fit), params.recover_outlier_loose
+    if x.reason == "ambiguous_wall" and math.isfinite(x.candidate) and known:
+        return x.candidate, max(sh, fit), params.recover_outlier_ambiguous
+    return None
+
+
+def jump_log_odds(
+    v: np.ndarray, s: np.ndarray, eps: np.ndarray, p_tt: float, period: float
+) -> float:
+    """log B, the Bayes factor of "the heading jumped by an unknown delta" against "it did
+    not" (module docstring), delta uniform over one period, integrated on a grid of
+    steps s_min / 8.
+
+    Parameters
+    ----------
+    v : ndarray, shape (n,)
+        The rings' innovations against the current prediction (rad).
+    s : ndarray, shape (n,)
+        Their standard deviations (rad).
+    eps : ndarray, shape (n,)
+        Their gross-error rates.
+    p_tt : float
+        The filter's heading variance (rad^2).
+    period : float
+        The comb's period T (rad).
+
+    Returns
+    -------
+    float
+        log B.
+    """
+    v, s, eps = (np.asarray(a, dtype=float).reshape(-1, 1) for a in (v, s, eps))
+    n = max(8, math.ceil(8.0 * period / float(s.min())))
+    delta = (np.arange(n) + 0.5) * (period / n) - period / 2  # (m,), the prior's grid
+
+    def log_mix(r: np.ndarray, var: np.ndarray) -> np.ndarray:
+        # log((1 - eps) N(r; 0, var) + eps / T)
+        gauss = np.log1p(-eps) - 0.5 * r * r / var - 0.5 * np.log(2.0 * math.pi * var)
+        return np.logaddexp(gauss, np.log(eps / period))
+
+    r1 = np.asarray(wrap_angle_period(v - delta[None, :], period), dtype=float)  # (n, m)
+    l1 = log_mix(r1, s * s).sum(axis=0)  # (m,)
+    l0 = float(log_mix(np.asarray(wrap_angle_period(v, period)), s * s + p_tt).sum())
+    top = float(l1.max())
+    return top + math.log(float(np.mean(np.exp(l1 - top)))) - l0
+
+
+def sequential_streak(
+    d: HeadingDecision, history: Sequence[HeadingDecision], params: FixParams, p_tt: float
+) -> list[HeadingDecision]:
+    """The rings whose sequential test calls for a recovery at ``d`` (newest first), or
+    [] (module docstring): ``d`` a gated corridor fix, and the rings since the last
+    agreeing fix (ok or recovered), within ``recover_window_s``, with
+    :func:`ring_evidence` (junction rings and rings without evidence skipped), favour a
+    jump by B >= 1 / ``recover_alpha``.
+
+    Parameters
+    ----------
+    d : HeadingDecision
+        The current ring's decision (its ``odometry`` and ``predicted``).
+    history : sequence of HeadingDecision
+        The earlier single-ring decisions, oldest first.
+    params : FixParams
+        ``recover_alpha``, ``recover_after`` (0: off), ``recover_window_s``,
+        ``recover_max_deg``, the sigmas and gross-error rates.
+    p_tt : float
+        The filter's heading variance at ``d`` (rad^2).
+
+    Returns
+    -------
+    list of HeadingDecision
+        The rings tested, newest first (``d`` first), or [] when no recovery is due.
+    """
+    alpha = params.recover_alpha
+    if alpha <= 0 or params.recover_after <= 0 or d.junction or d.reason != "gated":
+        return []
+    if not formed(d):
+        return []
+    if abs(float(wrap_angle(d.measured - d.predicted))) > math.radians(params.recover_max_deg):
+        return []
+    rings, ev = [], []
+    for x in (d, *reversed(history)):
+        if x.t < d.t - params.recover_window_s:
+            break
+        if formed(x) and x.reason != "gated":
+            break  # an agreeing fix: the filter's heading was right there
+        e = ring_evidence(x, params)
+        if e is None:
+            continue
+        rings.append(x)
+        # the candidate carried to the current ring by the dead reckoning
+        ev.append((e[0] - x.odometry + d.odometry - d.predicted, e[1], e[2]))
+    if not all(math.isfinite(a) for row in ev for a in row):
+        return []
+    v, s, eps = (np.array(c) for c in zip(*ev, strict=True))
+    period = math.pi / 2 if params.right_angles else math.pi
+    return rings if jump_log_odds(v, s, eps, p_tt, period) >= math.log(1.0 / alpha) else []
 
 
 def streak_offset(rings: Sequence[HeadingDecision]) -> tuple[float, float, float]:

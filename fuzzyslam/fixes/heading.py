@@ -30,7 +30,14 @@ A bump is a step between the true and the dead-reckoning headings, so the agreem
 tested on the offsets measured - odometry heading (a constant plus each ring's noise;
 the filter's own heading moves with the lamp updates), by a chi-square test on their
 weighted scatter (``recover_spread_p``), and the fix applied is their weighted mean
-added to the current dead-reckoning heading. Rings forming no fix (no wall, ambiguous
+added to the current dead-reckoning heading. A recovery is also due as soon as the
+rings since the last agreeing fix favour a jump by a Bayes factor of 1 /
+``recover_alpha`` (the sequential test, ``fixes.bump_recovery.sequential_streak``:
+each corridor ring weighed by its own wall fit's sigma and gross-error rate, the
+ambiguous_wall rings' dominant walls included as weak evidence; no ring decides
+alone, a second agreeing one, or ambiguous rings leaning the same way, can); the fix
+applied is then the formed rings' weighted mean, and the bump is placed midway between
+the last agreeing ring and the test's first ring. Rings forming no fix (no wall, ambiguous
 wall, no corridor) neither break nor extend a streak (``recover_window_s`` bounds its
 span), and rings at oblique junctions (candidate corridors not at right angles) are no
 evidence: there the FLM's wall was measured 7-14 deg off for 3-6 rings in a row
@@ -83,8 +90,10 @@ import numpy as np
 from fuzzyslam.fixes.base import FixAid
 from fuzzyslam.fixes.bump_recovery import (
     bump_position,
+    formed,
     oblique,
     recovery_streak,
+    sequential_streak,
     streak_offset,
 )
 from fuzzyslam.fixes.heading_measure import (  # the paper's measurement; re-exported here
@@ -194,6 +203,8 @@ class HeadingFixAid(FixAid):
         history = window.single if window is not None else self.decisions
         recover = d.reason == "gated"
         streak = recovery_streak(d, history, self.params) if recover else []
+        if recover and not streak:  # the sequential test (bump_recovery's docstring)
+            streak = sequential_streak(d, history, self.params, float(ekf.pose_cov[2, 2]))
         if streak:
             # consistent gated fixes: the filter, not the map, is wrong (an unseen bump).
             # The fix applied is the streak's: their common offset from dead reckoning
@@ -210,7 +221,7 @@ class HeadingFixAid(FixAid):
             # position has since drifted by v J (p - p_bump), J the 90-degree turn: the
             # inflation's heading column carries that lever, Q += v^2 g g^T, g = (J L, 1),
             # L = p - p_bump, so the fix moves the position with the heading.
-            offset, sigma, _ = streak_offset(streak)
+            offset, sigma, _ = streak_offset([x for x in streak if formed(x)])
             d = replace(d, measured=float(wrap_angle(d.odometry + offset)), sigma=sigma)
             v = float(wrap_angle(d.measured - d.predicted))
             dist = (

@@ -52,6 +52,14 @@ class HeadingDecision:
     # the filter's position at the ring, before the fix (where a viewer draws it)
     x: float = math.nan
     y: float = math.nan
+    # the wall fit's own standard deviation (rad; NaN without the tangent refinement)
+    # and, for a ring refused as ambiguous_wall in one corridor, the comb candidate its
+    # dominant wall gives nearest the prediction (rad): the bump test's weak evidence
+    # (fixes/bump_recovery.py, jump_log_odds)
+    fit_sigma: float = math.nan
+    candidate: float = math.nan
+    # formed at a junction (R = sigma_junction_deg)
+    junction: bool = False
 
     def row(self) -> list[str]:
         """The decision as a row of heading_fixes.csv.
@@ -203,15 +211,23 @@ def decide_heading_fix(
     if corridor is None:
         corridor = select_corridor(pose[:2], refs, period, params.junction_margin)
     cands, why = corridor
+    fit = float(getattr(wall, "sigma", math.nan))
     # two wall directions in one FLM (a corner) disqualify it, unless the corner's
     # corridors all compete (junction_walls): the strongest wall is then one of theirs
     if wall.ambiguous and not (why == "junction" and params.junction_walls):
-        return HeadingDecision(t, -1, math.nan, predicted, False, "ambiguous_wall", strength)
+        cand = math.nan
+        if why == "" and cands:  # one corridor: its candidate, kept as weak bump evidence
+            cand = nearest_candidate(cands[0].angle - float(wall.angle), predicted, period)[0]
+        return HeadingDecision(
+            t, -1, math.nan, predicted, False, "ambiguous_wall", strength,
+            fit_sigma=fit, candidate=cand,
+        )  # fmt: skip
     if not cands:
         return HeadingDecision(t, -1, math.nan, predicted, False, why, strength)
     if sigmas_deg is None:
         sigmas_deg = (params.sigma_heading_deg, params.sigma_junction_deg)
-    sig = sigmas_deg[1] if why == "junction" else sigmas_deg[0]
+    junction = why == "junction"
+    sig = sigmas_deg[1] if junction else sigmas_deg[0]
     sigma = math.radians(sig)
     # every candidate corridor's nearest comb member, sorted by distance to the prediction
     combs = sorted(
@@ -230,7 +246,10 @@ def decide_heading_fix(
         why = "gated"
     else:
         why = "ok"
-    return HeadingDecision(t, ref.id, theta, predicted, why == "ok", why, strength, nis, sigma)
+    return HeadingDecision(
+        t, ref.id, theta, predicted, why == "ok", why, strength, nis, sigma,
+        fit_sigma=fit, candidate=theta, junction=junction,
+    )  # fmt: skip
 
 
 class FlmSource:

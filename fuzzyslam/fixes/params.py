@@ -66,6 +66,29 @@ class FixParams:
     recover_max_deg: float = field(default=180.0, metadata={"min": 0.0, "max": 180.0})
     # the streak's rings all lie within this many seconds (skipped rings in between)
     recover_window_s: float = field(default=2.0, metadata={"min": 0.0, "max": 30.0})
+    # the sequential test of a heading jump (fixes/bump_recovery.py jump_log_odds, Wald's
+    # SPRT with a Bayes factor): a recovery is also due, before recover_after rings, when
+    # the corridor rings since the last agreeing fix favour "the heading jumped" over "it
+    # did not" by at least 1 / recover_alpha; 0: off (recover_after 0 turns both off).
+    # One ring carries at most 1 / eps (below), 2300 for the tightest: 1 / alpha = 5000
+    # lets no ring decide alone (one whose wall fit is tight and 8 deg off was measured on
+    # a seed of the quick world, near a junction: a recovery at once turned a correct
+    # heading), while a second ring, or earlier ambiguous_wall rings leaning the same
+    # way, decide. Measured on paper_bumps.yaml seeds 0-4 (heading fixes from t = 0):
+    # see docs/models.md sec. 9
+    recover_alpha: float = field(default=2e-4, metadata={"min": 0.0, "max": 0.5})
+    # the corridor rings' gross-error rates in the test's likelihoods, (1 - eps) N(v; mean,
+    # s^2) + eps / period: the fraction of rings more than 5 s from the simulator's true
+    # heading (paper log, calibration off, phases C and D of seeds 0-2 away from the bumps;
+    # the rule of three, 3 / n, where none was): a formed fix whose wall fit is within
+    # sigma_heading_deg (s = sigma_heading_deg): 0 of 7045 (3 / 7045); one with a looser
+    # fit (s = its fit's sigma): 2 of 259; an ambiguous_wall ring's dominant wall in one
+    # corridor (s = max(fit, sigma_heading_deg)): 0 of 774 (3 / 774). Seeds 3-4 alike: 0
+    # of 4719, 1 of 202, 0 of 498. Junction rings (223 of 3805, in agreeing runs) are left
+    # to the streak rule (bump_recovery's docstring)
+    recover_outlier_fit: float = field(default=4.3e-4, metadata={"min": 1e-9, "max": 1.0})
+    recover_outlier_loose: float = field(default=7.7e-3, metadata={"min": 1e-9, "max": 1.0})
+    recover_outlier_ambiguous: float = field(default=3.9e-3, metadata={"min": 1e-9, "max": 1.0})
 
     # --- multi-ring FLM heading fixes (beyond the paper; fixes.heading, maps.flm) ---
     # rings fused into the FLM the wall direction is measured on, placed by dead reckoning
