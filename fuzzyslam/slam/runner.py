@@ -240,8 +240,8 @@ class SlamRunner:
         self.anchor.frame(ekf, self.preint, ev.t, z, r)
         if m:
             d2 = ekf.individual_compatibility(z, r)
-            known = None  # JCBB's association, when the relocalisation test made it
-            lin = None  # relocalised: the iterate to linearise the update at
+            # JCBB's association when the relocalisation test made it; the iterate when
+            known, lin = None, None  # it relocalised (the update is linearised there)
             if self.relocaliser is not None:  # a pose that has left its covariance?
                 d2, known, lin = self.relocaliser(ekf, z, r, d2, ev.t)
             p = self.params
@@ -278,10 +278,9 @@ class SlamRunner:
                     self.health.observe(ev.t, float(d2[j, i]), 2)
             self.counts["ambiguous"] += len(assoc.ambiguous)
             if m and ekf.n_lamps:
-                explained = len(pairs) + len(assoc.ambiguous)
-                rel = self.relocaliser
-                if rel is not None and rel.explained_before is not None:  # relocalised:
-                    explained = rel.explained_before  # what the filter explained as it stood
+                rel, explained = self.relocaliser, len(pairs) + len(assoc.ambiguous)
+                if rel is not None and rel.explained_before is not None:  # relocalised: what
+                    explained = rel.explained_before  # the filter explained as it stood
                 self.health.observe_frame(ev.t, m, explained)
             used = {j for j, _ in pairs} | set(assoc.ambiguous)
             rest = [j for j in range(m) if j not in used]
