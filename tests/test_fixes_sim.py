@@ -84,8 +84,16 @@ def bump_case(tmp_path_factory):
         log, fgm = chain(
             tmp, {"scenario": {"bumps": [{"run": 2, "fraction": 0.45, "angle_deg": 10.0}]}}, 5
         )
-        summary = invoke(["run", log, "--map", fgm, "--fix", "heading", "-o", tmp / "C"])
+        # the heading fixes' own recovery: the lamps' relocalisation (docs/models.md
+        # sec. 4c) takes a lit bump out before the sonar sees it, so it is off here ...
+        off = tmp / "fixes_only.yaml"
+        slam = {"relocalise_sigma_m": 0.0, "relocalise_sigma_heading_deg": 0.0}
+        off.write_text(yaml.safe_dump({"extends": "scenario.yaml", "slam": slam}))
+        args = ["run", log, "--map", fgm, "--fix", "heading", "-o"]
+        summary = invoke([*args, tmp / "C", "--config", off])
         (tmp / "C.json").write_text(json.dumps(summary))
+        # ... and on (the scenario's own config) in a second run
+        (tmp / "R.json").write_text(json.dumps(invoke([*args, tmp / "R"])))
 
     tmp = shared_dir(tmp_path_factory, "fixsim-bump", build)
     return tmp / "log.mcap", tmp / "C", json.loads((tmp / "C.json").read_text())
@@ -137,6 +145,24 @@ def test_ten_degree_bump_corrected_by_heading_fixes_within_a_few_rings(bump_case
     assert any(r["reason"] == "recovered" for r in rows)
     # the position stays bounded: the recovery also inflated the position covariance
     assert np.hypot(err[later, 0], err[later, 1]).max() < 0.15
+
+
+def test_a_lit_bump_is_relocalised_on_the_lamps_before_the_sonar_sees_it(bump_case):
+    """The same bump with the relocalisation test on (paper.yaml's): the first frame
+    after it pairs its lamps again (the iterated test, docs/models.md sec. 4c), so the
+    heading is back within a degree from then on and the sonar needs no recovery."""
+    log, rundir, _ = bump_case
+    reloc = rundir.parent / "R"
+    summary = json.loads((rundir.parent / "R.json").read_text())
+    bump = next(e for e in read_scenario(LogReader(log)).events if e.kind == "bump")
+    t, err = errors(log, reloc)
+    after = (t > bump.t + 0.25) & (t < run_interval(log, 2)[1])  # a 5-Hz frame later
+    assert np.abs(np.degrees(err[after, 2])).max() < 1.0
+    assert np.hypot(err[after, 0], err[after, 1]).max() < 0.03
+    assert summary["counts"]["relocalisations"] >= 1
+    with open(reloc / "heading_fixes.csv", newline="") as fh:
+        rows = [r for r in csv.DictReader(fh) if bump.t <= float(r["t"]) < bump.t + 3.0]
+    assert not any(r["reason"] == "recovered" for r in rows)
 
 
 def test_every_lamp_off_pose_fixes_keep_error_bounded(dark_case):

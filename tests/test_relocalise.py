@@ -47,14 +47,18 @@ def test_a_pose_off_by_15_deg_is_relocalised_and_then_pairs_every_detection():
     d2_new, test = relocalisation_test(ekf, z, r, d2, GATE, 4.0, Q)
     assert test is not None and test.accepted
     assert test.pairs_after >= 5 and test.pairs_before == len(before.best)
+    # 10-cm detections: linearised at the turned pose the joint test already passes, so
+    # it is not iterated (slam/iterated.py) and the update is the plain EKF's
+    assert test.lin is None and test.iterations == 0
     # the robot block got exactly Q, nothing else changed; P stays symmetric PD
     dp = ekf.P - p_before
     assert np.allclose(dp[:3, :3], Q) and np.allclose(dp[3:], 0) and np.allclose(dp[:, 3:], 0)
     assert np.allclose(ekf.P, ekf.P.T) and np.linalg.eigvalsh(ekf.P).min() > 0
-    after = jcbb(ekf, z, r, d2_new, GATE, 4.0)
-    assert sorted(after.pairs) == [(j, j) for j in range(6)]  # every one with its own lamp
-    det = [j for j, _ in after.pairs]
-    res = ekf.update_lamps([i for _, i in after.pairs], z[det], np.kron(np.eye(6), r[0]))
+    with ekf.linearised_at(test.lin):  # the iterated test's pose (slam/iterated.py)
+        after = jcbb(ekf, z, r, d2_new, GATE, 4.0)
+        assert sorted(after.pairs) == [(j, j) for j in range(6)]  # each with its own lamp
+        det = [j for j, _ in after.pairs]
+        res = ekf.update_lamps([i for _, i in after.pairs], z[det], np.kron(np.eye(6), r[0]))
     assert res.accepted
     e = ekf.pose - true
     assert abs(np.degrees(e[2])) < 1.0
@@ -89,7 +93,7 @@ def test_relocaliser_counts_and_is_off_by_default():
     true = np.array([0.5, 0.5, 0.3])
     ekf = _filter(true + np.array([0.0, 0.0, np.radians(15.0)]))
     z, r = _detections(true, [0, 1, 2, 3, 4, 5])
-    _, known = rel(ekf, z, r, ekf.individual_compatibility(z, r), 0.0)
+    _, known, _ = rel(ekf, z, r, ekf.individual_compatibility(z, r), 0.0)
     assert known is None  # accepted: the association must be made again on the new d2
     assert rel.counts() == {"relocalisation_tests": 1, "relocalisations": 1}
 
@@ -142,9 +146,10 @@ def test_window_relocalises_a_pose_seen_one_or_two_landmarks_at_a_time():
             r = np.repeat(np.diag([0.1**2, 0.05**2])[None], len(ids), axis=0)
             rel.moved(np.zeros(3))
             p_before = ekf.P.copy()
-            d2, known = rel(ekf, z, r, ekf.individual_compatibility(z, r), 0.25 * k)
+            d2, known, lin = rel(ekf, z, r, ekf.individual_compatibility(z, r), 0.25 * k)
             grew.append(ekf.P[:3, :3] - p_before[:3, :3])
-            assoc, _ = associate_update(ekf, z, r, d2, GATE, 4.0, known)
+            with ekf.linearised_at(lin):
+                assoc, _ = associate_update(ekf, z, r, d2, GATE, 4.0, known)
             rel.unexplained(0.25 * k, z, r, assoc)
             paired.append([(ids[j], i) for j, i in assoc.pairs])
         results[window] = (paired, grew, rel.counts(), ekf)

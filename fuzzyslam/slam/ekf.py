@@ -137,6 +137,7 @@ class EkfSlam(EkfUpdates):
         self.robot_updates: list[tuple[tuple[int, ...], UpdateResult]] = []
         # numerical guards (slam/health.py): near-singular S regularised, P repaired
         self.guards = {"s_regularised": 0, "p_repaired": 0}
+        self.lin_pose = None  # the lamp model's linearisation pose (linearised_at)
         # dead reckoning of the same odometry, never corrected by updates: a smooth pose
         # whose differences are the robot's relative motion (multi-ring FLMs, fixes.heading)
         self.odometry_pose = self._x[:3].copy()
@@ -345,7 +346,8 @@ class EkfSlam(EkfUpdates):
         Computed in the map frame (O(n m), vectorised): with d_i = l_i - p,
         H_i = R^T [-I, d_i^perp | I] (d^perp = (d_y, -d_x)), so S_ij = R^T (W_i + R R_j R^T) R
         with W_i = G_i P_rr G_i^T + G_i P_rl_i + P_rl_i^T G_i^T + P_ll_i, G_i = [-I, d_i^perp],
-        and D2_ij = (R v_ij)^T (W_i + R R_j R^T)^-1 (R v_ij).
+        and D2_ij = (R v_ij)^T (W_i + R R_j R^T)^-1 (R v_ij). Within ``linearised_at``,
+        of the model linearised at that pose (R, d_i and G_i at it, h_i its expansion).
 
         Parameters
         ----------
@@ -365,10 +367,11 @@ class EkfSlam(EkfUpdates):
             return np.full((len(z), n), np.inf)
         p = self._p
         x = self._x
-        c, s = math.cos(x[2]), math.sin(x[2])
+        pose, dx = self._lin_offset()  # the linearisation pose (linearised_at)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
         rmat = np.array([[c, -s], [s, c]])
         m0, end = self.m0, self.dim
-        d = x[m0:end].reshape(n, 2) - x[:2]  # d_i = l_i - p  (n, 2)
+        d = x[m0:end].reshape(n, 2) - pose[:2]  # d_i = l_i - p  (n, 2)
         dp = d[:, ::-1] * _PERP  # d^perp = (d_y, -d_x)
         dpc = dp[:, :, None]  # (n, 2, 1)
         # G P_rr G^T = Pxx - (p_t dp^T + dp p_t^T) + q_tt dp dp^T
@@ -384,7 +387,10 @@ class EkfSlam(EkfUpdates):
         r = np.asarray(r, dtype=float).reshape(-1, 2, 2)
         rw = rmat @ r @ rmat.T  # (m or 1, 2, 2): one R for all broadcasts below
         zw = z @ rmat.T  # R z_j
-        v = zw[:, None, :] - d[None, :, :]  # R (z_j - h_i) = R z_j - d_i
+        # R h_i: d_i, and linearised at x_i (linearised_at) R h(x_i) + R H_i (x - x_i)
+        # = d_i - dp + dtheta d_i^perp, (dp, dtheta) = x - x_i
+        dh = d if dx is None else d - dx[:2] + dx[2] * dp
+        v = zw[:, None, :] - dh[None, :, :]  # R (z_j - h_i) = R z_j - R h_i
         # the entries (a, b; b, dd) of S_ij = W_i + R R_j R^T, each (m, n)
         a = w[:, 0, 0] + rw[:, None, 0, 0]
         b = w[:, 0, 1] + rw[:, None, 0, 1]

@@ -13,6 +13,8 @@ ch. 3 and 10; R. Labbe, *Kalman and Bayesian filters in Python* (filterpy), ch. 
 from __future__ import annotations
 
 import math
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from functools import lru_cache
 
@@ -76,6 +78,50 @@ class EkfUpdates:
     heading_frozen: np.ndarray
     robot_updates: list
     P: np.ndarray  # the covariance's used part (EkfSlam.P)
+    # the pose the lamp model is linearised at (None: the state's own; linearised_at)
+    lin_pose: np.ndarray | None = None
+
+    @contextmanager
+    def linearised_at(self, pose: np.ndarray | None) -> Iterator[None]:
+        """Linearise the lamp model at ``pose`` instead of at the state's pose, within.
+
+        The iterated EKF's step (Bell and Cathey, "The iterated Kalman filter update as
+        a Gauss-Newton method", IEEE T-AC 38(2), 1993): h and H are taken at the iterate
+        x_i (pose ``pose``, the lamps at their means) and the prediction is the
+        first-order expansion about it, evaluated at the prior mean x:
+
+            h_i(x) = h(x_i) + H_i (x - x_i),   v = z - h_i(x),   S = H_i P H_i^T + R
+
+        so the innovations, S, the gates, JCBB's joint tests and the update
+        x' = x + K v (K = P H_i^T S^-1) are those of the model linearised at x_i. With
+        ``pose`` None (or the state's pose) everything is the plain EKF's.
+
+        Parameters
+        ----------
+        pose : ndarray, shape (3,), or None
+            The linearisation pose (x, y, theta).
+
+        Returns
+        -------
+        contextmanager
+            Restores the previous linearisation pose on leaving.
+        """
+        old = self.lin_pose
+        self.lin_pose = None if pose is None else np.asarray(pose, dtype=float).copy()
+        try:
+            yield
+        finally:
+            self.lin_pose = old
+
+    def _lin_offset(self) -> tuple[np.ndarray, np.ndarray | None]:
+        """The linearisation pose x_i and x - x_i (pose part, heading wrapped; None when
+        the model is linearised at the state's own pose)."""
+        lin = self.lin_pose
+        if lin is None:
+            return self._x[:3], None
+        dx = self._x[:3] - lin
+        dx[2] = wrap_angle(dx[2])
+        return lin, dx
 
     def _correct(
         self,
@@ -164,7 +210,8 @@ class EkfUpdates:
         """Stacked prediction of lamps ``ids``: h (2k,), columns, H restricted to columns.
 
         Columns are [0, 1, 2, l_i...]; H is (2k, 3 + 2k) with the blocks of
-        ``lamp_measurement`` (vectorised over the k lamps).
+        ``lamp_measurement`` (vectorised over the k lamps). Within
+        :meth:`linearised_at`, h and H of the model linearised at that pose.
 
         Parameters
         ----------
@@ -183,11 +230,12 @@ class EkfUpdates:
         ids = np.asarray(ids, dtype=int).reshape(-1)
         k = len(ids)
         x = self._x
-        c, s = math.cos(x[2]), math.sin(x[2])
+        pose, dx = self._lin_offset()  # the linearisation pose (linearised_at)
+        c, s = math.cos(pose[2]), math.sin(pose[2])
         rt = np.array([[c, s], [-s, c]])
         j = self.m0 + 2 * ids
         jj = j[:, None] + _XY  # the lamps' (x, y) indices (k, 2)
-        h = (x[jj] - x[:2]) @ rt.T  # (k, 2)
+        h = (x[jj] - pose[:2]) @ rt.T  # (k, 2)
         hc = np.zeros((2 * k, 3 + 2 * k))
         hv = hc.reshape(k, 2, 3 + 2 * k)
         hv[:, :, :2] = -rt
@@ -195,6 +243,8 @@ class EkfUpdates:
         hv[:, 1, 2] = -h[:, 0]
         hv[_h_lamp_index(k)] = rt.T  # dh_a / dl_a = R^T in columns 3 + 2a, 4 + 2a
         cols = np.concatenate([_POSE_COLS, jj.reshape(-1)])
+        if dx is not None:  # h_i(x) = h(x_i) + H_i (x - x_i) (lamps at their means)
+            h = h + hv[:, :, :3] @ dx
         return h.reshape(-1), cols, hc
 
     def update_lamps(

@@ -78,15 +78,22 @@ class SlamParams:
     # margin of the best makes the pairings it changes ambiguous (not applied; a
     # log-likelihood ratio: 4 = alternatives at least e^-2 = 14 % as likely); 0: off
     ambiguity_margin: float = field(default=4.0, metadata={"min": 0.0, "max": 100.0})
-    # relocalisation test (slam/association.py ``relocalisation_test``): a frame that the
+    # relocalisation test (slam/relocalise.py ``relocalisation_test``): a frame that the
     # best hypothesis leaves >= relocalise_min_gain detections unexplained is associated
     # again with the robot's covariance inflated by an unmodelled disturbance of these
-    # sigmas (m, deg); kept when it then pairs that many more, and at least 3. 0: off
+    # sigmas (m, deg), re-linearised at the pose it implies when that is refused (the
+    # iterated EKF); kept when it then pairs that many more, and at least
+    # relocalise_min_pairs. 0: off
     relocalise_sigma_m: float = field(default=0.0, metadata={"min": 0.0, "max": 100.0})
     relocalise_sigma_heading_deg: float = field(default=0.0, metadata={"min": 0.0, "max": 180.0})
     relocalise_min_gain: int = field(default=2, metadata={"min": 1, "max": 100})
-    # frames with fewer than 3 detections: their unexplained detections are pooled over
-    # this window (s) of odometry and the test run on the pool; 0: each frame on its own
+    # pairings the disturbed hypothesis needs (and detections a frame needs to be tested on
+    # its own): 3 (two landmarks fix a pose, a third checks it); 2 where the disturbance's
+    # sigmas are small against the landmarks' spacing, so the prior tells them apart
+    relocalise_min_pairs: int = field(default=3, metadata={"min": 2, "max": 100})
+    # frames with fewer than relocalise_min_pairs detections: their unexplained ones are
+    # pooled over this window (s) of odometry and the test run on the pool; 0: each
+    # frame on its own
     relocalise_window_s: float = field(default=0.0, metadata={"min": 0.0, "max": 60.0})
     tentative_hits: int = field(default=3, metadata={"min": 1})
     tentative_radius: float = field(default=0.3, metadata={"min": 0.01, "max": 10.0})

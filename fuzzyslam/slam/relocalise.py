@@ -3,7 +3,8 @@
 When the best JCBB hypothesis (:mod:`fuzzyslam.slam.association`) leaves several of a
 frame's detections unexplained, the frame is associated again under the hypothesis that
 the robot suffered an unmodelled disturbance (its covariance inflated); the disturbance is
-accepted when that explains clearly more detections (docs/models.md sec. 4c). Frames with
+accepted when that explains clearly more detections (docs/models.md sec. 4c), JCBB
+re-linearised at the pose the disturbance implies (:mod:`fuzzyslam.slam.iterated`). Frames with
 too few detections for the test are pooled over a short window of odometry (a camera that
 sees one or two landmarks at a time, frame after frame, while the pose is lost).
 """
@@ -18,6 +19,7 @@ import numpy as np
 from fuzzyslam import se2
 from fuzzyslam.slam.association import Association, jcbb
 from fuzzyslam.slam.ekf import EkfSlam, mahalanobis_2x2
+from fuzzyslam.slam.iterated import iterated_association
 from fuzzyslam.slam.params import SlamParams
 
 
@@ -34,6 +36,9 @@ class Relocalisation:
     tested: bool = True  # False: the frame did not call for the test (nothing unexplained)
     # JCBB's association under the inflated covariance, when accepted
     wide: Association | None = None
+    # accepted by the iterated test: the pose to linearise the lamp model at (the iterate)
+    lin: np.ndarray | None = None
+    iterations: int = 0  # hypotheses iterated (0: the test linearised at x0 sufficed)
 
 
 def relocalisation_test(
@@ -50,16 +55,20 @@ def relocalisation_test(
     """Test whether an unmodelled disturbance explains a frame better [ours].
 
     A pose that has left its covariance (odometry that integrated a turn the wheels did
-    not make, a slip) makes JCBB pair a frame's detections with the wrong landmarks, or
-    with few of them: the landmarks that would explain the rest are outside their gates.
-    The alternative hypothesis is a disturbance of covariance ``q`` on the robot (the
-    fault-detection counterpart of covariance inflation; Simon, "Optimal state
-    estimation", sec. 7.4). Under it the gates widen and JCBB (the most jointly
-    compatible pairings) is run again. The disturbance is accepted, and the robot block of
-    ``ekf`` inflated by ``q``, when its best hypothesis pairs at least ``min_gain`` more
-    detections than before and at least ``min_pairs`` (redundant pairings: two landmarks
-    fix a pose, a third checks it). The test runs only on frames whose best hypothesis
-    leaves ``min_gain`` detections unexplained and that have ``min_pairs`` detections.
+    not make, a slip, a bump) makes JCBB pair a frame's detections with the wrong
+    landmarks, or with few of them: the landmarks that would explain the rest are
+    outside their gates. The alternative hypothesis is a disturbance of covariance ``q``
+    on the robot (the fault-detection counterpart of covariance inflation; Simon,
+    "Optimal state estimation", sec. 7.4). Under it the gates widen and JCBB (the most
+    jointly compatible pairings) is run again; when that is refused, it is run again
+    re-linearised at the pose its hypothesis implies (:func:`iterated_association`: a
+    disturbance whose linearisation error exceeds the detections' noise). The
+    disturbance is accepted, and the robot block of ``ekf`` inflated by ``q``, when its
+    best hypothesis pairs at least ``min_gain`` more detections than before and at least
+    ``min_pairs`` (redundant pairings: two landmarks fix a pose, a third checks it; two
+    check each other's distance and the prior ``q``). The test runs only on frames whose
+    best hypothesis leaves ``min_gain`` detections unexplained and that have
+    ``min_pairs`` detections.
 
     Parameters
     ----------
@@ -85,12 +94,14 @@ def relocalisation_test(
     Returns
     -------
     d2 : ndarray, shape (m, n)
-        The distances to associate with: recomputed under the inflated covariance when
-        accepted, else the ``d2`` given.
+        The distances to associate with: recomputed under the inflated covariance, and
+        linearised at the test's ``lin``, when accepted, else the ``d2`` given.
     test : Relocalisation or None
         The test's outcome (``tested`` False when the best hypothesis explained the frame
         well enough, with ``before`` its JCBB association); None when the frame had too
-        few detections or the map too few lamps.
+        few detections or the map too few lamps. Accepted, the filter's lamp update must
+        be linearised at its ``lin`` (``EkfSlam.linearised_at``): the iterated EKF's
+        update.
     """
     m = len(z)
     if m < min_pairs or ekf.n_lamps < min_pairs:
@@ -101,13 +112,19 @@ def relocalisation_test(
         return d2, Relocalisation(before, before, False, assoc, tested=False)
     trial = copy.deepcopy(ekf)
     trial.inflate_robot(q)
+    need = max(before + min_gain, min_pairs)
     d2_wide = trial.individual_compatibility(z, r)
     wide = jcbb(trial, z, r, d2_wide, gate_chi2, ambiguity_margin)
+    lin, its = None, 0
+    if len(wide.best) < need:  # refused linearised at x0: at the hypothesis' own pose?
+        d2_wide, wide, lin, its = iterated_association(
+            trial, z, r, gate_chi2, ambiguity_margin, d2_wide
+        )
     after = len(wide.best)
-    if after < max(before + min_gain, min_pairs):
-        return d2, Relocalisation(before, after, False, assoc)
+    if after < need:
+        return d2, Relocalisation(before, after, False, assoc, iterations=its)
     ekf.inflate_robot(q)
-    return d2_wide, Relocalisation(before, after, True, wide=wide)
+    return d2_wide, Relocalisation(before, after, True, assoc, wide=wide, lin=lin, iterations=its)
 
 
 @dataclass
@@ -176,7 +193,7 @@ def pool_window(
 class Relocaliser:
     """The test as the SLAM loop runs it, with its counts.
 
-    Frames with fewer than 3 detections cannot call for the test on their own. With
+    Frames with fewer than ``min_pairs`` detections cannot call for the test on their own. With
     ``window_s`` > 0 the unexplained detections of the frames of the last ``window_s``
     seconds are pooled with the frame's (:func:`pool_window`) and the test is run on the
     pool; when it accepts, the filter's robot covariance is inflated and the frame's
@@ -195,6 +212,8 @@ class Relocaliser:
         Extra pairings needed to accept.
     window_s : float
         The pooling window (s); 0: each frame on its own.
+    min_pairs : int
+        Pairings needed to accept (and detections to test a frame on its own).
     """
 
     q: np.ndarray
@@ -202,8 +221,14 @@ class Relocaliser:
     ambiguity_margin: float
     min_gain: int = 2
     window_s: float = 0.0
+    min_pairs: int = 3
     tests: int = 0
     accepted: int = 0
+    # accepted on the last call: the frame's detections the filter explained as it stood.
+    # The health monitor's association windows count these (a disturbance the model did
+    # not admit), so a model that needs one frame after frame (a wrong wheel radius)
+    # leaves them out of bounds as it did without the test
+    explained_before: int | None = None
     _odo: np.ndarray = field(default_factory=lambda: np.zeros(3))
     _past: list[_Sighting] = field(default_factory=list)
 
@@ -224,7 +249,14 @@ class Relocaliser:
             return None
         sp, sh = p.relocalise_sigma_m, np.radians(p.relocalise_sigma_heading_deg)
         q = np.diag([sp * sp, sp * sp, sh * sh])
-        return cls(q, p.gate_chi2, p.ambiguity_margin, p.relocalise_min_gain, p.relocalise_window_s)
+        return cls(
+            q,
+            p.gate_chi2,
+            p.ambiguity_margin,
+            p.relocalise_min_gain,
+            p.relocalise_window_s,
+            p.relocalise_min_pairs,
+        )
 
     def moved(self, delta: np.ndarray) -> None:
         """The odometry's relative motion since the last call (robot frame), for the window.
@@ -244,7 +276,7 @@ class Relocaliser:
 
     def __call__(
         self, ekf: EkfSlam, z: np.ndarray, r: np.ndarray, d2: np.ndarray, t: float
-    ) -> tuple[np.ndarray, Association | None]:
+    ) -> tuple[np.ndarray, Association | None, np.ndarray | None]:
         """Run :func:`relocalisation_test` on one frame (or its window) and count it.
 
         Parameters
@@ -267,30 +299,34 @@ class Relocaliser:
         known : Association or None
             JCBB's association on them, when the test computed it and left the filter as
             it was (for :func:`~fuzzyslam.slam.lamp_update.associate_update`).
+        lin : ndarray, shape (3,), or None
+            Accepted: the pose to linearise the frame's lamp update at
+            (``EkfSlam.linearised_at``; the iterate of :func:`iterated_association`).
         """
-        d2_new, test = relocalisation_test(
-            ekf, z, r, d2, self.gate_chi2, self.ambiguity_margin, self.q, self.min_gain
-        )
+        args = (self.gate_chi2, self.ambiguity_margin, self.q, self.min_gain, self.min_pairs)
+        self.explained_before = None
+        d2_new, test = relocalisation_test(ekf, z, r, d2, *args)
         self._count(test)
         if test is not None or self.window_s <= 0:
             if test is not None and test.accepted:
                 self._past.clear()
-            return d2_new, None if test is None or test.accepted else test.before
+                self.explained_before = test.pairs_before
+                return d2_new, None, test.lin
+            return d2_new, None if test is None else test.before, None
         # too few detections on their own: pool the window's unexplained ones with them
         self._forget(t)
         if not self._past or ekf.n_lamps == 0:
-            return d2, None
+            return d2, None, None
         zw, rw = pool_window(z, r, self._odo, self._past, self.gate_chi2)
         if len(zw) == len(z):
-            return d2, None
+            return d2, None, None
         dw = ekf.individual_compatibility(zw, rw)
-        dw, pooled = relocalisation_test(
-            ekf, zw, rw, dw, self.gate_chi2, self.ambiguity_margin, self.q, self.min_gain
-        )
+        dw, pooled = relocalisation_test(ekf, zw, rw, dw, *args)
         self._count(pooled)
         if pooled is None or not pooled.accepted:
-            return d2, None
+            return d2, None, None
         self._past.clear()
+        self.explained_before = sum(j < len(z) for j, _ in pooled.before.best)
         # the pool's association decides the frame's pairings (the frame's detections come
         # first in it); only the frame's own detections are measurements
         m, w = len(z), pooled.wide
@@ -299,7 +335,7 @@ class Relocaliser:
             [j for j in w.ambiguous if j < m],
             [pr for pr in w.best if pr[0] < m],
         )
-        return dw[:m], known
+        return dw[:m], known, pooled.lin
 
     def unexplained(self, t: float, z: np.ndarray, r: np.ndarray, assoc: Association) -> None:
         """Keep the frame's detections that the best hypothesis left unexplained, for the

@@ -244,11 +244,13 @@ class SlamRunner:
         self.anchor.frame(ekf, self.preint, ev.t, z, r)
         if m:
             d2 = ekf.individual_compatibility(z, r)
-            known = None  # JCBB's association, when the relocalisation test made it
+            # JCBB's association when the relocalisation test made it; the iterate when
+            known, lin = None, None  # it relocalised (the update is linearised there)
             if self.relocaliser is not None:  # a pose that has left its covariance?
-                d2, known = self.relocaliser(ekf, z, r, d2, ev.t)
+                d2, known, lin = self.relocaliser(ekf, z, r, d2, ev.t)
             p = self.params
-            assoc, res = associate_update(ekf, z, r, d2, p.gate_chi2, p.ambiguity_margin, known)
+            with ekf.linearised_at(lin):  # the iterated EKF's update (relocalise.py)
+                assoc, res = associate_update(ekf, z, r, d2, p.gate_chi2, p.ambiguity_margin, known)
             if self.relocaliser is not None:  # its window keeps what the map left unexplained
                 self.relocaliser.unexplained(ev.t, z, r, assoc)
             pairs = assoc.pairs
@@ -277,7 +279,10 @@ class SlamRunner:
                     self.health.observe(ev.t, float(d2[j, i]), 2)
             self.counts["ambiguous"] += len(assoc.ambiguous)
             if m and ekf.n_lamps:
-                self.health.observe_frame(ev.t, m, len(pairs) + len(assoc.ambiguous))
+                rel, explained = self.relocaliser, len(pairs) + len(assoc.ambiguous)
+                if rel is not None and rel.explained_before is not None:  # relocalised: what
+                    explained = rel.explained_before  # the filter explained as it stood
+                self.health.observe_frame(ev.t, m, explained)
             used = {j for j, _ in pairs} | set(assoc.ambiguous)
             rest = [j for j in range(m) if j not in used]
             if rest and any(getattr(a, "pose_suspect", False) for a in self.aids):
