@@ -317,7 +317,7 @@ def test_streamed_outputs_do_not_depend_on_blocks(quick_log, quick_run, tmp_path
     from fuzzyslam.slam.inputs import open_inputs
     from fuzzyslam.slam.outputs import StreamingOutputs
     from fuzzyslam.slam.runner import SlamRunner
-    from fuzzyslam.slam.stage import run_stage
+    from fuzzyslam.slam.stage import calibration_model, run_stage
     from fuzzyslam.streams.tum import format_tum
 
     cfg = load_config("quick")
@@ -338,7 +338,8 @@ def test_streamed_outputs_do_not_depend_on_blocks(quick_log, quick_run, tmp_path
         assert summary[key] == whole[key]
 
     inputs = open_inputs(quick_log, cfg)
-    runner = SlamRunner(cfg.slam, inputs.start_pose, [], inputs.mounts, cfg.slam.landmarks_period)
+    runner = SlamRunner(cfg.slam, inputs.start_pose, [], inputs.mounts, cfg.slam.landmarks_period,
+                        calibration=calibration_model(inputs, cfg, None))  # fmt: skip
     res = runner.run(inputs.events(), t0=inputs.start)  # every row in memory
     assert (a / "trajectory.tum").read_text() == format_tum(res.t, res.poses)
     assert (a / "odometry.tum").read_text() == format_tum(res.odo_t, res.odo_poses)

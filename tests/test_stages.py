@@ -40,7 +40,10 @@ def test_reproduce_calls_the_stages_with_its_commands_arguments(suite):
     """Each step's call of ``stage.run`` is what the CLI makes of the step's command line
     (commands.sh): the keyword arguments given are the parsed options, the others are at
     the entry's defaults."""
-    steps = build_plan([0, 2], suite) + sweep_steps([("quick.yaml", {})], [1])
+    calibrated = frozenset({"paper", "dark"})  # maps with --calibration
+    steps = build_plan([0, 2], suite, calibrated=calibrated)
+    steps += sweep_steps([("quick.yaml", {})], [1])
+    assert any("--calibration" in s.argv for s in steps)
     assert {s.kind for s in steps} == set(STAGES)
     for s in steps:
         entry = importlib.import_module(STAGES[s.kind]).run

@@ -48,6 +48,14 @@ from fuzzyslam.cli import LOG_TIME, cli, config_option, emit, ranges_option, sta
     help="landmarks.yaml from 'run': draw the estimated lamps in fgm.png.",
 )
 @click.option("--no-figures", is_flag=True, help="Do not draw the PNG figures.")
+@click.option(
+    "--calibration",
+    type=click.Path(readable=False, path_type=str),
+    default=None,
+    help="calibration.csv of the trajectory's run (slam.calibrate): its factors at the "
+    "freeze time go into FGMDIR/calibration.yaml, which 'run --map' starts from. "
+    "Default: the calibration.csv beside the trajectory, when there.",
+)
 @ranges_option
 @click.option(
     "--sort",
@@ -65,6 +73,7 @@ def map_cmd(
     skip_uncovered: bool,
     landmarks: str | None,
     no_figures: bool,
+    calibration: str | None,
     ranges: str | None,
     sort: bool,
     config: str | None,
@@ -87,6 +96,8 @@ def map_cmd(
       fgm.png            the FGM with the path, references and lamps (paper's Fig. 1)
       conflict.png       the conflict mass per cell
       hough.png          corridor segments and an FLM with their Hough planes (Fig. 2)
+      calibration.yaml   the odometry calibration at the freeze time (when the
+                         trajectory's run calibrated: --calibration)
       summary.json       the JSON printed on stdout
 
     Prints a JSON summary (cells, readings used and skipped, freeze time, reference
@@ -110,5 +121,6 @@ def map_cmd(
             not no_figures,
             ranges,
             sort,
+            calibration,
         )
     )

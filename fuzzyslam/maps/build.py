@@ -50,6 +50,8 @@ class MapOptions:
     explicit_config: bool = False
     ranges: str | None = None
     sort: bool = False
+    # the trajectory's run's calibration.csv (default: beside the trajectory, when there)
+    calibration: Path | None = None
 
 
 def covered(tq: np.ndarray, t: np.ndarray, max_gap: float) -> np.ndarray:
@@ -348,7 +350,8 @@ def build_map(
         )
     # the odometry calibration of the trajectory's run at the freeze time (run --map starts
     # from it: slam/calibration.py), when that run had one
-    calib = calibration_files.at_time(Path(traj_path).parent / "calibration.csv", t_end)
+    calib_csv = opts.calibration or Path(traj_path).parent / "calibration.csv"
+    calib = calibration_files.at_time(calib_csv, t_end)
     summary = MapSummary(
         log=str(log_path),
         trajectory=str(traj_path),

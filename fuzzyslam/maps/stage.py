@@ -8,7 +8,7 @@ from pathlib import Path
 from typing import Any
 
 from fuzzyslam.config import load_config
-from fuzzyslam.errors import UsageError
+from fuzzyslam.errors import InputError, UsageError
 from fuzzyslam.maps.build import MapOptions, build_map
 
 
@@ -24,6 +24,7 @@ def run(
     figures: bool = True,
     ranges: str | None = None,
     sort: bool = False,
+    calibration: str | os.PathLike | None = None,
 ) -> dict[str, Any]:
     """The FGM of ``log``'s range readings along ``trajectory`` (TUM) into ``outdir``, frozen
     at the end of run ``until_run`` or at the log time ``until`` (at most one; default the
@@ -53,6 +54,10 @@ def run(
         ``--ranges``.
     sort : bool
         ``--sort``.
+    calibration : path or None
+        ``--calibration``: the trajectory's run's calibration.csv, whose factors at the
+        freeze time go into calibration.yaml (default: the one beside the trajectory,
+        when there).
 
     Returns
     -------
@@ -71,5 +76,8 @@ def run(
         explicit_config=config is not None,
         ranges=ranges,
         sort=sort,
+        calibration=Path(calibration) if calibration else None,
     )
+    if opts.calibration is not None and not opts.calibration.is_file():
+        raise InputError(opts.calibration, "no such calibration file (--calibration)")
     return build_map(log, trajectory, outdir, cfg, opts)

@@ -93,9 +93,13 @@ def evaluations(beyond: bool = True) -> dict[str, tuple[str, str, str, str]]:
     return {k: v for k, v in EVALUATIONS.items() if beyond or k in PAPER_ONLY}
 
 
-def seed_steps(seed: int, suite: Suite, beyond: bool = True) -> list[Step]:
+def seed_steps(
+    seed: int, suite: Suite, beyond: bool = True, calibrated: frozenset[str] = frozenset()
+) -> list[Step]:
     """Every step of one seed, in a valid order (dependencies first); ``beyond=False``
-    keeps only the paper's phases A-D (no dark or people logs, no pose fixes)."""
+    keeps only the paper's phases A-D (no dark or people logs, no pose fixes);
+    ``calibrated``: the logs whose config calibrates the odometry (``slam.calibrate``):
+    their maps name the run's calibration.csv (``map --calibration``)."""
     d = f"seed{seed}"
     logs = {"paper": suite.paper, "bumps": suite.bumps}
     if beyond:
@@ -150,6 +154,9 @@ def seed_steps(seed: int, suite: Suite, beyond: bool = True) -> list[Step]:
         ]  # fmt: skip
         call = {"log": argv[1], "trajectory": argv[3], "outdir": argv[7], "config": logs[log]}
         call["landmarks"] = argv[5]
+        if log in calibrated:  # named, so that --ship-files sends it with the task
+            call["calibration"] = f"{d}/{est}/calibration.csv"
+            argv += ["--calibration", call["calibration"]]
         add(name, "map", argv, [f"{log}.mcap", est], COST["map"], call)
 
     run("AB", "paper")
@@ -180,9 +187,12 @@ def seed_steps(seed: int, suite: Suite, beyond: bool = True) -> list[Step]:
     return steps
 
 
-def build_plan(seeds: list[int], suite: Suite, beyond: bool = True) -> list[Step]:
-    """The steps of every seed; keys are unique and every dependency is a step."""
-    steps = [s for seed in seeds for s in seed_steps(seed, suite, beyond)]
+def build_plan(
+    seeds: list[int], suite: Suite, beyond: bool = True, calibrated: frozenset[str] = frozenset()
+) -> list[Step]:
+    """The steps of every seed (:func:`seed_steps`); keys are unique and every dependency
+    is a step."""
+    steps = [s for seed in seeds for s in seed_steps(seed, suite, beyond, calibrated)]
     keys = {s.key for s in steps}
     if len(keys) != len(steps):
         raise ValueError("duplicate step keys in the plan")

@@ -14,10 +14,12 @@ import json
 import os
 import threading
 import time
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
 from fuzzyslam import __version__
+from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, _in_place_only
 from fuzzyslam.reproduce.execute import StepResult, execute
@@ -35,33 +37,39 @@ from fuzzyslam.reproduce.report import (
 from fuzzyslam.reproduce.table import SeedResult, aggregate, headline_key, run_labels
 
 
-def calibration_truth(suite: Suite, root: Path) -> dict[str, list[float]]:
+def suite_configs(suite: Suite, root: Path) -> dict[str, Config]:
+    """The loaded config of each log of the suite (embedded names, or files in ``root``:
+    ``--set``), by log name (paper, bumps, dark, people)."""
+    from fuzzyslam.config import load_config
+
+    names = {f.name: getattr(suite, f.name) for f in fields(suite)}
+    return {
+        log: load_config(str(root / n) if (root / n).is_file() else n) for log, n in names.items()
+    }
+
+
+def calibration_truth(configs: dict[str, Config]) -> dict[str, list[float]]:
     """The simulator's true wheel factors of each log of the table's calibration rows
     (paper, bumps) whose config calibrates the odometry (``slam.calibrate``): its
     ``robot.left_scale``, ``right_scale``, ``base_scale`` (``SeedResult.calibration_truth``).
 
     Parameters
     ----------
-    suite : Suite
-        The plan's configs (embedded names, or files in ``root``: ``--set``).
-    root : Path
-        The plan's directory.
+    configs : dict
+        :func:`suite_configs`.
 
     Returns
     -------
     dict
         Log name -> [s_L, s_R, s_B].
     """
-    from fuzzyslam.config import load_config
     from fuzzyslam.slam.calibration import true_factors
 
-    out = {}
-    for log in ("paper", "bumps"):
-        name = getattr(suite, log)
-        cfg = load_config(str(root / name) if (root / name).is_file() else name)
-        if cfg.slam.calibrate:
-            out[log] = [float(v) for v in true_factors(cfg.robot)]
-    return out
+    return {
+        log: [float(v) for v in true_factors(configs[log].robot)]
+        for log in ("paper", "bumps")
+        if configs[log].slam.calibrate
+    }
 
 
 def seed_result(
@@ -222,8 +230,10 @@ def reproduce(
     check_outdir(Path(outdir))
     with OutputDir(outdir, owns=("*",)) as tmp:
         suite = suite_with(QUICK if quick else FULL, overrides, tmp)
-        truth = calibration_truth(suite, tmp)
-        steps = build_plan(seeds, suite, beyond)
+        configs = suite_configs(suite, tmp)
+        truth = calibration_truth(configs)
+        calibrated = frozenset(log for log, c in configs.items() if c.slam.calibrate)
+        steps = build_plan(seeds, suite, beyond, calibrated)
         for s in seeds:
             (tmp / f"seed{s}").mkdir()
         write_commands(tmp / "commands.sh", steps, set_options(overrides))
