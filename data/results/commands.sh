@@ -8,14 +8,14 @@ fuzzyslam simulate paper_bumps.yaml -o seed0/bumps.mcap --seed 0
 fuzzyslam simulate paper_dark.yaml -o seed0/dark.mcap --seed 0
 fuzzyslam simulate paper_people.yaml -o seed0/people.mcap --seed 0
 fuzzyslam run seed0/paper.mcap -o seed0/AB --config paper.yaml
-fuzzyslam map seed0/paper.mcap --trajectory seed0/AB/trajectory.tum --landmarks seed0/AB/landmarks.yaml -o seed0/fgm --config paper.yaml
+fuzzyslam map seed0/paper.mcap --trajectory seed0/AB/trajectory.tum --landmarks seed0/AB/landmarks.yaml -o seed0/fgm --config paper.yaml --calibration seed0/AB/calibration.csv
 fuzzyslam run seed0/paper.mcap -o seed0/C --config paper.yaml --map seed0/fgm --fix heading
 fuzzyslam run seed0/bumps.mcap -o seed0/D --config paper_bumps.yaml --map seed0/fgm --fix heading --fix-from 0
 fuzzyslam run seed0/paper.mcap -o seed0/C_pose --config paper.yaml --map seed0/fgm --fix pose
 fuzzyslam run seed0/dark.mcap -o seed0/dark_none --config paper_dark.yaml
-fuzzyslam map seed0/dark.mcap --trajectory seed0/dark_none/trajectory.tum --landmarks seed0/dark_none/landmarks.yaml -o seed0/dark_fgm --config paper_dark.yaml
+fuzzyslam map seed0/dark.mcap --trajectory seed0/dark_none/trajectory.tum --landmarks seed0/dark_none/landmarks.yaml -o seed0/dark_fgm --config paper_dark.yaml --calibration seed0/dark_none/calibration.csv
 fuzzyslam run seed0/people.mcap -o seed0/people_none --config paper_people.yaml
-fuzzyslam map seed0/people.mcap --trajectory seed0/people_none/trajectory.tum --landmarks seed0/people_none/landmarks.yaml -o seed0/people_fgm --config paper_people.yaml
+fuzzyslam map seed0/people.mcap --trajectory seed0/people_none/trajectory.tum --landmarks seed0/people_none/landmarks.yaml -o seed0/people_fgm --config paper_people.yaml --calibration seed0/people_none/calibration.csv
 fuzzyslam run seed0/dark.mcap -o seed0/dark_heading --config paper_dark.yaml --map seed0/dark_fgm --fix heading
 fuzzyslam run seed0/dark.mcap -o seed0/dark_pose --config paper_dark.yaml --map seed0/dark_fgm --fix pose
 fuzzyslam run seed0/people.mcap -o seed0/people_pose --config paper_people.yaml --map seed0/people_fgm --fix pose
@@ -33,14 +33,14 @@ fuzzyslam simulate paper_bumps.yaml -o seed1/bumps.mcap --seed 1
 fuzzyslam simulate paper_dark.yaml -o seed1/dark.mcap --seed 1
 fuzzyslam simulate paper_people.yaml -o seed1/people.mcap --seed 1
 fuzzyslam run seed1/paper.mcap -o seed1/AB --config paper.yaml
-fuzzyslam map seed1/paper.mcap --trajectory seed1/AB/trajectory.tum --landmarks seed1/AB/landmarks.yaml -o seed1/fgm --config paper.yaml
+fuzzyslam map seed1/paper.mcap --trajectory seed1/AB/trajectory.tum --landmarks seed1/AB/landmarks.yaml -o seed1/fgm --config paper.yaml --calibration seed1/AB/calibration.csv
 fuzzyslam run seed1/paper.mcap -o seed1/C --config paper.yaml --map seed1/fgm --fix heading
 fuzzyslam run seed1/bumps.mcap -o seed1/D --config paper_bumps.yaml --map seed1/fgm --fix heading --fix-from 0
 fuzzyslam run seed1/paper.mcap -o seed1/C_pose --config paper.yaml --map seed1/fgm --fix pose
 fuzzyslam run seed1/dark.mcap -o seed1/dark_none --config paper_dark.yaml
-fuzzyslam map seed1/dark.mcap --trajectory seed1/dark_none/trajectory.tum --landmarks seed1/dark_none/landmarks.yaml -o seed1/dark_fgm --config paper_dark.yaml
+fuzzyslam map seed1/dark.mcap --trajectory seed1/dark_none/trajectory.tum --landmarks seed1/dark_none/landmarks.yaml -o seed1/dark_fgm --config paper_dark.yaml --calibration seed1/dark_none/calibration.csv
 fuzzyslam run seed1/people.mcap -o seed1/people_none --config paper_people.yaml
-fuzzyslam map seed1/people.mcap --trajectory seed1/people_none/trajectory.tum --landmarks seed1/people_none/landmarks.yaml -o seed1/people_fgm --config paper_people.yaml
+fuzzyslam map seed1/people.mcap --trajectory seed1/people_none/trajectory.tum --landmarks seed1/people_none/landmarks.yaml -o seed1/people_fgm --config paper_people.yaml --calibration seed1/people_none/calibration.csv
 fuzzyslam run seed1/dark.mcap -o seed1/dark_heading --config paper_dark.yaml --map seed1/dark_fgm --fix heading
 fuzzyslam run seed1/dark.mcap -o seed1/dark_pose --config paper_dark.yaml --map seed1/dark_fgm --fix pose
 fuzzyslam run seed1/people.mcap -o seed1/people_pose --config paper_people.yaml --map seed1/people_fgm --fix pose
@@ -58,14 +58,14 @@ fuzzyslam simulate paper_bumps.yaml -o seed2/bumps.mcap --seed 2
 fuzzyslam simulate paper_dark.yaml -o seed2/dark.mcap --seed 2
 fuzzyslam simulate paper_people.yaml -o seed2/people.mcap --seed 2
 fuzzyslam run seed2/paper.mcap -o seed2/AB --config paper.yaml
-fuzzyslam map seed2/paper.mcap --trajectory seed2/AB/trajectory.tum --landmarks seed2/AB/landmarks.yaml -o seed2/fgm --config paper.yaml
+fuzzyslam map seed2/paper.mcap --trajectory seed2/AB/trajectory.tum --landmarks seed2/AB/landmarks.yaml -o seed2/fgm --config paper.yaml --calibration seed2/AB/calibration.csv
 fuzzyslam run seed2/paper.mcap -o seed2/C --config paper.yaml --map seed2/fgm --fix heading
 fuzzyslam run seed2/bumps.mcap -o seed2/D --config paper_bumps.yaml --map seed2/fgm --fix heading --fix-from 0
 fuzzyslam run seed2/paper.mcap -o seed2/C_pose --config paper.yaml --map seed2/fgm --fix pose
 fuzzyslam run seed2/dark.mcap -o seed2/dark_none --config paper_dark.yaml
-fuzzyslam map seed2/dark.mcap --trajectory seed2/dark_none/trajectory.tum --landmarks seed2/dark_none/landmarks.yaml -o seed2/dark_fgm --config paper_dark.yaml
+fuzzyslam map seed2/dark.mcap --trajectory seed2/dark_none/trajectory.tum --landmarks seed2/dark_none/landmarks.yaml -o seed2/dark_fgm --config paper_dark.yaml --calibration seed2/dark_none/calibration.csv
 fuzzyslam run seed2/people.mcap -o seed2/people_none --config paper_people.yaml
-fuzzyslam map seed2/people.mcap --trajectory seed2/people_none/trajectory.tum --landmarks seed2/people_none/landmarks.yaml -o seed2/people_fgm --config paper_people.yaml
+fuzzyslam map seed2/people.mcap --trajectory seed2/people_none/trajectory.tum --landmarks seed2/people_none/landmarks.yaml -o seed2/people_fgm --config paper_people.yaml --calibration seed2/people_none/calibration.csv
 fuzzyslam run seed2/dark.mcap -o seed2/dark_heading --config paper_dark.yaml --map seed2/dark_fgm --fix heading
 fuzzyslam run seed2/dark.mcap -o seed2/dark_pose --config paper_dark.yaml --map seed2/dark_fgm --fix pose
 fuzzyslam run seed2/people.mcap -o seed2/people_pose --config paper_people.yaml --map seed2/people_fgm --fix pose
@@ -83,14 +83,14 @@ fuzzyslam simulate paper_bumps.yaml -o seed3/bumps.mcap --seed 3
 fuzzyslam simulate paper_dark.yaml -o seed3/dark.mcap --seed 3
 fuzzyslam simulate paper_people.yaml -o seed3/people.mcap --seed 3
 fuzzyslam run seed3/paper.mcap -o seed3/AB --config paper.yaml
-fuzzyslam map seed3/paper.mcap --trajectory seed3/AB/trajectory.tum --landmarks seed3/AB/landmarks.yaml -o seed3/fgm --config paper.yaml
+fuzzyslam map seed3/paper.mcap --trajectory seed3/AB/trajectory.tum --landmarks seed3/AB/landmarks.yaml -o seed3/fgm --config paper.yaml --calibration seed3/AB/calibration.csv
 fuzzyslam run seed3/paper.mcap -o seed3/C --config paper.yaml --map seed3/fgm --fix heading
 fuzzyslam run seed3/bumps.mcap -o seed3/D --config paper_bumps.yaml --map seed3/fgm --fix heading --fix-from 0
 fuzzyslam run seed3/paper.mcap -o seed3/C_pose --config paper.yaml --map seed3/fgm --fix pose
 fuzzyslam run seed3/dark.mcap -o seed3/dark_none --config paper_dark.yaml
-fuzzyslam map seed3/dark.mcap --trajectory seed3/dark_none/trajectory.tum --landmarks seed3/dark_none/landmarks.yaml -o seed3/dark_fgm --config paper_dark.yaml
+fuzzyslam map seed3/dark.mcap --trajectory seed3/dark_none/trajectory.tum --landmarks seed3/dark_none/landmarks.yaml -o seed3/dark_fgm --config paper_dark.yaml --calibration seed3/dark_none/calibration.csv
 fuzzyslam run seed3/people.mcap -o seed3/people_none --config paper_people.yaml
-fuzzyslam map seed3/people.mcap --trajectory seed3/people_none/trajectory.tum --landmarks seed3/people_none/landmarks.yaml -o seed3/people_fgm --config paper_people.yaml
+fuzzyslam map seed3/people.mcap --trajectory seed3/people_none/trajectory.tum --landmarks seed3/people_none/landmarks.yaml -o seed3/people_fgm --config paper_people.yaml --calibration seed3/people_none/calibration.csv
 fuzzyslam run seed3/dark.mcap -o seed3/dark_heading --config paper_dark.yaml --map seed3/dark_fgm --fix heading
 fuzzyslam run seed3/dark.mcap -o seed3/dark_pose --config paper_dark.yaml --map seed3/dark_fgm --fix pose
 fuzzyslam run seed3/people.mcap -o seed3/people_pose --config paper_people.yaml --map seed3/people_fgm --fix pose
@@ -108,14 +108,14 @@ fuzzyslam simulate paper_bumps.yaml -o seed4/bumps.mcap --seed 4
 fuzzyslam simulate paper_dark.yaml -o seed4/dark.mcap --seed 4
 fuzzyslam simulate paper_people.yaml -o seed4/people.mcap --seed 4
 fuzzyslam run seed4/paper.mcap -o seed4/AB --config paper.yaml
-fuzzyslam map seed4/paper.mcap --trajectory seed4/AB/trajectory.tum --landmarks seed4/AB/landmarks.yaml -o seed4/fgm --config paper.yaml
+fuzzyslam map seed4/paper.mcap --trajectory seed4/AB/trajectory.tum --landmarks seed4/AB/landmarks.yaml -o seed4/fgm --config paper.yaml --calibration seed4/AB/calibration.csv
 fuzzyslam run seed4/paper.mcap -o seed4/C --config paper.yaml --map seed4/fgm --fix heading
 fuzzyslam run seed4/bumps.mcap -o seed4/D --config paper_bumps.yaml --map seed4/fgm --fix heading --fix-from 0
 fuzzyslam run seed4/paper.mcap -o seed4/C_pose --config paper.yaml --map seed4/fgm --fix pose
 fuzzyslam run seed4/dark.mcap -o seed4/dark_none --config paper_dark.yaml
-fuzzyslam map seed4/dark.mcap --trajectory seed4/dark_none/trajectory.tum --landmarks seed4/dark_none/landmarks.yaml -o seed4/dark_fgm --config paper_dark.yaml
+fuzzyslam map seed4/dark.mcap --trajectory seed4/dark_none/trajectory.tum --landmarks seed4/dark_none/landmarks.yaml -o seed4/dark_fgm --config paper_dark.yaml --calibration seed4/dark_none/calibration.csv
 fuzzyslam run seed4/people.mcap -o seed4/people_none --config paper_people.yaml
-fuzzyslam map seed4/people.mcap --trajectory seed4/people_none/trajectory.tum --landmarks seed4/people_none/landmarks.yaml -o seed4/people_fgm --config paper_people.yaml
+fuzzyslam map seed4/people.mcap --trajectory seed4/people_none/trajectory.tum --landmarks seed4/people_none/landmarks.yaml -o seed4/people_fgm --config paper_people.yaml --calibration seed4/people_none/calibration.csv
 fuzzyslam run seed4/dark.mcap -o seed4/dark_heading --config paper_dark.yaml --map seed4/dark_fgm --fix heading
 fuzzyslam run seed4/dark.mcap -o seed4/dark_pose --config paper_dark.yaml --map seed4/dark_fgm --fix pose
 fuzzyslam run seed4/people.mcap -o seed4/people_pose --config paper_people.yaml --map seed4/people_fgm --fix pose

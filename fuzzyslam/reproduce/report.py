@@ -252,8 +252,8 @@ def write_report(
         "run's at the freeze time, which phases C and D start from) and of the C and D runs "
         "with the simulator's true wheels (the config's `robot.left_scale`, `right_scale`, "
         "`base_scale`), the errors in the estimate's own sigmas; n/a when the runs do not "
-        "calibrate (`slam.calibrate` off, as in the shipped configs: `reproduce --set "
-        "slam.calibrate=true` turns it on). "
+        "calibrate (`slam.calibrate` off: `reproduce --set slam.calibrate=false`; the "
+        "shipped configs calibrate). "
         "The real-time factors of the Cost rows are measured while reproduce's jobs share the "
         "machine's cores; the isolated figures come from the benchmarks.",
         "",
