@@ -201,3 +201,45 @@ def test_nearest_pairs_takes_each_lamp_once_nearest_first():
     d2 = np.array([[0.5, 3.0, np.inf], [0.2, 8.0, 1.0], [20.0, 20.0, 20.0]])
     assert nearest_pairs(d2, GATE) == [(0, 1), (1, 0)]
     assert nearest_pairs(np.full((2, 3), 50.0), GATE) == []
+
+
+@pytest.mark.parametrize(
+    "est",
+    [
+        TRUE + np.array([0.004, -0.003, np.radians(0.05)]),  # within its covariance
+        TRUE + np.array([0.004, -0.003, np.radians(0.3)]),  # a lamp or two out of gate
+        _bumped(),  # every lamp out of gate: the test relocalises
+    ],
+)
+def test_update_if_explained_is_the_test_and_association_it_spares(est):
+    """Relocaliser.update_if_explained (the runner's first step) against the full path it
+    stands for (the relocalisation test, then associate_update with the test's JCBB): on
+    frames of 1-3 lamps, noisy, from a pose within and out of its covariance, either it
+    declines and leaves the filter bit for bit as it was, or the full path left the
+    frame untested and made the same update: the same pairs, state and covariance, bit
+    for bit."""
+    rel_a, rel_b = Relocaliser.from_params(PARAMS), Relocaliser.from_params(PARAMS)
+    a, b = _filter(est), _filter(est)
+    made = declined = 0
+    for k, ids in enumerate([[0], [0, 1], SEEN, [1, 2], SEEN, [0, 2]] * 2):
+        z, r = _frame(ids, seed=30 + k)
+        x0, p0 = a.x.copy(), a.P.copy()
+        done = rel_a.update_if_explained(a, z, r, a.individual_compatibility(z, r))
+        d2 = b.individual_compatibility(z, r)
+        tests = rel_b.tests
+        d2, known, lin = rel_b(b, z, r, d2, 0.2 * k)
+        with b.linearised_at(lin):
+            assoc, _ = associate_update(b, z, r, d2, GATE, MARGIN, known)
+        if done is None:
+            declined += 1
+            assert np.array_equal(a.x, x0) and np.array_equal(a.P, p0)
+            d2a = a.individual_compatibility(z, r)
+            d2a, known_a, lin_a = rel_a(a, z, r, d2a, 0.2 * k)
+            with a.linearised_at(lin_a):
+                associate_update(a, z, r, d2a, GATE, MARGIN, known_a)
+        else:
+            made += 1
+            assert rel_b.tests == tests and lin is None  # untested on the full path
+            assert done[0].pairs == assoc.pairs
+        assert np.array_equal(a.x, b.x) and np.array_equal(a.P, b.P)
+    assert made > 0 and declined > 0

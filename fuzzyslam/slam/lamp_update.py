@@ -62,20 +62,54 @@ def associate_update(
         return Association([]), None
     pairs = unique_hypothesis(candidates(d2, gate_chi2))
     if pairs is not None:
-        if not pairs:
-            return Association([]), None
-        det = [j for j, _ in pairs]
-        res = ekf.update_lamps(
-            [i for _, i in pairs],
-            z[det],
-            block_diag_cov(r[det]),
-            gate_chi2=joint_threshold(gate_chi2, 2 * len(pairs)),
-        )
-        if res.accepted:
-            return Association(pairs, [], pairs), res
+        done = unique_update(ekf, z, r, pairs, gate_chi2)
+        if done is not None:
+            return done
     assoc = known if known is not None else jcbb(ekf, z, r, d2, gate_chi2, ambiguity_margin)
     if not assoc.pairs:
         return assoc, None
     det = [j for j, _ in assoc.pairs]
     res = ekf.update_lamps([i for _, i in assoc.pairs], z[det], block_diag_cov(r[det]))
     return assoc, res
+
+
+def unique_update(
+    ekf: EkfSlam,
+    z: np.ndarray,
+    r: np.ndarray,
+    pairs: list[tuple[int, int]],
+    gate_chi2: float,
+) -> tuple[Association, UpdateResult | None] | None:
+    """The joint update of a unique hypothesis (``unique_hypothesis``), gated by its own
+    joint NIS: chi-square of 2 x pairs dof at ``gate_chi2``'s level, JCBB's joint
+    compatibility test of those pairs (Neira and Tardos 2001). No pairs: nothing to update.
+
+    Parameters
+    ----------
+    ekf : EkfSlam
+        The filter (updated in place when the test accepts).
+    z : ndarray, shape (m, 2)
+        The frame's detections in base_link (m).
+    r : ndarray, shape (m, 2, 2)
+        Their covariances.
+    pairs : list of (int, int)
+        The unique hypothesis: (detection j, lamp i), every candidate pair of the frame.
+    gate_chi2 : float
+        The individual gate (chi-square, 2 dof).
+
+    Returns
+    -------
+    (Association, UpdateResult or None) or None
+        The pairs and their update; None when the joint test refused them (the filter
+        unchanged: JCBB decides).
+    """
+    if not pairs:
+        return Association([]), None
+    det = [j for j, _ in pairs]
+    res = ekf.update_lamps(
+        [i for _, i in pairs],
+        z[det],
+        block_diag_cov(r[det]),
+        gate_chi2=joint_threshold(gate_chi2, 2 * len(pairs)),
+    )
+    return (Association(pairs, [], pairs), res) if res.accepted else None

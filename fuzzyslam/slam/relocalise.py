@@ -17,9 +17,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fuzzyslam import se2
-from fuzzyslam.slam.association import Association, jcbb
-from fuzzyslam.slam.ekf import EkfSlam, mahalanobis_2x2
+from fuzzyslam.slam.association import Association, candidates, jcbb, unique_hypothesis
+from fuzzyslam.slam.ekf import EkfSlam, UpdateResult, mahalanobis_2x2
 from fuzzyslam.slam.iterated import iterated_association
+from fuzzyslam.slam.lamp_update import unique_update
 from fuzzyslam.slam.params import SlamParams
 
 
@@ -273,6 +274,44 @@ class Relocaliser:
         if test is not None and test.tested:
             self.tests += 1
             self.accepted += test.accepted
+
+    def update_if_explained(
+        self, ekf: EkfSlam, z: np.ndarray, r: np.ndarray, d2: np.ndarray
+    ) -> tuple[Association, UpdateResult | None] | None:
+        """The frame's lamp update when it certainly leaves :func:`relocalisation_test`
+        untested, without the test's own JCBB: its association has a unique hypothesis
+        (``unique_hypothesis``) that leaves fewer than ``min_gain`` detections
+        unexplained, and the update's joint test accepts it. JCBB's best is then that
+        hypothesis (every candidate pair, jointly compatible), so the test would have
+        found fewer than ``min_gain`` unexplained detections and the association would
+        have made this same update (``lamp_update.associate_update``'s first step). None
+        (the filter unchanged) otherwise: the frame goes through :meth:`__call__`.
+
+        Parameters
+        ----------
+        ekf : EkfSlam
+            The filter (updated in place when the update is made).
+        z : ndarray, shape (m, 2)
+            Detections (robot frame).
+        r : ndarray, shape (m, 2, 2)
+            Their covariances.
+        d2 : ndarray, shape (m, n)
+            Their squared Mahalanobis distances to the lamps.
+
+        Returns
+        -------
+        (Association, UpdateResult or None) or None
+        """
+        m = len(z)
+        if m < self.min_pairs or ekf.n_lamps < self.min_pairs:
+            return None  # the test would not run on the frame alone: its window might
+        pairs = unique_hypothesis(candidates(d2, self.gate_chi2))
+        if pairs is None or m - len(pairs) >= self.min_gain:
+            return None
+        done = unique_update(ekf, z, r, pairs, self.gate_chi2)
+        if done is not None:
+            self.explained_before = None
+        return done
 
     def __call__(
         self, ekf: EkfSlam, z: np.ndarray, r: np.ndarray, d2: np.ndarray, t: float

@@ -246,11 +246,17 @@ class SlamRunner:
             d2 = ekf.individual_compatibility(z, r)
             # JCBB's association when the relocalisation test made it; the iterate when
             known, lin = None, None  # it relocalised (the update is linearised there)
-            if self.relocaliser is not None:  # a pose that has left its covariance?
-                d2, known, lin = self.relocaliser(ekf, z, r, d2, ev.t)
-            p = self.params
-            with ekf.linearised_at(lin):  # the iterated EKF's update (relocalise.py)
-                assoc, res = associate_update(ekf, z, r, d2, p.gate_chi2, p.ambiguity_margin, known)
+            rel, p = self.relocaliser, self.params
+            done = rel.update_if_explained(ekf, z, r, d2) if rel is not None else None
+            if done is not None:  # a frame the relocalisation test would not test
+                assoc, res = done
+            else:
+                if rel is not None:  # a pose that has left its covariance?
+                    d2, known, lin = rel(ekf, z, r, d2, ev.t)
+                with ekf.linearised_at(lin):  # the iterated EKF's update (relocalise.py)
+                    assoc, res = associate_update(
+                        ekf, z, r, d2, p.gate_chi2, p.ambiguity_margin, known
+                    )
             if self.relocaliser is not None:  # its window keeps what the map left unexplained
                 self.relocaliser.unexplained(ev.t, z, r, assoc)
             pairs = assoc.pairs
