@@ -79,7 +79,7 @@ class EkfUpdates:
     robot_updates: list
     P: np.ndarray  # the covariance's used part (EkfSlam.P)
     # the pose the lamp model is linearised at (None: the state's own; linearised_at)
-    lin_pose: np.ndarray | None = None
+    lin_pose: np.ndarray | None
 
     @contextmanager
     def linearised_at(self, pose: np.ndarray | None) -> Iterator[None]:

@@ -244,21 +244,20 @@ class SlamRunner:
         self.anchor.frame(ekf, self.preint, ev.t, z, r)
         if m:
             d2 = ekf.individual_compatibility(z, r)
-            # JCBB's association when the relocalisation test made it; the iterate when
-            known, lin = None, None  # it relocalised (the update is linearised there)
             rel, p = self.relocaliser, self.params
+            # a frame the relocalisation test would not test is updated at once; else the
+            # test (a pose that has left its covariance?) gives JCBB's association when it
+            # made it, and the iterate when it relocalised (the update is linearised there)
             done = rel.update_if_explained(ekf, z, r, d2) if rel is not None else None
-            if done is not None:  # a frame the relocalisation test would not test
-                assoc, res = done
-            else:
-                if rel is not None:  # a pose that has left its covariance?
+            if done is None:
+                known, lin = None, None
+                if rel is not None:
                     d2, known, lin = rel(ekf, z, r, d2, ev.t)
                 with ekf.linearised_at(lin):  # the iterated EKF's update (relocalise.py)
-                    assoc, res = associate_update(
-                        ekf, z, r, d2, p.gate_chi2, p.ambiguity_margin, known
-                    )
-            if self.relocaliser is not None:  # its window keeps what the map left unexplained
-                self.relocaliser.unexplained(ev.t, z, r, assoc)
+                    done = associate_update(ekf, z, r, d2, p.gate_chi2, p.ambiguity_margin, known)
+            assoc, res = done
+            if rel is not None:  # its window keeps what the map left unexplained
+                rel.unexplained(ev.t, z, r, assoc)
             pairs = assoc.pairs
             if pairs and self.calibration is not None:
                 self.preint.mark()  # an update: the calibration Jacobian's next instrument
@@ -285,7 +284,7 @@ class SlamRunner:
                     self.health.observe(ev.t, float(d2[j, i]), 2)
             self.counts["ambiguous"] += len(assoc.ambiguous)
             if m and ekf.n_lamps:
-                rel, explained = self.relocaliser, len(pairs) + len(assoc.ambiguous)
+                explained = len(pairs) + len(assoc.ambiguous)
                 if rel is not None and rel.explained_before is not None:  # relocalised: what
                     explained = rel.explained_before  # the filter explained as it stood
                 self.health.observe_frame(ev.t, m, explained)
