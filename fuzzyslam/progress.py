@@ -18,39 +18,94 @@ def enabled() -> bool:
 
 
 class Progress:
-    """A stderr progress bar over a known amount of work (e.g. seconds of log)."""
+    """Progress over a known amount of work (e.g. seconds of log) on stderr.
 
-    def __init__(self, total: float, label: str, show: bool = True) -> None:
+    On a terminal: a bar. Anywhere else (stderr a file or a pipe: CI, nohup): the label when
+    the work starts, a line ``LABEL: P % after S s`` at most every ``interval_s`` seconds,
+    and ``LABEL: done in S s`` when the work ends without an error (an error is the
+    command's own one line). Off when FUZZYSLAM_NO_PROGRESS is set or ``show`` is false.
+
+    Parameters
+    ----------
+    total : float
+        The amount of work (the unit of :meth:`update_to`).
+    label : str
+        The bar's label and every line's prefix.
+    show : bool
+        False: no display (a caller drawing beside another display).
+    stream : file-like, optional
+        Where to write (default: sys.stderr).
+    clock : callable, optional
+        Monotonic seconds (default: time.monotonic); tests pass their own.
+    interval_s : float
+        Longest silence between two lines (lines mode), seconds.
+    """
+
+    def __init__(
+        self,
+        total: float,
+        label: str,
+        show: bool = True,
+        stream=None,
+        clock=None,
+        interval_s: float = 30.0,
+    ) -> None:
+        import time
+
         self.total = max(float(total), 1e-9)
         self.label = label
+        self.stream = stream if stream is not None else sys.stderr
+        self.clock = clock or time.monotonic
+        self.interval_s = interval_s
         self._bar = None
         self._done = 0
-        if show and enabled():  # show=False: a caller drawing beside another display
+        isatty = getattr(self.stream, "isatty", lambda: False)
+        if not (show and enabled()):
+            self.mode = "off"
+        elif isatty():
+            self.mode = "bar"
             self._bar = click.progressbar(
-                length=1000, label=label, file=sys.stderr, show_eta=True, show_percent=True
+                length=1000, label=label, file=self.stream, show_eta=True, show_percent=True
             )
             self._bar.__enter__()
+        else:
+            self.mode = "lines"
+            self.t0 = self.last = self.clock()
+            self._line(label)
+
+    def _line(self, text: str) -> None:
+        click.echo(text, file=self.stream)
+        self.stream.flush()
+        self.last = self.clock()
 
     def update_to(self, amount: float) -> None:
-        """Advance the bar to ``amount`` out of ``total``."""
-        if self._bar is None:
+        """Advance to ``amount`` out of ``total``."""
+        if self.mode == "off":
             return
         target = int(1000 * min(max(amount / self.total, 0.0), 1.0))
-        if target > self._done:
+        if target <= self._done:
+            return
+        if self._bar is not None:
             self._bar.update(target - self._done)
-            self._done = target
+        elif self.clock() - self.last >= self.interval_s:  # lines mode: at most one a period
+            self._line(f"{self.label}: {target / 10:.0f} % after {self.clock() - self.t0:.0f} s")
+        self._done = target
 
-    def close(self) -> None:
+    def close(self, ok: bool = True) -> None:
+        """End the display; ``ok``: the work ended without an error (lines mode says so)."""
         if self._bar is not None:
             self.update_to(self.total)
             self._bar.__exit__(None, None, None)
             self._bar = None
+        elif self.mode == "lines" and ok:
+            self._line(f"{self.label}: done in {self.clock() - self.t0:.1f} s")
+        self.mode = "off"
 
     def __enter__(self) -> Progress:
         return self
 
-    def __exit__(self, *exc: object) -> None:
-        self.close()
+    def __exit__(self, exc_type: object, *exc: object) -> None:
+        self.close(ok=exc_type is None)
 
 
 def iterate(items: Iterable[T], length: int, label: str) -> Iterator[T]:
@@ -135,7 +190,7 @@ class PlanProgress:
 
     def _start_bar(self) -> None:
         if self.mode == "bar" and self._bar is None:
-            self._bar = Progress(self._total, self.label)
+            self._bar = Progress(self._total, self.label, stream=self.stream)
 
     def step_done(self, key: str, seconds: float, n_done: int, where: str, cost_done: float):
         """A step finished: a line (lines mode) or the bar moved (bar mode)."""
