@@ -39,11 +39,13 @@ alone, a second agreeing one, or ambiguous rings leaning the same way, can); the
 applied is then the formed rings' weighted mean, and the bump is placed midway between
 the last agreeing ring and the test's first ring. Rings forming no fix (no wall, ambiguous
 wall, no corridor) neither break nor extend a streak (``recover_window_s`` bounds its
-span), and rings at oblique junctions (candidate corridors not at right angles) are no
-evidence: there the FLM's wall was measured 7-14 deg off for 3-6 rings in a row
-(paper_bumps.yaml, the corners of the 70-degree corridor, 4 of 5 seeds), which
-consistency cannot tell from a bump. A bump is not in the covariance, so only the
-heading fixes can vouch for the pose from which a new lamp is initialised: the aid flags
+span), and rings at unsure junctions are no evidence: oblique ones (candidate corridors
+not at right angles), where the FLM's wall was measured 7-14 deg off for 3-6 rings in a
+row (paper_bumps.yaml, the corners of the 70-degree corridor, 4 of 5 seeds), which
+consistency cannot tell from a bump, and those whose candidates all run one way (no
+junction the map knows of: the walls seen may be a corridor's the map has no reference
+for; ``fixes.bump_recovery.unsure_junction``). A bump is not in the covariance, so only
+the heading fixes can vouch for the pose from which a new lamp is initialised: the aid flags
 ``pose_suspect`` (``run`` then creates no new lamp, it would be a duplicate) unless the
 latest ring's fix agrees with the prediction (NIS <= ``suspect_chi2``), and from a
 disagreement (gated, NIS above ``suspect_chi2``, or a recovery) until a fix that agrees
@@ -91,10 +93,10 @@ from fuzzyslam.fixes.base import FixAid
 from fuzzyslam.fixes.bump_recovery import (
     bump_position,
     formed,
-    oblique,
     recovery_streak,
     sequential_streak,
     streak_offset,
+    unsure_junction,
 )
 from fuzzyslam.fixes.heading_measure import (  # the paper's measurement; re-exported here
     HEADING_FIELDS,
@@ -198,7 +200,8 @@ class HeadingFixAid(FixAid):
         d = decide_heading_fix(
             t, wall, self.refs, pose, ekf.pose_cov, self.params, corridor=corridor
         )
-        d = replace(d, odometry=odo_heading, oblique=why == "junction" and oblique(cands),
+        junction = why == "junction"
+        d = replace(d, odometry=odo_heading, unsure_junction=junction and unsure_junction(cands),
                     x=x0, y=y0)  # fmt: skip
         history = window.single if window is not None else self.decisions
         recover = d.reason == "gated"
