@@ -966,6 +966,39 @@ def test_consistent_gated_rings_near_one_corridor_only_do_not_recover():
     assert not any(d.unsure_junction for d in aid.decisions)
 
 
+def test_position_unresolved_once_the_ellipse_outgrows_the_junction_margin():
+    """The heading aid picks its corridor at the mean position, regions within
+    junction_margin competing: from the first ring at which the position's 99 % ellipse
+    (semi-major axis sqrt(chi2_2(0.99) lambda_max), chi2_2(0.99) = -2 ln 0.01) reaches
+    beyond that margin, the choice is a guess, and filter_health says so (reason
+    position_unresolved, at that ring). lambda_max of [[a, b], [b, a]] is a + |b|."""
+    from fuzzyslam.slam.health import DivergenceMonitor
+    from fuzzyslam.slam.run_results import filter_health
+
+    margin = FixParams().junction_margin
+    lam_edge = margin**2 / (-2.0 * math.log(0.01))  # 0.4343 m^2 for 2 m
+    a = 0.9 * lam_edge
+    ekf = OdoEkf([0.0, 0.0, 0.0], np.diag([a, a, 1e-4]))
+    aid = HeadingFixAid([corridor_ref(0.0)], FixParams(flm_rings=1), lambda r, m: None,
+                        lambda f: None, 0.0)  # fmt: skip
+    health = filter_health({"s_regularised": 0, "p_repaired": 0}, DivergenceMonitor(), 0.0,
+                           [], None, [aid])  # fmt: skip
+    for j, b in enumerate([0.0, 0.09 * lam_edge, 0.11 * lam_edge, 0.0]):
+        ekf.P[0, 1] = ekf.P[1, 0] = b  # lambda_max = a + b: 0.9, 0.99, 1.01, 0.9 lam_edge
+        aid.on_ring(0.25 * j, sonar_ring(0.25 * j), MOUNTS, ekf)
+        if j == 1:
+            assert aid.trouble() is None
+    assert aid.trouble() == ("position_unresolved", 0.5)  # the first ring beyond, kept
+    summary = aid.summary()
+    assert summary.position_unresolved_at == 0.5
+    assert summary.position_sigma_max_m == pytest.approx(math.sqrt(1.01 * lam_edge), abs=1e-4)
+    assert not health.diverged  # before
+    health = filter_health({"s_regularised": 0, "p_repaired": 0}, DivergenceMonitor(), 0.0,
+                           [], None, [aid])  # fmt: skip
+    assert health.diverged and health.reasons == ["position_unresolved"]
+    assert health.diverged_at == 0.5
+
+
 # --- what the fixes need from the SLAM stage ----------------------------------------------
 
 

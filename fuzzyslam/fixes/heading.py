@@ -115,6 +115,7 @@ from fuzzyslam.maps.flm import RecentRings
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import wrap_angle
 from fuzzyslam.slam.events import FilterView
+from fuzzyslam.slam.health import chi2_quantile
 
 __all__ = ["HEADING_FIELDS", "FlmSource", "HeadingDecision", "HeadingFixAid", "WallLike",
            "decide_heading_fix", "nearest_candidate", "select_corridor"]  # fmt: skip
@@ -149,6 +150,9 @@ class HeadingFixAid(FixAid):
         self.wall_direction = wall_direction
         self.decisions: list[HeadingDecision] = []
         self.recoveries = 0
+        # the robot's position uncertainty against the corridor choice (``trouble``)
+        self.position_sigma_max = 0.0
+        self.position_unresolved_at: float | None = None
         self._last_ok_xy: np.ndarray | None = None  # position at the last accepted fix
         # the last formed fix disagreed with the prediction (NIS above suspect_chi2, or
         # gated): ``run`` then creates no new lamp (it would be a duplicate)
@@ -183,6 +187,7 @@ class HeadingFixAid(FixAid):
             window.push(t, ring, ekf)
         pose = ekf.pose
         x0, y0 = float(pose[0]), float(pose[1])
+        self._watch_position(t, ekf.pose_cov)
         odo_heading = float(ekf.odometry_pose[2])
         period = math.pi / 2 if self.params.right_angles else math.pi
         cands, why = select_corridor(pose[:2], self.refs, period, self.params.junction_margin)
@@ -256,6 +261,54 @@ class HeadingFixAid(FixAid):
                 self._last_ok_xy = ekf.pose[:2]
         self._update_suspicion(single, d)
         self.decisions.append(replace(d, x=x0, y=y0))
+        self._watch_position(t, ekf.pose_cov)  # a recovery inflates it
+
+    def _watch_position(self, t: float, cov: np.ndarray) -> None:
+        """Track the position's largest standard deviation, and the first ring at which
+        its 99 % ellipse's semi-major axis, sqrt(chi2_2(0.99) lambda_max(P_xy)), exceeds
+        ``junction_margin`` (``trouble``); asked before and after the ring's fix.
+
+        The corridor a fix is taken from is chosen at the filter's mean position
+        (``select_corridor``), regions within ``junction_margin`` of it competing; once
+        the filter itself puts the robot farther than that from its mean, a region it
+        does not consider may be the one it is in, and the fixes rest on a guess. This
+        happens without lamps, when a recovery inflates the position by the drift a
+        wrong heading may have caused, (v d)^2, over a long d: after a false 90-degree
+        recovery on the quick world's dark lap (seeds 9, 10, 12 before junction rings
+        of one direction were ruled out as bump evidence: sigma 3.5-6.2 m, errors of
+        10-19 m), or a 10-degree bump in a corridor the map has no reference for (seed
+        10 since: sigma 1.26 m, error up to 69 cm).
+
+        Parameters
+        ----------
+        t : float
+            The ring's log time (s).
+        cov : ndarray, shape (3, 3)
+            The robot's covariance.
+        """
+        a, b, c = float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1])
+        lam = 0.5 * (a + c) + math.hypot(0.5 * (a - c), b)  # the 2x2 block's largest
+        self.position_sigma_max = max(self.position_sigma_max, math.sqrt(max(lam, 0.0)))
+        margin = self.params.junction_margin
+        if (
+            self.position_unresolved_at is None
+            and margin > 0
+            and chi2_quantile(0.99, 2) * lam > margin * margin
+        ):
+            self.position_unresolved_at = t
+
+    def trouble(self) -> tuple[str, float] | None:
+        """The aid's finding for the run's ``filter_health`` (slam/run_results.py):
+        ("position_unresolved", the time) once the position's 99 % ellipse outgrew
+        ``junction_margin`` (``_watch_position``), else None.
+
+        Returns
+        -------
+        (str, float) or None
+        """
+        if self.position_unresolved_at is None:
+            return None
+        return "position_unresolved", self.position_unresolved_at
 
     def _agrees(self, d: HeadingDecision) -> bool:
         """A formed fix within the gate whose NIS is at most ``suspect_chi2``."""
@@ -346,6 +399,8 @@ class HeadingFixAid(FixAid):
             multi_ring_fixes_formed=self.window.formed if self.window is not None else 0,
             reasons=dict(sorted(reasons.items())),
             mean_nis=float(nis.mean()) if nis.size else None,
+            position_sigma_max_m=round(self.position_sigma_max, 4),
+            position_unresolved_at=self.position_unresolved_at,
         )
 
     def messages(self, topics: Any, start: float | None = None) -> list:
