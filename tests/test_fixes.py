@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import csv
 import math
+from dataclasses import replace
 from types import SimpleNamespace
 
 import numpy as np
@@ -930,7 +931,7 @@ def test_consistent_gated_rings_at_an_oblique_junction_do_not_recover(other_deg,
     refs = [corridor_ref(0.0, 0), corridor_ref(math.radians(other_deg), 1)]
     aid, ekf, _ = _bump_walk(refs, [0.0] * 6, [0.0] * 6)
     reasons = [d.reason for d in aid.decisions]
-    assert all(d.oblique != recovers for d in aid.decisions)
+    assert all(d.unsure_junction != recovers for d in aid.decisions)
     assert reasons[:3] == ["gated", "gated", "recovered" if recovers else "gated"]
     assert aid.recoveries == int(recovers)
     assert set(reasons[3:]) == ({"ok"} if recovers else {"gated"})
@@ -939,6 +940,63 @@ def test_consistent_gated_rings_at_an_oblique_junction_do_not_recover(other_deg,
         # nor does the sequential test recover from them
         aid, _, _ = _bump_walk(refs, [0.0] * 6, [0.0] * 6, params=FixParams(flm_rings=1))
         assert aid.recoveries == 0
+
+
+def test_consistent_gated_rings_near_one_corridor_only_do_not_recover():
+    """Outside every region, with the regions near it (junction_margin) all running one
+    way, the robot is at no junction the map knows of: the wall it sees may be a
+    corridor's the map has no reference for (the quick world's dark lap, seeds 9, 10
+    and 12: three such rings 81-90 deg off recovered a correct heading and the pose was
+    lost). However many agree, no recovery from them, by either rule; the same rings
+    inside the region are a bump, recovered."""
+    near = corridor_ref(0.0, 0, half_length=2.0)  # region x in [-2, 2]
+    aid, ekf, _ = _bump_walk([near], [0.0] * 6, [0.0] * 6, xy=(3.0, 0.0))
+    assert all(d.unsure_junction and d.reason == "gated" for d in aid.decisions)
+    assert aid.recoveries == 0 and ekf.updates == 0
+    sequential = FixParams(flm_rings=1)
+    aid, _, _ = _bump_walk([near], [0.0] * 6, [0.0] * 6, xy=(3.0, 0.0), params=sequential)
+    assert aid.recoveries == 0
+    # two collinear pieces of one corridor, the robot in the gap: still one direction
+    other = corridor_ref(0.0, 1, half_length=2.0)
+    other = replace(other, region=other.region + np.array([6.0, 0.0]))  # x in [4, 8]
+    aid, _, _ = _bump_walk([near, other], [0.0] * 6, [0.0] * 6, xy=(3.0, 0.0))
+    assert aid.recoveries == 0
+    aid, _, _ = _bump_walk([near], [0.0] * 6, [0.0] * 6, xy=(1.0, 0.0))
+    assert [d.reason for d in aid.decisions][:3] == ["gated", "gated", "recovered"]
+    assert not any(d.unsure_junction for d in aid.decisions)
+
+
+def test_position_unresolved_once_the_ellipse_outgrows_the_junction_margin():
+    """The heading aid picks its corridor at the mean position, regions within
+    junction_margin competing: from the first ring at which the position's 99 % ellipse
+    (semi-major axis sqrt(chi2_2(0.99) lambda_max), chi2_2(0.99) = -2 ln 0.01) reaches
+    beyond that margin, the choice is a guess, and filter_health says so (reason
+    position_unresolved, at that ring). lambda_max of [[a, b], [b, a]] is a + |b|."""
+    from fuzzyslam.slam.health import DivergenceMonitor
+    from fuzzyslam.slam.run_results import filter_health
+
+    margin = FixParams().junction_margin
+    lam_edge = margin**2 / (-2.0 * math.log(0.01))  # 0.4343 m^2 for 2 m
+    a = 0.9 * lam_edge
+    ekf = OdoEkf([0.0, 0.0, 0.0], np.diag([a, a, 1e-4]))
+    aid = HeadingFixAid([corridor_ref(0.0)], FixParams(flm_rings=1), lambda r, m: None,
+                        lambda f: None, 0.0)  # fmt: skip
+    health = filter_health({"s_regularised": 0, "p_repaired": 0}, DivergenceMonitor(), 0.0,
+                           [], None, [aid])  # fmt: skip
+    for j, b in enumerate([0.0, 0.09 * lam_edge, 0.11 * lam_edge, 0.0]):
+        ekf.P[0, 1] = ekf.P[1, 0] = b  # lambda_max = a + b: 0.9, 0.99, 1.01, 0.9 lam_edge
+        aid.on_ring(0.25 * j, sonar_ring(0.25 * j), MOUNTS, ekf)
+        if j == 1:
+            assert aid.trouble() is None
+    assert aid.trouble() == ("position_unresolved", 0.5)  # the first ring beyond, kept
+    summary = aid.summary()
+    assert summary.position_unresolved_at == 0.5
+    assert summary.position_sigma_max_m == pytest.approx(math.sqrt(1.01 * lam_edge), abs=1e-4)
+    assert not health.diverged  # before
+    health = filter_health({"s_regularised": 0, "p_repaired": 0}, DivergenceMonitor(), 0.0,
+                           [], None, [aid])  # fmt: skip
+    assert health.diverged and health.reasons == ["position_unresolved"]
+    assert health.diverged_at == 0.5
 
 
 # --- what the fixes need from the SLAM stage ----------------------------------------------

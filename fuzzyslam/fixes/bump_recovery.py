@@ -3,7 +3,7 @@ the streak of consistent gated single-ring fixes that calls for a recovery
 (:func:`recovery_streak`), the sequential test that calls for one as soon as the rings'
 evidence suffices (:func:`sequential_streak`, :func:`jump_log_odds`), their common
 offset from dead reckoning (:func:`streak_offset`), and which rings count as evidence
-(:func:`formed`, not at an :func:`oblique` junction; :func:`ring_evidence`).
+(:func:`formed`, not at an :func:`unsure_junction`; :func:`ring_evidence`).
 
 The sequential test [ours, after Wald, "Sequential tests of statistical hypotheses",
 Ann. Math. Stat. 16(2), 1945, with a mixture over the unknown jump]. A bump turns the
@@ -68,6 +68,56 @@ def formed(d: HeadingDecision) -> bool:
         Reason ok, gated or recovered, with a finite measurement.
     """
     return d.reason in ("ok", "gated", "recovered") and math.isfinite(d.measured)
+
+
+def one_direction(refs: Sequence[Reference]) -> bool:
+    """Candidate corridors that all run one way: reference angles within 1 deg mod pi.
+
+    Parameters
+    ----------
+    refs : sequence of Reference
+        The candidate corridors (at least one).
+
+    Returns
+    -------
+    bool
+        Every reference angle within 1 deg of the first's, mod pi.
+    """
+    a0 = refs[0].angle
+    return all(
+        abs(float(wrap_angle_period(r.angle - a0, math.pi))) <= math.radians(1.0) for r in refs
+    )
+
+
+def unsure_junction(refs: Sequence[Reference]) -> bool:
+    """A junction (outside every corridor region, or in regions of different angles)
+    whose rings are no bump evidence: its candidate corridors are :func:`oblique`, or
+    they all run one way (:func:`one_direction`).
+
+    Oblique: the FLM's wall was measured 7-14 deg off for 3-6 rings in a row at the
+    corners of the 70-degree corridor (paper_bumps.yaml, 4 of 5 seeds), which
+    consistency cannot tell from a bump. One direction: outside every region, with the
+    regions near it all parallel, the robot is at no junction the map knows of; it is
+    beyond a region's trimmed end, or in a corridor the map has no reference for (a
+    one-lap map's path-based segments can miss one, ``maps/references.py``), whose
+    walls, consistently seen for many rings, make a gated streak as long as the robot
+    stays there: as likely that corridor as a bump. Measured on the quick world with
+    every lamp off in run 2 (docs/models.md sec. 9): seeds 9 and 12, in the start
+    corridor's half the map has no reference for, 1.7 m from the left corridor's
+    region, three junction rings 89-90 deg off recovered a correct heading (the
+    position variance inflated to 12-16 m^2, the pose lost); seed 10, in the left
+    corridor (no reference), 81 deg off against the top corridor's.
+
+    Parameters
+    ----------
+    refs : sequence of Reference
+        The candidate corridors (at least one).
+
+    Returns
+    -------
+    bool
+    """
+    return oblique(refs) or one_direction(refs)
 
 
 def oblique(refs: Sequence[Reference]) -> bool:
@@ -251,11 +301,12 @@ def recovery_streak(
     ``history`` (all within ``recover_window_s``), all gated, whose measurements
     agree with one another (fixes/heading.py's module docstring, "Bumps").
 
-    Evidence rings are the formed fixes (ok, gated, recovered) outside oblique
+    Evidence rings are the formed fixes (ok, gated, recovered) outside unsure
     junctions: a ring that forms no fix (no wall, ambiguous wall or heading, no
     corridor) is skipped, neither breaking nor extending the streak, and so is a ring
-    at an oblique junction (its fixes can be off by a consistent 7-14 deg for several
-    rings). An ok or recovered evidence ring ends the streak.
+    at an :func:`unsure_junction` (oblique corridors, whose fixes can be off by a
+    consistent 7-14 deg for several rings, or one direction only, which may be another
+    corridor's). An ok or recovered evidence ring ends the streak.
 
     Agreement: a bump is a step between the true and the dead-reckoning headings, so
     over a streak of about a second the offsets u_i = measured_i - odometry_i are one
@@ -279,7 +330,7 @@ def recovery_streak(
         The streak, newest first (``d`` first), or [] when no recovery is due.
     """
     k = params.recover_after
-    if k <= 0 or d.oblique or d.reason != "gated" or not formed(d):
+    if k <= 0 or d.unsure_junction or d.reason != "gated" or not formed(d):
         return []
     if abs(float(wrap_angle(d.measured - d.predicted))) > math.radians(params.recover_max_deg):
         return []  # as likely another corridor's walls as a bump (recover_max_deg)
@@ -287,7 +338,7 @@ def recovery_streak(
     for x in reversed(history):
         if len(last) >= k or x.t < d.t - params.recover_window_s:
             break
-        if not formed(x) or x.oblique:
+        if not formed(x) or x.unsure_junction:
             continue
         if x.reason != "gated":
             return []

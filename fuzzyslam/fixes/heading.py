@@ -39,11 +39,13 @@ alone, a second agreeing one, or ambiguous rings leaning the same way, can); the
 applied is then the formed rings' weighted mean, and the bump is placed midway between
 the last agreeing ring and the test's first ring. Rings forming no fix (no wall, ambiguous
 wall, no corridor) neither break nor extend a streak (``recover_window_s`` bounds its
-span), and rings at oblique junctions (candidate corridors not at right angles) are no
-evidence: there the FLM's wall was measured 7-14 deg off for 3-6 rings in a row
-(paper_bumps.yaml, the corners of the 70-degree corridor, 4 of 5 seeds), which
-consistency cannot tell from a bump. A bump is not in the covariance, so only the
-heading fixes can vouch for the pose from which a new lamp is initialised: the aid flags
+span), and rings at unsure junctions are no evidence: oblique ones (candidate corridors
+not at right angles), where the FLM's wall was measured 7-14 deg off for 3-6 rings in a
+row (paper_bumps.yaml, the corners of the 70-degree corridor, 4 of 5 seeds), which
+consistency cannot tell from a bump, and those whose candidates all run one way (no
+junction the map knows of: the walls seen may be a corridor's the map has no reference
+for; ``fixes.bump_recovery.unsure_junction``). A bump is not in the covariance, so only
+the heading fixes can vouch for the pose from which a new lamp is initialised: the aid flags
 ``pose_suspect`` (``run`` then creates no new lamp, it would be a duplicate) unless the
 latest ring's fix agrees with the prediction (NIS <= ``suspect_chi2``), and from a
 disagreement (gated, NIS above ``suspect_chi2``, or a recovery) until a fix that agrees
@@ -91,10 +93,10 @@ from fuzzyslam.fixes.base import FixAid
 from fuzzyslam.fixes.bump_recovery import (
     bump_position,
     formed,
-    oblique,
     recovery_streak,
     sequential_streak,
     streak_offset,
+    unsure_junction,
 )
 from fuzzyslam.fixes.heading_measure import (  # the paper's measurement; re-exported here
     HEADING_FIELDS,
@@ -113,6 +115,7 @@ from fuzzyslam.maps.flm import RecentRings
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import wrap_angle
 from fuzzyslam.slam.events import FilterView
+from fuzzyslam.slam.health import chi2_quantile
 
 __all__ = ["HEADING_FIELDS", "FlmSource", "HeadingDecision", "HeadingFixAid", "WallLike",
            "decide_heading_fix", "nearest_candidate", "select_corridor"]  # fmt: skip
@@ -147,6 +150,9 @@ class HeadingFixAid(FixAid):
         self.wall_direction = wall_direction
         self.decisions: list[HeadingDecision] = []
         self.recoveries = 0
+        # the robot's position uncertainty against the corridor choice (``trouble``)
+        self.position_sigma_max = 0.0
+        self.position_unresolved_at: float | None = None
         self._last_ok_xy: np.ndarray | None = None  # position at the last accepted fix
         # the last formed fix disagreed with the prediction (NIS above suspect_chi2, or
         # gated): ``run`` then creates no new lamp (it would be a duplicate)
@@ -181,6 +187,7 @@ class HeadingFixAid(FixAid):
             window.push(t, ring, ekf)
         pose = ekf.pose
         x0, y0 = float(pose[0]), float(pose[1])
+        self._watch_position(t, ekf.pose_cov)
         odo_heading = float(ekf.odometry_pose[2])
         period = math.pi / 2 if self.params.right_angles else math.pi
         cands, why = select_corridor(pose[:2], self.refs, period, self.params.junction_margin)
@@ -198,7 +205,8 @@ class HeadingFixAid(FixAid):
         d = decide_heading_fix(
             t, wall, self.refs, pose, ekf.pose_cov, self.params, corridor=corridor
         )
-        d = replace(d, odometry=odo_heading, oblique=why == "junction" and oblique(cands),
+        junction = why == "junction"
+        d = replace(d, odometry=odo_heading, unsure_junction=junction and unsure_junction(cands),
                     x=x0, y=y0)  # fmt: skip
         history = window.single if window is not None else self.decisions
         recover = d.reason == "gated"
@@ -253,6 +261,54 @@ class HeadingFixAid(FixAid):
                 self._last_ok_xy = ekf.pose[:2]
         self._update_suspicion(single, d)
         self.decisions.append(replace(d, x=x0, y=y0))
+        self._watch_position(t, ekf.pose_cov)  # a recovery inflates it
+
+    def _watch_position(self, t: float, cov: np.ndarray) -> None:
+        """Track the position's largest standard deviation, and the first ring at which
+        its 99 % ellipse's semi-major axis, sqrt(chi2_2(0.99) lambda_max(P_xy)), exceeds
+        ``junction_margin`` (``trouble``); asked before and after the ring's fix.
+
+        The corridor a fix is taken from is chosen at the filter's mean position
+        (``select_corridor``), regions within ``junction_margin`` of it competing; once
+        the filter itself puts the robot farther than that from its mean, a region it
+        does not consider may be the one it is in, and the fixes rest on a guess. This
+        happens without lamps, when a recovery inflates the position by the drift a
+        wrong heading may have caused, (v d)^2, over a long d: after a false 90-degree
+        recovery on the quick world's dark lap (seeds 9, 10, 12 before junction rings
+        of one direction were ruled out as bump evidence: sigma 3.5-6.2 m, errors of
+        10-19 m), or a 10-degree bump in a corridor the map has no reference for (seed
+        10 since: sigma 1.26 m, error up to 69 cm).
+
+        Parameters
+        ----------
+        t : float
+            The ring's log time (s).
+        cov : ndarray, shape (3, 3)
+            The robot's covariance.
+        """
+        a, b, c = float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1])
+        lam = 0.5 * (a + c) + math.hypot(0.5 * (a - c), b)  # the 2x2 block's largest
+        self.position_sigma_max = max(self.position_sigma_max, math.sqrt(max(lam, 0.0)))
+        margin = self.params.junction_margin
+        if (
+            self.position_unresolved_at is None
+            and margin > 0
+            and chi2_quantile(0.99, 2) * lam > margin * margin
+        ):
+            self.position_unresolved_at = t
+
+    def trouble(self) -> tuple[str, float] | None:
+        """The aid's finding for the run's ``filter_health`` (slam/run_results.py):
+        ("position_unresolved", the time) once the position's 99 % ellipse outgrew
+        ``junction_margin`` (``_watch_position``), else None.
+
+        Returns
+        -------
+        (str, float) or None
+        """
+        if self.position_unresolved_at is None:
+            return None
+        return "position_unresolved", self.position_unresolved_at
 
     def _agrees(self, d: HeadingDecision) -> bool:
         """A formed fix within the gate whose NIS is at most ``suspect_chi2``."""
@@ -343,6 +399,8 @@ class HeadingFixAid(FixAid):
             multi_ring_fixes_formed=self.window.formed if self.window is not None else 0,
             reasons=dict(sorted(reasons.items())),
             mean_nis=float(nis.mean()) if nis.size else None,
+            position_sigma_max_m=round(self.position_sigma_max, 4),
+            position_unresolved_at=self.position_unresolved_at,
         )
 
     def messages(self, topics: Any, start: float | None = None) -> list:

@@ -47,8 +47,9 @@ class HeadingDecision:
     # the dead-reckoning heading at the ring (EkfSlam.odometry_pose; the filter's when
     # absent): the bump recovery's reference for the measurements' consistency
     odometry: float = math.nan
-    # at an oblique junction (candidate corridors not at right angles): no bump evidence
-    oblique: bool = False
+    # at a junction whose rings are no bump evidence (fixes/bump_recovery.py
+    # unsure_junction: candidate corridors not at right angles, or all one way)
+    unsure_junction: bool = False
     # the filter's position at the ring, before the fix (where a viewer draws it)
     x: float = math.nan
     y: float = math.nan

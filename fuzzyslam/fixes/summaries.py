@@ -7,6 +7,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from fuzzyslam.summary import OMIT
+
 
 @dataclass(frozen=True, kw_only=True)
 class HeadingSummary:
@@ -20,6 +22,11 @@ class HeadingSummary:
     multi_ring_fixes_formed: int
     reasons: dict[str, int]
     mean_nis: float | None  # of the accepted fixes (None: none)
+    # the robot's largest position standard deviation at a ring (m), and the first ring at
+    # which the 99 % position ellipse outgrew fixes.junction_margin (None: never), from
+    # when the corridor a fix is taken from is a guess (HeadingFixAid.trouble)
+    position_sigma_max_m: float = OMIT
+    position_unresolved_at: float | None = OMIT
 
 
 @dataclass(frozen=True, kw_only=True)

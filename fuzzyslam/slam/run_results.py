@@ -7,7 +7,9 @@ a counter or health figure left out is a ``TypeError`` where it is made."""
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -79,6 +81,7 @@ def filter_health(
     gap_s: float,
     lamps: list[LampRecord],
     map_motion: MapMotionMonitor | None = None,
+    aids: Sequence[Any] = (),
 ) -> FilterHealth:
     """The filter's health at the end of a run: the guards' and windows' counts; the map
     turned untrustworthy (orphan landmarks, :func:`~fuzzyslam.slam.health.orphan_landmarks`)
@@ -96,6 +99,10 @@ def filter_health(
         The mapped lamps (birth times, observation counts).
     map_motion : MapMotionMonitor, optional
         The runner's landmark motion windows (reason ``map_motion``).
+    aids : sequence, optional
+        The fix plug-ins; one with a ``trouble()`` that answers (reason, time) adds that
+        reason (the heading aid's ``position_unresolved``: the position's 99 % ellipse
+        wider than the margin of its corridor choice, fixes/heading.py).
 
     Returns
     -------
@@ -123,6 +130,13 @@ def filter_health(
             reasons.append("map_motion")
             t = map_motion.diverged_at
             diverged_at = t if diverged_at is None else min(diverged_at, t)
+            diverged = True
+    for aid in aids:
+        trouble = getattr(aid, "trouble", None)
+        found = trouble() if trouble is not None else None
+        if found is not None:
+            reasons.append(found[0])
+            diverged_at = found[1] if diverged_at is None else min(diverged_at, found[1])
             diverged = True
     return FilterHealth(
         **guards,

@@ -251,7 +251,8 @@ def _tell(summary: RunSummary, cfg: Config | None = None) -> None:
     health = summary.filter_health
     if health.diverged:
         note(
-            f"filter_health: the filter looks inconsistent from t = {health.diverged_at:.3f} s "
+            "filter_health: the filter looks inconsistent or lost from "
+            f"t = {health.diverged_at:.3f} s "
             f"({', '.join(health.reasons) or 'NIS or association windows'}; see "
             "the summary's filter_health): do not trust this estimate"
         )
@@ -378,7 +379,7 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs, model=N
         res.delay_estimate = tap.estimate(cfg.slam.odometry_delay_s)
     # numerical guards, the divergence tests, orphan landmarks (slam/run_results.py)
     res.health = filter_health(
-        res.ekf.guards, runner.health, inputs.gap_seconds, res.lamps, runner.map_motion
+        res.ekf.guards, runner.health, inputs.gap_seconds, res.lamps, runner.map_motion, aids
     )
     if inputs.lamp_source == "detections":
         res.counts = replace(res.counts, detections_own_covariance=inputs.own_covariances)
