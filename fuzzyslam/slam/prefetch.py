@@ -1,0 +1,237 @@
+"""The run's input events made in a forked child process, on a second core (issue 16).
+
+``LogInputs.events`` (chunk decompression, CDR decoding, lamp detection, the sonar
+rings: pure per message, in order) costs about a third of a lamps-only run. A forked
+child makes them and sends them to the filter in the parent as pickled batches of
+``BATCH`` events through a pipe; the two run at once on two cores (a thread could not:
+both sides are short Python steps under one GIL; ``benchmarks/bench_prefetch.py``).
+
+The child's own reading state comes back with its last batch
+(``LogInputs.read_state``: glitch counts, first problem, gaps, ring statistics, the
+reader's damage), so that every output, summary.json included, is the one-process
+run's, byte for byte. An exception of the child is raised in the parent as the same
+type and message (its traceback as the cause, for ``--debug``), after the events made
+before it, as the one-process run would.
+
+Memory: the pipe's buffer (64 KiB on Linux) and one batch on each side; the child
+blocks while the parent lags. The child is reaped on every path out of
+:func:`input_events` (the end of the events, the parent's exception, Ctrl-C, SIGTERM
+raised as KeyboardInterrupt by the CLI): SIGKILL, then ``waitpid``. If the parent dies
+without that (SIGKILL), the child gets SIGKILL too (``prctl(PR_SET_PDEATHSIG)`` on
+Linux), and a write to the pipe without a reader ends it elsewhere.
+
+When: :func:`wanted` (``fuzzyslam run``'s default, ``--no-prefetch`` or
+``FUZZYSLAM_PREFETCH=0`` to turn it off): a platform with ``fork`` (Linux), at least
+two CPUs usable by this process (``os.sched_getaffinity``), not a daemonic process nor a
+Dask worker. ``reproduce`` and ``sweep`` steps never ask for it: their pool already
+keeps every core busy.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import pickle
+import signal
+import sys
+import traceback
+from collections.abc import Iterator
+from typing import TYPE_CHECKING
+
+from fuzzyslam.slam.events import Event
+
+if TYPE_CHECKING:  # multiprocessing loaded only for a child (16 ms of start-up)
+    from multiprocessing.connection import Connection
+
+BATCH = 256  # events per pickled batch (bench_prefetch.py: 64 and 256 alike, 1 slower)
+ENV = "FUZZYSLAM_PREFETCH"  # "0" (or off, no, false): never a child process
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
+
+
+def wanted(requested: bool = True) -> bool:
+    """Whether a run reads its events in a child process (module docstring).
+
+    Parameters
+    ----------
+    requested : bool
+        The caller asks for it (``fuzzyslam run``'s ``--prefetch``, its default).
+
+    Returns
+    -------
+    bool
+        ``requested``, the environment does not turn it off, and the process may fork
+        a child onto a second CPU.
+    """
+    if not requested or os.environ.get(ENV, "1").strip().lower() in ("0", "off", "no", "false"):
+        return False
+    if not sys.platform.startswith("linux") or not hasattr(os, "sched_getaffinity"):
+        return False
+    if len(os.sched_getaffinity(0)) < 2:
+        return False
+    mp = sys.modules.get("multiprocessing.process")  # not loaded: no pool's worker
+    if mp is not None and mp.current_process().daemon:
+        return False
+    dist = sys.modules.get("distributed")  # a Dask worker's tasks share its cores
+    if dist is not None:
+        try:
+            dist.get_worker()
+            return False
+        except ValueError:
+            pass
+    return True
+
+
+@contextlib.contextmanager
+def input_events(
+    inputs, rings: bool = False, ring_start: float | None = None, child: bool = False
+) -> Iterator[Iterator[Event]]:
+    """``inputs.events(rings, ring_start)``, made in this process or (``child``) in a
+    forked child process; on leaving, the child is killed if still running and reaped.
+
+    Parameters
+    ----------
+    inputs : slam.inputs.LogInputs
+        The opened log; with ``child``, its reading state is the child's once the
+        events are all read (``LogInputs.restore_read_state``).
+    rings : bool
+        Merge in the range sensor's rings (``LogInputs.events``).
+    ring_start : float or None
+        Rings from this log time (s) on.
+    child : bool
+        Make the events in a child process (:func:`wanted` decides).
+
+    Yields
+    ------
+    iterator of Odom, Frame or RingEvent
+        The events, in time order.
+    """
+    if not child:
+        yield inputs.events(rings, ring_start)
+        return
+    from multiprocessing.connection import Connection
+
+    for stream in (sys.stdout, sys.stderr):  # nothing buffered is written twice
+        with contextlib.suppress(Exception):
+            stream.flush()
+    read_fd, write_fd = os.pipe()
+    parent = os.getpid()
+    pid = os.fork()
+    if pid == 0:  # the child: never returns
+        os.close(read_fd)
+        code = 1
+        try:
+            _child(Connection(write_fd, readable=False), parent, inputs, rings, ring_start)
+            code = 0
+        finally:
+            os._exit(code)
+    os.close(write_fd)
+    conn = Connection(read_fd, writable=False)
+    try:
+        yield _received(conn, inputs, pid)
+    finally:
+        conn.close()
+        _reap(pid)
+
+
+def _child(conn: Connection, parent: int, inputs, rings: bool, ring_start) -> None:
+    """The child's work: the events in batches of ``BATCH``, then the last batch with the
+    reading state; or an exception, pickled (:func:`_error`). Its own exceptions, and a
+    parent gone (a broken pipe), end it quietly."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the CLI's handler would raise here
+    with contextlib.suppress(Exception):  # die with the parent (Linux)
+        import ctypes
+
+        ctypes.CDLL(None).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if os.getppid() != parent:  # the parent died before prctl
+        return
+    try:
+        try:
+            buf: list[Event] = []
+            for ev in inputs.events(rings, ring_start):
+                buf.append(ev)
+                if len(buf) >= BATCH:
+                    conn.send_bytes(pickle.dumps(("events", buf), pickle.HIGHEST_PROTOCOL))
+                    buf = []
+            last = ("end", (buf, inputs.read_state()))
+            conn.send_bytes(pickle.dumps(last, pickle.HIGHEST_PROTOCOL))
+        except OSError as exc:
+            if isinstance(exc, BrokenPipeError):  # the parent stopped reading
+                return
+            conn.send_bytes(_error(exc))
+        except BaseException as exc:
+            conn.send_bytes(_error(exc))
+        conn.close()
+    except OSError:  # the parent stopped reading
+        return
+
+
+def _error(exc: BaseException) -> bytes:
+    """``exc`` for the parent: pickled with its formatted traceback, or, for an exception
+    that does not pickle and unpickle, its module, type name and message."""
+    tb = "".join(traceback.format_exception(exc))
+    try:
+        data = pickle.dumps(exc, pickle.HIGHEST_PROTOCOL)
+        pickle.loads(data)  # an __init__ that the pickled args do not fit fails here
+        return pickle.dumps(("error", (data, None, tb)), pickle.HIGHEST_PROTOCOL)
+    except Exception:
+        named = (type(exc).__module__, type(exc).__qualname__, str(exc))
+        return pickle.dumps(("error", (None, named, tb)), pickle.HIGHEST_PROTOCOL)
+
+
+class ChildTraceback(Exception):
+    """The traceback of an exception raised in the child process (the cause of the
+    exception raised again in the parent: ``--debug`` shows it)."""
+
+    def __init__(self, text: str) -> None:
+        super().__init__(text)
+        self.text = text
+
+    def __str__(self) -> str:
+        return f'\n"""\n{self.text}"""'
+
+
+def _received(conn: Connection, inputs, pid: int) -> Iterator[Event]:
+    """The child's events, in order; then its reading state into ``inputs``."""
+    while True:
+        try:
+            data = conn.recv_bytes()
+        except EOFError:
+            raise RuntimeError(
+                f"the process reading {inputs.reader.path} (pid {pid}) ended without its "
+                "events (killed?)"
+            ) from None
+        kind, payload = pickle.loads(data)
+        if kind == "events":
+            yield from payload
+        elif kind == "end":
+            events, state = payload
+            inputs.restore_read_state(state)
+            yield from events
+            return
+        else:
+            data, named, tb = payload
+            if data is not None:
+                exc = pickle.loads(data)
+            else:  # a stand-in of the same module, name and message
+                module, name, message = named
+                exc = type(name.rsplit(".", 1)[-1], (Exception,), {"__module__": module})(message)
+            raise exc from ChildTraceback(tb)
+
+
+def _reap(pid: int) -> None:
+    """Kill the child (it has sent everything, or is no longer wanted) and wait for it;
+    a second Ctrl-C while waiting kills it again and is raised once it is reaped."""
+    interrupted: BaseException | None = None
+    while True:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+        try:
+            os.waitpid(pid, 0)
+            break
+        except ChildProcessError:
+            break
+        except KeyboardInterrupt as exc:
+            interrupted = exc
+    if interrupted is not None:
+        raise interrupted
