@@ -182,16 +182,25 @@ def test_progress_sees_the_same_times(tmp_path: Path, forks, monkeypatch) -> Non
 
 @pytest.mark.slow
 @pytest.mark.parametrize("fix", ["heading", "pose"])
-def test_fixes_outputs_are_the_same(tmp_path: Path, forks, tiny, fix: str) -> None:  # noqa: F811
+def test_fixes_outputs_are_the_same(tmp_path: Path, forks, tiny, fix: str, monkeypatch) -> None:  # noqa: F811
     """With a map's fixes (from the log's start: the map was frozen at its end) the child
-    also makes the rings, merged in time order: the same files (fixes' CSVs, ring
-    statistics) either way."""
+    also makes the rings, merged in time order, and the heading aid's single-ring walls
+    (``HeadingFixAid.ahead``), which the aid takes instead of computing them: the same
+    files (fixes' CSVs, ring statistics) either way."""
+    from fuzzyslam.fixes.heading import HeadingFixAid
+
+    taken = []
+    real = HeadingFixAid.take_ahead
+    monkeypatch.setattr(
+        HeadingFixAid, "take_ahead", lambda self, ring, v: taken.append(1) or real(self, ring, v)
+    )
     a, b, _ = run_both(
         tmp_path, forks, tiny.log, "--config", tiny.config,
         "--map", tiny.dir / "fgm", "--fix", fix, "--fix-from", "0",
     )  # fmt: skip
     s = assert_same_outputs(a, b)
     assert s["rings"]["rings"] > 100 and s["aids"]
+    assert len(taken) == s["rings"]["rings"]  # every ring's wall came from the child
 
 
 # -- errors -------------------------------------------------------------------------------

@@ -11,10 +11,13 @@ from __future__ import annotations
 import csv
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any, ClassVar, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.fixes.params import FixParams
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 class Row(Protocol):
@@ -67,6 +70,37 @@ class FixAid:
         self.start_time = float(start_time)
         self.decisions: list[Any] = []
         self.before_start = 0
+
+    def ahead(self, ring: Any, mounts: np.ndarray) -> Any:
+        """What the aid computes from a ring and the mounts alone (nothing of the filter),
+        so that it can be computed before the filter reaches the ring: in the child
+        process that makes the events (slam/prefetch.py), handed back through
+        :meth:`take_ahead` just before :meth:`on_ring`. None: nothing (the default).
+
+        Parameters
+        ----------
+        ring : Ring
+            The range ring.
+        mounts : ndarray, shape (M, 3)
+            The sensors' poses in base_link.
+
+        Returns
+        -------
+        object or None
+            Picklable; None when the aid computes nothing ahead.
+        """
+        return None
+
+    def take_ahead(self, ring: Any, value: Any) -> None:
+        """Take :meth:`ahead`'s ``value`` for ``ring``, the next ring :meth:`on_ring` gets.
+
+        Parameters
+        ----------
+        ring : Ring
+            The ring (the object ``on_ring`` will be given).
+        value : object
+            :meth:`ahead`'s answer for it.
+        """
 
     def started(self, t: float) -> bool:
         """Whether the aid acts on a ring at log time ``t`` (counted in ``before_start``

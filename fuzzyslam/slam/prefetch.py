@@ -6,6 +6,12 @@ child makes them and sends them to the filter in the parent as pickled batches o
 ``BATCH`` events through a pipe; the two run at once on two cores (a thread could not:
 both sides are short Python steps under one GIL; ``benchmarks/bench_prefetch.py``).
 
+With aids, the child also computes what each aid can compute from a ring alone
+(``FixAid.ahead``: the heading aid's single-ring FLM and wall direction, a fifth of a
+heading run) and sends it with the ring (``RingEvent.ahead``); the aid takes it instead of
+computing it (``take_ahead``). An exception there is left for the aid to raise itself,
+where the one-process run would.
+
 The child's own reading state comes back with its last batch
 (``LogInputs.read_state``: glitch counts, first problem, gaps, ring statistics, the
 reader's damage), so that every output, summary.json included, is the one-process
@@ -35,10 +41,10 @@ import pickle
 import signal
 import sys
 import traceback
-from collections.abc import Iterator
-from typing import TYPE_CHECKING
+from collections.abc import Iterator, Sequence
+from typing import TYPE_CHECKING, Any
 
-from fuzzyslam.slam.events import Event
+from fuzzyslam.slam.events import Event, RingEvent
 
 if TYPE_CHECKING:  # multiprocessing loaded only for a child (16 ms of start-up)
     from multiprocessing.connection import Connection
@@ -83,7 +89,11 @@ def wanted(requested: bool = True) -> bool:
 
 @contextlib.contextmanager
 def input_events(
-    inputs, rings: bool = False, ring_start: float | None = None, child: bool = False
+    inputs,
+    rings: bool = False,
+    ring_start: float | None = None,
+    child: bool = False,
+    aids: Sequence = (),
 ) -> Iterator[Iterator[Event]]:
     """``inputs.events(rings, ring_start)``, made in this process or (``child``) in a
     forked child process; on leaving, the child is killed if still running and reaped.
@@ -99,6 +109,9 @@ def input_events(
         Rings from this log time (s) on.
     child : bool
         Make the events in a child process (:func:`wanted` decides).
+    aids : sequence of Aid
+        The run's aids, in the runner's order: with ``child``, each ring carries what
+        they compute ahead (``RingEvent.ahead``).
 
     Yields
     ------
@@ -120,7 +133,8 @@ def input_events(
         os.close(read_fd)
         code = 1
         try:
-            _child(Connection(write_fd, readable=False), parent, inputs, rings, ring_start)
+            send = Connection(write_fd, readable=False)
+            _child(send, parent, inputs, rings, ring_start, aids)
             code = 0
         finally:
             os._exit(code)
@@ -133,7 +147,7 @@ def input_events(
         _reap(pid)
 
 
-def _child(conn: Connection, parent: int, inputs, rings: bool, ring_start) -> None:
+def _child(conn: Connection, parent: int, inputs, rings: bool, ring_start, aids) -> None:
     """The child's work: the events in batches of ``BATCH``, then the last batch with the
     reading state; or an exception, pickled (:func:`_error`). Its own exceptions, and a
     parent gone (a broken pipe), end it quietly."""
@@ -148,7 +162,11 @@ def _child(conn: Connection, parent: int, inputs, rings: bool, ring_start) -> No
     try:
         try:
             buf: list[Event] = []
+            ahead = [(getattr(a, "ahead", None), float(a.start_time)) for a in aids]
+            mounts = inputs.mounts
             for ev in inputs.events(rings, ring_start):
+                if ahead and type(ev) is RingEvent:
+                    ev.ahead = _ahead(ahead, ev, mounts)
                 buf.append(ev)
                 if len(buf) >= BATCH:
                     conn.send_bytes(pickle.dumps(("events", buf), pickle.HIGHEST_PROTOCOL))
@@ -164,6 +182,22 @@ def _child(conn: Connection, parent: int, inputs, rings: bool, ring_start) -> No
         conn.close()
     except OSError:  # the parent stopped reading
         return
+
+
+def _ahead(ahead: list, ev: RingEvent, mounts) -> tuple | None:
+    """Per aid (``ahead``: its ``ahead`` method or None, its start time), what it computes
+    from the ring ahead, or None; None for all: nothing. An aid's exception gives None:
+    the aid then computes it itself and raises it where the one-process run would."""
+    out: list[Any] = []
+    for fn, start in ahead:
+        value = None
+        if fn is not None and ev.t >= start:
+            try:
+                value = fn(ev.ring, mounts)
+            except Exception:
+                value = None
+        out.append(value)
+    return tuple(out) if any(v is not None for v in out) else None
 
 
 def _error(exc: BaseException) -> bytes:

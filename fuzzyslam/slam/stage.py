@@ -379,7 +379,7 @@ def _run_filter(
         with Progress(max(inputs.end - inputs.start, 1e-6), "run: EKF-SLAM") as bar:
             t0 = inputs.start
             ring_start = min((a.start_time for a in aids), default=None)
-            with input_events(inputs, bool(aids), ring_start, prefetch) as events:
+            with input_events(inputs, bool(aids), ring_start, prefetch, aids) as events:
                 tap = MotionTap(events) if inputs.lamp_source == "detections" else None
                 res = runner.run(
                     events if tap is None else iter(tap), lambda t: bar.update_to(t - t0), t0=t0
