@@ -162,6 +162,27 @@ def test_read_state_names_everything_reading_changes(tmp_path: Path) -> None:
     assert here.read_state() == there.read_state()
 
 
+def test_the_child_waits_for_a_parent_that_lags(monkeypatch) -> None:
+    """Memory is bounded by the pipe: with its default 64 KiB buffer (less than the
+    sample log's 160 KB of pickled events) the child, ahead of a parent that does not
+    read, sleeps in the pipe's write; the events then all come, those of one process."""
+    monkeypatch.setattr(prefetch, "PIPE_BYTES", 0)
+    cfg = load_config("paper")
+    inputs = open_inputs(SAMPLE, cfg)
+    with prefetch.input_events(inputs, child=True) as events:
+        got = [next(events)]
+        pid = int(Path(f"/proc/self/task/{os.getpid()}/children").read_text().split()[0])
+        t_end = time.monotonic() + 30
+        while "pipe_write" not in Path(f"/proc/{pid}/wchan").read_text():
+            assert time.monotonic() < t_end, "the child never filled the pipe"
+            time.sleep(0.01)
+        assert Path(f"/proc/{pid}/stat").read_text().split()[2] == "S"  # asleep, not done
+        got += list(events)
+    want = list(open_inputs(SAMPLE, cfg).events())
+    assert [pickle.dumps(e) for e in got] == [pickle.dumps(e) for e in want]
+    assert reaped(pid)
+
+
 def test_progress_sees_the_same_times(tmp_path: Path, forks, monkeypatch) -> None:
     """The progress bar (stderr) is driven by the events the filter takes, in the parent:
     the same sequence of updates either way, to the end of the log."""
