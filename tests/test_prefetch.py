@@ -205,15 +205,20 @@ def test_progress_sees_the_same_times(tmp_path: Path, forks, monkeypatch) -> Non
 @pytest.mark.parametrize("fix", ["heading", "pose"])
 def test_fixes_outputs_are_the_same(tmp_path: Path, forks, tiny, fix: str, monkeypatch) -> None:  # noqa: F811
     """With a map's fixes (from the log's start: the map was frozen at its end) the child
-    also makes the rings, merged in time order, and the heading aid's single-ring walls
-    (``HeadingFixAid.ahead``), which the aid takes instead of computing them: the same
-    files (fixes' CSVs, ring statistics) either way."""
+    also makes the rings, merged in time order, the heading aid's single-ring walls
+    (``HeadingFixAid.ahead``), which the aid takes instead of computing them, and, for the
+    pose aid and the change detector, the FLMs (``FlmAhead``): the same files (fixes'
+    CSVs, ring statistics) either way."""
     from fuzzyslam.fixes.heading import HeadingFixAid
+    from fuzzyslam.fixes.heading_measure import FlmSource
 
-    taken = []
-    real = HeadingFixAid.take_ahead
+    taken, seeded = [], []
+    real, real_seed = HeadingFixAid.take_ahead, FlmSource.seed
     monkeypatch.setattr(
         HeadingFixAid, "take_ahead", lambda self, ring, v: taken.append(1) or real(self, ring, v)
+    )
+    monkeypatch.setattr(
+        FlmSource, "seed", lambda self, ring, flm: seeded.append(1) or real_seed(self, ring, flm)
     )
     a, b, _ = run_both(
         tmp_path, forks, tiny.log, "--config", tiny.config,
@@ -222,6 +227,7 @@ def test_fixes_outputs_are_the_same(tmp_path: Path, forks, tiny, fix: str, monke
     s = assert_same_outputs(a, b)
     assert s["rings"]["rings"] > 100 and s["aids"]
     assert len(taken) == s["rings"]["rings"]  # every ring's wall came from the child
+    assert len(seeded) == (2 * s["rings"]["rings"] if fix == "pose" else 0)  # pose, changes
 
 
 # -- errors -------------------------------------------------------------------------------

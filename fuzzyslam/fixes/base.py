@@ -44,6 +44,47 @@ def write_rows(path: Path, fields: Sequence[str], decisions: Iterable[Row]) -> N
         w.writerows(d.row() for d in decisions)
 
 
+class FlmAhead:
+    """Mixin of the aids that read a ring's FLM through a shared ``flm_source``
+    (``heading_measure.FlmSource``; the pose aid, the change detector): the FLM, built
+    ahead in slam/prefetch.py's child process (where the heading aid's ``ahead`` has
+    built it already: the same object, pickled once per batch), seeds the source, so
+    that no aid builds it again (0.37 ms a ring; 28 KB through the pipe, 0.03 ms)."""
+
+    flm_source: Any
+
+    def ahead(self, ring: Any, mounts: np.ndarray) -> tuple | None:
+        """The ring's FLM, in a 1-tuple (``FixAid.ahead``); None for a source that
+        cannot be seeded (a test's function).
+
+        Parameters
+        ----------
+        ring : Ring
+            The sonar ring.
+        mounts : ndarray, shape (M, 3)
+            The sonars' poses in base_link.
+
+        Returns
+        -------
+        (BeliefMap,) or None
+        """
+        if not hasattr(self.flm_source, "seed"):
+            return None
+        return (self.flm_source(ring, mounts),)
+
+    def take_ahead(self, ring: Any, value: tuple) -> None:
+        """Seed the FLM source with :meth:`ahead`'s FLM of ``ring`` (``FixAid.take_ahead``).
+
+        Parameters
+        ----------
+        ring : Ring
+            The ring.
+        value : (BeliefMap,)
+            :meth:`ahead`'s answer.
+        """
+        self.flm_source.seed(ring, value[0])
+
+
 class FixAid:
     """The base of the fix plug-ins: ``start_time``, ``before_start``, ``decisions``
     and ``write(outdir)`` (``csv_name`` with the header ``csv_fields``).
