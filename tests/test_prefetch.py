@@ -254,10 +254,17 @@ def test_errors_in_the_child_are_the_same_line_and_code(
     tmp_path: Path, forks, monkeypatch, kind: str
 ) -> None:
     """An exception raised while making the events (at the 50th frame) ends the run with
-    the same exit code and the same line on stderr either way; nothing written, the
-    child reaped."""
+    the same exit code and the same line on stderr either way, after the filter took the
+    49 frames before it; nothing written, the child reaped."""
+    from fuzzyslam.slam import runner as runner_mod
+
     real = inputs_mod.LogInputs._frame
     calls = [0]
+    taken = []
+    real_frame = runner_mod.SlamRunner.frame
+    monkeypatch.setattr(
+        runner_mod.SlamRunner, "frame", lambda self, ev: taken.append(1) or real_frame(self, ev)
+    )
 
     def frame(self, t, msg):
         calls[0] += 1
@@ -269,14 +276,15 @@ def test_errors_in_the_child_are_the_same_line_and_code(
     got = {}
     for mode in ("prefetch", "no-prefetch"):
         calls[0] = 0
+        taken.clear()
         out = tmp_path / mode
         code, stdout, err = cli("run", SAMPLE, "-o", out, f"--{mode}")
         assert not out.exists() and not leftovers(tmp_path) and stdout == ""
-        got[mode] = (code, error_lines(err))
+        got[mode] = (code, error_lines(err), len(taken))
     assert len(forks) == 1 and reaped(forks[0])
     assert got["prefetch"] == got["no-prefetch"]
-    code, lines = got["prefetch"]
-    assert len(lines) == 1
+    code, lines, frames = got["prefetch"]
+    assert len(lines) == 1 and frames == 49
     assert code == {"bug": 1, "unpicklable": 1}.get(kind, 3)
     if kind == "unpicklable":
         assert "TwoArgs: one and two" in lines[0]

@@ -168,9 +168,9 @@ def _child(conn: Connection, parent: int, inputs, rings: bool, ring_start, aids)
         ctypes.CDLL(None).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
     if os.getppid() != parent:  # the parent died before prctl
         return
+    buf: list[Event] = []
     try:
         try:
-            buf: list[Event] = []
             ahead = [(getattr(a, "ahead", None), float(a.start_time)) for a in aids]
             mounts = inputs.mounts
             for ev in inputs.events(rings, ring_start):
@@ -178,15 +178,15 @@ def _child(conn: Connection, parent: int, inputs, rings: bool, ring_start, aids)
                     ev.ahead = _ahead(ahead, ev, mounts)
                 buf.append(ev)
                 if len(buf) >= BATCH:
-                    conn.send_bytes(pickle.dumps(("events", buf), pickle.HIGHEST_PROTOCOL))
-                    buf = []
+                    batch, buf = buf, []
+                    conn.send_bytes(pickle.dumps(("events", batch), pickle.HIGHEST_PROTOCOL))
             last = ("end", (buf, inputs.read_state()))
             conn.send_bytes(pickle.dumps(last, pickle.HIGHEST_PROTOCOL))
-        except OSError as exc:
-            if isinstance(exc, BrokenPipeError):  # the parent stopped reading
-                return
-            conn.send_bytes(_error(exc))
+        except BrokenPipeError:  # the parent stopped reading
+            return
         except BaseException as exc:
+            with contextlib.suppress(Exception):  # the events made before it, first
+                conn.send_bytes(pickle.dumps(("events", buf), pickle.HIGHEST_PROTOCOL))
             conn.send_bytes(_error(exc))
         conn.close()
     except OSError:  # the parent stopped reading
