@@ -1,5 +1,9 @@
 """Would a producer thread for the input work make ``run`` faster on 2 cores? (issue 16)
 
+(The experiment before ``run`` had its input process: the ``--process`` variant is now
+``fuzzyslam/slam/prefetch.py``, with the child's state sent back; ``run``'s own
+``--prefetch``/``--no-prefetch`` are compared by ``bench_run.py --prefetch``.)
+
     python benchmarks/bench_prefetch.py [LOG.mcap] [--pairs 8] [--batch 64]
         [--chunks | --process] [--map FGMDIR --fix heading|pose]
 

@@ -26,6 +26,14 @@ cost) and whether the outputs of both settings are byte-identical to the old cod
 
     python benchmarks/bench_run.py LOG.mcap --baseline main --calibration --repeat 5
 
+``--prefetch`` times this code's ``fuzzyslam run`` with its events made in a child
+process (``--prefetch``, the default where there are two CPUs) and in one process
+(``--no-prefetch``) alternately (the order swapped every round), fresh processes, on the
+paper log: lamps only, heading and pose fixes; wall and CPU (the child's included: it is
+waited for) medians, and whether the outputs are byte-identical.
+
+    python benchmarks/bench_run.py [LOG.mcap] --prefetch --repeat 5
+
 ``--sample`` (with ``--baseline``) times ``fuzzyslam run data/sample.mcap`` (121 s of log)
 instead, old and new alternately: the command's start-up weighs most there.
 """
@@ -163,6 +171,53 @@ def side_by_side_run(log: Path, rev: str, repeat: int, candidate: str | None = N
                           "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
 
 
+def side_by_side_prefetch(log: Path, repeat: int) -> None:
+    """``fuzzyslam run --no-prefetch`` and ``--prefetch`` (this code) alternately, the
+    order swapped every round: lamps only, heading, pose (module docstring)."""
+    import json
+    import statistics
+
+    sys.path.insert(0, str(Path(__file__).parent))
+    from sidebyside import ROOT, compiled, load, run_cli, same_outputs
+
+    from fuzzyslam.streams.reader import LogReader
+
+    reader = LogReader(log)
+    duration = reader.end - reader.start
+    compiled(ROOT / "fuzzyslam")
+    work = Path(tempfile.mkdtemp(prefix="bench_prefetch."))
+    run_cli(["run", str(log), "-o", str(work / "AB"), "--config", "paper"], None)
+    run_cli(["map", str(log), "--trajectory", str(work / "AB" / "trajectory.tum"),
+             "--landmarks", str(work / "AB" / "landmarks.yaml"), "-o", str(work / "fgm"),
+             "--config", "paper"], None)  # fmt: skip
+    fgm = ["--map", str(work / "fgm"), "--fix"]
+    for name, fix, target in (("lamps only", [], 500), ("heading fixes", [*fgm, "heading"], 300),
+                              ("pose fixes", [*fgm, "pose"], 300)):  # fmt: skip
+        before = load()
+        times: dict[str, list[tuple[float, float]]] = {"one process": [], "child": []}
+        outs = {v: work / f"{name.split()[0]}_{v.replace(' ', '_')}" for v in times}
+        flag = {"one process": "--no-prefetch", "child": "--prefetch"}
+        for i in range(repeat):
+            for v in ("one process", "child") if i % 2 == 0 else ("child", "one process"):
+                args = ["run", str(log), "-o", str(outs[v]), "--config", "paper", *fix, flag[v]]
+                times[v].append(run_cli(args, None))
+        res = {}
+        for v, rows in times.items():
+            walls, cpus = [w for w, _ in rows], [c for _, c in rows]
+            wall, cpu = statistics.median(walls), statistics.median(cpus)
+            res[v] = {"wall_median_s": round(wall, 2), "wall_best_s": round(min(walls), 2),
+                      "cpu_median_s": round(cpu, 2), "cpu_best_s": round(min(cpus), 2),
+                      "real_time_factor_wall": round(duration / wall),
+                      "real_time_factor_cpu": round(duration / cpu)}  # fmt: skip
+        same = same_outputs(outs["one process"], outs["child"])["identical"]
+        print(json.dumps({"run": name, "log_s": round(duration, 1), "repeat": repeat, **res,
+                          "wall_ratio": round(res["one process"]["wall_median_s"]
+                                              / res["child"]["wall_median_s"], 2),
+                          "target_real_time_factor": target,
+                          "outputs_byte_identical": same,
+                          "load_before": before, "load_after": load()}, indent=2))  # fmt: skip
+
+
 def side_by_side_calibration(log: Path, rev: str, repeat: int,
                               candidate: str | None = None) -> None:  # fmt: skip
     """Old (``rev``) and new ``fuzzyslam run`` lamps only, calibration off and on, the four
@@ -240,6 +295,8 @@ def main() -> None:
                     help="with --baseline: run the sample log instead (start-up)")  # fmt: skip
     ap.add_argument("--calibration", action="store_true",
                     help="with --baseline: lamps only, calibration off and on")  # fmt: skip
+    ap.add_argument("--prefetch", action="store_true",
+                    help="this code with and without its input process, alternately")  # fmt: skip
     ap.add_argument("--candidate", metavar="REV", default=None,
                     help="the new code: a git revision (default: the installed code)")  # fmt: skip
     args = ap.parse_args()
@@ -256,6 +313,9 @@ def main() -> None:
                 check=True,
                 stdout=subprocess.DEVNULL,
             )
+    if args.prefetch:
+        side_by_side_prefetch(log.resolve(), args.repeat)
+        return
     if args.baseline and args.calibration:
         side_by_side_calibration(log.resolve(), args.baseline, args.repeat, args.candidate)
         return

@@ -33,6 +33,12 @@ class InputError(FuzzyslamError):
         self.problem = problem
         super().__init__(f"{self.path}: {problem}")
 
+    def __reduce__(self) -> tuple:
+        """Pickled as (type, path, problem): the exception comes back whole from a child
+        process (``slam/prefetch.py``); ``Exception``'s own pickling would call
+        ``__init__`` with the one-line message alone."""
+        return type(self), (self.path, self.problem)
+
 
 class ConfigError(InputError):
     """A configuration file has an unknown key, a wrong type or an out-of-range value."""

@@ -89,6 +89,13 @@ def _parse_pose(_ctx, _param, value: str | None) -> tuple[float, float, float] |
     "slam.calibrate). Default with --map and slam.calibrate: the map's calibration.yaml "
     "(the calibration at its freeze time) when it has one.",
 )
+@click.option(
+    "--prefetch/--no-prefetch",
+    default=True,
+    help="Read and decode the log in a second process, on a second core (default: on "
+    "where the platform forks and this process may use >= 2 CPUs; FUZZYSLAM_PREFETCH=0 "
+    "turns it off too). The outputs are the same either way.",
+)
 @seed_option
 def run_command(
     log: Path,
@@ -101,6 +108,7 @@ def run_command(
     start_pose,
     adapt_noise,
     calibration,
+    prefetch,
     seed,
 ) -> None:
     """EKF-SLAM on ceiling lamps over the recorded LOG (MCAP), written into OUTDIR.
@@ -137,5 +145,6 @@ def run_command(
             start_pose,
             adapt_noise,
             calibration,
+            prefetch,
         )
     )

@@ -11,10 +11,13 @@ from __future__ import annotations
 import csv
 from collections.abc import Iterable, Sequence
 from pathlib import Path
-from typing import Any, ClassVar, Protocol
+from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.fixes.params import FixParams
+
+if TYPE_CHECKING:
+    import numpy as np
 
 
 class Row(Protocol):
@@ -39,6 +42,47 @@ def write_rows(path: Path, fields: Sequence[str], decisions: Iterable[Row]) -> N
         w = csv.writer(fh, lineterminator="\n")
         w.writerow(fields)
         w.writerows(d.row() for d in decisions)
+
+
+class FlmAhead:
+    """Mixin of the aids that read a ring's FLM through a shared ``flm_source``
+    (``heading_measure.FlmSource``; the pose aid, the change detector): the FLM, built
+    ahead in slam/prefetch.py's child process (where the heading aid's ``ahead`` has
+    built it already: the same object, pickled once per batch), seeds the source, so
+    that no aid builds it again (0.37 ms a ring; 28 KB through the pipe, 0.03 ms)."""
+
+    flm_source: Any
+
+    def ahead(self, ring: Any, mounts: np.ndarray) -> tuple | None:
+        """The ring's FLM, in a 1-tuple (``FixAid.ahead``); None for a source that
+        cannot be seeded (a test's function).
+
+        Parameters
+        ----------
+        ring : Ring
+            The sonar ring.
+        mounts : ndarray, shape (M, 3)
+            The sonars' poses in base_link.
+
+        Returns
+        -------
+        (BeliefMap,) or None
+        """
+        if not hasattr(self.flm_source, "seed"):
+            return None
+        return (self.flm_source(ring, mounts),)
+
+    def take_ahead(self, ring: Any, value: tuple) -> None:
+        """Seed the FLM source with :meth:`ahead`'s FLM of ``ring`` (``FixAid.take_ahead``).
+
+        Parameters
+        ----------
+        ring : Ring
+            The ring.
+        value : (BeliefMap,)
+            :meth:`ahead`'s answer.
+        """
+        self.flm_source.seed(ring, value[0])
 
 
 class FixAid:
@@ -67,6 +111,37 @@ class FixAid:
         self.start_time = float(start_time)
         self.decisions: list[Any] = []
         self.before_start = 0
+
+    def ahead(self, ring: Any, mounts: np.ndarray) -> Any:
+        """What the aid computes from a ring and the mounts alone (nothing of the filter),
+        so that it can be computed before the filter reaches the ring: in the child
+        process that makes the events (slam/prefetch.py), handed back through
+        :meth:`take_ahead` just before :meth:`on_ring`. None: nothing (the default).
+
+        Parameters
+        ----------
+        ring : Ring
+            The range ring.
+        mounts : ndarray, shape (M, 3)
+            The sensors' poses in base_link.
+
+        Returns
+        -------
+        object or None
+            Picklable; None when the aid computes nothing ahead.
+        """
+        return None
+
+    def take_ahead(self, ring: Any, value: Any) -> None:
+        """Take :meth:`ahead`'s ``value`` for ``ring``, the next ring :meth:`on_ring` gets.
+
+        Parameters
+        ----------
+        ring : Ring
+            The ring (the object ``on_ring`` will be given).
+        value : object
+            :meth:`ahead`'s answer for it.
+        """
 
     def started(self, t: float) -> bool:
         """Whether the aid acts on a ring at log time ``t`` (counted in ``before_start``

@@ -29,7 +29,7 @@ import cv2
 import numpy as np
 
 from fuzzyslam.fileio import atomic_path
-from fuzzyslam.fixes.base import FixAid
+from fuzzyslam.fixes.base import FixAid, FlmAhead
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.summaries import ChangeSummary
 from fuzzyslam.maps.grid import BeliefMap
@@ -204,7 +204,7 @@ def detect_changes(
     ]
 
 
-class ChangeDetector(FixAid):
+class ChangeDetector(FlmAhead, FixAid):
     """Plug-in of ``fuzzyslam run``: change detections per ring, written to changes.csv
     (its ``decisions`` are the detections, :class:`Change`)."""
 

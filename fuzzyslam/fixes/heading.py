@@ -84,7 +84,7 @@ from __future__ import annotations
 import math
 from collections import Counter
 from collections.abc import Callable, Sequence
-from dataclasses import replace
+from dataclasses import is_dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -164,6 +164,47 @@ class HeadingFixAid(FixAid):
             if rings_flm is not None and params.flm_rings > 1
             else None
         )
+        self._ahead: tuple[Any, WallLike | None] | None = None  # (ring, wall): take_ahead
+
+    def ahead(self, ring: Any, mounts: np.ndarray) -> tuple[WallLike | None] | None:
+        """The ring's single-ring wall, ``wall_direction(flm_source(ring, mounts))``: the
+        ring and the mounts alone decide it, so it may be computed before the filter
+        reaches the ring (``FixAid.ahead``; in slam/prefetch.py's child process, on
+        another core). It is the FLM and Hough of :meth:`on_ring`, whose answer is the
+        same whichever process computed it; without the Hough plane (``plane``, for the
+        maps' figures only, 100 KB a ring through the pipe: 0.14 s of pickling a run).
+
+        Parameters
+        ----------
+        ring : Ring
+            The sonar ring.
+        mounts : ndarray, shape (M, 3)
+            The sonars' poses in base_link.
+
+        Returns
+        -------
+        (WallLike or None,) or None
+            The wall (None: no wall found), in a 1-tuple; None without an FLM source.
+        """
+        if self.flm_source is None or self.wall_direction is None:
+            return None
+        wall = self.wall_direction(self.flm_source(ring, mounts))
+        if is_dataclass(wall) and getattr(wall, "plane", None) is not None:
+            wall = replace(wall, plane=None)  # decide_heading_fix reads none of it
+        return (wall,)
+
+    def take_ahead(self, ring: Any, value: tuple[WallLike | None]) -> None:
+        """:meth:`ahead`'s answer for ``ring``, used by the next :meth:`on_ring` if it is
+        given that ring (``FixAid.take_ahead``).
+
+        Parameters
+        ----------
+        ring : Ring
+            The ring.
+        value : (WallLike or None,)
+            :meth:`ahead`'s answer.
+        """
+        self._ahead = (ring, value[0])
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
         """Form the ring's heading measurement (the paper's, on its FLM or the multi-ring
@@ -180,6 +221,7 @@ class HeadingFixAid(FixAid):
         ekf : FilterView
             The filter (its pose, covariance, dead reckoning, ``update_robot``).
         """
+        ahead, self._ahead = self._ahead, None
         if not self.started(t):
             return
         window = self.window
@@ -200,7 +242,10 @@ class HeadingFixAid(FixAid):
             if window is not None:
                 window.single.append(self.decisions[-1])  # skipped by recovery_streak
             return
-        wall = self.wall_direction(self.flm_source(ring, mounts))
+        if ahead is not None and ahead[0] is ring:  # computed ahead (take_ahead)
+            wall = ahead[1]
+        else:
+            wall = self.wall_direction(self.flm_source(ring, mounts))
         corridor = (cands, why)  # asked once per ring, at this pose
         d = decide_heading_fix(
             t, wall, self.refs, pose, ekf.pose_cov, self.params, corridor=corridor

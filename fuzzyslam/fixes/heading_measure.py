@@ -267,3 +267,16 @@ class FlmSource:
             self._flm = self._build(ring, mounts)
             self._key = key
         return self._flm
+
+    def seed(self, ring: Any, flm: BeliefMap) -> None:
+        """Take ``flm`` as the ring's FLM, built elsewhere of the same ring and mounts (in
+        slam/prefetch.py's child process: ``fixes.base.FlmAhead``).
+
+        Parameters
+        ----------
+        ring : Ring
+            The ring (the object the aids will be given).
+        flm : BeliefMap
+            Its FLM.
+        """
+        self._flm, self._key = flm, (id(ring), float(ring.t))

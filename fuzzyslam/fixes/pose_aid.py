@@ -36,7 +36,7 @@ from typing import Any
 
 import numpy as np
 
-from fuzzyslam.fixes.base import FixAid
+from fuzzyslam.fixes.base import FixAid, FlmAhead
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.pose_match import PoseMatch, PoseMatcher
 from fuzzyslam.fixes.summaries import PoseSummary
@@ -102,6 +102,7 @@ class PoseDecision:
         list of str
             t, accepted, reason, x, y, theta, sxx, syy, stt, degenerate, nis.
         """
+
         def num(v: float) -> str:
             return "" if not np.isfinite(v) else f"{v:.9g}"
 
@@ -117,7 +118,7 @@ class PoseDecision:
         ]
 
 
-class PoseFixAid(FixAid):
+class PoseFixAid(FlmAhead, FixAid):
     """Plug-in of ``fuzzyslam run``: full-pose fixes update_robot(z, R, idx=[0, 1, 2])."""
 
     kind = "pose"

@@ -41,8 +41,13 @@ class Frame:
 
 @dataclass(slots=True)
 class RingEvent:
+    """A range ring; ``ahead``: per aid, what it computed from the ring alone before the
+    filter reached it (``FixAid.ahead``, made in slam/prefetch.py's child process), or
+    None (nothing: the aid computes it itself)."""
+
     t: float
     ring: Ring
+    ahead: tuple | None = None
 
 
 Event = Odom | Frame | RingEvent
@@ -98,7 +103,11 @@ class FilterView(Protocol):
 
 
 class Aid(Protocol):
-    """A plug-in that corrects the filter from sonar rings (heading or pose fixes)."""
+    """A plug-in that corrects the filter from sonar rings (heading or pose fixes).
+
+    Optional: ``ahead(ring, mounts)``, what it computes from a ring alone, and
+    ``take_ahead(ring, value)`` (``fixes.base.FixAid``): slam/prefetch.py's child
+    process computes it before the filter reaches the ring."""
 
     start_time: float
 

@@ -38,6 +38,7 @@ import math
 import os
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
 
@@ -60,6 +61,9 @@ from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.sonar import RingStats
 
 CAMERA_FRAME = "ceiling_camera"
+# what reading the events changes that the run reports (with the reader's damage):
+# LogInputs.read_state, which slam/prefetch.py sends back from the child that read them
+READ_STATE = ("warnings", "first_problem", "gap_seconds", "own_covariances", "ring_stats")
 ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
 
 
@@ -105,6 +109,31 @@ class LogInputs:
         self.warnings[key] = self.warnings.get(key, 0) + 1
         if problem and not self.first_problem:
             self.first_problem = problem
+
+    def read_state(self) -> dict[str, Any]:
+        """What reading the events has changed that the run reports: the fields of
+        ``READ_STATE`` (glitch counts, the first problem, odometry gaps, ring
+        statistics) and the reader's damage (``LogReader.damage_state``).
+
+        Returns
+        -------
+        dict
+            Field name -> value (``damage``: the reader's); picklable.
+        """
+        return {k: getattr(self, k) for k in READ_STATE} | {"damage": self.reader.damage_state()}
+
+    def restore_read_state(self, state: dict[str, Any]) -> None:
+        """Take the :meth:`read_state` of another reader of the same log (the child
+        process of slam/prefetch.py that made the events).
+
+        Parameters
+        ----------
+        state : dict
+            :meth:`read_state`'s answer.
+        """
+        for k in READ_STATE:
+            setattr(self, k, state[k])
+        self.reader.restore_damage(state["damage"])
 
     # -- streams --------------------------------------------------------------------------
 

@@ -347,12 +347,16 @@ class SlamRunner:
         Parameters
         ----------
         ev : RingEvent
-            The ring at ``ev.t`` (s): ``ev.ring`` (ranges (M,), max ranges (M,), fov).
+            The ring at ``ev.t`` (s): ``ev.ring`` (ranges (M,), max ranges (M,), fov);
+            ``ev.ahead``: what each aid computed from it ahead (``take_ahead``), or None.
         """
         self.counts["rings"] += 1
         self.flush()
-        for aid in self.aids:
+        ahead = ev.ahead
+        for k, aid in enumerate(self.aids):
             if ev.t >= aid.start_time:
+                if ahead is not None and ahead[k] is not None:  # computed in slam/prefetch.py
+                    aid.take_ahead(ev.ring, ahead[k])
                 aid.on_ring(ev.t, ev.ring, self.mounts, self.ekf)
                 self.counts["aid_calls"] += 1
         for idx, res in self.ekf.robot_updates:

@@ -26,6 +26,8 @@ from fuzzyslam.slam.inputs import open_inputs
 from fuzzyslam.slam.latency import MotionTap, delay_note
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
 from fuzzyslam.slam.outputs import StreamingOutputs, write_outputs, write_summary
+from fuzzyslam.slam.prefetch import input_events
+from fuzzyslam.slam.prefetch import wanted as prefetch_wanted
 from fuzzyslam.slam.run_results import filter_health
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
 from fuzzyslam.slam.summary import RunSummary
@@ -107,15 +109,18 @@ def run(
     start_pose: tuple[float, float, float] | None = None,
     adapt_noise: bool = False,
     calibration: str | os.PathLike | None = None,
+    prefetch: bool = False,
 ) -> dict:
     """The ``run`` stage on ``log`` into ``outdir``: the config ``config`` (a YAML path or
     an embedded name; default paper.yaml) with ``seed``; with ``map_dir``, the fixes
     ``fix`` (heading|pose|none; default the config's ``fixes.mode``) from ``fix_from``
     (``fixes.aids.aids_for_log``, the plug-ins loaded on demand); ``calibration``: a
     run's calibration.yaml to start the odometry self-calibration from (default with a
-    map and ``slam.calibrate``: the map's, its calibration at the freeze time). Returns
-    the JSON summary (:class:`RunSummary` as JSON); UsageError for options that do not
-    go together.
+    map and ``slam.calibrate``: the map's, its calibration at the freeze time);
+    ``prefetch``: the log's events made in a child process on a second core where
+    ``slam.prefetch.wanted`` allows it (``fuzzyslam run``'s default; off for reproduce's
+    steps). Returns the JSON summary (:class:`RunSummary` as JSON); UsageError for
+    options that do not go together.
 
     Parameters
     ----------
@@ -141,6 +146,8 @@ def run(
         ``--adapt-noise``.
     calibration : path or None
         ``--calibration``.
+    prefetch : bool
+        ``--prefetch`` / ``--no-prefetch``.
 
     Returns
     -------
@@ -171,6 +178,7 @@ def run(
         ranges=ranges,
         start_pose=start_pose,
         calibration=calibration,
+        prefetch=prefetch_wanted(prefetch),
     )
 
 
@@ -183,6 +191,7 @@ def run_stage(
     ranges: str | None = None,
     start_pose: tuple[float, float, float] | None = None,
     calibration: str | os.PathLike | None = None,
+    prefetch: bool = False,
 ) -> dict[str, Any]:
     """Run EKF-SLAM on ``log`` and write docs/contracts.md sec. 2 files into ``outdir``.
 
@@ -199,7 +208,8 @@ def run_stage(
     start pose (slam/inputs.py). ``calibration``: a calibration.yaml whose factors and
     covariance start the odometry self-calibration (slam/calibration.py; implies it).
     A log without lamps and without aids is dead reckoning: a one-line note on stderr
-    says so.
+    says so. ``prefetch``: the events are made in a forked child process
+    (slam/prefetch.py; the outputs are the same, byte for byte).
 
     Parameters
     ----------
@@ -219,6 +229,8 @@ def run_stage(
         Overrides the log's start pose.
     calibration : path or None
         A calibration.yaml to start from.
+    prefetch : bool
+        Make the events in a child process (as decided: ``prefetch.wanted``).
 
     Returns
     -------
@@ -228,7 +240,7 @@ def run_stage(
     if adapt_noise:
         if aids:
             raise ValueError("adapt_noise: the aids of a first pass cannot be reused")
-        first = _run_once(log, outdir, cfg, [], True, ranges, start_pose, calibration)
+        first = _run_once(log, outdir, cfg, [], True, ranges, start_pose, calibration, prefetch)
         est = first.noise_estimate or None
         if est:
             cfg = copy.deepcopy(cfg)
@@ -239,11 +251,12 @@ def run_stage(
             ):
                 if est[key] is not None:  # None: not measurable (slam.noise)
                     setattr(cfg.slam, key, float(est[key]))
-        summary = _run_once(log, outdir, cfg, [], True, ranges, start_pose, calibration)
+        summary = _run_once(log, outdir, cfg, [], True, ranges, start_pose, calibration, prefetch)
         summary = replace(summary, noise_adapted=est)
         _tell(summary)
         return as_json(summary)
-    return as_json(_run_once(log, outdir, cfg, aids, False, ranges, start_pose, calibration))
+    once = _run_once(log, outdir, cfg, aids, False, ranges, start_pose, calibration, prefetch)
+    return as_json(once)
 
 
 def _tell(summary: RunSummary, cfg: Config | None = None) -> None:
@@ -285,6 +298,7 @@ def _run_once(
     ranges: str | None = None,
     start_pose: tuple[float, float, float] | None = None,
     calibration: str | os.PathLike | None = None,
+    prefetch: bool = False,
 ) -> RunSummary:
     aids = list(aids or [])
     wall0 = time.perf_counter()
@@ -299,7 +313,7 @@ def _run_once(
     model = calibration_model(inputs, cfg, calibration)
     staged = OutputDir(outdir, owns=OPTIONAL_OUTPUTS)
     with staged as tmp, StreamingOutputs(tmp, cfg, inputs.start_pose, inputs.frames) as streamed:
-        res = _run_filter(inputs, cfg, aids, streamed, model)
+        res = _run_filter(inputs, cfg, aids, streamed, model, prefetch)
         for aid in aids:
             aid.write(tmp)
         extra = [  # the aids' messages for estimates.mcap (/map stamped at the log's start)
@@ -339,9 +353,12 @@ def calibration_model(inputs, cfg: Config, path) -> cal.Calibration | None:
     return model if path is None else calibration_files.load(path, model)
 
 
-def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs, model=None) -> SlamResult:
-    """The filter over the log's events (rows to ``sink``), its health, input checks;
-    with ``model``, the calibration files into the sink's directory."""
+def _run_filter(
+    inputs, cfg: Config, aids: list, sink: StreamingOutputs, model=None, prefetch: bool = False
+) -> SlamResult:
+    """The filter over the log's events (rows to ``sink``; made in a child process with
+    ``prefetch``), its health, input checks; with ``model``, the calibration files into
+    the sink's directory."""
     runner = SlamRunner(
         cfg.slam,
         inputs.start_pose,
@@ -363,11 +380,11 @@ def _run_filter(inputs, cfg: Config, aids: list, sink: StreamingOutputs, model=N
         with Progress(max(inputs.end - inputs.start, 1e-6), "run: EKF-SLAM") as bar:
             t0 = inputs.start
             ring_start = min((a.start_time for a in aids), default=None)
-            events = inputs.events(rings=bool(aids), ring_start=ring_start)
-            tap = MotionTap(events) if inputs.lamp_source == "detections" else None
-            res = runner.run(
-                events if tap is None else iter(tap), lambda t: bar.update_to(t - t0), t0=t0
-            )
+            with input_events(inputs, bool(aids), ring_start, prefetch, aids) as events:
+                tap = MotionTap(events) if inputs.lamp_source == "detections" else None
+                res = runner.run(
+                    events if tap is None else iter(tap), lambda t: bar.update_to(t - t0), t0=t0
+                )
     finally:
         if cv2 is not None:
             cv2.setNumThreads(threads)

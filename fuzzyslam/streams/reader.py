@@ -164,6 +164,15 @@ class LogReader:
             "undecodable": int(d.undecodable),
         }
 
+    def damage_state(self) -> Damage:
+        """The damage counted so far, whole (``damage()``'s source): what a child process
+        that read the messages (``slam/prefetch.py``) sends back to :meth:`restore_damage`."""
+        return self._damage
+
+    def restore_damage(self, damage: Damage) -> None:
+        """Take the damage counted by another reader of the same file (``damage_state``)."""
+        self._damage = damage
+
     def has(self, topic: str) -> bool:
         return topic in self.topics
 

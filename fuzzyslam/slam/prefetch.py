@@ -1,0 +1,280 @@
+"""The run's input events made in a forked child process, on a second core (issue 16).
+
+``LogInputs.events`` (chunk decompression, CDR decoding, lamp detection, the sonar
+rings: pure per message, in order) costs about a third of a lamps-only run. A forked
+child makes them and sends them to the filter in the parent as pickled batches of
+``BATCH`` events through a pipe; the two run at once on two cores (a thread could not:
+both sides are short Python steps under one GIL; ``benchmarks/bench_prefetch.py``).
+
+With aids, the child also computes what each aid can compute from a ring alone
+(``FixAid.ahead``: the heading aid's single-ring FLM and wall direction, a fifth of a
+heading run) and sends it with the ring (``RingEvent.ahead``); the aid takes it instead of
+computing it (``take_ahead``). An exception there is left for the aid to raise itself,
+where the one-process run would.
+
+The child's own reading state comes back with its last batch
+(``LogInputs.read_state``: glitch counts, first problem, gaps, ring statistics, the
+reader's damage), so that every output, summary.json included, is the one-process
+run's, byte for byte. An exception of the child is raised in the parent as the same
+type and message (its traceback as the cause, for ``--debug``), after the events made
+before it, as the one-process run would.
+
+Memory: the pipe's buffer (``PIPE_BYTES``, 1 MiB) and one batch on each side; the child
+blocks while the parent lags. The child is reaped on every path out of
+:func:`input_events` (the end of the events, the parent's exception, Ctrl-C, SIGTERM
+raised as KeyboardInterrupt by the CLI): SIGKILL, then ``waitpid``. If the parent dies
+without that (SIGKILL), the child gets SIGKILL too (``prctl(PR_SET_PDEATHSIG)`` on
+Linux), and a write to the pipe without a reader ends it elsewhere.
+
+When: :func:`wanted` (``fuzzyslam run``'s default, ``--no-prefetch`` or
+``FUZZYSLAM_PREFETCH=0`` to turn it off): a platform with ``fork`` (Linux), at least
+two CPUs usable by this process (``os.sched_getaffinity``), not a daemonic process nor a
+Dask worker. ``reproduce`` and ``sweep`` steps never ask for it: their pool already
+keeps every core busy.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import os
+import pickle
+import signal
+import sys
+import traceback
+from collections.abc import Iterator, Sequence
+from typing import TYPE_CHECKING, Any
+
+from fuzzyslam.slam.events import Event, RingEvent
+
+if TYPE_CHECKING:  # multiprocessing loaded only for a child (16 ms of start-up)
+    from multiprocessing.connection import Connection
+
+BATCH = 256  # events per pickled batch (bench_prefetch.py: 64 and 256 alike, 1 slower)
+ENV = "FUZZYSLAM_PREFETCH"  # "0" (or off, no, false): never a child process
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
+F_SETPIPE_SZ = 1031  # linux/fcntl.h (fcntl.F_SETPIPE_SZ from Python 3.10, Linux only)
+# the pipe's buffer (Linux's default 64 KiB): 1 MiB lets the child run further ahead of a
+# parent whose steps come in bursts (a multi-ring fix, a relocalisation); paper log, in one
+# warm process, two cores: heading fixes 3.12 s wall with 64 KiB, 2.29 s with 1 MiB
+PIPE_BYTES = 1 << 20
+
+
+def wanted(requested: bool = True) -> bool:
+    """Whether a run reads its events in a child process (module docstring).
+
+    Parameters
+    ----------
+    requested : bool
+        The caller asks for it (``fuzzyslam run``'s ``--prefetch``, its default).
+
+    Returns
+    -------
+    bool
+        ``requested``, the environment does not turn it off, and the process may fork
+        a child onto a second CPU.
+    """
+    if not requested or os.environ.get(ENV, "1").strip().lower() in ("0", "off", "no", "false"):
+        return False
+    if not sys.platform.startswith("linux") or not hasattr(os, "sched_getaffinity"):
+        return False
+    if len(os.sched_getaffinity(0)) < 2:
+        return False
+    mp = sys.modules.get("multiprocessing.process")  # not loaded: no pool's worker
+    if mp is not None and mp.current_process().daemon:
+        return False
+    dist = sys.modules.get("distributed")  # a Dask worker's tasks share its cores
+    if dist is not None:
+        try:
+            dist.get_worker()
+            return False
+        except ValueError:
+            pass
+    return True
+
+
+@contextlib.contextmanager
+def input_events(
+    inputs,
+    rings: bool = False,
+    ring_start: float | None = None,
+    child: bool = False,
+    aids: Sequence = (),
+) -> Iterator[Iterator[Event]]:
+    """``inputs.events(rings, ring_start)``, made in this process or (``child``) in a
+    forked child process; on leaving, the child is killed if still running and reaped.
+
+    Parameters
+    ----------
+    inputs : slam.inputs.LogInputs
+        The opened log; with ``child``, its reading state is the child's once the
+        events are all read (``LogInputs.restore_read_state``).
+    rings : bool
+        Merge in the range sensor's rings (``LogInputs.events``).
+    ring_start : float or None
+        Rings from this log time (s) on.
+    child : bool
+        Make the events in a child process (:func:`wanted` decides).
+    aids : sequence of Aid
+        The run's aids, in the runner's order: with ``child``, each ring carries what
+        they compute ahead (``RingEvent.ahead``).
+
+    Yields
+    ------
+    iterator of Odom, Frame or RingEvent
+        The events, in time order.
+    """
+    if not child:
+        yield inputs.events(rings, ring_start)
+        return
+    import fcntl
+    from multiprocessing.connection import Connection
+
+    for stream in (sys.stdout, sys.stderr):  # nothing buffered is written twice
+        with contextlib.suppress(Exception):
+            stream.flush()
+    read_fd, write_fd = os.pipe()
+    if PIPE_BYTES:
+        with contextlib.suppress(OSError):  # the system's limit (pipe-max-size) is lower
+            fcntl.fcntl(write_fd, F_SETPIPE_SZ, PIPE_BYTES)
+    parent = os.getpid()
+    pid = os.fork()
+    if pid == 0:  # the child: never returns
+        os.close(read_fd)
+        code = 1
+        try:
+            send = Connection(write_fd, readable=False)
+            _child(send, parent, inputs, rings, ring_start, aids)
+            code = 0
+        finally:
+            os._exit(code)
+    os.close(write_fd)
+    conn = Connection(read_fd, writable=False)
+    try:
+        yield _received(conn, inputs, pid)
+    finally:
+        conn.close()
+        _reap(pid)
+
+
+def _child(conn: Connection, parent: int, inputs, rings: bool, ring_start, aids) -> None:
+    """The child's work: the events in batches of ``BATCH``, then the last batch with the
+    reading state; or an exception, pickled (:func:`_error`). Its own exceptions, and a
+    parent gone (a broken pipe), end it quietly."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the CLI's handler would raise here
+    with contextlib.suppress(Exception):  # die with the parent (Linux)
+        import ctypes
+
+        ctypes.CDLL(None).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    if os.getppid() != parent:  # the parent died before prctl
+        return
+    buf: list[Event] = []
+    try:
+        try:
+            ahead = [(getattr(a, "ahead", None), float(a.start_time)) for a in aids]
+            mounts = inputs.mounts
+            for ev in inputs.events(rings, ring_start):
+                if ahead and type(ev) is RingEvent:
+                    ev.ahead = _ahead(ahead, ev, mounts)
+                buf.append(ev)
+                if len(buf) >= BATCH:
+                    batch, buf = buf, []
+                    conn.send_bytes(pickle.dumps(("events", batch), pickle.HIGHEST_PROTOCOL))
+            last = ("end", (buf, inputs.read_state()))
+            conn.send_bytes(pickle.dumps(last, pickle.HIGHEST_PROTOCOL))
+        except BrokenPipeError:  # the parent stopped reading
+            return
+        except BaseException as exc:
+            with contextlib.suppress(Exception):  # the events made before it, first
+                conn.send_bytes(pickle.dumps(("events", buf), pickle.HIGHEST_PROTOCOL))
+            conn.send_bytes(_error(exc))
+        conn.close()
+    except OSError:  # the parent stopped reading
+        return
+
+
+def _ahead(ahead: list, ev: RingEvent, mounts) -> tuple | None:
+    """Per aid (``ahead``: its ``ahead`` method or None, its start time), what it computes
+    from the ring ahead, or None; None for all: nothing. An aid's exception gives None:
+    the aid then computes it itself and raises it where the one-process run would."""
+    out: list[Any] = []
+    for fn, start in ahead:
+        value = None
+        if fn is not None and ev.t >= start:
+            try:
+                value = fn(ev.ring, mounts)
+            except Exception:
+                value = None
+        out.append(value)
+    return tuple(out) if any(v is not None for v in out) else None
+
+
+def _error(exc: BaseException) -> bytes:
+    """``exc`` for the parent: pickled with its formatted traceback, or, for an exception
+    that does not pickle and unpickle, its module, type name and message."""
+    tb = "".join(traceback.format_exception(exc))
+    try:
+        data = pickle.dumps(exc, pickle.HIGHEST_PROTOCOL)
+        pickle.loads(data)  # an __init__ that the pickled args do not fit fails here
+        return pickle.dumps(("error", (data, None, tb)), pickle.HIGHEST_PROTOCOL)
+    except Exception:
+        named = (type(exc).__module__, type(exc).__qualname__, str(exc))
+        return pickle.dumps(("error", (None, named, tb)), pickle.HIGHEST_PROTOCOL)
+
+
+class ChildTraceback(Exception):
+    """The traceback of an exception raised in the child process (the cause of the
+    exception raised again in the parent: ``--debug`` shows it)."""
+
+    def __init__(self, text: str) -> None:
+        super().__init__(text)
+        self.text = text
+
+    def __str__(self) -> str:
+        return f'\n"""\n{self.text}"""'
+
+
+def _received(conn: Connection, inputs, pid: int) -> Iterator[Event]:
+    """The child's events, in order; then its reading state into ``inputs``."""
+    while True:
+        try:
+            data = conn.recv_bytes()
+        except EOFError:
+            raise RuntimeError(
+                f"the process reading {inputs.reader.path} (pid {pid}) ended without its "
+                "events (killed?)"
+            ) from None
+        kind, payload = pickle.loads(data)
+        if kind == "events":
+            yield from payload
+        elif kind == "end":
+            events, state = payload
+            inputs.restore_read_state(state)
+            yield from events
+            return
+        else:
+            data, named, tb = payload
+            if data is not None:
+                exc = pickle.loads(data)
+            else:  # a stand-in of the same module, name and message
+                module, name, message = named
+                exc = type(name.rsplit(".", 1)[-1], (Exception,), {"__module__": module})(message)
+            raise exc from ChildTraceback(tb)
+
+
+def _reap(pid: int) -> None:
+    """Kill the child (it has sent everything, or is no longer wanted) and wait for it;
+    a second Ctrl-C while waiting kills it again and is raised once it is reaped."""
+    interrupted: BaseException | None = None
+    while True:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+        try:
+            os.waitpid(pid, 0)
+            break
+        except ChildProcessError:
+            break
+        except KeyboardInterrupt as exc:
+            interrupted = exc
+    if interrupted is not None:
+        raise interrupted
