@@ -14,6 +14,7 @@ import contextlib
 import ctypes
 import errno
 import json
+import math
 import os
 import pickle
 import signal
@@ -349,8 +350,12 @@ def test_wanted_is_off_where_it_must_be(monkeypatch) -> None:
     import inspect
 
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
+    monkeypatch.setattr(prefetch, "cpu_quota", lambda: math.inf)
     monkeypatch.delenv(prefetch.ENV, raising=False)
     assert prefetch.wanted(True) and not prefetch.wanted(False)
+    monkeypatch.setattr(prefetch, "cpu_quota", lambda: 1.5)  # a container of 1.5 CPUs
+    assert not prefetch.wanted(True)
+    monkeypatch.setattr(prefetch, "cpu_quota", lambda: math.inf)
     for off in ("0", "off", "no", "false"):
         monkeypatch.setenv(prefetch.ENV, off)
         assert not prefetch.wanted(True)
@@ -363,6 +368,25 @@ def test_wanted_is_off_where_it_must_be(monkeypatch) -> None:
     monkeypatch.setattr(mpp.current_process(), "_config", {"daemon": True})
     assert not prefetch.wanted(True)
     assert inspect.signature(stage.run).parameters["prefetch"].default is False
+
+
+@pytest.mark.parametrize(
+    "files, expect",
+    [
+        ({"cpu.max": "max 100000\n"}, math.inf),
+        ({"cpu.max": "150000 100000\n"}, 1.5),
+        ({"cpu/cpu.cfs_quota_us": "200000\n", "cpu/cpu.cfs_period_us": "100000\n"}, 2.0),
+        ({"cpu/cpu.cfs_quota_us": "-1\n", "cpu/cpu.cfs_period_us": "100000\n"}, math.inf),
+        ({"cpu.max": "garbage\n"}, math.inf),
+        ({}, math.inf),
+    ],
+)
+def test_cpu_quota_reads_cgroup_v1_and_v2(tmp_path, files, expect) -> None:
+    """The cgroup's CPU quota: v2's cpu.max, v1's cfs quota / period, no limit = inf."""
+    for name, text in files.items():
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text(text)
+    assert prefetch.cpu_quota(str(tmp_path)) == expect
 
 
 def test_input_error_pickles_whole() -> None:
