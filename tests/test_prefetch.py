@@ -473,3 +473,37 @@ def test_signals_to_the_parent(tmp_path: Path, sig: int, code: int) -> None:
         else:
             assert len(error_lines(err)) == 1 and not leftovers(tmp_path), err
             assert reaped(child)  # the parent waited for it: never ours
+
+
+def test_flm_ahead_only_for_aids_that_read_every_ring() -> None:
+    """The pose aid's FLM is built ahead only when it matches every ring (the paper's
+    pose fixes); the building presets match every metre or 30 deg, and so the child
+    builds none for them (it would cost more than the parent saves)."""
+    from types import SimpleNamespace
+
+    from fuzzyslam.fixes.base import FlmAhead
+    from fuzzyslam.fixes.pose_aid import PoseFixAid
+
+    built = []
+
+    class Source:
+        def __call__(self, ring, mounts):
+            built.append(ring)
+            return "flm"
+
+        def seed(self, ring, flm):  # pragma: no cover - only its presence matters
+            pass
+
+    paper, building = load_config("paper").fixes, load_config("real_building_scan").fixes
+    assert PoseFixAid.flm_every_ring(SimpleNamespace(params=paper))
+    assert not PoseFixAid.flm_every_ring(SimpleNamespace(params=building))
+
+    class Aid(FlmAhead):
+        def __init__(self, every: bool) -> None:
+            self.flm_source, self.every = Source(), every
+
+        def flm_every_ring(self) -> bool:
+            return self.every
+
+    assert Aid(True).ahead("ring", None) == ("flm",) and built == ["ring"]
+    assert Aid(False).ahead("ring2", None) is None and built == ["ring"]

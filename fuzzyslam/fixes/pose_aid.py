@@ -183,6 +183,13 @@ class PoseFixAid(FlmAhead, FixAid):
                 return False
         return True
 
+    def flm_every_ring(self) -> bool:
+        """Every ring is matched (``pose_every`` 1, no ``pose_min_travel`` or
+        ``pose_min_turn_deg``: the paper scenario's pose fixes), so the FLM built ahead
+        is used (``FlmAhead``)."""
+        p = self.params
+        return p.pose_every == 1 and p.pose_min_travel <= 0.0 and p.pose_min_turn_deg <= 0.0
+
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
         """Match the ring's FLM against the FGM around the prediction; apply the match
         (module docstring).
