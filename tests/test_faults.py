@@ -465,11 +465,16 @@ def test_log_and_preview_are_replaced_together(micro, tmp_path: Path) -> None:
         assert not leftovers(fs)
 
 
-def test_map_without_references_names_its_file(micro, micro_map, tmp_path: Path) -> None:
-    """Heading fixes from a map with no corridor references: the error names the map's
-    references.yaml, not a bare "references.yaml"."""
-    cfg, log, _ = micro
-    code, _, err = cli("run", log, "--config", cfg, "--map", micro_map, "--fix", "heading",
+def test_map_without_references_names_its_file(micro, tmp_path: Path) -> None:
+    """Heading fixes from a map with no corridor references (built over the first 5 s: a
+    path shorter than a corridor segment): the error names the map's references.yaml,
+    not a bare "references.yaml"."""
+    cfg, log, est = micro
+    fgm = tmp_path / "fgm"
+    code, _, err = cli("map", log, "--trajectory", est / "trajectory.tum", "--config", cfg,
+                       "-o", fgm, "--no-figures", "--until", "5")
+    assert code == 0, err
+    code, _, err = cli("run", log, "--config", cfg, "--map", fgm, "--fix", "heading",
                        "-o", tmp_path / "o")
     assert code == errors.EXIT_INPUT, err
-    assert_one_line(err, micro_map / "references.yaml", "no corridor references")
+    assert_one_line(err, fgm / "references.yaml", "no corridor references")

@@ -333,6 +333,16 @@ def test_ambiguous_corridor_fix_is_skipped_not_applied():
     aid = HeadingFixAid(flagged, FixParams(), lambda r, m: None, lambda flm: wall, 0.0)
     aid.on_ring(1.0, ring(1.0), MOUNTS, ekf)
     assert aid.decisions[-1].reason == "ambiguous_reference" and ekf.updates == 0
+    # ... which is no corridor: in one 1.5 m from an unflagged corridor (a room beside
+    # it), that corridor is offered as at a corner (the stub's own 12 degrees never)
+    stub = corridor_ref(math.radians(12.0), 1, half_length=2.0)
+    stub = Reference(1, "stub", stub.angle, 5.0, stub.polygon, ambiguous=True)
+    beside = Reference(0, "c", 0.0, 1.0, corridor_ref(0.0).polygon + np.array([0.0, 2.5]))
+    ekf_stub = SmallEkf([0.0, 0.0, -0.05], np.diag([0.01, 0.01, (3 * DEG) ** 2]))
+    aid = HeadingFixAid([stub, beside], FixParams(), lambda r, m: None, lambda flm: wall, 0.0)
+    aid.on_ring(1.0, ring(1.0), MOUNTS, ekf_stub)
+    d = aid.decisions[-1]
+    assert d.reason == "ok" and d.corridor == 0 and ekf_stub.updates == 1
     # and so is a wall direction the Hough calls ambiguous, or a ring before start_time
     amb = SimpleNamespace(angle=0.05, strength=3.0, ambiguous=True)
     aid = HeadingFixAid(refs[:1], FixParams(), lambda r, m: None, lambda flm: amb, 2.0)

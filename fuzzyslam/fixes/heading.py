@@ -73,8 +73,8 @@ sets ``pose_suspect``. Single-ring decisions are not applied between multi-ring 
 Reasons recorded per ring (``heading_fixes.csv``): ``ok``, ``recovered``, ``no_wall``
 (no Hough peak), ``weak_peak``, ``ambiguous_wall`` (the FLM's peaks disagree: junction,
 open space), ``no_corridor``, ``ambiguous_corridor`` (two regions with different
-reference angles, junctions off), ``ambiguous_reference`` (the map stage flagged the
-corridor's own reference angle), ``ambiguous_heading`` (two candidates both
+reference angles, junctions off), ``ambiguous_reference`` (in a region the map stage
+flagged, no other within the junction margin), ``ambiguous_heading`` (two candidates both
 plausible), ``gated``, ``loose_fit`` (a multi-ring window whose own wall fit is too
 loose, ``fixes.flm_fit_scatter``).
 """

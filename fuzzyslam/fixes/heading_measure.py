@@ -113,12 +113,15 @@ def select_corridor(
 ) -> tuple[list[Reference], str]:
     """The candidate corridors at ``xy``: (references, "" | "junction" | why none).
 
-    Inside one region, or overlapping regions whose reference angles agree mod
-    ``period`` within 1 degree: the strongest one (``ambiguous_reference`` if the map
-    stage flagged it). Regions that disagree (a junction): ``ambiguous_corridor``, or,
-    with ``junction_margin`` > 0, all of them ("junction"). Outside every region:
-    ``no_corridor``, or, with ``junction_margin`` > 0, the regions within that distance
-    (a corner, "junction"), all of whose angles then compete in :func:`decide_heading_fix`.
+    Regions the map stage flagged (a room, a stub, two wall directions alike) are no
+    corridor: they offer no angle and, as for the laser's lines
+    (:mod:`fuzzyslam.fixes.scan_heading`), the robot in one alone is outside every
+    corridor. Inside one region, or overlapping regions whose reference angles agree mod
+    ``period`` within 1 degree: the strongest one. Regions that disagree (a junction):
+    ``ambiguous_corridor``, or, with ``junction_margin`` > 0, all of them ("junction").
+    Outside every region: ``no_corridor`` (``ambiguous_reference`` in a flagged one),
+    or, with ``junction_margin`` > 0, the regions within that distance (a corner,
+    "junction"), all of whose angles then compete in :func:`decide_heading_fix`.
 
     Parameters
     ----------
@@ -138,23 +141,20 @@ def select_corridor(
     why : str
         "", "junction", or the reason there is none.
     """
-    inside = corridors_at(xy, refs)
+    regions = corridors_at(xy, refs)
+    inside = [r for r in regions if not r.ambiguous]
     if not inside:
         near = corridors_near(xy, refs, junction_margin) if junction_margin > 0 else []
         near = [r for r in near if not r.ambiguous]
-        return (near, "junction") if near else ([], "no_corridor")
+        if near:
+            return near, "junction"
+        return [], "ambiguous_reference" if regions else "no_corridor"
     if len(inside) > 1:
         a0 = inside[0].angle
         spread = [abs(float(wrap_angle_period(r.angle - a0, period))) for r in inside]
         if max(spread) > math.radians(1.0):
-            if junction_margin > 0:
-                good = [r for r in inside if not r.ambiguous]
-                return (good, "junction") if good else ([], "ambiguous_reference")
-            return [], "ambiguous_corridor"
-    best = max(inside, key=lambda r: r.strength)
-    if best.ambiguous:
-        return [], "ambiguous_reference"
-    return [best], ""
+            return (inside, "junction") if junction_margin > 0 else ([], "ambiguous_corridor")
+    return [max(inside, key=lambda r: r.strength)], ""
 
 
 def decide_heading_fix(

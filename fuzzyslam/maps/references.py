@@ -4,11 +4,27 @@ The paper cut the FGM into corridor segments by hand. Here the segments come fro
 path the map was built along (the robot drives the corridors' centre lines):
 
 1. resample the path every ``step`` metres of arc length;
-2. its direction mod pi at each sample (doubled-angle vectors, so back-and-forth runs
-   agree), from the chord over +-``window`` metres;
-3. samples where the direction changes by less than ``segment_turn_deg`` across the
-   window are straight; runs of straight samples at least ``segment_min_length`` long
-   are stretches, each fitted with a line (total least squares);
+2. split it into pieces along which it stays within tol = ``segment_min_length`` *
+   sin(``segment_turn_deg``) of a line: split-and-merge (Ramer 1972; Douglas and
+   Peucker 1973), the merge step against each joint piece's total-least-squares line.
+   A path that bends by ``segment_turn_deg`` departs from its first leg's line by tol
+   within ``segment_min_length`` of the bend; a weave about a straight line (the
+   simulated robot's 0.1 m across over 3-4 m, +-7 deg of direction) stays within it
+   (a test of the path's direction over a metre or two cuts it into pieces shorter
+   than a corridor);
+3. a piece ends where the path turns, judged from its direction mod pi at each sample
+   (doubled-angle vectors, so back-and-forth runs agree; the chord over +-``window``
+   metres): a sample is straight when that direction changes by less than
+   ``segment_turn_deg`` across the window. Where two pieces meet in a corner (their
+   lines, fitted to their straight samples, differ by ``segment_turn_deg`` or more, or
+   the path turns back), each piece keeps the samples from its first straight one to
+   its last (the weave's own non-straight samples between them included) and ends no
+   nearer the crossing of the two lines than the test's reach, 2 ``window`` (where a
+   sharp corner's straight samples end: the weave may make samples nearer the corner
+   straight); at the path's own ends, and where two pieces meet at less than
+   ``segment_turn_deg`` (the same corridor), it is not cut. Pieces at least
+   ``segment_min_length`` long are stretches, each fitted with a line (total least
+   squares);
 4. stretches of the same corridor (direction within ``segment_turn_deg`` mod pi,
    centroid within ``segment_merge_distance`` of the line) are merged;
 5. each corridor's region is the rectangle along its line over the stretch's extent
@@ -22,6 +38,7 @@ path the map was built along (the robot drives the corridors' centre lines):
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numpy as np
@@ -105,6 +122,123 @@ def resample_path(xy: np.ndarray, step: float) -> np.ndarray:
     return np.column_stack([np.interp(q, s, xy[:, 0]), np.interp(q, s, xy[:, 1])])
 
 
+def straight_samples(p: np.ndarray, k: int, turn: float) -> np.ndarray:
+    """Which samples of a resampled path are straight: the chord from the sample 2k back
+    to it and the chord from it to the sample 2k on differ in direction (mod pi) by less
+    than ``turn`` (rad); the first and last 2k samples, where the chords do not fit, take
+    the nearest sample's answer.
+
+    Parameters
+    ----------
+    p : ndarray, shape (K, 2)
+        Path samples, evenly spaced (none is straight when K < 4k + 1).
+    k : int
+        Half-window (samples).
+    turn : float
+        Bound on the direction change (rad).
+
+    Returns
+    -------
+    ndarray of bool, shape (K,)
+    """
+    if len(p) < 4 * k + 1:
+        return np.zeros(len(p), dtype=bool)
+    chord = p[2 * k :] - p[: -2 * k]
+    ang2 = 2.0 * np.arctan2(chord[:, 1], chord[:, 0])  # doubled: direction mod pi
+    dang = np.abs(wrap_angle_period(ang2[2 * k :] - ang2[: -2 * k], 2 * np.pi)) / 2.0
+    ok = dang < turn
+    return np.concatenate([np.full(2 * k, ok[0]), ok, np.full(2 * k, ok[-1])])
+
+
+def split_path(p: np.ndarray, tol: float) -> np.ndarray:
+    """The split step of split-and-merge (Ramer 1972, Douglas and Peucker 1973): vertex
+    indices such that every point between two consecutive vertices lies within ``tol``
+    of the chord (segment) joining them, each piece split at its point farthest from it.
+
+    Parameters
+    ----------
+    p : ndarray, shape (K, 2)
+        The polyline.
+    tol : float
+        Across-track tolerance (m).
+
+    Returns
+    -------
+    ndarray of int, shape (V,)
+        Vertex indices, ascending, first 0 and last K - 1.
+    """
+    keep = np.zeros(len(p), dtype=bool)
+    keep[[0, -1]] = True
+    stack = [(0, len(p) - 1)]
+    while stack:  # one split per iteration: a few per corridor
+        a, b = stack.pop()
+        if b - a < 2:
+            continue
+        q = p[a + 1 : b] - p[a]
+        e = p[b] - p[a]
+        u = np.clip(q @ e / max(float(e @ e), 1e-18), 0.0, 1.0)  # the segment, not its line:
+        d = np.hypot(*(q - u[:, None] * e).T)  # a path that turns back is split there
+        j = int(np.argmax(d))
+        if d[j] > tol:
+            m = a + 1 + j
+            keep[m] = True
+            stack += [(a, m), (m, b)]
+    return np.flatnonzero(keep)
+
+
+def merge_pieces(p: np.ndarray, vertices: np.ndarray, tol: float) -> np.ndarray:
+    """The merge step of split-and-merge: a vertex is dropped when the path from the
+    previous kept vertex to the next vertex lies within ``tol`` of its total-least-squares
+    line and does not turn back there (the chords of :func:`split_path` end on the path's
+    own weave, a line fitted to all of it does not).
+
+    Parameters
+    ----------
+    p : ndarray, shape (K, 2)
+        The polyline.
+    vertices : ndarray of int, shape (V,)
+        Vertex indices, ascending, first 0 and last K - 1.
+    tol : float
+        Across-track tolerance (m).
+
+    Returns
+    -------
+    ndarray of int, shape (V',)
+        The kept vertices.
+    """
+    out = [int(vertices[0])]
+    for j in range(1, len(vertices) - 1):  # one line fit per vertex
+        a, v, b = out[-1], int(vertices[j]), int(vertices[j + 1])
+        q = p[a : b + 1]
+        c, d = _fit_line(q)
+        back = (p[v] - p[a]) @ (p[b] - p[v]) < 0
+        if back or np.abs((q - c) @ np.array([-d[1], d[0]])).max() > tol:
+            out.append(v)
+    out.append(int(vertices[-1]))
+    return np.array(out)
+
+
+def _corner(
+    p: np.ndarray, a: int, v: int, b: int, straight: np.ndarray, turn: float
+) -> np.ndarray | None:
+    """Where the pieces a-v and v-b of the path meet in a corner: the crossing of their
+    lines (each fitted to its straight samples) when they differ by ``turn`` or more
+    (mod pi), the vertex itself when the path turns back there, else None (one corridor).
+    """
+    lines = []
+    for i, j in ((a, v), (v, b)):
+        idx = i + np.flatnonzero(straight[i : j + 1])
+        lines.append(_fit_line(p[idx] if len(idx) >= 2 else p[i : j + 1]))
+    (c1, d1), (c2, d2) = lines
+    cross = d1[0] * d2[1] - d1[1] * d2[0]
+    if abs(cross) >= np.sin(turn):  # |sin| of the angle between the lines
+        t = ((c2 - c1)[0] * d2[1] - (c2 - c1)[1] * d2[0]) / cross
+        return c1 + t * d1
+    if (p[v] - p[a]) @ (p[b] - p[v]) < 0:
+        return p[v]
+    return None
+
+
 def straight_stretches(
     xy: np.ndarray, params: MapParams, step: float = 0.1, window: float = 0.5
 ) -> list[Stretch]:
@@ -126,23 +260,34 @@ def straight_stretches(
     list of Stretch
     """
     p = resample_path(xy, step)
-    k = max(round(window / step), 1)
-    if len(p) < 2 * k + 2:
+    if len(p) < 2:
         return []
-    chord = p[2 * k :] - p[: -2 * k]
-    ang2 = 2.0 * np.arctan2(chord[:, 1], chord[:, 0])  # doubled: direction mod pi
-    dang = np.abs(wrap_angle_period(ang2[2 * k :] - ang2[: -2 * k], 2 * np.pi)) / 2.0
-    straight = np.zeros(len(p), dtype=bool)
-    straight[2 * k : 2 * k + len(dang)] = dang < np.deg2rad(params.segment_turn_deg)
-    edges = np.flatnonzero(np.diff(np.concatenate([[0], straight.astype(np.int8), [0]])))
+    k = max(round(window / step), 1)
+    turn = np.deg2rad(params.segment_turn_deg)
+    straight = straight_samples(p, k, turn)
+    tol = params.segment_min_length * np.sin(turn)
+    v = merge_pieces(p, split_path(p, tol), tol)
+    corners = [None, *(_corner(p, *v[j - 1 : j + 2], straight, turn) for j in range(1, len(v) - 1))]
+    corners.append(None)  # the path's ends are no corners
+    reach = 2 * k * step  # the chord test's: a sharp corner's straight samples end there
     out = []
-    for a, b in zip(edges[::2], edges[1::2], strict=True):  # one per stretch
-        pts = p[a:b]
-        if len(pts) * step < params.segment_min_length:
+    for j, (a, b) in enumerate(itertools.pairwise(v)):  # one per piece
+        idx = a + np.flatnonzero(straight[a : b + 1])
+        ends = corners[j], corners[j + 1]
+        if len(idx) == 0 and (ends[0] is not None or ends[1] is not None):
             continue
+        pts = p[idx[0] if ends[0] is not None else a : (idx[-1] if ends[1] is not None else b) + 1]
         c, d = _fit_line(pts)
         s = (pts - c) @ d
-        out.append(Stretch(c, d, float(s.min()), float(s.max())))
+        s0, s1 = float(s.min()), float(s.max())
+        ahead = 1.0 if (p[b] - p[a]) @ d >= 0 else -1.0  # travel along +d or -d
+        for corner, side in zip(ends, (-ahead, ahead), strict=True):  # no nearer a corner
+            if corner is not None:  # than the chord test's reach, weave or not
+                sc = float((corner - c) @ d)
+                s0, s1 = (max(s0, sc + reach), s1) if side < 0 else (s0, min(s1, sc - reach))
+        if s1 - s0 < params.segment_min_length:
+            continue
+        out.append(Stretch(c, d, s0, s1))
     return out
 
 
