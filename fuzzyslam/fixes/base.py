@@ -58,7 +58,13 @@ class FlmAhead:
         reads one ring in many (the building presets' pose fixes: every metre or 30 deg)
         says no: built ahead for every ring, the FLMs would cost the child more than the
         parent saves (Freiburg 079's laser, pose fixes: 4.7 -> 10.5 s of CPU, the wall
-        time 1.7-2.2x longer)."""
+        time 1.7-2.2x longer).
+
+        Returns
+        -------
+        bool
+            True: the child process builds every ring's FLM ahead (:meth:`ahead`).
+        """
         return True
 
     def ahead(self, ring: Any, mounts: np.ndarray) -> tuple | None:

@@ -186,7 +186,14 @@ class PoseFixAid(FlmAhead, FixAid):
     def flm_every_ring(self) -> bool:
         """Every ring is matched (``pose_every`` 1, no ``pose_min_travel`` or
         ``pose_min_turn_deg``: the paper scenario's pose fixes), so the FLM built ahead
-        is used (``FlmAhead``)."""
+        is used (``FlmAhead``).
+
+        Returns
+        -------
+        bool
+            ``pose_every`` is 1 and neither ``pose_min_travel`` nor ``pose_min_turn_deg``
+            is set.
+        """
         p = self.params
         return p.pose_every == 1 and p.pose_min_travel <= 0.0 and p.pose_min_turn_deg <= 0.0
 
