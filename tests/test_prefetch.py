@@ -27,6 +27,7 @@ import pytest
 from test_robust_logs import chunk_index, cli, error_lines, leftovers, tiny  # noqa: F401
 from test_run_e2e import write_robot_log
 
+from fuzzyslam import cpus
 from fuzzyslam.config import load_config
 from fuzzyslam.errors import ConfigError, InputError
 from fuzzyslam.slam import inputs as inputs_mod
@@ -350,12 +351,12 @@ def test_wanted_is_off_where_it_must_be(monkeypatch) -> None:
     import inspect
 
     monkeypatch.setattr(os, "sched_getaffinity", lambda pid: {0, 1})
-    monkeypatch.setattr(prefetch, "cpu_quota", lambda: math.inf)
+    monkeypatch.setattr(cpus, "cgroup_quota", lambda: math.inf)
     monkeypatch.delenv(prefetch.ENV, raising=False)
     assert prefetch.wanted(True) and not prefetch.wanted(False)
-    monkeypatch.setattr(prefetch, "cpu_quota", lambda: 1.5)  # a container of 1.5 CPUs
+    monkeypatch.setattr(cpus, "cgroup_quota", lambda: 1.5)  # a container of 1.5 CPUs
     assert not prefetch.wanted(True)
-    monkeypatch.setattr(prefetch, "cpu_quota", lambda: math.inf)
+    monkeypatch.setattr(cpus, "cgroup_quota", lambda: math.inf)
     for off in ("0", "off", "no", "false"):
         monkeypatch.setenv(prefetch.ENV, off)
         assert not prefetch.wanted(True)
@@ -386,7 +387,16 @@ def test_cpu_quota_reads_cgroup_v1_and_v2(tmp_path, files, expect) -> None:
     for name, text in files.items():
         (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
         (tmp_path / name).write_text(text)
-    assert prefetch.cpu_quota(str(tmp_path)) == expect
+    assert cpus.cgroup_quota(str(tmp_path)) == expect
+
+
+def test_usable_cpus_is_the_affinity_capped_by_the_quota(monkeypatch) -> None:
+    """The pool's size and the input process's condition: the affinity set's size, at
+    most the cgroup's quota rounded down, at least 1."""
+    for affinity, quota, expect in [(4, math.inf, 4), (4, 2.5, 2), (2, 8.0, 2), (2, 0.5, 1)]:
+        monkeypatch.setattr(os, "sched_getaffinity", lambda pid, n=affinity: set(range(n)))
+        monkeypatch.setattr(cpus, "cgroup_quota", lambda q=quota: q)
+        assert cpus.usable_cpus() == expect
 
 
 def test_input_error_pickles_whole() -> None:

@@ -48,7 +48,8 @@ from fuzzyslam.cli import cli, emit
     "--jobs",
     type=click.IntRange(min=1),
     default=None,
-    help="Steps at once (default: the machine's cores, or the Dask cluster's worker threads).",
+    help="Steps at once (default: the CPUs this process may use, its affinity and cgroup "
+    "quota, or the Dask cluster's worker threads).",
 )
 @click.option(
     "--scheduler",

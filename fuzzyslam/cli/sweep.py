@@ -29,7 +29,7 @@ from fuzzyslam.cli import cli, emit
               type=click.Path(path_type=Path),
               help="Output directory; rerun into it to go on where it stopped.")  # fmt: skip
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
-              help="Steps at once (default: the cores, or the Dask threads).")  # fmt: skip
+              help="Steps at once (default: the usable CPUs, or the Dask threads).")  # fmt: skip
 @click.option("--scheduler", metavar="ADDRESS", default=None,
               help="Run the steps on an existing Dask scheduler (shared filesystem).")  # fmt: skip
 @click.option("--ship-files", is_flag=True,

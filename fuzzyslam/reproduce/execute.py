@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from fuzzyslam.cpus import usable_cpus
 from fuzzyslam.errors import EXIT_INTERNAL, FuzzyslamError, InputError
 from fuzzyslam.fileio import guard_inputs
 from fuzzyslam.progress import PlanProgress
@@ -232,7 +233,7 @@ class Engine:
         self._shipped: dict[Future, tuple[str, ...]] = {}
         self._client = None
         if scheduler is None:
-            self.jobs = max(1, jobs or os.cpu_count() or 1)
+            self.jobs = max(1, jobs or usable_cpus())
             ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
             if ctx.get_start_method() == "fork":
                 preload()  # the workers, forked at the first step, inherit the imports

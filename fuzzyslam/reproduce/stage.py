@@ -20,6 +20,7 @@ from typing import Any
 
 from fuzzyslam import __version__
 from fuzzyslam.config import Config
+from fuzzyslam.cpus import usable_cpus
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, _in_place_only
 from fuzzyslam.reproduce.execute import StepResult, execute
@@ -259,7 +260,7 @@ def reproduce(
             configs=[suite.paper, suite.bumps] + ([suite.dark, suite.people] if beyond else []),
             overrides=overrides,
             seeds=seeds,
-            jobs=jobs or (len(workers) if scheduler else os.cpu_count() or 1),
+            jobs=jobs or (len(workers) if scheduler else usable_cpus()),
             engine=f"dask {scheduler}" if scheduler else "local",
             workers=workers,
             logs_kept=keep_logs,

@@ -28,8 +28,9 @@ Linux), and a write to the pipe without a reader ends it elsewhere.
 
 When: :func:`wanted` (``fuzzyslam run``'s default, ``--no-prefetch`` or
 ``FUZZYSLAM_PREFETCH=0`` to turn it off): a platform with ``fork`` (Linux), at least
-two CPUs usable by this process (``os.sched_getaffinity`` and the cgroup's CPU quota,
-:func:`cpu_quota`: a container limited to one CPU gains nothing), not a daemonic process nor a
+two CPUs usable by this process (its affinity and its cgroup's CPU quota,
+``fuzzyslam.cpus.usable_cpus``: a container limited to one CPU gains nothing), not a
+daemonic process nor a
 Dask worker. ``reproduce`` and ``sweep`` steps never ask for it: their pool already
 keeps every core busy.
 """
@@ -37,16 +38,15 @@ keeps every core busy.
 from __future__ import annotations
 
 import contextlib
-import math
 import os
 import pickle
 import signal
 import sys
 import traceback
 from collections.abc import Iterator, Sequence
-from pathlib import Path
 from typing import TYPE_CHECKING, Any
 
+from fuzzyslam.cpus import usable_cpus
 from fuzzyslam.slam.events import Event, RingEvent
 
 if TYPE_CHECKING:  # multiprocessing loaded only for a child (16 ms of start-up)
@@ -78,9 +78,7 @@ def wanted(requested: bool = True) -> bool:
     """
     if not requested or os.environ.get(ENV, "1").strip().lower() in ("0", "off", "no", "false"):
         return False
-    if not sys.platform.startswith("linux") or not hasattr(os, "sched_getaffinity"):
-        return False
-    if len(os.sched_getaffinity(0)) < 2 or cpu_quota() < 2.0:
+    if not sys.platform.startswith("linux") or usable_cpus() < 2:
         return False
     mp = sys.modules.get("multiprocessing.process")  # not loaded: no pool's worker
     if mp is not None and mp.current_process().daemon:
@@ -93,38 +91,6 @@ def wanted(requested: bool = True) -> bool:
         except ValueError:
             pass
     return True
-
-
-def cpu_quota(root: str = "/sys/fs/cgroup") -> float:
-    """The CPUs this process's cgroup may use per second (inf: no limit or unknown).
-
-    cgroup v2: ``cpu.max`` ("QUOTA PERIOD" or "max PERIOD"); v1: ``cpu/cpu.cfs_quota_us``
-    over ``cpu/cpu.cfs_period_us`` (a quota of -1: no limit). A container started with
-    ``--cpus=1`` has quota / period = 1: a second process only takes turns with the
-    first (+3-7 % CPU, no wall time gained, as on a machine whose cores are busy).
-
-    Parameters
-    ----------
-    root : str
-        The cgroup filesystem's mount point (tests pass their own).
-
-    Returns
-    -------
-    float
-        quota / period, or inf.
-    """
-    base = Path(root)
-    try:
-        quota, period = (base / "cpu.max").read_text().split()[:2]
-        return math.inf if quota == "max" else int(quota) / int(period)
-    except (OSError, ValueError):
-        pass
-    try:
-        quota_us = int((base / "cpu" / "cpu.cfs_quota_us").read_text())
-        period_us = int((base / "cpu" / "cpu.cfs_period_us").read_text())
-        return math.inf if quota_us <= 0 or period_us <= 0 else quota_us / period_us
-    except (OSError, ValueError):
-        return math.inf
 
 
 @contextlib.contextmanager
