@@ -17,6 +17,26 @@ def enabled() -> bool:
     return not os.environ.get("FUZZYSLAM_NO_PROGRESS")
 
 
+def display_mode(stream, show: bool = True) -> str:
+    """How progress is shown on ``stream``: "off" (not ``show``, or FUZZYSLAM_NO_PROGRESS
+    set), "bar" (a terminal) or "lines" (a file or a pipe: CI, nohup).
+
+    Parameters
+    ----------
+    stream : file-like
+        Where progress goes.
+    show : bool
+        The caller shows progress at all.
+
+    Returns
+    -------
+    str
+    """
+    if not (show and enabled()):
+        return "off"
+    return "bar" if getattr(stream, "isatty", lambda: False)() else "lines"
+
+
 class Progress:
     """Progress over a known amount of work (e.g. seconds of log) on stderr.
 
@@ -59,17 +79,13 @@ class Progress:
         self.interval_s = interval_s
         self._bar = None
         self._done = 0
-        isatty = getattr(self.stream, "isatty", lambda: False)
-        if not (show and enabled()):
-            self.mode = "off"
-        elif isatty():
-            self.mode = "bar"
+        self.mode = display_mode(self.stream, show)
+        if self.mode == "bar":
             self._bar = click.progressbar(
                 length=1000, label=label, file=self.stream, show_eta=True, show_percent=True
             )
             self._bar.__enter__()
-        else:
-            self.mode = "lines"
+        elif self.mode == "lines":
             self.t0 = self.last = self.clock()
             self._line(label)
 
@@ -163,13 +179,7 @@ class PlanProgress:
         self.label = label
         self.heartbeat_s = heartbeat_s
         self.t0 = self.last = self.clock()
-        isatty = getattr(self.stream, "isatty", lambda: False)
-        if not enabled():
-            self.mode = "off"
-        elif isatty():
-            self.mode = "bar"
-        else:
-            self.mode = "lines"
+        self.mode = display_mode(self.stream)
         self._total = total_cost
         self._bar: Progress | None = None
 
