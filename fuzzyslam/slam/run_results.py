@@ -116,10 +116,9 @@ def filter_health(
         np.array([lm.first_seen for lm in lamps]),
         np.array([lm.observations for lm in lamps]),
     )
+    findings = []  # (reason, from when) beyond the windows'
     if orphans_at is not None:
-        reasons.append("orphan_landmarks")
-        diverged_at = orphans_at if diverged_at is None else min(diverged_at, orphans_at)
-        diverged = True
+        findings.append(("orphan_landmarks", orphans_at))
     motion = {}
     if map_motion is not None and map_motion.windows:
         motion = {
@@ -127,17 +126,16 @@ def filter_health(
             "map_motion_windows_out_of_bounds": map_motion.out_of_bounds,
         }
         if map_motion.diverged_at is not None:
-            reasons.append("map_motion")
-            t = map_motion.diverged_at
-            diverged_at = t if diverged_at is None else min(diverged_at, t)
-            diverged = True
+            findings.append(("map_motion", map_motion.diverged_at))
     for aid in aids:
         trouble = getattr(aid, "trouble", None)
         found = trouble() if trouble is not None else None
         if found is not None:
-            reasons.append(found[0])
-            diverged_at = found[1] if diverged_at is None else min(diverged_at, found[1])
-            diverged = True
+            findings.append(found)
+    for reason, t in findings:
+        reasons.append(reason)
+        diverged_at = t if diverged_at is None else min(diverged_at, t)
+    diverged = diverged or bool(findings)
     return FilterHealth(
         **guards,
         **windows,
