@@ -309,7 +309,8 @@ class ChangeDetector(FlmAhead, FixAid):
 
 
 def change_messages(changes: Sequence[Change], topic: str) -> list[tuple[str, str, Any, float]]:
-    """(topic, type, MarkerArray, t) per time with detections, in time order (map frame).
+    """(topic, type, MarkerArray CDR bytes, t) per time with detections, in time order (map
+    frame).
 
     Parameters
     ----------
@@ -320,20 +321,21 @@ def change_messages(changes: Sequence[Change], topic: str) -> list[tuple[str, st
 
     Returns
     -------
-    list of (str, str, MarkerArray, float)
+    list of (str, str, bytes, float)
     """
     from itertools import groupby
 
     from fuzzyslam.streams import messages as M
+    from fuzzyslam.streams.cdr_encode import MarkerSpec, encode_marker_array
 
     out = []
     for t, group in groupby(sorted(changes, key=lambda c: c.t), key=lambda c: c.t):
         markers = [
-            M.marker(t, "map", "changes", k, 3, (c.x, c.y, 0.0), 0.5,
-                     (max(c.size, 0.1), max(c.size, 0.1), 1.0), (0.9, 0.1, 0.1, 0.7))
+            MarkerSpec(t, "map", "changes", k, 3, (c.x, c.y, 0.0), 0.5,
+                       (max(c.size, 0.1), max(c.size, 0.1), 1.0), (0.9, 0.1, 0.1, 0.7))
             for k, c in enumerate(group)
         ]  # fmt: skip
-        out.append((topic, M.MARKER_ARRAY, M.marker_array(markers), float(t)))
+        out.append((topic, M.MARKER_ARRAY, encode_marker_array(markers), float(t)))
     return out
 
 

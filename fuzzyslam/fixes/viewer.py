@@ -1,6 +1,6 @@
-"""The fixes as a viewer shows them, for ``run``'s estimates.mcap (ROS 2 messages built by
-``streams/messages.py``): one visualization_msgs/MarkerArray per formed fix, at the ring's
-time, in the map frame. Colours (Okabe-Ito, colour-blind safe): bluish green when the
+"""The fixes as a viewer shows them, for ``run``'s estimates.mcap (ROS 2 messages as CDR
+bytes, ``streams/cdr_encode.py``): one visualization_msgs/MarkerArray per formed fix, at the
+ring's time, in the map frame. Colours (Okabe-Ito, colour-blind safe): bluish green when the
 filter took the fix, vermillion when it was refused (gated, ambiguous, ...).
 
 - heading fixes (``topics.heading_fixes``): a line through the robot of the corridor
@@ -20,6 +20,7 @@ from typing import Any
 import numpy as np
 
 from fuzzyslam.streams import messages as M
+from fuzzyslam.streams.cdr_encode import MarkerSpec, encode_marker_array
 
 ACCEPTED = (0.0, 0.62, 0.45, 1.0)  # bluish green
 REFUSED = (0.84, 0.37, 0.0, 1.0)  # vermillion
@@ -29,7 +30,7 @@ HEADING_LINE_M = 2.0  # length of a heading fix's line, m
 def heading_fix_messages(
     decisions: Sequence[Any], ref_angles: dict[int, float], topic: str, frame: str = "map"
 ) -> list[tuple[str, str, Any, float]]:
-    """(topic, type, MarkerArray, t) of every formed heading fix (finite measured heading
+    """(topic, type, MarkerArray CDR bytes, t) of every formed heading fix (finite measured heading
     and robot position, a known corridor): a line of ``HEADING_LINE_M`` through the robot
     at reference angle + predicted - measured (module docstring).
 
@@ -46,7 +47,7 @@ def heading_fix_messages(
 
     Returns
     -------
-    list of (str, str, MarkerArray, float)
+    list of (str, str, bytes, float)
     """
     out = []
     for d in decisions:
@@ -57,17 +58,17 @@ def heading_fix_messages(
         a = ang + d.predicted - d.measured
         u = 0.5 * HEADING_LINE_M * np.array([np.cos(a), np.sin(a)])
         c = np.array([d.x, d.y])
-        m = M.marker(d.t, frame, "heading_fix", 0, 5, scale=(0.05, 0.0, 0.0),
-                     rgba=ACCEPTED if d.accepted else REFUSED, points=np.array([c - u, c + u]),
-                     z=0.05)  # fmt: skip
-        out.append((topic, M.MARKER_ARRAY, M.marker_array([m]), float(d.t)))
+        m = MarkerSpec(d.t, frame, "heading_fix", 0, 5, scale=(0.05, 0.0, 0.0),
+                       rgba=ACCEPTED if d.accepted else REFUSED, points=np.array([c - u, c + u]),
+                       z=0.05)  # fmt: skip
+        out.append((topic, M.MARKER_ARRAY, encode_marker_array([m]), float(d.t)))
     return out
 
 
 def pose_fix_messages(
     decisions: Sequence[Any], topic: str, frame: str = "map"
 ) -> list[tuple[str, str, Any, float]]:
-    """(topic, type, MarkerArray, t) of every pose match (finite matched pose): an arrow
+    """(topic, type, MarkerArray CDR bytes, t) of every pose match (finite matched pose): an arrow
     (0.5 m) at the matched pose, coloured by whether the filter took it.
 
     Parameters
@@ -81,16 +82,16 @@ def pose_fix_messages(
 
     Returns
     -------
-    list of (str, str, MarkerArray, float)
+    list of (str, str, bytes, float)
     """
     out = []
     for d in decisions:
         p = np.asarray(d.pose, dtype=float)
         if p.shape != (3,) or not np.all(np.isfinite(p)):
             continue
-        m = M.marker(d.t, frame, "pose_fix", 0, 0, (p[0], p[1], p[2]), 0.05, (0.5, 0.08, 0.08),
-                     ACCEPTED if d.accepted else REFUSED)  # fmt: skip
-        out.append((topic, M.MARKER_ARRAY, M.marker_array([m]), float(d.t)))
+        m = MarkerSpec(d.t, frame, "pose_fix", 0, 0, (p[0], p[1], p[2]), 0.05, (0.5, 0.08, 0.08),
+                       ACCEPTED if d.accepted else REFUSED)  # fmt: skip
+        out.append((topic, M.MARKER_ARRAY, encode_marker_array([m]), float(d.t)))
     return out
 
 
@@ -110,7 +111,8 @@ def map_messages(viewer_map: Any, topics: Any, start: float | None) -> list:
 
     Returns
     -------
-    list of (str, str, message, float)
+    list of (str, str, bytes, float)
+        The messages as CDR bytes.
     """
     if viewer_map is None or start is None:
         return []

@@ -3,8 +3,9 @@ corridor references (nav_msgs/OccupancyGrid, visualization_msgs/MarkerArray).
 
 The grids have the geometry of the nav2 files ``mapio.save_nav2`` writes (the same
 resolution, width, height and lower-left origin as fgm.yaml and fgm.pgm): row 0 of
-``OccupancyGrid.data`` is the map's lowest y, as the FGM's arrays. Messages are built by
-``streams/messages.py`` and written by the caller through ``streams/writer.LogWriter``.
+``OccupancyGrid.data`` is the map's lowest y, as the FGM's arrays. Messages are CDR bytes
+(``streams/cdr_encode.py``: rosbags' bytes without its typestore), written by the caller
+through ``streams/writer.LogWriter``.
 """
 
 from __future__ import annotations
@@ -16,6 +17,7 @@ import numpy as np
 
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.streams import messages as M
+from fuzzyslam.streams.cdr_encode import MarkerSpec, encode_marker_array, encode_occupancy_grid
 
 UNKNOWN_T = 0.9  # m(Theta) above this: unknown (-1), as the nav2 PGM (mapio.occupancy_image)
 REFERENCE_COLOUR = (0.0, 0.45, 0.70, 1.0)  # blue (Okabe-Ito), colour-blind safe
@@ -57,8 +59,8 @@ def conflict_values(bm: BeliefMap) -> np.ndarray:
     return v
 
 
-def grid_message(bm: BeliefMap, values: np.ndarray, t: float, frame: str = "map") -> Any:
-    """nav_msgs/OccupancyGrid of ``values`` (ny, nx) on the FGM's grid.
+def grid_message(bm: BeliefMap, values: np.ndarray, t: float, frame: str = "map") -> bytes:
+    """nav_msgs/OccupancyGrid (CDR bytes) of ``values`` (ny, nx) on the FGM's grid.
 
     Parameters
     ----------
@@ -73,17 +75,18 @@ def grid_message(bm: BeliefMap, values: np.ndarray, t: float, frame: str = "map"
 
     Returns
     -------
-    OccupancyGrid
+    bytes
+        The message's CDR payload.
     """
     g = bm.grid
-    return M.occupancy_grid(t, frame, values, g.resolution, (g.origin[0], g.origin[1]))
+    return encode_occupancy_grid(t, frame, values, g.resolution, (g.origin[0], g.origin[1]))
 
 
 def reference_markers(
     refs: Sequence[tuple[int, str, float, np.ndarray]], t: float, frame: str = "map"
-) -> Any:
-    """visualization_msgs/MarkerArray of corridor references given as (id, name, angle
-    (rad, mod pi), region polygon (K, 2)): per reference its region (closed line strip,
+) -> bytes:
+    """visualization_msgs/MarkerArray (CDR bytes) of corridor references given as (id, name,
+    angle (rad, mod pi), region polygon (K, 2)): per reference its region (closed line strip,
     namespace ``region``), its reference direction through the region's centroid (a
     line as long as the region's extent along it, ``direction``) and a text label
     ``name angle deg`` (``label``); marker id = reference id.
@@ -99,7 +102,8 @@ def reference_markers(
 
     Returns
     -------
-    MarkerArray
+    bytes
+        The message's CDR payload.
     """
     markers = []
     for rid, name, angle, poly in refs:
@@ -110,19 +114,19 @@ def reference_markers(
         half = max(0.5 * float(s.max() - s.min()), 0.5)
         ring = np.vstack([poly, poly[:1]])
         markers.append(
-            M.marker(t, frame, "region", rid, 4, scale=(0.03, 0.0, 0.0), rgba=REFERENCE_COLOUR,
-                     points=ring, z=0.01)
+            MarkerSpec(t, frame, "region", rid, 4, scale=(0.03, 0.0, 0.0), rgba=REFERENCE_COLOUR,
+                       points=ring, z=0.01)
         )  # fmt: skip
         markers.append(
-            M.marker(t, frame, "direction", rid, 5, scale=(0.06, 0.0, 0.0),
-                     rgba=REFERENCE_COLOUR, points=np.array([c - half * d, c + half * d]),
-                     z=0.02)
+            MarkerSpec(t, frame, "direction", rid, 5, scale=(0.06, 0.0, 0.0),
+                       rgba=REFERENCE_COLOUR, points=np.array([c - half * d, c + half * d]),
+                       z=0.02)
         )  # fmt: skip
         markers.append(
-            M.marker(t, frame, "label", rid, 9, (c[0], c[1], 0.0), 0.3, (0.0, 0.0, 0.3),
-                     (1.0, 1.0, 1.0, 1.0), text=f"{name} {np.rad2deg(angle):.2f} deg")
+            MarkerSpec(t, frame, "label", rid, 9, (c[0], c[1], 0.0), 0.3, (0.0, 0.0, 0.3),
+                       (1.0, 1.0, 1.0, 1.0), text=f"{name} {np.rad2deg(angle):.2f} deg")
         )  # fmt: skip
-    return M.marker_array(markers)
+    return encode_marker_array(markers)
 
 
 def fgm_messages(
@@ -131,9 +135,10 @@ def fgm_messages(
     t: float,
     topics: Any,
     frame: str = "map",
-) -> list[tuple[str, str, Any, float]]:
-    """(topic, type, message, t) of an FGM: ``topics.map`` (occupancy), ``topics.map_conflict``
-    (the conflict layer), ``topics.map_references`` (the corridor references, when any).
+) -> list[tuple[str, str, bytes, float]]:
+    """(topic, type, CDR bytes, t) of an FGM: ``topics.map`` (occupancy),
+    ``topics.map_conflict`` (the conflict layer), ``topics.map_references`` (the corridor
+    references, when any).
 
     Parameters
     ----------
@@ -150,7 +155,7 @@ def fgm_messages(
 
     Returns
     -------
-    list of (str, str, message, float)
+    list of (str, str, bytes, float)
     """
     out = [
         (topics.map, M.OCCUPANCY_GRID, grid_message(bm, occupancy_values(bm), t, frame), t),

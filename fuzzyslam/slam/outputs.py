@@ -273,14 +273,14 @@ class StreamingOutputs:
 
     def finish(self, res: SlamResult, extra=()) -> None:
         """Write what is left: the last blocks, landmarks.yaml and ``extra`` (topic, type
-        name, message, t) messages of estimates.mcap (e.g. the aids' /slam/changes), and
-        close estimates.mcap (renamed into place inside ``tmp``).
+        name, message or its CDR bytes, t) messages of estimates.mcap (e.g. the aids'
+        /slam/changes), and close estimates.mcap (renamed into place inside ``tmp``).
 
         Parameters
         ----------
         res : SlamResult
             The filter's result (landmarks).
-        extra : iterable of (str, str, message, float)
+        extra : iterable of (str, str, message or bytes, float)
             The aids' messages.
         """
         self._flush_rows()
@@ -305,8 +305,8 @@ def write_outputs(tmp: Path, out: StreamingOutputs, res: SlamResult, extra=()) -
         The sink the rows went to.
     res : SlamResult
         The filter's result.
-    extra : iterable of (str, str, message, float)
-        The aids' messages for estimates.mcap.
+    extra : iterable of (str, str, message or bytes, float)
+        The aids' messages for estimates.mcap (rosbags messages or CDR bytes).
     """
     assert out.tmp == Path(tmp)
     out.finish(res, extra)

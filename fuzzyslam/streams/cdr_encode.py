@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import struct
 from collections.abc import Sequence
+from dataclasses import dataclass
 from functools import lru_cache
 
 import numpy as np
@@ -272,31 +273,68 @@ class _Cdr:
         self.b += data
 
 
-def _marker_array_cdr(frame: str, ns: str, mtype: int, rgba, markers: list[tuple]) -> bytes:
-    """visualization_msgs/MarkerArray (ROS 2 Humble) of markers (t, id, (x, y, z, qx, qy,
-    qz, qw), (sx, sy, sz)) in the frame, namespace, type and colour given, written
-    field by field (no points, colours, texture, uv coordinates, text or mesh; action 0,
-    lifetime 0): what rosbags serialises for ``messages.marker`` (tests/test_cdr.py)."""
+@dataclass(frozen=True, slots=True)
+class MarkerSpec:
+    """One visualization_msgs/Marker as ``messages.marker`` takes it (the same arguments,
+    in its order): ``messages.marker(*astuple(spec))`` is the rosbags message whose bytes
+    :func:`encode_marker_array` writes."""
+
+    t: float  # stamp, s
+    frame_id: str
+    ns: str
+    mid: int
+    mtype: int  # 0 arrow, 2 sphere, 3 cylinder, 4 line strip, 5 line list, 9 text
+    pose: tuple[float, float, float] = (0.0, 0.0, 0.0)  # x, y, yaw (a yaw quaternion)
+    z: float = 0.0  # the pose's and the points' height
+    scale: tuple[float, float, float] = (0.1, 0.1, 0.1)
+    rgba: tuple[float, float, float, float] = (1.0, 1.0, 1.0, 1.0)
+    points: np.ndarray | None = None  # (K, 2) x, y (at height z)
+    text: str = ""
+    action: int = 0
+
+
+def encode_marker_array(markers: Sequence[MarkerSpec]) -> bytes:
+    """Little-endian CDR of the visualization_msgs/MarkerArray (ROS 2 Humble) of
+    ``messages.marker(*astuple(m))`` for each m, written field by field: the bytes
+    ``typestore.serialize`` gives for it (tests/test_cdr.py), without the typestore
+    (its import and set-up cost 0.1 s of a run's start).
+
+    Parameters
+    ----------
+    markers : sequence of MarkerSpec
+        The markers (no colours per point, texture, uv coordinates or mesh).
+
+    Returns
+    -------
+    bytes
+        The payload.
+    """
     w = _Cdr()
     w.put("I", 4, len(markers))
-    for t, mid, pose, scale in markers:
-        sec, nsec = divmod(round(t * 1e9), 1_000_000_000)
+    for m in markers:
+        sec, nsec = divmod(round(m.t * 1e9), 1_000_000_000)  # messages.stamp
+        x, y, theta = m.pose
+        z = float(m.z)
         w.put("iI", 4, sec, nsec)  # header
-        w.string(frame)
-        w.string(ns)
-        w.put("iii", 4, mid, mtype, 0)  # id, type, action
-        w.put("7d", 8, *pose)
-        w.put("3d", 8, *scale)
-        w.put("4f", 4, *rgba)
+        w.string(m.frame_id)
+        w.string(m.ns)
+        w.put("iii", 4, int(m.mid), int(m.mtype), int(m.action))
+        w.put("7d", 8, float(x), float(y), z, *yaw_to_quaternion(theta).tolist())
+        w.put("3d", 8, *map(float, m.scale))
+        w.put("4f", 4, *map(float, m.rgba))
         w.put("iI?", 4, 0, 0, False)  # lifetime, frame_locked
-        w.put("II", 4, 0, 0)  # points, colors
+        pts = [] if m.points is None else np.asarray(m.points, dtype=float).reshape(-1, 2)
+        w.put("I", 4, len(pts))
+        for px, py in np.asarray(pts).tolist():
+            w.put("3d", 8, px, py, z)
+        w.put("I", 4, 0)  # colors
         w.string("")  # texture_resource
         w.put("iI", 4, sec, nsec)  # texture: header, format, data
         w.string("")
         w.string("")
         w.put("I", 4, 0)
         w.put("I", 4, 0)  # uv_coordinates
-        w.string("")  # text
+        w.string(m.text)
         w.string("")  # mesh_resource
         w.string("")  # mesh_file: filename, data
         w.put("I", 4, 0)
@@ -304,20 +342,58 @@ def _marker_array_cdr(frame: str, ns: str, mtype: int, rgba, markers: list[tuple
     return bytes(w.b)
 
 
+def encode_occupancy_grid(
+    t: float, frame_id: str, data: np.ndarray, resolution: float, origin: tuple[float, float]
+) -> bytes:
+    """Little-endian CDR of ``messages.occupancy_grid(t, frame_id, data, resolution,
+    origin)`` (nav_msgs/OccupancyGrid), written field by field: the bytes
+    ``typestore.serialize`` gives for it (tests/test_cdr.py).
+
+    Parameters
+    ----------
+    t : float
+        Stamp and map load time (s).
+    frame_id : str
+        The frame.
+    data : ndarray of int8, shape (H, W)
+        The cells (row 0 at the origin's y).
+    resolution : float
+        Cell size (m).
+    origin : (float, float)
+        The lower-left corner (m).
+
+    Returns
+    -------
+    bytes
+        The payload.
+    """
+    data = np.ascontiguousarray(data, dtype=np.int8)
+    h, wd = data.shape
+    sec, nsec = divmod(round(t * 1e9), 1_000_000_000)
+    w = _Cdr()
+    w.put("iI", 4, sec, nsec)  # header
+    w.string(frame_id)
+    w.put("iIfII", 4, sec, nsec, float(resolution), wd, h)  # info: load time, size
+    w.put("7d", 8, float(origin[0]), float(origin[1]), 0.0, *yaw_to_quaternion(0.0).tolist())
+    w.put("I", 4, data.size)
+    w.b += data.tobytes()
+    return bytes(w.b)
+
+
 @lru_cache(maxsize=16)
 def _marker_layout(
     frame: str, ns: str, mtype: int, z: float, scale_z: float, rgba: tuple[float, ...]
 ) -> tuple[bytes, int, int, np.dtype] | None:
-    """One Marker's bytes (``_marker_array_cdr``) with the padding to the next one, its
+    """One Marker's bytes (``encode_marker_array``) with the padding to the next one, its
     length, the number of stamps in it, and the structured dtype of the numbers that
     change; None when a 3-marker array is not head + markers at that stride (then rosbags
     serialises)."""
 
-    def one(i: int, t: float, xy, scale) -> tuple:
-        return (t, i, (*xy, z, *yaw_to_quaternion(0.0).tolist()), (*scale, scale_z))
+    def one(i: int, t: float, xy, scale) -> MarkerSpec:
+        return MarkerSpec(t, frame, ns, i, mtype, (*xy, 0.0), z, (*scale, scale_z), rgba)
 
     def ser(markers: list) -> bytes:
-        return _marker_array_cdr(frame, ns, mtype, rgba, markers)
+        return encode_marker_array(markers)
 
     s1 = ser([one(_SENT_ID, _SENT_T, _SENT_XY, _SENT_SCALE)])
     s3 = ser([one(_SENT_ID, _SENT_T, _SENT_XY, _SENT_SCALE)] * 3)
@@ -358,7 +434,7 @@ def encode_markers(
     """Little-endian CDR of the visualization_msgs/MarkerArray of ``messages.marker(t,
     frame, ns, k, mtype, poses[k], z, (*scales[k], scale_z), rgba)`` for k = 0..n-1 (ids
     0..n-1; no points, no text): the bytes ``typestore.serialize`` gives for it, from one
-    Marker written by ``_marker_array_cdr`` as a template (the stamps, id, pose and scale written
+    Marker written by ``encode_marker_array`` as a template (the stamps, id, pose and scale written
     into n copies through a structured view).
 
     Parameters

@@ -1,8 +1,9 @@
-"""The ros2msg definitions (schema texts) of the messages a lamps-only ``run`` writes into
-estimates.mcap, as rosbags' ROS 2 Humble typestore generates them, so that writing them needs
-no typestore (tests/test_cdr.py checks each equals the typestore's text). Each message's
-own definition is written once; a type's text is its definition followed by those of the
-types it uses, each after a separator line and ``MSG: name``."""
+"""The ros2msg definitions (schema texts) of the messages ``run`` writes into estimates.mcap
+(with fixes, the map and the fixes' markers too), as rosbags' ROS 2 Humble typestore
+generates them, so that writing them needs no typestore (tests/test_cdr.py checks each
+equals the typestore's text). Each message's own definition is written once; a type's
+text is its definition followed by those of the types it uses, each after a separator
+line and ``MSG: name``."""
 
 from __future__ import annotations
 
@@ -70,6 +71,11 @@ _DEFINITIONS: dict[str, str] = {
     "visualization_msgs/UVCoordinate": ("float32 u\nfloat32 v\n"),
     "visualization_msgs/MeshFile": ("string filename\nuint8[] data\n"),
     "visualization_msgs/MarkerArray": ("visualization_msgs/Marker[] markers\n"),
+    "nav_msgs/OccupancyGrid": ("std_msgs/Header header\nnav_msgs/MapMetaData info\nint8[] data\n"),
+    "nav_msgs/MapMetaData": (
+        "builtin_interfaces/Time map_load_time\nfloat32 resolution\nuint32 width\n"
+        "uint32 height\ngeometry_msgs/Pose origin\n"
+    ),
 }
 
 # the types written, with the types their text includes, in the typestore's order
@@ -103,6 +109,14 @@ _USES: dict[str, tuple[str, ...]] = {
         "sensor_msgs/CompressedImage",
         "visualization_msgs/UVCoordinate",
         "visualization_msgs/MeshFile",
+    ),
+    "nav_msgs/msg/OccupancyGrid": (
+        "std_msgs/Header",
+        "builtin_interfaces/Time",
+        "nav_msgs/MapMetaData",
+        "geometry_msgs/Pose",
+        "geometry_msgs/Point",
+        "geometry_msgs/Quaternion",
     ),
 }
 

@@ -168,8 +168,10 @@ class LogWriter:
         return cid
 
     def write(self, topic: str, typename: str, msg: Any, t: float) -> None:
-        """Write a message with log and publish time ``t`` (seconds of log time)."""
-        self.write_cdr(topic, typename, serialize(msg, typename), t)
+        """Write a message (a rosbags message, or its CDR bytes as ``streams/cdr_encode.py``
+        writes them) with log and publish time ``t`` (seconds of log time)."""
+        data = msg if isinstance(msg, bytes) else serialize(msg, typename)
+        self.write_cdr(topic, typename, data, t)
 
     def write_cdr(self, topic: str, typename: str, data: bytes, t: float) -> None:
         """Write an already CDR-serialised message of type ``typename`` (as ``write``)."""
