@@ -175,9 +175,7 @@ def test_pose_block_encoder_equals_rosbags(rows, frame) -> None:
 @settings(max_examples=60, deadline=None)
 @given(
     st.floats(0, 2e9),
-    st.lists(
-        st.tuples(*(st.floats(-1e3, 1e3),) * 3, *(st.floats(1e-9, 1e2),) * 3), max_size=7
-    ),
+    st.lists(st.tuples(*(st.floats(-1e3, 1e3),) * 3, *(st.floats(1e-9, 1e2),) * 3), max_size=7),
     TEXT,
 )
 def test_marker_encoder_equals_rosbags(t, rows, frame) -> None:
