@@ -18,7 +18,9 @@ between consecutive /ground_truth/odom poses becomes
 
 with n1, n2 standard normal per step, d = |(dx, dy)|, integrated from the truth's first
 pose) and writes a copy of the log whose other topics are copied byte for byte. The
-log's own /odom is the variant ``given``. The FGMs are built once per building from
+log's own /odom is the variant ``given``; the others are named KIND-SEED, KIND one of
+``same`` (the data's own error model), ``flip``, ``mixed`` and ``double`` (KINDS), any
+seed (``--variants same-1 same-2 ... same-8``: the spread of draws). The FGMs are built once per building from
 truth.tum (they do not depend on /odom); each variant runs ``--fix pose`` and
 ``--fix heading`` with both presets (``real_building_scan`` / ``_sonar``). Scored as in
 bench_buildings.py: position error mean / max and heading error mean against truth
@@ -40,7 +42,7 @@ import json
 import math
 import sys
 import tempfile
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -67,15 +69,23 @@ class OdomErrors:
     seed: int = 1
 
 
-VARIANTS: dict[str, OdomErrors | None] = {
-    "given": None,
-    "same-1": OdomErrors(seed=1),
-    "same-2": OdomErrors(seed=2),
-    "flip-1": OdomErrors(-0.01, 0.005, bias_deg_per_m=-0.05, seed=1),
-    "flip-2": OdomErrors(-0.01, 0.005, bias_deg_per_m=-0.05, seed=2),
-    "mixed-3": OdomErrors(-0.01, -0.005, bias_deg_per_m=0.05, seed=3),
-    "double-4": OdomErrors(0.02, -0.01, 0.04, 0.02, -0.1, seed=4),
+# the error models: the data's own, its signs flipped, mixed signs, all doubled
+KINDS = {
+    "same": OdomErrors(),
+    "flip": OdomErrors(-0.01, 0.005, bias_deg_per_m=-0.05),
+    "mixed": OdomErrors(-0.01, -0.005, bias_deg_per_m=0.05),
+    "double": OdomErrors(0.02, -0.01, 0.04, 0.02, -0.1),
 }
+# the default study: the log's own /odom ("given"), then KIND-SEED
+VARIANTS = ["given", "same-1", "same-2", "flip-1", "flip-2", "mixed-3", "double-4"]
+
+
+def variant(name: str) -> OdomErrors | None:
+    """The errors of a variant ``KIND-SEED`` (KINDS; any seed), None for ``given``."""
+    if name == "given":
+        return None
+    kind, seed = name.rsplit("-", 1)
+    return replace(KINDS[kind], seed=int(seed))
 
 
 def synthetic_odometry(truth: np.ndarray, e: OdomErrors) -> np.ndarray:
@@ -149,7 +159,7 @@ def carmen(data: Path, out: Path, variants: list[str]) -> list[dict]:
                 fuzzyslam("map", str(log), "--trajectory", str(truth), "--config",
                           f"real_building_{rs}.yaml", "-o", str(fgm))  # fmt: skip
         for v in variants:
-            e = VARIANTS[v]
+            e = variant(v)
             # the same file name: a map's identity is its log's name (maps.mapio.log_identity)
             vlog = log if e is None else work / v / "log.mcap"
             if e is not None and not vlog.is_file():
@@ -295,7 +305,7 @@ def main() -> None:
     ap.add_argument("--data", type=Path, default=_default_data())
     ap.add_argument("--out", type=Path, default=None, help="keep logs and outputs here")
     ap.add_argument("--part", nargs="*", default=["mrclam", "carmen"])
-    ap.add_argument("--variants", nargs="*", default=list(VARIANTS))
+    ap.add_argument("--variants", nargs="*", default=VARIANTS, help="given or KIND-SEED")
     ap.add_argument("--starts", nargs="*", type=float, default=[0, 75, 150, 225, 300, 375, 450])
     ap.add_argument("--window", type=float, default=450.0)
     a = ap.parse_args()
