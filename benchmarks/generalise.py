@@ -20,8 +20,8 @@ with n1, n2 standard normal per step, d = |(dx, dy)|, integrated from the truth'
 pose) and writes a copy of the log whose other topics are copied byte for byte. The
 log's own /odom is the variant ``given``; the others are named KIND-SEED, KIND one of
 ``same`` (the data's own error model), ``flip``, ``mixed`` and ``double`` (KINDS), any
-seed (``--variants same-1 same-2 ... same-8``: the spread of draws). The FGMs are built once per building from
-truth.tum (they do not depend on /odom); each variant runs ``--fix pose`` and
+seed (``--variants same-1 same-2 ... same-8``: the spread of draws). The FGMs are built
+once per building from truth.tum (they do not depend on /odom); each variant runs ``--fix pose`` and
 ``--fix heading`` with both presets (``real_building_scan`` / ``_sonar``). Scored as in
 bench_buildings.py: position error mean / max and heading error mean against truth
 (targets 0.3 / 1.0 m, 1 deg).
