@@ -1,12 +1,16 @@
-"""Matplotlib figures written as PNG files with one draw (the stages' figures).
+"""Matplotlib figures written as PNG files with one draw and no text measuring (the
+stages' figures).
 
 ``Figure.savefig(..., bbox_inches="tight")`` draws a figure twice (once with drawing
-disabled, to find the tight bounding box, then for real) and PIL compresses the RGBA
-picture at zlib level 6. :func:`save_png` draws once on the Agg canvas, crops the
-picture to the same box (every drawn artist, ``savefig.pad_inches`` around it) when
-that box lies in the figure (else it falls back to ``savefig``, which grows the canvas),
-and writes RGB (the figures are opaque) at a lower zlib level: the same picture for
-about a third less CPU, files a few per cent larger.
+disabled, to find the tight bounding box, then for real), ``tight_layout`` measures every
+tick label and title once more before that, and PIL compresses the RGBA picture at zlib
+level 6. Here a figure is laid out with fixed margins in inches (:func:`fixed_layout`,
+sized for the labels the stages draw), drawn once on the Agg canvas, and cropped to the
+pixels that differ from the figure's background, ``savefig.pad_inches`` around them: the
+blank part of the generous margins goes, and only the legends are measured. When a drawn
+pixel touches the canvas's edge or a legend leaves it (an artist is cut, or lies wholly
+beyond) it falls back to ``savefig(bbox_inches="tight")``, which grows the canvas. The
+picture is written as RGB (the figures are opaque) at a lower zlib level.
 """
 
 from __future__ import annotations
@@ -17,52 +21,89 @@ import os
 import matplotlib
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.colors import to_rgba_array
 from matplotlib.figure import Figure
 
 COMPRESS_LEVEL = 3  # zlib: 6 (PIL's default) costs 1.5x the time for files 5-8 % smaller
 SOFTWARE = f"Matplotlib version{matplotlib.__version__}, https://matplotlib.org/"
 
 
-def tight_pixels(fig: Figure, canvas: FigureCanvasAgg) -> tuple[slice, slice] | None:
-    """The rows and columns of the drawn picture inside ``savefig(bbox_inches="tight")``'s
-    box (the figure's tight bounding box padded by ``savefig.pad_inches``), or None when
-    the unpadded box leaves the figure (cropping would cut a drawn artist).
+def fixed_layout(
+    fig: Figure,
+    left: float,
+    right: float,
+    bottom: float,
+    top: float,
+    hspace: float = 0.0,
+    wspace: float = 0.0,
+) -> None:
+    """Place the figure's grid of subplots with margins and gaps given in inches (what
+    ``tight_layout`` finds by measuring every label, here fixed by the caller: the
+    margins must hold the tick labels, axis labels, titles and legends outside the axes;
+    :func:`save_png` crops the blank rest).
+
+    With H by W axes in a figure of ``w`` by ``h`` inches, the axes' height is
+    ``a_h = (h - top - bottom - (H - 1) hspace) / H`` and matplotlib's ``hspace`` is the
+    gap over the mean axes height, ``hspace / a_h`` (``wspace`` likewise).
 
     Parameters
     ----------
     fig : Figure
-        A figure just drawn on ``canvas``.
-    canvas : FigureCanvasAgg
-        Its canvas.
+        A figure whose axes lie on one grid (``subplots``).
+    left, right, bottom, top : float
+        Margins between the figure's edge and the grid (inches).
+    hspace, wspace : float
+        Gaps between rows and between columns of the grid (inches).
+    """
+    w, h = fig.get_size_inches()
+    rows, cols = 1, 1
+    for ax in fig.axes:
+        spec = ax.get_subplotspec()
+        if spec is not None:
+            rows, cols = spec.get_topmost_subplotspec().get_gridspec().get_geometry()
+            break
+    ax_h = (h - top - bottom - (rows - 1) * hspace) / rows
+    ax_w = (w - left - right - (cols - 1) * wspace) / cols
+    fig.subplots_adjust(left=left / w, right=1.0 - right / w, bottom=bottom / h,
+                        top=1.0 - top / h, hspace=hspace / ax_h, wspace=wspace / ax_w)  # fmt: skip
+
+
+def ink_pixels(rgba: np.ndarray, background: np.ndarray, pad: int) -> tuple[slice, slice] | None:
+    """The rows and columns of a picture around every pixel that differs from
+    ``background``, ``pad`` pixels more on each side (kept inside the picture); None when
+    a drawn pixel touches the picture's edge (something may lie beyond it).
+
+    Parameters
+    ----------
+    rgba : ndarray, shape (H, W, 4)
+        The drawn picture (uint8).
+    background : ndarray, shape (4,)
+        The figure's background colour (uint8).
+    pad : int
+        Blank pixels kept around the drawing.
 
     Returns
     -------
     (slice, slice) or None
-        Rows (from the top) and columns of the picture.
+        Rows (from the top) and columns; the whole picture when nothing is drawn.
     """
-    box = fig.get_tightbbox(canvas.get_renderer())  # inches, origin bottom left
-    w, h = fig.get_size_inches()
-    eps = 0.5 / fig.dpi  # half a pixel
-    if box.x0 < -eps or box.y0 < -eps or box.x1 > w + eps or box.y1 > h + eps:
+    # one 32-bit comparison per pixel (its four bytes at once)
+    ink = rgba.view(np.uint32)[..., 0] != background.view(np.uint32)[0]
+    rows, cols = np.flatnonzero(ink.any(axis=1)), np.flatnonzero(ink.any(axis=0))
+    h, w = ink.shape
+    if rows.size == 0:
+        return slice(0, h), slice(0, w)
+    if rows[0] == 0 or cols[0] == 0 or rows[-1] == h - 1 or cols[-1] == w - 1:
         return None
-    box = box.padded(matplotlib.rcParams["savefig.pad_inches"])
-    rows, cols = canvas.get_width_height()[::-1]
-    d = fig.dpi
-    c0, c1 = max(math.floor(box.x0 * d), 0), min(math.ceil(box.x1 * d), cols)
-    r0, r1 = max(math.floor((h - box.y1) * d), 0), min(math.ceil((h - box.y0) * d), rows)
-    return slice(r0, r1), slice(c0, c1)
+    return (slice(max(rows[0] - pad, 0), min(rows[-1] + 1 + pad, h)),
+            slice(max(cols[0] - pad, 0), min(cols[-1] + 1 + pad, w)))  # fmt: skip
 
 
-def save_png(
-    fig: Figure, path: str | os.PathLike, dpi: float, tight: bool = False, grows: bool = False
-) -> None:
+def save_png(fig: Figure, path: str | os.PathLike, dpi: float, tight: bool = False) -> None:
     """Write ``fig`` to ``path`` as a PNG at ``dpi`` with one draw; ``tight``: cropped to
-    the tight bounding box, as ``savefig(bbox_inches="tight")`` (which it falls back to
-    when the box leaves the figure). The figure is left open.
-
-    ``grows`` (with ``tight``): the caller knows the box leaves the figure (a legend
-    placed outside the axes): ``savefig`` at once, without the draw that would find it
-    out (``savefig`` draws once without output to find the box, then once for real).
+    the drawn pixels (:func:`ink_pixels`, ``savefig.pad_inches`` around them), or
+    ``savefig(bbox_inches="tight")`` when the drawing reaches the canvas's edge or a
+    legend leaves it. The figure is left open.
 
     Parameters
     ----------
@@ -73,22 +114,19 @@ def save_png(
     dpi : float
         Dots per inch.
     tight : bool
-        Crop to the drawn artists.
-    grows : bool
-        The drawn artists leave the figure (``tight`` only).
+        Crop the blank margins.
     """
     from PIL import Image, PngImagePlugin
 
-    if tight and grows:
-        _savefig_tight(fig, path, dpi)
-        return
     fig.set_dpi(dpi)
     canvas = fig.canvas if isinstance(fig.canvas, FigureCanvasAgg) else FigureCanvasAgg(fig)
     canvas.draw()
     rgba = np.asarray(canvas.buffer_rgba())
     if tight:
-        crop = tight_pixels(fig, canvas)
-        if crop is None:  # an artist outside the figure: savefig grows the canvas
+        bg = np.round(to_rgba_array(fig.get_facecolor())[0] * 255).astype(np.uint8)
+        pad = math.ceil(matplotlib.rcParams["savefig.pad_inches"] * dpi)
+        crop = ink_pixels(rgba, bg, pad)
+        if crop is None or _legend_outside(fig, canvas):  # savefig grows the canvas
             _savefig_tight(fig, path, dpi)
             return
         rgba = rgba[crop]
@@ -98,6 +136,24 @@ def save_png(
     Image.fromarray(np.ascontiguousarray(pixels)).save(
         path, format="png", compress_level=COMPRESS_LEVEL, dpi=(dpi, dpi), pnginfo=info
     )
+
+
+def _legend_outside(fig: Figure, canvas: FigureCanvasAgg) -> bool:
+    """A legend of the figure (of its axes, also those kept with ``add_artist``, or of the
+    figure) not wholly inside the canvas: one placed beyond the edge leaves no pixel
+    there for :func:`ink_pixels` to see. Legends are the artists the stages place
+    outside their axes; measuring only them costs little after the draw."""
+    from matplotlib.legend import Legend
+
+    legends = [*fig.legends, *(a for ax in fig.axes for a in (ax.get_legend(), *ax.artists))]
+    renderer = canvas.get_renderer()
+    w, h = canvas.get_width_height()
+    for leg in legends:
+        if isinstance(leg, Legend) and leg.get_visible():
+            box = leg.get_window_extent(renderer)
+            if box.x0 < 0 or box.y0 < 0 or box.x1 > w or box.y1 > h:
+                return True
+    return False
 
 
 def _savefig_tight(fig: Figure, path: str | os.PathLike, dpi: float) -> None:

@@ -155,6 +155,72 @@ def test_lean_mcap_writer_equals_mcap_writer(chunk_size):
     assert len(out[True]) > chunk_size or chunk_size > 10**5
 
 
+def test_level_chunks_hold_what_mcap_writes():
+    """_LeanWriter's chunks at ZSTD_LEVEL against mcap's own Writer (its default level):
+    the same messages, metadata, attachment and statistics read back (CRCs checked), the
+    same chunks (uncompressed size and CRC, times) and message indexes, each chunk the
+    ZSTD_LEVEL compression of its bytes; only the compressed bytes differ."""
+    import io
+
+    import zstandard
+    from mcap.reader import make_reader
+    from mcap.records import Chunk, MessageIndex
+    from mcap.stream_reader import StreamReader
+    from mcap.writer import CompressionType, Writer
+
+    from fuzzyslam.streams.writer import ZSTD_LEVEL, _LeanWriter
+
+    rng = np.random.default_rng(8)
+    n = 2000
+    cids, sizes = rng.integers(0, 3, n), rng.integers(0, 900, n)
+    datas = [rng.integers(0, 8, int(k), dtype=np.uint8).tobytes() for k in sizes]  # compressible
+    files = {}
+    for kind in (_LeanWriter, Writer):
+        f = io.BytesIO()
+        w = kind(f, chunk_size=64 * 1024, compression=CompressionType.ZSTD)
+        w.start(profile="ros2", library="test")
+        s = w.register_schema(name="a/msg/B", encoding="ros2msg", data=b"int32 x")
+        ch = [
+            w.register_channel(topic=f"/t{k}", message_encoding="cdr", schema_id=s)
+            for k in range(3)
+        ]
+        w.add_metadata("m", {"k": "v"})
+        for i in range(n):
+            w.add_message(channel_id=ch[cids[i]], log_time=10 * i, data=datas[i],
+                          publish_time=10 * i + 1, sequence=i)  # fmt: skip
+        w.add_attachment(create_time=1, log_time=2, name="w.yaml", media_type="t", data=b"x")
+        w.finish()
+        files[kind] = f.getvalue()
+    assert files[_LeanWriter] != files[Writer]  # another level: other compressed bytes
+
+    def read(data: bytes):
+        r = make_reader(io.BytesIO(data), validate_crcs=True)
+        msgs = [(c.topic, m.log_time, m.publish_time, m.sequence, m.data)
+                for _, c, m in r.iter_messages(log_time_order=False)]  # fmt: skip
+        meta = [(m.name, m.metadata) for m in r.iter_metadata()]
+        att = [(a.name, a.data, a.log_time) for a in r.iter_attachments()]
+        return msgs, meta, att, r.get_summary().statistics
+
+    def chunks(data: bytes):
+        out = []
+        for rec in StreamReader(io.BytesIO(data), emit_chunks=True).records:
+            if isinstance(rec, Chunk):
+                size = rec.uncompressed_size
+                raw = zstandard.ZstdDecompressor().decompress(rec.data, max_output_size=size)
+                out.append((rec.uncompressed_size, rec.uncompressed_crc, rec.message_start_time,
+                            rec.message_end_time, raw))  # fmt: skip
+                if data is files[_LeanWriter]:
+                    assert rec.data == zstandard.ZstdCompressor(level=ZSTD_LEVEL).compress(raw)
+            elif isinstance(rec, MessageIndex):
+                out.append((rec.channel_id, rec.records))
+        return out
+
+    assert read(files[_LeanWriter]) == read(files[Writer])
+    assert len(read(files[Writer])[0]) == n
+    lean_chunks = chunks(files[_LeanWriter])
+    assert lean_chunks == chunks(files[Writer]) and len(lean_chunks) > 10
+
+
 def test_loop_at1_equals_at():
     from fuzzyslam.sim.world import Loop
 

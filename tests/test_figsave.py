@@ -1,5 +1,6 @@
-"""save_png: one draw gives savefig(bbox_inches="tight")'s picture (its box and pixels),
-and falls back to savefig when an artist lies outside the figure."""
+"""save_png and fixed_layout: one draw cropped to the drawn pixels (every drawn pixel kept,
+the pad around them), savefig(bbox_inches="tight")'s picture when the drawing reaches the
+canvas's edge, and margins placed where they were asked (inches)."""
 
 from __future__ import annotations
 
@@ -11,12 +12,12 @@ import numpy as np
 import pytest
 from PIL import Image
 
-from fuzzyslam.figsave import save_png
+from fuzzyslam.figsave import fixed_layout, ink_pixels, save_png
 
 
 def _figure(legend_x: float = 1.02) -> plt.Figure:
     """A figure like Fig. 1/3: a log axis, a line, a band, a legend (at ``legend_x`` in
-    axes fractions, placed after the layout), a title and labels."""
+    axes fractions), a title and labels, in a fixed layout with generous margins."""
     fig, axes = plt.subplots(2, 1, figsize=(6, 4), sharex=True, dpi=100)
     t = np.linspace(0.0, 10.0, 400)
     axes[0].semilogy(t, np.exp(np.sin(t)) + 0.1, label="a line")
@@ -24,58 +25,48 @@ def _figure(legend_x: float = 1.02) -> plt.Figure:
     axes[1].plot(t, np.cos(t), ".", ms=2, label="points")
     axes[1].set_xlabel("time (s)")
     axes[0].set_ylabel("value (m)")
-    axes[0].set_title("a title")
-    fig.tight_layout()
+    axes[0].set_title("a title", y=1.0)
+    fixed_layout(fig, 1.0, 0.3, 0.7, 0.5, hspace=0.3)
     axes[0].legend(loc="upper left", bbox_to_anchor=(legend_x, 1.0))
     return fig
-
-
-def _shifted_difference(a: np.ndarray, b: np.ndarray, most: int = 2) -> float:
-    """The smallest mean absolute difference of two pictures over shifts of b by at most
-    ``most`` pixels each way (their common part)."""
-    h, w = min(a.shape[0], b.shape[0]) - 2 * most, min(a.shape[1], b.shape[1]) - 2 * most
-    ref = a[most : most + h, most : most + w]
-    return min(
-        float(np.abs(ref - b[most + dy : most + dy + h, most + dx : most + dx + w]).mean())
-        for dy in range(-most, most + 1)
-        for dx in range(-most, most + 1)
-    )
 
 
 def _pixels(path) -> np.ndarray:
     return np.asarray(Image.open(path).convert("RGB"), dtype=float)
 
 
-def _tight_pair(tmp_path, legend_x: float, dpi: int):
-    """The same figure written by savefig(bbox_inches="tight") and by save_png(tight=True):
-    their pixels (H, W, 3) and the new file's path."""
+def test_the_crop_keeps_every_drawn_pixel_and_the_pad(tmp_path) -> None:
+    fig = _figure(legend_x=0.6)
+    save_png(fig, tmp_path / "whole.png", 120)
+    save_png(fig, tmp_path / "tight.png", 120, tight=True)
+    plt.close(fig)
+    whole, tight = _pixels(tmp_path / "whole.png"), _pixels(tmp_path / "tight.png")
+    assert whole.shape == (480, 720, 3)
+    ink = np.argwhere((whole != 255).any(axis=2))
+    (r0, c0), (r1, c1) = ink.min(axis=0), ink.max(axis=0)
+    pad = 12  # savefig.pad_inches (0.1 in) at 120 dpi
+    # the same drawing (one draw each, the same pixels), cut pad pixels around the ink
+    assert tight.shape == (r1 - r0 + 1 + 2 * pad, c1 - c0 + 1 + 2 * pad, 3)
+    assert np.array_equal(tight, whole[r0 - pad : r1 + 1 + pad, c0 - pad : c1 + 1 + pad])
+    assert (tight[:pad] == 255).all() and (tight[-pad:] == 255).all()
+    assert (tight[:, :pad] == 255).all() and (tight[:, -pad:] == 255).all()
+    assert Image.open(tmp_path / "tight.png").mode == "RGB"  # opaque: no alpha written
+    # pHYs holds whole pixels per metre
+    assert Image.open(tmp_path / "tight.png").info["dpi"] == pytest.approx((120, 120), abs=0.05)
+
+
+@pytest.mark.parametrize("legend_x", [0.95, 1.3])  # across the edge; wholly beyond it
+def test_a_drawing_past_the_edge_grows_the_picture_as_savefig(tmp_path, legend_x) -> None:
     ref, new = tmp_path / "ref.png", tmp_path / "new.png"
     fig = _figure(legend_x=legend_x)
-    fig.savefig(ref, dpi=dpi, bbox_inches="tight", format="png")
+    fig.savefig(ref, dpi=100, bbox_inches="tight", format="png")
     plt.close(fig)
     fig = _figure(legend_x=legend_x)
-    save_png(fig, new, dpi, tight=True)
+    save_png(fig, new, 100, tight=True)
     plt.close(fig)
-    return _pixels(ref), _pixels(new), new
-
-
-def test_one_draw_gives_the_tight_savefig_picture(tmp_path) -> None:
-    a, b, new = _tight_pair(tmp_path, legend_x=0.6, dpi=120)
-    # the same box up to rounding to whole pixels
-    assert abs(a.shape[0] - b.shape[0]) <= 2 and abs(a.shape[1] - b.shape[1]) <= 2
-    # the same picture: the two agree but for anti-aliasing, once the crop's whole-pixel
-    # offset is undone (a picture with anything moved, added or missing differs more)
-    best = _shifted_difference(a, b)
-    assert best < 1.5, best
-    assert Image.open(new).mode == "RGB"  # opaque: no alpha channel written
-    # pHYs holds whole pixels per metre
-    assert Image.open(new).info["dpi"] == pytest.approx((120, 120), abs=0.05)
-
-
-def test_an_artist_outside_the_figure_grows_the_picture_as_savefig(tmp_path) -> None:
-    a, b, _ = _tight_pair(tmp_path, legend_x=1.3, dpi=100)  # the legend right of the edge
+    a, b = _pixels(ref), _pixels(new)
     assert a.shape[1] > 600 and a.shape == b.shape  # wider than the 6-inch figure: not cut
-    assert _shifted_difference(a, b) < 0.5
+    assert np.abs(a - b).mean() < 0.5
 
 
 def test_untight_is_the_whole_figure(tmp_path) -> None:
@@ -83,3 +74,28 @@ def test_untight_is_the_whole_figure(tmp_path) -> None:
     save_png(fig, tmp_path / "f.png", 110)
     plt.close(fig)
     assert Image.open(tmp_path / "f.png").size == (660, 440)
+
+
+def test_ink_pixels() -> None:
+    bg = np.array([255, 255, 255, 255], np.uint8)
+    img = np.full((50, 80, 4), 255, np.uint8)
+    assert ink_pixels(img, bg, 3) == (slice(0, 50), slice(0, 80))  # nothing drawn
+    img[10:20, 30:41, 0] = 0  # one channel differs
+    assert ink_pixels(img, bg, 3) == (slice(7, 23), slice(27, 44))
+    assert ink_pixels(img, bg, 15) == (slice(0, 35), slice(15, 56))  # the pad kept inside
+    img[49, 5, 3] = 254  # a pixel on the bottom edge: something may lie beyond
+    assert ink_pixels(img, bg, 3) is None
+
+
+def test_fixed_layout_places_the_margins_and_gaps_in_inches() -> None:
+    fig, axes = plt.subplots(3, 2, figsize=(8, 6), dpi=100)
+    fixed_layout(fig, 1.0, 0.5, 0.8, 0.4, hspace=0.3, wspace=0.6)
+    boxes = np.array([[ax.get_position().bounds for ax in row] for row in axes])  # x, y, w, h
+    plt.close(fig)
+    x, y, w, h = (boxes[..., k] * s for k, s in enumerate((8, 6, 8, 6)))
+    ax_w, ax_h = (8 - 1.0 - 0.5 - 0.6) / 2, (6 - 0.8 - 0.4 - 2 * 0.3) / 3
+    assert np.allclose(w, ax_w) and np.allclose(h, ax_h)
+    assert np.allclose(x[:, 0], 1.0) and np.allclose(x[:, 1], 1.0 + ax_w + 0.6)
+    assert np.allclose(8 - (x[:, 1] + w[:, 1]), 0.5)
+    assert np.allclose(y[-1], 0.8) and np.allclose(6 - (y[0] + h[0]), 0.4)
+    assert np.allclose(y[:-1] - (y[1:] + h[1:]), 0.3)

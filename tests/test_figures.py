@@ -184,3 +184,27 @@ def test_figure_is_labelled_and_clips_nothing(drawn, name) -> None:
             if isinstance(im, AxesImage) and im.colorbar is None:
                 problems.append(f"{where}: an image without a colour bar")
     assert not problems, "\n".join(problems)
+
+
+@pytest.mark.parametrize(
+    "name",
+    ["fgm.png", "conflict.png", "hough.png", "fig1_paths.png", "fig3_errors.png", "compare.png",
+     "fig4_lamps.png", "consistency.png"],
+)  # fmt: skip
+def test_fixed_layout_holds_every_artist(drawn, name) -> None:
+    """The fixed margins (fuzzyslam/figsave.py) hold every label, title and legend: the
+    figure's tight box lies inside it (so the crop keeps everything, and save_png needs
+    no second draw), and the tight boxes of the axes and colour bars do not overlap (no
+    label over a neighbour)."""
+    if name not in drawn:
+        pytest.skip(f"{name} not drawn for this log")
+    fig = drawn[name]
+    renderer = fig.canvas.get_renderer()
+    box = fig.get_tightbbox(renderer)  # inches
+    w, h = fig.get_size_inches()
+    assert box.x0 >= 0 and box.y0 >= 0 and box.x1 <= w and box.y1 <= h, (box, w, h)
+    boxes = [ax.get_tightbbox(renderer) for ax in fig.axes if ax.axison]  # colour bars too
+    for i, a in enumerate(boxes):
+        for b in boxes[i + 1 :]:
+            overlap = min(a.x1, b.x1) - max(a.x0, b.x0), min(a.y1, b.y1) - max(a.y0, b.y0)
+            assert min(overlap) <= 1.0, (name, a, b)  # pixels: touching, not overlapping

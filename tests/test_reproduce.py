@@ -23,6 +23,7 @@ from fuzzyslam.reproduce.plan import (
     build_plan,
     compare_label,
     critical_path,
+    ready_order,
 )
 from fuzzyslam.reproduce.table import CAL, ROWS, Row, aggregate, phase_stat, run_labels
 
@@ -97,6 +98,28 @@ def test_critical_path_is_the_longest_chain():
     ]
     cp = critical_path(steps)
     assert cp == {"a": 7.0, "b": 6.0, "c": 3.0, "d": 1.0}
+
+
+def test_the_plan_starts_the_longest_chain_first():
+    """On the full plan: once the paper's FGM is done, phase D (heading fixes over all six
+    runs of the bump log, --fix-from 0) outranks every other ready step, as its chain
+    (D, then eval_D) is the longest left; the order is the same on every call and does
+    not depend on the order the steps are listed in."""
+    steps = build_plan([0], FULL)
+    prio = critical_path(steps)
+    by = {s.key.split("/")[1]: s for s in steps}
+    # D's chain: its run (the aid over 6 runs, not 2) and its evaluation
+    assert prio["seed0/D"] == pytest.approx(by["D"].cost + by["eval_D"].cost)
+    assert by["D"].cost > 1.8 * by["C"].cost
+    ready = [by[k] for k in ("C", "C_pose", "dark_heading", "dark_pose", "people_pose", "D",
+                             "eval_AB")]  # fmt: skip
+    order = [s.key.split("/")[1] for s in ready_order(ready, prio)]
+    assert order[0] == "D" and order[-1] == "eval_AB"
+    assert order == [s.key.split("/")[1] for s in ready_order(ready[::-1], prio)]
+    # a step never ranks below a step it leads to (a chain is at least its own length)
+    for s in steps:
+        for d in s.deps:
+            assert prio[d] > prio[s.key]
 
 
 def test_plan_refuses_unknown_dependencies_and_cycles():

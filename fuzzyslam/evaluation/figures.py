@@ -17,7 +17,7 @@ from numpy.typing import NDArray
 
 from fuzzyslam.evaluation.core import Estimate, Evaluation, Truth
 from fuzzyslam.evaluation.lamps import LampMatch
-from fuzzyslam.figsave import save_png
+from fuzzyslam.figsave import fixed_layout, save_png
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.slam.health import chi2_quantile
 from fuzzyslam.streams.logmeta import World
@@ -27,10 +27,34 @@ DPI = 120  # figures are made at their PNG's dpi: the layout's text sizes are th
 C_TRUTH, C_EST, C_ODOM = "black", "tab:blue", "tab:red"
 
 
-def _save(fig: plt.Figure, path: Path, grows: bool = False) -> None:
-    # one draw, cropped as bbox_inches="tight"; ``grows``: an artist leaves the figure,
-    # savefig at once (fuzzyslam/figsave.py)
-    save_png(fig, path, DPI, tight=True, grows=grows)
+# Margins of the figures' fixed layouts (inches; fuzzyslam/figsave.py): tick labels and
+# an axis label left, a title on top, tick labels and an axis label below (and the
+# legend of the events 0.28 axes heights below the last axes); the blank rest is cropped.
+# Titles are placed at y=1.0 (as matplotlib places them by default, above axes without
+# top tick labels): otherwise it measures every y tick label at each draw to place them
+LEFT, RIGHT, TOP, BOTTOM = 0.95, 0.25, 0.45, 0.65
+EVENTS_BELOW = 0.28  # the events' legend: its top this far below the last axes (axes heights)
+LEGEND_RIGHT = 3.6  # Fig. 1's legend right of the axes (its longest label, font size 8)
+
+
+EVENTS_HEIGHT = 0.4  # the events' legend: one row of font size 8, and a blank to spare
+
+
+def _events_bottom(fig: plt.Figure, rows: int, gaps: float) -> float:
+    """The bottom margin (inches) that holds the events' legend of :func:`_mark_events`
+    under ``rows`` axes separated by ``gaps`` inches in all: the legend's top hangs
+    EVENTS_BELOW axes heights below the last axes, whose height is
+    h_a = (h - TOP - b - gaps) / rows, so b = EVENTS_HEIGHT + EVENTS_BELOW h_a gives
+    b = (EVENTS_HEIGHT + k (h - TOP - gaps)) / (1 + k) with k = EVENTS_BELOW / rows
+    (at least BOTTOM)."""
+    h = fig.get_size_inches()[1]
+    k = EVENTS_BELOW / rows
+    return max(BOTTOM, (EVENTS_HEIGHT + k * (h - TOP - gaps)) / (1.0 + k))
+
+
+def _save(fig: plt.Figure, path: Path) -> None:
+    # one draw with the fixed layout, cropped to the drawn pixels (fuzzyslam/figsave.py)
+    save_png(fig, path, DPI, tight=True)
     plt.close(fig)
 
 
@@ -44,7 +68,8 @@ def fig1_paths(
 ) -> None:
     """Fig. 1: true, estimated and odometry-only paths; true and estimated lamps (duplicated and
     missed ones marked when lamp_match is given); walls; the FGM underneath when given."""
-    fig, ax = plt.subplots(figsize=(9, 6.5), dpi=DPI)
+    fig, ax = plt.subplots(figsize=(8.6 + LEGEND_RIGHT, 6.5), dpi=DPI)
+    fixed_layout(fig, LEFT, LEGEND_RIGHT, 0.6, TOP)
     if fgm is not None:
         im = ax.imshow(
             fgm.pignistic_occupied(),
@@ -138,11 +163,12 @@ def fig1_paths(
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_title(
-        title or f"Fig. 1: {'FGM, ' if fgm is not None else ''}paths and lamps (map frame)"
+        title or f"Fig. 1: {'FGM, ' if fgm is not None else ''}paths and lamps (map frame)",
+        y=1.0,
     )
     ax.grid(alpha=0.3)
     ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, framealpha=0.85)
-    _save(fig, path, grows=True)  # the legend right of the axes leaves the figure
+    _save(fig, path)
 
 
 def _mark_events(axes: list[plt.Axes], truth: Truth) -> None:
@@ -190,7 +216,7 @@ def _mark_events(axes: list[plt.Axes], truth: Truth) -> None:
         axes[-1].legend(
             handles=handles,
             loc="upper center",
-            bbox_to_anchor=(0.5, -0.28),
+            bbox_to_anchor=(0.5, -EVENTS_BELOW),
             fontsize=8,
             ncol=len(handles),
             frameon=False,
@@ -225,8 +251,8 @@ def fig3_errors(path: Path, truth: Truth, ev: Evaluation, title: str = "") -> No
     _mark_events(list(axes), truth)
     axes[0].legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("time (s)")
-    axes[0].set_title(title or "Fig. 3: pose errors against time")
-    fig.tight_layout()
+    axes[0].set_title(title or "Fig. 3: pose errors against time", y=1.0)
+    fixed_layout(fig, LEFT, RIGHT, _events_bottom(fig, 3, 2 * 0.22), TOP, hspace=0.22)
     _save(fig, path)
 
 
@@ -265,9 +291,10 @@ def fig4_lamp_errors(
         else "true lamp index"
     )
     ax.set_ylabel("lamp position error (cm)")
-    ax.set_title(title or "Fig. 4: per-lamp position error")
+    ax.set_title(title or "Fig. 4: per-lamp position error", y=1.0)
     ax.grid(axis="y", alpha=0.3)
     ax.legend(fontsize=8)
+    fixed_layout(fig, LEFT, RIGHT, BOTTOM, TOP)
     _save(fig, path)
 
 
@@ -338,8 +365,8 @@ def fig_consistency(path: Path, truth: Truth, est: Estimate, ev: Evaluation) -> 
     ax.set_xlabel("time (s)")
     ax.grid(alpha=0.3, which="both")
     _mark_events(list(axes), truth)
-    axes[0].set_title("Filter consistency against truth (NEES) and innovations (NIS)")
-    fig.tight_layout()
+    axes[0].set_title("Filter consistency against truth (NEES) and innovations (NIS)", y=1.0)
+    fixed_layout(fig, LEFT, RIGHT, _events_bottom(fig, 2, 0.28), TOP, hspace=0.28)
     _save(fig, path)
     return True
 
@@ -369,10 +396,10 @@ def fig_compare(path: Path, truth: Truth, runs: Sequence[tuple[str, Evaluation]]
     ax.set_ylabel("position error (cm)")
     ax.set_xlabel("time (s)")
     ax.grid(alpha=0.3, which="both")
+    ax.legend(loc="upper left", fontsize=8)  # first: _mark_events keeps it beside its own
     _mark_events([ax], truth)
-    ax.legend(loc="upper left", fontsize=8)
-    ax.set_title("position error against time, side by side")
-    fig.tight_layout()
+    ax.set_title("position error against time, side by side", y=1.0)
+    fixed_layout(fig, LEFT, RIGHT, _events_bottom(fig, 1, 0.0), TOP)
     _save(fig, path)
 
 

@@ -353,7 +353,7 @@ def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change]) -> None:
         The detections.
     """
     # a Figure without pyplot (its import and figure manager are not needed for one
-    # PNG), drawn once and cropped as savefig(bbox_inches="tight") (fuzzyslam/figsave.py)
+    # PNG), drawn once and cropped to its drawn pixels (fuzzyslam/figsave.py)
     from matplotlib.figure import Figure
 
     from fuzzyslam.figsave import save_png
@@ -371,7 +371,7 @@ def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change]) -> None:
         t = np.array([c.t for c in changes])
         sc = ax.scatter(xy[:, 0], xy[:, 1], c=t, cmap="autumn_r", s=12, edgecolors="none")
         fig.colorbar(sc, ax=ax, label="time (s)")
-    ax.set_title(f"change detections ({len(changes)}) over the frozen FGM")
+    ax.set_title(f"change detections ({len(changes)}) over the frozen FGM", y=1.0)
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")

@@ -12,7 +12,7 @@ matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
 
-from fuzzyslam.figsave import save_png
+from fuzzyslam.figsave import fixed_layout, save_png
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.maps.flm import build_flm
 from fuzzyslam.maps.grid import BeliefMap
@@ -25,9 +25,9 @@ from fuzzyslam.streams.logmeta import World
 DPI = 110  # figures are made at their PNG's dpi: the layout's text sizes are the drawing's
 
 
-def _save(fig, path: Path) -> None:
+def _save(fig, path: Path, tight: bool = False) -> None:
     with atomic_path(path) as tmp:
-        save_png(fig, tmp, DPI)  # one draw, RGB at a cheaper zlib level
+        save_png(fig, tmp, DPI, tight)  # one draw, RGB at a cheaper zlib level
     plt.close(fig)
 
 
@@ -81,7 +81,7 @@ def fig_fgm(
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
-    ax.set_title("Fuzzy global map: BetP(occupied) (dark = occupied)")
+    ax.set_title("Fuzzy global map: BetP(occupied) (dark = occupied)", y=1.0)
     ax.legend(loc="upper right", fontsize=8)
     _save(fig, path)
 
@@ -102,13 +102,13 @@ def fig_conflict(path: Path, fgm: BeliefMap) -> None:
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
-    ax.set_title("FGM contradiction (conflict mass)")
+    ax.set_title("FGM contradiction (conflict mass)", y=1.0)
     _save(fig, path)
 
 
 def _hough_panel(ax, wd: WallDirection, title: str) -> None:
     if wd.plane is None:
-        ax.set_title(title + " (no evidence)")
+        ax.set_title(title + " (no evidence)", y=1.0)
         return
     pl = wd.plane
     im = ax.imshow(
@@ -139,7 +139,7 @@ def _hough_panel(ax, wd: WallDirection, title: str) -> None:
         ax.legend(fontsize=6, loc="upper right", framealpha=0.7)
     ax.set_xlabel("theta (deg)")
     ax.set_ylabel("rho (m)")
-    ax.set_title(title, fontsize=9)
+    ax.set_title(title, fontsize=9, y=1.0)
 
 
 HOUGH_COLUMNS = 6  # corridor panels per row of hough.png
@@ -201,7 +201,7 @@ def fig_hough(
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
         ax.set_aspect("equal")
-        ax.set_title(f"{r.name}: {np.rad2deg(r.angle):.2f} deg", fontsize=9)
+        ax.set_title(f"{r.name}: {np.rad2deg(r.angle):.2f} deg", fontsize=9, y=1.0)
         if r.wall is not None:
             _hough_panel(bottom, r.wall, f"Hough, strength {r.strength:.2f} m")
     if flm is not None and flm_wd is not None:
@@ -220,10 +220,12 @@ def fig_hough(
         ax.set_xlabel("x, robot frame (m)")
         ax.set_ylabel("y, robot frame (m)")
         ax.set_aspect("equal")
-        ax.set_title(f"FLM (robot frame): {np.rad2deg(flm_wd.angle):.2f} deg", fontsize=9)
+        ax.set_title(f"FLM (robot frame): {np.rad2deg(flm_wd.angle):.2f} deg", fontsize=9, y=1.0)
         _hough_panel(bottom, flm_wd, f"FLM Hough, strength {flm_wd.strength:.2f} m")
-    fig.tight_layout()
-    _save(fig, path)
+    # fixed margins and gaps (inches) for the tick labels, axis labels, titles and colour
+    # bars' labels between the panels, the blank rest cropped (fuzzyslam/figsave.py)
+    fixed_layout(fig, 0.75, 0.6, 0.6, 0.35, hspace=0.8, wspace=1.1)
+    _save(fig, path, tight=True)
 
 
 def pick_flm_ring(poses: np.ndarray, refs: list[Reference]) -> int:

@@ -38,7 +38,7 @@ from fuzzyslam.cpus import usable_cpus
 from fuzzyslam.errors import EXIT_INTERNAL, FuzzyslamError, InputError
 from fuzzyslam.fileio import guard_inputs
 from fuzzyslam.progress import PlanProgress
-from fuzzyslam.reproduce.plan import Step, critical_path
+from fuzzyslam.reproduce.plan import Step, critical_path, ready_order
 from fuzzyslam.summary import summary_text
 
 
@@ -366,7 +366,7 @@ def execute(
             while pending or running:
                 if failure is None:
                     ready = [s for s in pending.values() if all(d in done for d in s.deps)]
-                    ready.sort(key=lambda s: (-prio[s.key], s.key))
+                    ready = ready_order(ready, prio)
                     for s in ready[: max(engine.jobs - len(running), 0)]:
                         del pending[s.key]
                         running[engine.submit(s, root)] = s

@@ -168,7 +168,7 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
 
     from fuzzyslam.evaluation.evaluate import read_truth
     from fuzzyslam.evaluation.metrics import associate, pose_errors
-    from fuzzyslam.figsave import save_png
+    from fuzzyslam.figsave import fixed_layout, save_png
     from fuzzyslam.streams.tum import read_tum
 
     panels = [p for p in SUMMARY_PANELS if (root / seed_dir / f"{p[0]}.mcap").is_file()]
@@ -193,12 +193,13 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
                         fontsize=7, color="0.4")  # fmt: skip
         ax.set_yscale("log")
         ax.set_ylabel("position error (cm)")
-        ax.set_title(f"{seed_dir}: {title}", fontsize=10)
+        ax.set_title(f"{seed_dir}: {title}", fontsize=10, y=1.0)
         ax.grid(True, which="both", alpha=0.3)
         ax.legend(fontsize=8, loc="upper left")
     axes[-1].set_xlabel("log time (s)")
-    fig.tight_layout()
-    save_png(fig, out, 110)  # one draw, RGB (fuzzyslam/figsave.py)
+    # fixed margins (inches) for the labels and titles, one draw, the blank rest cropped
+    fixed_layout(fig, 0.9, 0.25, 0.6, 0.4, hspace=0.7)
+    save_png(fig, out, 110, tight=True)  # (fuzzyslam/figsave.py)
     return True
 
 

@@ -13,12 +13,14 @@ import json
 import os
 import struct
 import sys
+import zlib
 from pathlib import Path
 from typing import Any
 
+import zstandard
 from mcap.opcode import Opcode
-from mcap.records import MessageIndex
-from mcap.writer import CompressionType, Writer
+from mcap.records import Chunk, ChunkIndex, MessageIndex
+from mcap.writer import CompressionType, IndexType, Writer
 
 from fuzzyslam import __version__
 from fuzzyslam.fileio import atomic_path
@@ -47,6 +49,13 @@ class _PackedIndex(MessageIndex):
         stream.finish_record()
 
 
+# zstd level of the chunks: 1 compresses a simulated log's 103 MB of chunks in 0.12 s
+# into 42.3 MB, mcap's default 3 in 0.49 s into 43.7 MB (the camera frames' noise does not
+# compress better with more effort), and its chunks decompress 1.35x faster; the
+# messages, and so everything read from a log, are the same at any level
+ZSTD_LEVEL = 1
+
+
 class _LeanWriter(Writer):
     """mcap's Writer with a lean ``add_message``: the message record packed in one struct
     call straight into the open chunk, the statistics and the chunk's message index kept
@@ -65,6 +74,57 @@ class _LeanWriter(Writer):
         self.lean = None not in (self._stats, self._chunks, self._limit, self._finalize) and all(
             hasattr(self._chunks, a) for a in parts
         )
+        self._zstd = zstandard.ZstdCompressor(level=ZSTD_LEVEL)
+        private = ("compression", "record_builder", "stream", "enable_crcs", "index_types",
+                   "chunk_indices", "flush")  # fmt: skip
+        self._level_chunks = self.lean and all(hasattr(self, f"_Writer__{a}") for a in private)
+
+    def _Writer__finalize_chunk(self) -> None:
+        """mcap 1.x's ``Writer.__finalize_chunk`` (which ``finish`` and a full chunk call)
+        with a zstd chunk compressed at ``ZSTD_LEVEL``: the same Chunk, Message Index and
+        Chunk Index records as mcap writes, but for the compressed bytes. With other
+        internals or another compression, mcap's own."""
+        if not self._level_chunks or self._Writer__compression != CompressionType.ZSTD:
+            Writer._Writer__finalize_chunk(self)
+            return
+        cb, records = self._chunks, self._Writer__record_builder
+        if cb.num_messages == 0:
+            return
+        self._stats.chunk_count += 1
+        chunk_data = cb.end()
+        compressed = self._zstd.compress(chunk_data)
+        chunk = Chunk(
+            compression="zstd",
+            data=compressed,
+            message_start_time=cb.message_start_time,
+            message_end_time=cb.message_end_time,
+            uncompressed_crc=zlib.crc32(chunk_data) if self._Writer__enable_crcs else 0,
+            uncompressed_size=len(chunk_data),
+        )
+        self._Writer__flush()
+        start = self._Writer__stream.tell()
+        chunk.write(records)
+        index = ChunkIndex(
+            message_start_time=chunk.message_start_time,
+            message_end_time=chunk.message_end_time,
+            chunk_start_offset=start,
+            chunk_length=records.count,
+            message_index_offsets={},
+            message_index_length=0,
+            compression=chunk.compression,
+            compressed_size=len(compressed),
+            uncompressed_size=chunk.uncompressed_size,
+        )
+        self._Writer__flush()
+        index_start = self._Writer__stream.tell()
+        if self._Writer__index_types & IndexType.MESSAGE:
+            for cid, message_index in cb.message_indices.items():
+                index.message_index_offsets[cid] = index_start + records.count
+                message_index.write(records)
+        index.message_index_length = records.count
+        self._Writer__flush()
+        self._Writer__chunk_indices.append(index)
+        cb.reset()
 
     def add_message(
         self, channel_id: int, log_time: int, data: bytes, publish_time: int, sequence: int = 0
