@@ -208,3 +208,27 @@ def test_fixed_layout_holds_every_artist(drawn, name) -> None:
         for b in boxes[i + 1 :]:
             overlap = min(a.x1, b.x1) - max(a.x0, b.x0), min(a.y1, b.y1) - max(a.y0, b.y0)
             assert min(overlap) <= 1.0, (name, a, b)  # pixels: touching, not overlapping
+
+
+@pytest.mark.parametrize(
+    "lo, hi",
+    [((0.33, -1.27), (2.01, 0.49)), ((-9.0, -9.0), (0.05, 0.05)), ((3.9, 1.9), (9.0, 9.0))],
+)
+def test_crop_cells_covers_the_box_with_the_same_cells(lo, hi) -> None:
+    """crop_cells: the cells under [lo, hi] (one to spare, clipped to the grid), the same
+    values as the whole array at the same places, and the extent of exactly those cells."""
+    from fuzzyslam.maps.grid import Grid
+
+    grid = Grid((-2.0, -1.5), 0.1, (40, 60))  # origin, resolution, (ny, nx)
+    values = np.arange(40 * 60, dtype=float).reshape(40, 60)
+    part, (x0, x1, y0, y1) = map_figures.crop_cells(values, grid, np.array(lo), np.array(hi))
+    ox, oy = grid.origin
+    ix0, iy0 = round((x0 - ox) / 0.1), round((y0 - oy) / 0.1)
+    assert part.shape == (round((y1 - y0) / 0.1), round((x1 - x0) / 0.1))
+    np.testing.assert_array_equal(
+        part, values[iy0 : iy0 + part.shape[0], ix0 : ix0 + part.shape[1]]
+    )
+    gx0, gx1, gy0, gy1 = grid.extent
+    assert x0 <= max(lo[0], gx0) and x1 >= min(hi[0], gx1)
+    assert y0 <= max(lo[1], gy0) and y1 >= min(hi[1], gy1)
+    assert gx0 <= x0 and x1 <= gx1 and gy0 <= y0 and y1 <= gy1

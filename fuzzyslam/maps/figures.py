@@ -15,7 +15,7 @@ import numpy as np
 from fuzzyslam.figsave import fixed_layout, save_png
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.maps.flm import build_flm
-from fuzzyslam.maps.grid import BeliefMap
+from fuzzyslam.maps.grid import BeliefMap, Grid
 from fuzzyslam.maps.hough import WallDirection, flm_wall_direction, wall_weights
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.references import Reference
@@ -142,6 +142,40 @@ def _hough_panel(ax, wd: WallDirection, title: str) -> None:
     ax.set_title(title, fontsize=9, y=1.0)
 
 
+def crop_cells(
+    values: np.ndarray, grid: Grid, lo: np.ndarray, hi: np.ndarray
+) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    """The cells of ``values`` (the grid's (ny, nx) array) that cover the box [lo, hi]
+    (x, y in m) with one cell to spare, and their extent for ``imshow(origin="lower")``:
+    a panel that shows one corridor draws its cells, not the whole building's (Freiburg
+    079's hough.png: ten panels, each resampling the whole map).
+
+    Parameters
+    ----------
+    values : ndarray, shape (ny, nx)
+        Per-cell values on ``grid``.
+    grid : Grid
+        The grid.
+    lo, hi : ndarray, shape (2,)
+        The box's lower-left and upper-right corners (m).
+
+    Returns
+    -------
+    part : ndarray, shape (h, w)
+        The cells (a view).
+    extent : (float, float, float, float)
+        (xmin, xmax, ymin, ymax) of those cells (m).
+    """
+    res, (ox, oy) = grid.resolution, grid.origin
+    ny, nx = values.shape
+    ix0 = min(max(int(np.floor((lo[0] - ox) / res)) - 1, 0), nx)
+    ix1 = min(max(int(np.ceil((hi[0] - ox) / res)) + 1, ix0), nx)
+    iy0 = min(max(int(np.floor((lo[1] - oy) / res)) - 1, 0), ny)
+    iy1 = min(max(int(np.ceil((hi[1] - oy) / res)) + 1, iy0), ny)
+    extent = (ox + ix0 * res, ox + ix1 * res, oy + iy0 * res, oy + iy1 * res)
+    return values[iy0:iy1, ix0:ix1], extent
+
+
 HOUGH_COLUMNS = 6  # corridor panels per row of hough.png
 
 
@@ -191,7 +225,8 @@ def fig_hough(
     for k, r in enumerate(refs):
         lo, hi = r.region.min(axis=0), r.region.max(axis=0)
         ax, bottom = pair(k)
-        im = ax.imshow(w, origin="lower", extent=fgm.grid.extent, cmap="gray_r", vmin=0, vmax=1)
+        part, extent = crop_cells(w, fgm.grid, lo, hi)
+        im = ax.imshow(part, origin="lower", extent=extent, cmap="gray_r", vmin=0, vmax=1)
         fig.colorbar(im, ax=ax, shrink=0.8, label="wall weight (0-1)")
         poly = np.vstack([r.region, r.region[:1]])
         ax.plot(poly[:, 0], poly[:, 1], "--", color="tab:orange", lw=0.8, label="region")
