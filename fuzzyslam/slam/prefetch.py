@@ -2,9 +2,10 @@
 
 ``LogInputs.events`` (chunk decompression, CDR decoding, lamp detection, the sonar
 rings: pure per message, in order) costs about a third of a lamps-only run. A forked
-child makes them and sends them to the filter in the parent as pickled batches of
-``BATCH`` events through a pipe; the two run at once on two cores (a thread could not:
-both sides are short Python steps under one GIL; ``benchmarks/bench_prefetch.py``).
+child makes them and sends them to the filter in the parent as pickled batches
+(``FIRST_BATCH`` events, then twice as many each time up to ``BATCH``) through a pipe;
+the two run at once on two cores (a thread could not: both sides are short Python steps
+under one GIL; ``benchmarks/bench_prefetch.py``).
 
 With aids, the child also computes what each aid can compute from a ring alone
 (``FixAid.ahead``: the heading aid's single-ring FLM and wall direction, a fifth of a

@@ -323,9 +323,9 @@ def encode_marker_array(markers: Sequence[MarkerSpec]) -> bytes:
         w.put("3d", 8, *map(float, m.scale))
         w.put("4f", 4, *map(float, m.rgba))
         w.put("iI?", 4, 0, 0, False)  # lifetime, frame_locked
-        pts = [] if m.points is None else np.asarray(m.points, dtype=float).reshape(-1, 2)
+        pts = () if m.points is None else np.asarray(m.points, dtype=float).reshape(-1, 2).tolist()
         w.put("I", 4, len(pts))
-        for px, py in np.asarray(pts).tolist():
+        for px, py in pts:
             w.put("3d", 8, px, py, z)
         w.put("I", 4, 0)  # colors
         w.string("")  # texture_resource
