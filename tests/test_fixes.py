@@ -694,6 +694,8 @@ def test_make_aids_loads_and_checks_map_dir(room, tmp_path):
     out.mkdir()
     for a in [aid, *aids]:
         a.write(out)
+        for fn, args in a.figures(out):  # changes.png: the stage makes the call
+            fn(*args)
     assert sorted(p.name for p in out.iterdir()) == [
         "changes.csv", "changes.png", "heading_fixes.csv", "pose_fixes.csv"
     ]  # fmt: skip

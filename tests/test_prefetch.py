@@ -71,9 +71,10 @@ def reaped(pid: int) -> bool:
     return False
 
 
-def run_both(tmp_path: Path, forks: list[int], *args) -> tuple[Path, Path, str]:
+def run_both(tmp_path: Path, forks: list[int], *args, children: int = 1) -> tuple[Path, Path, str]:
     """``fuzzyslam run ARGS`` with --prefetch and --no-prefetch: the two output
-    directories and the child's stderr; asserts both succeed, one child forked."""
+    directories and the child's stderr; asserts both succeed, ``children`` forked with
+    --prefetch (the input process; a pose run's figure process too), none without."""
     outs = {}
     errs = {}
     tmp_path.mkdir(exist_ok=True)
@@ -82,7 +83,7 @@ def run_both(tmp_path: Path, forks: list[int], *args) -> tuple[Path, Path, str]:
         out = tmp_path / mode
         code, _, err = cli("run", *args, "-o", out, f"--{mode}")
         assert code == 0, err
-        assert len(forks) - before == (mode == "prefetch")
+        assert len(forks) - before == (children if mode == "prefetch" else 0)
         outs[mode], errs[mode] = out, err
     assert all(reaped(pid) for pid in forks)
     assert errs["prefetch"] == errs["no-prefetch"]  # the notes on stderr
@@ -203,6 +204,17 @@ def test_progress_sees_the_same_times(tmp_path: Path, forks, monkeypatch) -> Non
     assert seen[True][-1] == pytest.approx(duration, abs=0.5)
 
 
+DRAWING: dict = {}  # draw_noting_pid's file and the real draw_changes (set by the test)
+
+
+def draw_noting_pid(path, fgm, found) -> None:
+    """``changes.draw_changes`` that notes which process drew (module-level: the figure
+    process is sent it by name)."""
+    with open(DRAWING["log"], "a", encoding="utf-8") as fh:
+        fh.write(f"{os.getpid()}\n")
+    DRAWING["draw"](path, fgm, found)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("fix", ["heading", "pose"])
 def test_fixes_outputs_are_the_same(tmp_path: Path, forks, tiny, fix: str, monkeypatch) -> None:  # noqa: F811
@@ -210,7 +222,9 @@ def test_fixes_outputs_are_the_same(tmp_path: Path, forks, tiny, fix: str, monke
     also makes the rings, merged in time order, the heading aid's single-ring walls
     (``HeadingFixAid.ahead``), which the aid takes instead of computing them, and, for the
     pose aid and the change detector, the FLMs (``FlmAhead``): the same files (fixes'
-    CSVs, ring statistics) either way."""
+    CSVs, ring statistics) either way. A pose run's changes.png is drawn by a second
+    child (fuzzyslam/forked.py's ``ChildCalls``), the same PNG byte for byte."""
+    from fuzzyslam.fixes import changes
     from fuzzyslam.fixes.heading import HeadingFixAid
     from fuzzyslam.fixes.heading_measure import FlmSource
 
@@ -222,14 +236,23 @@ def test_fixes_outputs_are_the_same(tmp_path: Path, forks, tiny, fix: str, monke
     monkeypatch.setattr(
         FlmSource, "seed", lambda self, ring, flm: seeded.append(1) or real_seed(self, ring, flm)
     )
+    drawn_by = tmp_path / "drawn_by"
+    monkeypatch.setitem(DRAWING, "log", drawn_by)
+    monkeypatch.setitem(DRAWING, "draw", changes.draw_changes)
+    monkeypatch.setattr(changes, "draw_changes", draw_noting_pid)
     a, b, _ = run_both(
         tmp_path, forks, tiny.log, "--config", tiny.config,
         "--map", tiny.dir / "fgm", "--fix", fix, "--fix-from", "0",
+        children=2 if fix == "pose" else 1,
     )  # fmt: skip
     s = assert_same_outputs(a, b)
     assert s["rings"]["rings"] > 100 and s["aids"]
     assert len(taken) == s["rings"]["rings"]  # every ring's wall came from the child
     assert len(seeded) == (2 * s["rings"]["rings"] if fix == "pose" else 0)  # pose, changes
+    if fix == "pose":  # --prefetch: drawn by the figure process; --no-prefetch: here
+        assert (a / "changes.png").is_file()
+        pids = [int(x) for x in drawn_by.read_text(encoding="utf-8").split()]
+        assert pids == [forks[0], os.getpid()]
 
 
 # -- errors -------------------------------------------------------------------------------

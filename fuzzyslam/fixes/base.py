@@ -9,7 +9,7 @@ from :class:`FixAid` and add ``on_ring`` and ``summary``.
 from __future__ import annotations
 
 import csv
-from collections.abc import Iterable, Sequence
+from collections.abc import Callable, Iterable, Sequence
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, ClassVar, Protocol
 
@@ -118,6 +118,7 @@ class FixAid:
 
     kind: ClassVar[str] = ""
     csv_name: ClassVar[str] = ""
+    draws_figures: ClassVar[bool] = False  # :meth:`figures` has calls to make
     csv_fields: ClassVar[tuple[str, ...]] = ()
     viewer_map: Any = None  # (FGM, references) this aid shows in estimates.mcap (aids.py)
 
@@ -176,6 +177,23 @@ class FixAid:
             self.before_start += 1
             return False
         return True
+
+    def figures(self, outdir: Path) -> list[tuple[Callable[..., None], tuple]]:
+        """The aid's figures as calls ``fn(*args)`` that write them into ``outdir`` (none
+        here): the run makes them after :meth:`write`, in its figure process where it
+        has one (``fuzzyslam.forked.ChildCalls``).
+
+        Parameters
+        ----------
+        outdir : Path
+            The run's (staging) output directory.
+
+        Returns
+        -------
+        list of (callable, tuple)
+            Module-level functions and their arguments (pickled for the figure process).
+        """
+        return []
 
     def write(self, outdir: Path) -> None:
         """The decisions as ``outdir/csv_name``.

@@ -209,6 +209,7 @@ class ChangeDetector(FlmAhead, FixAid):
     (its ``decisions`` are the detections, :class:`Change`)."""
 
     kind = "changes"
+    draws_figures = True  # changes.png (:meth:`figures`)
     csv_name = "changes.csv"
     csv_fields = CHANGE_FIELDS
 
@@ -276,16 +277,22 @@ class ChangeDetector(FlmAhead, FixAid):
             rings_with_detections=len({c.t for c in self.decisions}),
         )
 
-    def write(self, outdir: Path) -> None:
-        """changes.csv (:class:`FixAid`) and changes.png (:func:`draw_changes`).
+    def figures(self, outdir: Path) -> list[tuple[Callable[..., None], tuple]]:
+        """changes.png (:func:`draw_changes`), as a call for the run to make (in its
+        figure process, ``fuzzyslam.forked.ChildCalls``, or in itself); changes.csv is
+        :meth:`write`'s.
 
         Parameters
         ----------
         outdir : Path
             The run's (staging) output directory.
+
+        Returns
+        -------
+        list of (callable, tuple)
+            ``(draw_changes, (path, fgm, detections))``.
         """
-        super().write(outdir)
-        draw_changes(Path(outdir) / "changes.png", self.fgm, self.decisions)
+        return [(draw_changes, (Path(outdir) / "changes.png", self.fgm, self.decisions))]
 
     def messages(
         self, topics: Any, start: float | None = None

@@ -25,7 +25,8 @@ blocks while the parent lags. The child is reaped on every path out of
 :func:`input_events` (the end of the events, the parent's exception, Ctrl-C, SIGTERM
 raised as KeyboardInterrupt by the CLI): SIGKILL, then ``waitpid``. If the parent dies
 without that (SIGKILL), the child gets SIGKILL too (``prctl(PR_SET_PDEATHSIG)`` on
-Linux), and a write to the pipe without a reader ends it elsewhere.
+Linux), and a write to the pipe without a reader ends it elsewhere. (These fork helpers
+are :mod:`fuzzyslam.forked`'s, shared with the run's figure process.)
 
 When: :func:`wanted` (``fuzzyslam run``'s default, ``--no-prefetch`` or
 ``FUZZYSLAM_PREFETCH=0`` to turn it off): a platform with ``fork`` (Linux), at least
@@ -41,13 +42,12 @@ from __future__ import annotations
 import contextlib
 import os
 import pickle
-import signal
 import sys
-import traceback
 from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 from fuzzyslam.cpus import usable_cpus
+from fuzzyslam.forked import flush_std, orphan_guard, pickled_error, raise_child_error, reap
 from fuzzyslam.slam.events import Event, RingEvent
 
 if TYPE_CHECKING:  # multiprocessing loaded only for a child (16 ms of start-up)
@@ -58,7 +58,6 @@ BATCH = 256  # events per pickled batch (bench_prefetch.py: 64 and 256 alike, 1 
 # first batch with nothing to do (256 events of the paper log: 40-60 ms, 2 % of a run)
 FIRST_BATCH = 16
 ENV = "FUZZYSLAM_PREFETCH"  # "0" (or off, no, false): never a child process
-_PR_SET_PDEATHSIG = 1  # linux/prctl.h
 F_SETPIPE_SZ = 1031  # linux/fcntl.h (fcntl.F_SETPIPE_SZ from Python 3.10, Linux only)
 # the pipe's buffer (Linux's default 64 KiB): 1 MiB lets the child run further ahead of a
 # parent whose steps come in bursts (a multi-ring fix, a relocalisation); paper log, in one
@@ -134,9 +133,7 @@ def input_events(
     import fcntl
     from multiprocessing.connection import Connection
 
-    for stream in (sys.stdout, sys.stderr):  # nothing buffered is written twice
-        with contextlib.suppress(Exception):
-            stream.flush()
+    flush_std()
     read_fd, write_fd = os.pipe()
     if PIPE_BYTES:
         with contextlib.suppress(OSError):  # the system's limit (pipe-max-size) is lower
@@ -158,7 +155,7 @@ def input_events(
         yield _received(conn, inputs, pid)
     finally:
         conn.close()
-        _reap(pid)
+        reap(pid)
 
 
 def _child(conn: Connection, parent: int, inputs, rings: bool, ring_start, aids) -> None:
@@ -166,13 +163,7 @@ def _child(conn: Connection, parent: int, inputs, rings: bool, ring_start, aids)
     ``BATCH``, then the last batch with the reading state; or an exception, pickled
     (:func:`_error`). Its own exceptions, and a parent gone (a broken pipe), end it
     quietly."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the parent's to handle
-    signal.signal(signal.SIGTERM, signal.SIG_DFL)  # the CLI's handler would raise here
-    with contextlib.suppress(Exception):  # die with the parent (Linux)
-        import ctypes
-
-        ctypes.CDLL(None).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
-    if os.getppid() != parent:  # the parent died before prctl
+    if not orphan_guard(parent):  # the parent died before the guard was set
         return
     buf: list[Event] = []
     limit = FIRST_BATCH
@@ -195,7 +186,7 @@ def _child(conn: Connection, parent: int, inputs, rings: bool, ring_start, aids)
         except BaseException as exc:
             with contextlib.suppress(Exception):  # the events made before it, first
                 conn.send_bytes(pickle.dumps(("events", buf), pickle.HIGHEST_PROTOCOL))
-            conn.send_bytes(_error(exc))
+            conn.send_bytes(pickled_error(exc))
         conn.close()
     except OSError:  # the parent stopped reading
         return
@@ -217,31 +208,6 @@ def _ahead(ahead: list, ev: RingEvent, mounts) -> tuple | None:
     return tuple(out) if any(v is not None for v in out) else None
 
 
-def _error(exc: BaseException) -> bytes:
-    """``exc`` for the parent: pickled with its formatted traceback, or, for an exception
-    that does not pickle and unpickle, its module, type name and message."""
-    tb = "".join(traceback.format_exception(exc))
-    try:
-        data = pickle.dumps(exc, pickle.HIGHEST_PROTOCOL)
-        pickle.loads(data)  # an __init__ that the pickled args do not fit fails here
-        return pickle.dumps(("error", (data, None, tb)), pickle.HIGHEST_PROTOCOL)
-    except Exception:
-        named = (type(exc).__module__, type(exc).__qualname__, str(exc))
-        return pickle.dumps(("error", (None, named, tb)), pickle.HIGHEST_PROTOCOL)
-
-
-class ChildTraceback(Exception):
-    """The traceback of an exception raised in the child process (the cause of the
-    exception raised again in the parent: ``--debug`` shows it)."""
-
-    def __init__(self, text: str) -> None:
-        super().__init__(text)
-        self.text = text
-
-    def __str__(self) -> str:
-        return f'\n"""\n{self.text}"""'
-
-
 def _received(conn: Connection, inputs, pid: int) -> Iterator[Event]:
     """The child's events, in order; then its reading state into ``inputs``."""
     while True:
@@ -261,28 +227,4 @@ def _received(conn: Connection, inputs, pid: int) -> Iterator[Event]:
             yield from events
             return
         else:
-            data, named, tb = payload
-            if data is not None:
-                exc = pickle.loads(data)
-            else:  # a stand-in of the same module, name and message
-                module, name, message = named
-                exc = type(name.rsplit(".", 1)[-1], (Exception,), {"__module__": module})(message)
-            raise exc from ChildTraceback(tb)
-
-
-def _reap(pid: int) -> None:
-    """Kill the child (it has sent everything, or is no longer wanted) and wait for it;
-    a second Ctrl-C while waiting kills it again and is raised once it is reaped."""
-    interrupted: BaseException | None = None
-    while True:
-        with contextlib.suppress(ProcessLookupError):
-            os.kill(pid, signal.SIGKILL)
-        try:
-            os.waitpid(pid, 0)
-            break
-        except ChildProcessError:
-            break
-        except KeyboardInterrupt as exc:
-            interrupted = exc
-    if interrupted is not None:
-        raise interrupted
+            raise_child_error(payload)

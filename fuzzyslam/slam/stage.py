@@ -5,6 +5,7 @@ the same on a loaded config and built aids."""
 
 from __future__ import annotations
 
+import contextlib
 import copy
 import importlib
 import os
@@ -18,6 +19,7 @@ import numpy as np
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, check_outputs
+from fuzzyslam.forked import ChildCalls
 from fuzzyslam.progress import Progress, note
 from fuzzyslam.rundir import OPTIONAL_OUTPUTS
 from fuzzyslam.slam import calibration as cal
@@ -312,10 +314,23 @@ def _run_once(
         )
     model = calibration_model(inputs, cfg, calibration)
     staged = OutputDir(outdir, owns=OPTIONAL_OUTPUTS)
-    with staged as tmp, StreamingOutputs(tmp, cfg, inputs.start_pose, inputs.frames) as streamed:
+    # the aids' figures drawn in a child that imports matplotlib while the filter runs
+    # (fuzzyslam/forked.py), where the events come from a child too (a second core)
+    drawing = any(getattr(a, "draws_figures", False) for a in aids)
+    figures = ChildCalls() if prefetch and drawing else contextlib.nullcontext()
+    with (
+        figures as drawer,
+        staged as tmp,
+        StreamingOutputs(tmp, cfg, inputs.start_pose, inputs.frames) as streamed,
+    ):
         res = _run_filter(inputs, cfg, aids, streamed, model, prefetch)
         for aid in aids:
             aid.write(tmp)
+            for fn, args in aid.figures(tmp) if hasattr(aid, "figures") else ():
+                if drawer is not None:
+                    drawer.call(fn, *args)
+                else:
+                    fn(*args)
         extra = [  # the aids' messages for estimates.mcap (/map stamped at the log's start)
             m for aid in aids if hasattr(aid, "messages")
             for m in aid.messages(cfg.topics, inputs.start)

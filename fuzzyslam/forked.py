@@ -1,0 +1,266 @@
+"""Forked child processes: what the run's input process (:mod:`fuzzyslam.slam.prefetch`)
+and its figure process (:class:`ChildCalls`) share, and the figure process itself.
+
+A child is forked from the running process (Linux: ``fork``; no re-import, no pickling of
+what it already holds) and ends with ``os._exit`` (nothing the parent buffered, in Python
+or in a file it has open, is written twice). It ignores Ctrl-C (the parent's to handle),
+dies with its parent (``prctl(PR_SET_PDEATHSIG)``) and is killed and reaped on every path
+out of its parent's ``with`` block (:func:`reap`). Its exception reaches the parent
+pickled (:func:`pickled_error`) and is raised there as the same type and message, its
+traceback as the cause (:func:`raise_child_error`, :class:`ChildTraceback`: ``--debug``
+shows it).
+
+:class:`ChildCalls` is a child forked before the filter runs that imports the plotting
+modules (matplotlib: 0.4-0.5 s) while the filter runs on the other core, then makes the
+calls it is sent (module-level functions, pickled with their arguments) one at a time:
+a pose run's ``changes.png`` costs the run's end the drawing alone (``slam/stage.py``).
+"""
+
+from __future__ import annotations
+
+import contextlib
+import importlib
+import os
+import pickle
+import signal
+import sys
+import traceback
+from collections.abc import Callable, Sequence
+from typing import TYPE_CHECKING, Any
+
+if TYPE_CHECKING:  # multiprocessing loaded only for a child (16 ms of start-up)
+    from multiprocessing.connection import Connection
+
+_PR_SET_PDEATHSIG = 1  # linux/prctl.h
+# what a figure process imports while the filter runs (fuzzyslam/figsave.py's matplotlib)
+FIGURE_MODULES = ("fuzzyslam.figsave",)
+# the figure process's niceness: its imports use what the filter and the input process
+# leave of the cores, and its calls come when the filter has finished
+NICE = 10
+
+
+def flush_std() -> None:
+    """Flush stdout and stderr before a fork: nothing buffered is written twice."""
+    for stream in (sys.stdout, sys.stderr):
+        with contextlib.suppress(Exception):
+            stream.flush()
+
+
+def orphan_guard(parent: int) -> bool:
+    """The child's set-up: Ctrl-C ignored, SIGTERM's default action (the CLI's handler
+    would raise in the child), SIGKILL when the parent dies (Linux).
+
+    Parameters
+    ----------
+    parent : int
+        The parent's pid, read before the fork.
+
+    Returns
+    -------
+    bool
+        False when the parent died before the guard was set (the child should end).
+    """
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    with contextlib.suppress(Exception):
+        import ctypes
+
+        ctypes.CDLL(None).prctl(_PR_SET_PDEATHSIG, signal.SIGKILL, 0, 0, 0)
+    return os.getppid() == parent
+
+
+def pickled_error(exc: BaseException) -> bytes:
+    """``("error", ...)`` for the parent: ``exc`` pickled with its formatted traceback, or,
+    for an exception that does not pickle and unpickle, its module, type name and message.
+
+    Parameters
+    ----------
+    exc : BaseException
+        The child's exception.
+
+    Returns
+    -------
+    bytes
+        The pickled message (:func:`raise_child_error` reads its payload).
+    """
+    tb = "".join(traceback.format_exception(exc))
+    try:
+        data = pickle.dumps(exc, pickle.HIGHEST_PROTOCOL)
+        pickle.loads(data)  # an __init__ that the pickled args do not fit fails here
+        return pickle.dumps(("error", (data, None, tb)), pickle.HIGHEST_PROTOCOL)
+    except Exception:
+        named = (type(exc).__module__, type(exc).__qualname__, str(exc))
+        return pickle.dumps(("error", (None, named, tb)), pickle.HIGHEST_PROTOCOL)
+
+
+class ChildTraceback(Exception):
+    """The traceback of an exception raised in a child process (the cause of the
+    exception raised again in the parent: ``--debug`` shows it)."""
+
+    def __init__(self, text: str) -> None:
+        super().__init__(text)
+        self.text = text
+
+    def __str__(self) -> str:
+        return f'\n"""\n{self.text}"""'
+
+
+def raise_child_error(payload: tuple) -> None:
+    """Raise the child's exception of a :func:`pickled_error` message's payload.
+
+    Parameters
+    ----------
+    payload : tuple
+        (pickled exception or None, (module, name, message) or None, traceback text).
+
+    Raises
+    ------
+    BaseException
+        The child's exception (or a stand-in of the same module, name and message),
+        from :class:`ChildTraceback`.
+    """
+    data, named, tb = payload
+    if data is not None:
+        exc = pickle.loads(data)
+    else:
+        module, name, message = named
+        exc = type(name.rsplit(".", 1)[-1], (Exception,), {"__module__": module})(message)
+    raise exc from ChildTraceback(tb)
+
+
+def reap(pid: int) -> None:
+    """Kill the child (it has done its work, or is no longer wanted) and wait for it; a
+    second Ctrl-C while waiting kills it again and is raised once it is reaped.
+
+    Parameters
+    ----------
+    pid : int
+        The child.
+    """
+    interrupted: BaseException | None = None
+    while True:
+        with contextlib.suppress(ProcessLookupError):
+            os.kill(pid, signal.SIGKILL)
+        try:
+            os.waitpid(pid, 0)
+            break
+        except ChildProcessError:
+            break
+        except KeyboardInterrupt as exc:
+            interrupted = exc
+    if interrupted is not None:
+        raise interrupted
+
+
+class ChildCalls:
+    """Calls made in a child process forked now, which imports ``warm`` first (module
+    docstring); a context manager that reaps it.
+
+    ``call(fn, *args)`` sends the module-level function ``fn`` and its arguments and
+    returns its result, or raises its exception as the child raised it. If the child is
+    gone (killed), or ``fn`` or its arguments do not pickle, the call is made in this
+    process instead: the result is the same, only slower.
+
+    Parameters
+    ----------
+    warm : sequence of str
+        Modules the child imports before it waits for calls (an import that fails is
+        left for the call to meet).
+    """
+
+    def __init__(self, warm: Sequence[str] = FIGURE_MODULES) -> None:
+        from multiprocessing.connection import Connection
+
+        flush_std()
+        calls_r, calls_w = os.pipe()
+        replies_r, replies_w = os.pipe()
+        parent = os.getpid()
+        pid = os.fork()
+        if pid == 0:  # the child: never returns
+            os.close(calls_w)
+            os.close(replies_r)
+            code = 1
+            try:
+                if orphan_guard(parent):
+                    _serve(Connection(calls_r, writable=False),
+                           Connection(replies_w, readable=False), warm)  # fmt: skip
+                code = 0
+            finally:
+                os._exit(code)
+        os.close(calls_r)
+        os.close(replies_w)
+        self.pid: int | None = pid
+        self._send: Connection | None = Connection(calls_w, readable=False)
+        self._recv: Connection | None = Connection(replies_r, writable=False)
+
+    def call(self, fn: Callable[..., Any], *args: Any) -> Any:
+        """``fn(*args)``, made in the child.
+
+        Parameters
+        ----------
+        fn : callable
+            A module-level function (pickled by name).
+        *args
+            Its arguments (pickled).
+
+        Returns
+        -------
+        object
+            ``fn``'s result.
+        """
+        if self._send is None or self._recv is None:
+            return fn(*args)
+        try:
+            request = pickle.dumps((fn, args), pickle.HIGHEST_PROTOCOL)
+        except Exception:  # a closure, an open file: not for the child
+            return fn(*args)
+        try:
+            self._send.send_bytes(request)
+            kind, payload = pickle.loads(self._recv.recv_bytes())
+        except (EOFError, OSError):  # the child is gone: made here
+            self.close()
+            return fn(*args)
+        if kind == "error":
+            raise_child_error(payload)
+        return payload
+
+    def close(self) -> None:
+        """Close the pipes, kill the child and reap it (idempotent)."""
+        for conn in (self._send, self._recv):
+            if conn is not None:
+                conn.close()
+        self._send = self._recv = None
+        if self.pid is not None:
+            pid, self.pid = self.pid, None
+            reap(pid)
+
+    def __enter__(self) -> ChildCalls:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+def _serve(calls: Connection, replies: Connection, warm: Sequence[str]) -> None:
+    """The child of :class:`ChildCalls`: import ``warm``, then make each call received
+    and send back ``("ok", result)`` or :func:`pickled_error`, until the parent closes
+    its end."""
+    with contextlib.suppress(OSError):  # the imports take the cores' idle time only
+        os.nice(NICE)
+    for name in warm:
+        with contextlib.suppress(Exception):
+            importlib.import_module(name)
+    while True:
+        try:
+            data = calls.recv_bytes()
+        except (EOFError, OSError):
+            return
+        try:
+            fn, args = pickle.loads(data)
+            reply = pickle.dumps(("ok", fn(*args)), pickle.HIGHEST_PROTOCOL)
+        except BaseException as exc:
+            reply = pickled_error(exc)
+        try:
+            replies.send_bytes(reply)
+        except OSError:  # the parent stopped reading
+            return

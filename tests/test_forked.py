@@ -1,0 +1,104 @@
+"""The figure process (fuzzyslam/forked.py ``ChildCalls``): calls made in a forked child
+that imported its modules first; their results and exceptions as in this process; a
+child that is gone, or a call that does not pickle, made here instead; the child reaped
+on every way out.
+
+(That a pose run's changes.png is drawn there, byte for byte the one-process PNG, is
+tests/test_prefetch.py's ``test_fixes_outputs_are_the_same``.)
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import sys
+
+import numpy as np
+import pytest
+
+from fuzzyslam.forked import ChildCalls, ChildTraceback
+
+pytestmark = pytest.mark.skipif(
+    not sys.platform.startswith("linux"), reason="the child process needs fork (Linux)"
+)
+
+
+def reaped(pid: int) -> bool:
+    """``pid`` is no longer a child of this process (waited for, not a zombie)."""
+    try:
+        os.waitpid(pid, os.WNOHANG)
+    except ChildProcessError:
+        return True
+    return False
+
+
+def where_and_sum(a: np.ndarray, b: np.ndarray) -> tuple[int, np.ndarray]:
+    """The calling process and a + b."""
+    return os.getpid(), a + b
+
+
+def imported(name: str) -> bool:
+    """Whether the calling process has imported ``name``."""
+    return name in sys.modules
+
+
+class TwoArgs(Exception):
+    """An exception that does not survive pickling (its ``__init__`` takes two)."""
+
+    def __init__(self, a: str, b: str) -> None:
+        super().__init__(f"{a} and {b}")
+
+
+def fail(kind: str) -> None:
+    """Raise a picklable or an unpicklable exception."""
+    if kind == "value":
+        raise ValueError("a bug in the figure")
+    raise TwoArgs("one", "two")
+
+
+def test_calls_are_made_in_the_child_with_their_results() -> None:
+    a, b = np.arange(5.0), np.full(5, 0.5)
+    with ChildCalls(warm=()) as calls:
+        pid = calls.pid
+        for _ in range(2):  # one child serves several calls
+            where, total = calls.call(where_and_sum, a, b)
+            assert where == pid != os.getpid()
+            np.testing.assert_array_equal(total, a + b)
+    assert calls.pid is None and reaped(pid)
+
+
+def test_the_child_imports_its_modules_first() -> None:
+    name = "wave"  # not imported by this test process (checked)
+    if name in sys.modules:
+        pytest.skip(f"{name} is already imported here")
+    with ChildCalls(warm=(name, "no_such_module_at_all")) as calls:
+        assert calls.call(imported, name)  # the failed import is left for a call to meet
+    assert name not in sys.modules
+
+
+@pytest.mark.parametrize("kind", ["value", "unpicklable"])
+def test_the_childs_exception_is_raised_here(kind: str) -> None:
+    with ChildCalls(warm=()) as calls, pytest.raises(Exception) as info:
+        calls.call(fail, kind)
+    assert type(info.value).__name__ == ("ValueError" if kind == "value" else "TwoArgs")
+    assert str(info.value) == ("a bug in the figure" if kind == "value" else "one and two")
+    assert isinstance(info.value.__cause__, ChildTraceback)
+    assert "in fail" in info.value.__cause__.text  # the child's traceback
+
+
+def test_a_child_that_is_gone_or_a_call_that_does_not_pickle_is_made_here() -> None:
+    a, b = np.ones(3), np.ones(3)
+    with ChildCalls(warm=()) as calls:
+        pid = calls.pid
+        assert calls.call(lambda: os.getpid()) == os.getpid()  # a lambda: not sent
+        os.kill(pid, signal.SIGKILL)
+        where, total = calls.call(where_and_sum, a, b)
+        assert where == os.getpid() and np.all(total == 2.0)
+        assert calls.pid is None and reaped(pid)  # reaped when found gone
+
+
+def test_an_exception_in_the_parent_reaps_the_child() -> None:
+    with pytest.raises(KeyboardInterrupt), ChildCalls(warm=()) as calls:
+        pid = calls.pid
+        raise KeyboardInterrupt
+    assert reaped(pid)
