@@ -236,6 +236,7 @@ def test_fixes_outputs_are_the_same(tmp_path: Path, forks, tiny, fix: str, monke
     monkeypatch.setattr(
         FlmSource, "seed", lambda self, ring, flm: seeded.append(1) or real_seed(self, ring, flm)
     )
+    monkeypatch.setattr(prefetch, "ahead_wanted", lambda sent, taken: True)  # every ring
     drawn_by = tmp_path / "drawn_by"
     monkeypatch.setitem(DRAWING, "log", drawn_by)
     monkeypatch.setitem(DRAWING, "draw", changes.draw_changes)
@@ -253,6 +254,64 @@ def test_fixes_outputs_are_the_same(tmp_path: Path, forks, tiny, fix: str, monke
         assert (a / "changes.png").is_file()
         pids = [int(x) for x in drawn_by.read_text(encoding="utf-8").split()]
         assert pids == [forks[0], os.getpid()]
+
+
+ALTERNATE = [0]  # alternate_ahead's count of rings (the child's copy)
+
+
+def alternate_ahead(sent: int, taken: int) -> bool:
+    """``prefetch.ahead_wanted`` for every other ring, whatever the parent's backlog."""
+    ALTERNATE[0] += 1
+    return ALTERNATE[0] % 2 == 0
+
+
+@pytest.mark.slow
+def test_rings_without_ahead_are_computed_by_the_aids(
+    tmp_path: Path,
+    forks,
+    tiny,  # noqa: F811
+    monkeypatch,
+) -> None:
+    """Rings the child leaves to the parent (its backlog low: ``ahead_wanted``) are
+    computed by the aids themselves: with every other ring sent without, the same files
+    as the one-process run, and half the walls taken from the child."""
+    from fuzzyslam.fixes.heading import HeadingFixAid
+
+    taken = []
+    real = HeadingFixAid.take_ahead
+    monkeypatch.setattr(
+        HeadingFixAid, "take_ahead", lambda self, ring, v: taken.append(1) or real(self, ring, v)
+    )
+    monkeypatch.setattr(prefetch, "ahead_wanted", alternate_ahead)
+    a, b, _ = run_both(
+        tmp_path, forks, tiny.log, "--config", tiny.config,
+        "--map", tiny.dir / "fgm", "--fix", "pose", "--fix-from", "0", children=2,
+    )  # fmt: skip
+    s = assert_same_outputs(a, b)
+    assert len(taken) == s["rings"]["rings"] // 2
+
+
+def test_the_parents_backlog_is_shared_with_the_child() -> None:
+    """``Taken`` counts in a mapping the child sees (a fork's copy-on-write would not);
+    ``ahead_wanted`` from a backlog of ``AHEAD_BACKLOG``."""
+    import mmap
+
+    taken = prefetch.Taken(mmap.mmap(-1, prefetch.Taken.SIZE))
+    r, w = os.pipe()
+    pid = os.fork()
+    if pid == 0:  # the child reports what it sees once the parent has counted
+        os.close(w)
+        os.read(r, 1)
+        os._exit(taken.count % 256)
+    os.close(r)
+    taken.add(300)
+    taken.add(3)
+    os.write(w, b"x")
+    os.close(w)
+    _, status = os.waitpid(pid, 0)
+    assert os.waitstatus_to_exitcode(status) == 303 % 256 and taken.count == 303
+    n = prefetch.AHEAD_BACKLOG
+    assert prefetch.ahead_wanted(303 + n, 303) and not prefetch.ahead_wanted(302 + n, 303)
 
 
 # -- errors -------------------------------------------------------------------------------

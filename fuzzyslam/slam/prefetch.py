@@ -11,7 +11,12 @@ With aids, the child also computes what each aid can compute from a ring alone
 (``FixAid.ahead``: the heading aid's single-ring FLM and wall direction, a fifth of a
 heading run) and sends it with the ring (``RingEvent.ahead``); the aid takes it instead of
 computing it (``take_ahead``). An exception there is left for the aid to raise itself,
-where the one-process run would.
+where the one-process run would. The child does this only while the parent has a
+backlog (:func:`ahead_wanted`: it counts the events the parent has handled in a shared
+mapping, :class:`Taken`); when the parent is about to wait, the ring goes without and
+the aid computes it in the parent. With fixes the child's work is nearly the filter's,
+so the two share it by need rather than by a fixed split; the results are the same
+either way.
 
 The child's own reading state comes back with its last batch
 (``LogInputs.read_state``: glitch counts, first problem, gaps, ring statistics, the
@@ -57,6 +62,11 @@ BATCH = 256  # events per pickled batch (bench_prefetch.py: 64 and 256 alike, 1 
 # the first batch is small and the next ones double up to BATCH: the parent waits for the
 # first batch with nothing to do (256 events of the paper log: 40-60 ms, 2 % of a run)
 FIRST_BATCH = 16
+# the parent's backlog (events sent, not yet handled) from which the child does the aids'
+# ring work (ahead_wanted): more than the batch the parent is handling. Paper log, two
+# free cores, whole command: pose fixes 2.88 -> 2.60 s wall with one batch, 2.55 s with
+# two, 3.2-3.4 s with four (the parent then does nearly all of it); heading 2.30 -> 2.08 s
+AHEAD_BACKLOG = 2 * BATCH
 ENV = "FUZZYSLAM_PREFETCH"  # "0" (or off, no, false): never a child process
 F_SETPIPE_SZ = 1031  # linux/fcntl.h (fcntl.F_SETPIPE_SZ from Python 3.10, Linux only)
 # the pipe's buffer (Linux's default 64 KiB): 1 MiB lets the child run further ahead of a
@@ -131,9 +141,11 @@ def input_events(
         yield inputs.events(rings, ring_start)
         return
     import fcntl
+    import mmap
     from multiprocessing.connection import Connection
 
     flush_std()
+    taken = Taken(mmap.mmap(-1, Taken.SIZE))  # shared with the child (MAP_SHARED)
     read_fd, write_fd = os.pipe()
     if PIPE_BYTES:
         with contextlib.suppress(OSError):  # the system's limit (pipe-max-size) is lower
@@ -145,39 +157,88 @@ def input_events(
         code = 1
         try:
             send = Connection(write_fd, readable=False)
-            _child(send, parent, inputs, rings, ring_start, aids)
+            _child(send, parent, inputs, rings, ring_start, aids, taken)
             code = 0
         finally:
             os._exit(code)
     os.close(write_fd)
     conn = Connection(read_fd, writable=False)
     try:
-        yield _received(conn, inputs, pid)
+        yield _received(conn, inputs, pid, taken)
     finally:
         conn.close()
         reap(pid)
 
 
-def _child(conn: Connection, parent: int, inputs, rings: bool, ring_start, aids) -> None:
+class Taken:
+    """The count of events the parent has taken from the pipe and handled, in a shared
+    anonymous mapping (written by the parent after each batch, read by the child):
+    what the child has sent minus this is the parent's backlog (:func:`ahead_wanted`).
+    An 8-byte aligned store and load; a stale value only moves work between the two
+    processes, never changes a result."""
+
+    SIZE = 8
+
+    def __init__(self, buf) -> None:
+        self.buf = buf
+
+    def add(self, n: int) -> None:
+        """The parent has handled ``n`` more events."""
+        self.buf[:8] = (int.from_bytes(self.buf[:8], "little") + n).to_bytes(8, "little")
+
+    @property
+    def count(self) -> int:
+        """Events handled by the parent so far."""
+        return int.from_bytes(self.buf[:8], "little")
+
+
+def ahead_wanted(sent: int, taken: int) -> bool:
+    """Whether the child computes a ring's ``ahead`` (the aids' work on the ring alone):
+    only while the parent has at least ``AHEAD_BACKLOG`` events sent and not yet handled.
+    With less, the parent is about to wait for the child (the child is the slower of the
+    two: a pose run's FLMs, Hough and tangent fits, 1.9 s of CPU against the filter's 2.1 s on
+    the paper log): the ring goes without, and the aid computes it in the parent, which
+    would otherwise be idle. The work is the same function either way, so the outputs
+    are too; only its place depends on timing.
+
+    Parameters
+    ----------
+    sent : int
+        Events the child has sent.
+    taken : int
+        Events the parent has handled (:class:`Taken`).
+
+    Returns
+    -------
+    bool
+    """
+    return sent - taken >= AHEAD_BACKLOG
+
+
+def _child(
+    conn: Connection, parent: int, inputs, rings: bool, ring_start, aids, taken: Taken
+) -> None:
     """The child's work: the events in batches of ``FIRST_BATCH``, twice that, ... up to
     ``BATCH``, then the last batch with the reading state; or an exception, pickled
-    (:func:`_error`). Its own exceptions, and a parent gone (a broken pipe), end it
-    quietly."""
+    (``fuzzyslam.forked.pickled_error``). Its own exceptions, and a parent gone (a
+    broken pipe), end it quietly."""
     if not orphan_guard(parent):  # the parent died before the guard was set
         return
     buf: list[Event] = []
     limit = FIRST_BATCH
+    sent = 0
     try:
         try:
             ahead = [(getattr(a, "ahead", None), float(a.start_time)) for a in aids]
             mounts = inputs.mounts
             for ev in inputs.events(rings, ring_start):
-                if ahead and type(ev) is RingEvent:
+                if ahead and type(ev) is RingEvent and ahead_wanted(sent, taken.count):
                     ev.ahead = _ahead(ahead, ev, mounts)
                 buf.append(ev)
                 if len(buf) >= limit:
                     batch, buf = buf, []
                     conn.send_bytes(pickle.dumps(("events", batch), pickle.HIGHEST_PROTOCOL))
+                    sent += len(batch)
                     limit = min(2 * limit, BATCH)
             last = ("end", (buf, inputs.read_state()))
             conn.send_bytes(pickle.dumps(last, pickle.HIGHEST_PROTOCOL))
@@ -208,8 +269,9 @@ def _ahead(ahead: list, ev: RingEvent, mounts) -> tuple | None:
     return tuple(out) if any(v is not None for v in out) else None
 
 
-def _received(conn: Connection, inputs, pid: int) -> Iterator[Event]:
-    """The child's events, in order; then its reading state into ``inputs``."""
+def _received(conn: Connection, inputs, pid: int, taken: Taken) -> Iterator[Event]:
+    """The child's events, in order (each batch counted in ``taken`` once handled); then
+    its reading state into ``inputs``."""
     while True:
         try:
             data = conn.recv_bytes()
@@ -221,6 +283,7 @@ def _received(conn: Connection, inputs, pid: int) -> Iterator[Event]:
         kind, payload = pickle.loads(data)
         if kind == "events":
             yield from payload
+            taken.add(len(payload))
         elif kind == "end":
             events, state = payload
             inputs.restore_read_state(state)
