@@ -183,7 +183,13 @@ class Taken:
         self.buf = buf
 
     def add(self, n: int) -> None:
-        """The parent has handled ``n`` more events."""
+        """Count ``n`` more events handled by the parent.
+
+        Parameters
+        ----------
+        n : int
+            Events handled since the last call.
+        """
         self.buf[:8] = (int.from_bytes(self.buf[:8], "little") + n).to_bytes(8, "little")
 
     @property
