@@ -63,9 +63,11 @@ BATCH = 256  # events per pickled batch (bench_prefetch.py: 64 and 256 alike, 1 
 # first batch with nothing to do (256 events of the paper log: 40-60 ms, 2 % of a run)
 FIRST_BATCH = 16
 # the parent's backlog (events sent, not yet handled) from which the child does the aids'
-# ring work (ahead_wanted): more than the batch the parent is handling. Paper log, two
-# free cores, whole command: pose fixes 2.88 -> 2.60 s wall with one batch, 2.55 s with
-# two, 3.2-3.4 s with four (the parent then does nearly all of it); heading 2.30 -> 2.08 s
+# ring work (ahead_wanted): more than the batch the parent is handling (two batches and
+# one alike on the paper log; four: the parent then does nearly all of it, 1.25x slower).
+# Side by side with the child doing all of it (two free cores, whole command, medians of
+# 5): paper log heading fixes 2.06 -> 2.04 s, pose 2.64 -> 2.60 s; Freiburg 079 sonar
+# heading fixes (4791 rings) 6.61 -> 6.44 s (3 runs each); outputs byte-identical
 AHEAD_BACKLOG = 2 * BATCH
 ENV = "FUZZYSLAM_PREFETCH"  # "0" (or off, no, false): never a child process
 F_SETPIPE_SZ = 1031  # linux/fcntl.h (fcntl.F_SETPIPE_SZ from Python 3.10, Linux only)
@@ -201,11 +203,12 @@ class Taken:
 def ahead_wanted(sent: int, taken: int) -> bool:
     """Whether the child computes a ring's ``ahead`` (the aids' work on the ring alone):
     only while the parent has at least ``AHEAD_BACKLOG`` events sent and not yet handled.
-    With less, the parent is about to wait for the child (the child is the slower of the
-    two: a pose run's FLMs, Hough and tangent fits, 1.9 s of CPU against the filter's 2.1 s on
-    the paper log): the ring goes without, and the aid computes it in the parent, which
-    would otherwise be idle. The work is the same function either way, so the outputs
-    are too; only its place depends on timing.
+    With less, the parent is about to wait for the child (with fixes the two are nearly
+    balanced: on the paper log a pose run's child spends 1.9 s of CPU on the events and
+    the rings' FLMs, Hough and tangent fits, the parent 2.1 s on the filter): the ring goes
+    without, and the aid computes it in the parent, which would otherwise be idle. The
+    work is the same function either way, so the outputs are too; only its place depends
+    on timing.
 
     Parameters
     ----------
