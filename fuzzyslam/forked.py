@@ -12,8 +12,9 @@ shows it).
 
 :class:`ChildCalls` is a child forked before the filter runs that imports the plotting
 modules (matplotlib: 0.4-0.5 s) while the filter runs on the other core, then makes the
-calls it is sent (module-level functions, pickled with their arguments) one at a time:
-a pose run's ``changes.png`` costs the run's end the drawing alone (``slam/stage.py``).
+calls it is sent (module-level functions, pickled with their arguments) one at a time,
+while the parent goes on (``submit``; ``Pending.result`` waits): a pose run's
+``changes.png`` is drawn while the run's other outputs are written (``slam/stage.py``).
 """
 
 from __future__ import annotations
@@ -192,9 +193,10 @@ class ChildCalls:
         self.pid: int | None = pid
         self._send: Connection | None = Connection(calls_w, readable=False)
         self._recv: Connection | None = Connection(replies_r, writable=False)
+        self._queue: list[Pending] = []  # sent, reply not yet read
 
     def call(self, fn: Callable[..., Any], *args: Any) -> Any:
-        """``fn(*args)``, made in the child.
+        """``fn(*args)``, made in the child (:meth:`submit`, then its result).
 
         Parameters
         ----------
@@ -208,21 +210,54 @@ class ChildCalls:
         object
             ``fn``'s result.
         """
-        if self._send is None or self._recv is None:
-            return fn(*args)
+        return self.submit(fn, *args).result()
+
+    def submit(self, fn: Callable[..., Any], *args: Any) -> Pending:
+        """Send ``fn(*args)`` to the child and return at once; the child makes the calls
+        in the order sent, while this process goes on.
+
+        Parameters
+        ----------
+        fn : callable
+            A module-level function (pickled by name).
+        *args
+            Its arguments (pickled).
+
+        Returns
+        -------
+        Pending
+            Its ``result()`` waits for the call's result (or raises its exception).
+        """
+        job = Pending(self, fn, args)
+        if self._send is None:
+            return job
         try:
             request = pickle.dumps((fn, args), pickle.HIGHEST_PROTOCOL)
         except Exception:  # a closure, an open file: not for the child
-            return fn(*args)
+            return job
         try:
             self._send.send_bytes(request)
-            kind, payload = pickle.loads(self._recv.recv_bytes())
-        except (EOFError, OSError):  # the child is gone: made here
+        except OSError:  # the child is gone: made here
             self.close()
-            return fn(*args)
-        if kind == "error":
-            raise_child_error(payload)
-        return payload
+            return job
+        job.sent = True
+        self._queue.append(job)
+        return job
+
+    def _collect(self, job: Pending) -> None:
+        """Read the child's replies, in the order of the calls, up to ``job``'s; a child
+        that is gone leaves the calls still waiting to be made here."""
+        while self._queue and not job.done:
+            head = self._queue.pop(0)
+            head.done = True
+            if self._recv is None:  # closed: made here
+                head.sent = False
+                continue
+            try:
+                head.reply = pickle.loads(self._recv.recv_bytes())
+            except (EOFError, OSError):  # the child is gone: made here
+                head.sent = False
+                self.close()
 
     def close(self) -> None:
         """Close the pipes, kill the child and reap it (idempotent)."""
@@ -239,6 +274,34 @@ class ChildCalls:
 
     def __exit__(self, *exc: object) -> None:
         self.close()
+
+
+class Pending:
+    """A call sent to a :class:`ChildCalls` child (or to be made here: not sent)."""
+
+    def __init__(self, calls: ChildCalls, fn: Callable[..., Any], args: tuple) -> None:
+        self.calls, self.fn, self.args = calls, fn, args
+        self.sent = False  # sent to the child
+        self.done = False  # its reply read
+        self.reply: tuple | None = None
+
+    def result(self) -> Any:
+        """Wait for the call's result: the child's, its exception raised here, or, when
+        the call was not sent or the child is gone, ``fn(*args)`` made here.
+
+        Returns
+        -------
+        object
+            ``fn``'s result.
+        """
+        if self.sent and not self.done:
+            self.calls._collect(self)
+        if not self.sent or self.reply is None:
+            return self.fn(*self.args)
+        kind, payload = self.reply
+        if kind == "error":
+            raise_child_error(payload)
+        return payload
 
 
 def _serve(calls: Connection, replies: Connection, warm: Sequence[str]) -> None:

@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import time
 
 import numpy as np
 import pytest
@@ -35,6 +36,12 @@ def reaped(pid: int) -> bool:
 def where_and_sum(a: np.ndarray, b: np.ndarray) -> tuple[int, np.ndarray]:
     """The calling process and a + b."""
     return os.getpid(), a + b
+
+
+def slow_where(seconds: float) -> int:
+    """The calling process, after ``seconds``."""
+    time.sleep(seconds)
+    return os.getpid()
 
 
 def imported(name: str) -> bool:
@@ -101,4 +108,21 @@ def test_an_exception_in_the_parent_reaps_the_child() -> None:
     with pytest.raises(KeyboardInterrupt), ChildCalls(warm=()) as calls:
         pid = calls.pid
         raise KeyboardInterrupt
+    assert reaped(pid)
+
+
+def test_submitted_calls_run_while_this_process_goes_on() -> None:
+    """``submit`` returns at once; results come back in any order asked, each its own;
+    a child killed with calls in flight leaves them to be made here."""
+    a = np.arange(3.0)
+    with ChildCalls(warm=()) as calls:
+        pid = calls.pid
+        first, second = calls.submit(where_and_sum, a, a), calls.submit(where_and_sum, a, 2 * a)
+        where2, total2 = second.result()  # the first's reply is read on the way
+        where1, total1 = first.result()
+        assert where1 == where2 == pid and np.all(total1 == 2 * a) and np.all(total2 == 3 * a)
+        late = [calls.submit(slow_where, 0.3) for _ in range(2)]
+        time.sleep(0.1)  # the child is in the first call
+        os.kill(pid, signal.SIGKILL)
+        assert [job.result() for job in late] == [os.getpid()] * 2
     assert reaped(pid)

@@ -324,11 +324,12 @@ def _run_once(
         StreamingOutputs(tmp, cfg, inputs.start_pose, inputs.frames) as streamed,
     ):
         res = _run_filter(inputs, cfg, aids, streamed, model, prefetch)
+        drawings = []  # drawn by the figure process while the other outputs are written
         for aid in aids:
             aid.write(tmp)
             for fn, args in aid.figures(tmp) if hasattr(aid, "figures") else ():
                 if drawer is not None:
-                    drawer.call(fn, *args)
+                    drawings.append(drawer.submit(fn, *args))
                 else:
                     fn(*args)
         extra = [  # the aids' messages for estimates.mcap (/map stamped at the log's start)
@@ -336,6 +337,8 @@ def _run_once(
             for m in aid.messages(cfg.topics, inputs.start)
         ]  # fmt: skip
         write_outputs(tmp, streamed, res, extra)
+        for drawing in drawings:
+            drawing.result()
         summary = make_summary(res, inputs, time.perf_counter() - wall0, aids, streamed)
         write_summary(tmp, as_json(summary))
     if not _quiet:
