@@ -16,21 +16,13 @@ import time
 
 import numpy as np
 import pytest
+from test_prefetch import reaped
 
 from fuzzyslam.forked import ChildCalls, ChildTraceback
 
 pytestmark = pytest.mark.skipif(
     not sys.platform.startswith("linux"), reason="the child process needs fork (Linux)"
 )
-
-
-def reaped(pid: int) -> bool:
-    """``pid`` is no longer a child of this process (waited for, not a zombie)."""
-    try:
-        os.waitpid(pid, os.WNOHANG)
-    except ChildProcessError:
-        return True
-    return False
 
 
 def where_and_sum(a: np.ndarray, b: np.ndarray) -> tuple[int, np.ndarray]:
