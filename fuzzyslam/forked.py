@@ -154,13 +154,14 @@ def reap(pid: int) -> None:
 
 
 class ChildCalls:
-    """Calls made in a child process forked now, which imports ``warm`` first (module
-    docstring); a context manager that reaps it.
+    """Calls made in a child process, which imports ``warm`` first (module docstring); a
+    context manager: the child is forked on entering and reaped on leaving.
 
-    ``call(fn, *args)`` sends the module-level function ``fn`` and its arguments and
-    returns its result, or raises its exception as the child raised it. If the child is
-    gone (killed), or ``fn`` or its arguments do not pickle, the call is made in this
-    process instead: the result is the same, only slower.
+    ``submit(fn, *args)`` sends the module-level function ``fn`` and its arguments, and
+    its ``result()`` waits for the result or raises the exception as the child raised it
+    (``call``: both at once). If the child is gone (killed), or ``fn`` or its arguments do
+    not pickle, the call is made in this process instead: the result is the same, only
+    later.
 
     Parameters
     ----------
@@ -170,8 +171,17 @@ class ChildCalls:
     """
 
     def __init__(self, warm: Sequence[str] = FIGURE_MODULES) -> None:
+        self.warm = tuple(warm)
+        self.pid: int | None = None
+        self._send: Connection | None = None
+        self._recv: Connection | None = None
+        self._queue: list[Pending] = []  # sent, reply not yet read
+
+    def start(self) -> None:
+        """Fork the child (``with`` does it)."""
         from multiprocessing.connection import Connection
 
+        warm = self.warm
         flush_std()
         calls_r, calls_w = os.pipe()
         replies_r, replies_w = os.pipe()
@@ -190,10 +200,9 @@ class ChildCalls:
                 os._exit(code)
         os.close(calls_r)
         os.close(replies_w)
-        self.pid: int | None = pid
-        self._send: Connection | None = Connection(calls_w, readable=False)
-        self._recv: Connection | None = Connection(replies_r, writable=False)
-        self._queue: list[Pending] = []  # sent, reply not yet read
+        self.pid = pid
+        self._send = Connection(calls_w, readable=False)
+        self._recv = Connection(replies_r, writable=False)
 
     def call(self, fn: Callable[..., Any], *args: Any) -> Any:
         """``fn(*args)``, made in the child (:meth:`submit`, then its result).
@@ -270,6 +279,7 @@ class ChildCalls:
             reap(pid)
 
     def __enter__(self) -> ChildCalls:
+        self.start()
         return self
 
     def __exit__(self, *exc: object) -> None:

@@ -291,6 +291,37 @@ def test_rings_without_ahead_are_computed_by_the_aids(
     assert len(taken) == s["rings"]["rings"] // 2
 
 
+@pytest.mark.slow
+def test_a_pose_run_that_fails_reaps_both_children(
+    tmp_path: Path,
+    forks,
+    tiny,  # noqa: F811
+    monkeypatch,
+) -> None:
+    """The filter failing mid-run with the input and figure processes: the error as
+    without them, no output, both children killed and reaped."""
+    from fuzzyslam.slam import runner as runner_mod
+
+    real = runner_mod.SlamRunner.ring
+
+    def ring(self, ev):
+        if self.counts["rings"] == 50:
+            raise RuntimeError("filter bug")
+        return real(self, ev)
+
+    monkeypatch.setattr(runner_mod.SlamRunner, "ring", ring)
+    got = []
+    for mode in ("prefetch", "no-prefetch"):
+        code, _, err = cli(
+            "run", tiny.log, "--config", tiny.config, "--map", tiny.dir / "fgm",
+            "--fix", "pose", "--fix-from", "0", "-o", tmp_path / mode, f"--{mode}",
+        )  # fmt: skip
+        got.append((code, error_lines(err)))
+        assert not (tmp_path / mode).exists() and not leftovers(tmp_path)
+    assert got[0] == got[1] and got[0][0] == 1
+    assert len(forks) == 2 and all(reaped(pid) for pid in forks)
+
+
 def test_the_parents_backlog_is_shared_with_the_child() -> None:
     """``Taken`` counts in a mapping the child sees (a fork's copy-on-write would not);
     ``ahead_wanted`` from a backlog of ``AHEAD_BACKLOG``."""

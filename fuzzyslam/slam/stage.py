@@ -319,8 +319,8 @@ def _run_once(
     drawing = any(getattr(a, "draws_figures", False) for a in aids)
     figures = ChildCalls() if prefetch and drawing else contextlib.nullcontext()
     with (
-        figures as drawer,
         staged as tmp,
+        figures as drawer,  # reaped before the staging directory is removed or renamed
         StreamingOutputs(tmp, cfg, inputs.start_pose, inputs.frames) as streamed,
     ):
         res = _run_filter(inputs, cfg, aids, streamed, model, prefetch)
