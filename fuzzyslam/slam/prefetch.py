@@ -176,8 +176,8 @@ class Taken:
     """The count of events the parent has taken from the pipe and handled, in a shared
     anonymous mapping (written by the parent after each batch, read by the child):
     what the child has sent minus this is the parent's backlog (:func:`ahead_wanted`).
-    An 8-byte aligned store and load; a stale value only moves work between the two
-    processes, never changes a result."""
+    Eight bytes written and read without a lock: a stale (or torn) value only moves work
+    between the two processes, never changes a result."""
 
     SIZE = 8
 
