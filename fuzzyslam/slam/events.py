@@ -107,7 +107,9 @@ class Aid(Protocol):
 
     Optional: ``ahead(ring, mounts)``, what it computes from a ring alone, and
     ``take_ahead(ring, value)`` (``fixes.base.FixAid``): slam/prefetch.py's child
-    process computes it before the filter reaches the ring."""
+    process computes it before the filter reaches the ring; ``figures(outdir)``, the
+    calls that draw its figures after ``write`` (with ``draws_figures``: made in the
+    run's figure process, fuzzyslam/forked.py)."""
 
     start_time: float
 
