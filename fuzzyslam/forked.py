@@ -159,9 +159,9 @@ class ChildCalls:
 
     ``submit(fn, *args)`` sends the module-level function ``fn`` and its arguments, and
     its ``result()`` waits for the result or raises the exception as the child raised it
-    (``call``: both at once). If the child is gone (killed), or ``fn`` or its arguments do
-    not pickle, the call is made in this process instead: the result is the same, only
-    later.
+    (``call``: both at once). If there is no child (the system refused the fork or the
+    pipes) or it is gone (killed), or ``fn`` or its arguments do not pickle, the call is
+    made in this process instead: the result is the same, only later.
 
     Parameters
     ----------
@@ -183,10 +183,17 @@ class ChildCalls:
 
         warm = self.warm
         flush_std()
-        calls_r, calls_w = os.pipe()
-        replies_r, replies_w = os.pipe()
-        parent = os.getpid()
-        pid = os.fork()
+        fds: list[int] = []
+        try:
+            fds.extend(os.pipe())
+            fds.extend(os.pipe())
+            parent = os.getpid()
+            pid = os.fork()
+        except OSError:  # no pipe or process to spare (EMFILE, EAGAIN, ENOMEM): calls made here
+            for fd in fds:
+                os.close(fd)
+            return
+        calls_r, calls_w, replies_r, replies_w = fds
         if pid == 0:  # the child: never returns
             os.close(calls_w)
             os.close(replies_r)

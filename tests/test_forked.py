@@ -9,6 +9,7 @@ tests/test_prefetch.py's ``test_fixes_outputs_are_the_same``.)
 
 from __future__ import annotations
 
+import errno
 import os
 import signal
 import sys
@@ -118,3 +119,22 @@ def test_submitted_calls_run_while_this_process_goes_on() -> None:
         os.kill(pid, signal.SIGKILL)
         assert [job.result() for job in late] == [os.getpid()] * 2
     assert reaped(pid)
+
+
+def test_a_refused_fork_makes_the_calls_here(monkeypatch) -> None:
+    """No process to spare (``fork`` failing with EAGAIN): no child, the calls made here,
+    no descriptor left open."""
+
+    refused = []
+
+    def refuse() -> int:
+        refused.append(1)
+        raise OSError(errno.EAGAIN, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(os, "fork", refuse)
+    before = len(os.listdir("/proc/self/fd"))
+    with ChildCalls(warm=()) as calls:
+        assert calls.pid is None
+        where, total = calls.submit(where_and_sum, np.ones(2), np.ones(2)).result()
+        assert where == os.getpid() and np.all(total == 2.0)
+    assert len(os.listdir("/proc/self/fd")) == before and refused == [1]

@@ -114,6 +114,26 @@ def test_sample_log_outputs_are_the_same(tmp_path: Path, forks) -> None:
     assert s["counts"]["frames"] > 200 and s["trajectory_rows"] > 600
 
 
+def test_a_refused_fork_is_the_one_process_run(tmp_path: Path, monkeypatch) -> None:
+    """No process to spare (``fork`` failing with EAGAIN, as under RLIMIT_NPROC): the run
+    makes its events itself, the same files as --no-prefetch."""
+    monkeypatch.setattr(stage, "prefetch_wanted", lambda requested: requested)
+
+    refused = []
+
+    def refuse() -> int:
+        refused.append(1)
+        raise OSError(errno.EAGAIN, "Resource temporarily unavailable")
+
+    monkeypatch.setattr(os, "fork", refuse)
+    before = len(os.listdir("/proc/self/fd"))
+    for mode in ("prefetch", "no-prefetch"):
+        code, _, err = cli("run", SAMPLE, "-o", tmp_path / mode, f"--{mode}")
+        assert code == 0, err
+    assert_same_outputs(tmp_path / "prefetch", tmp_path / "no-prefetch")
+    assert len(os.listdir("/proc/self/fd")) == before and refused == [1]
+
+
 def test_real_excerpt_outputs_are_the_same(tmp_path: Path, forks) -> None:
     """A real log's PoseArray detections (odometry latency tap, noise estimate, own
     covariances) and Odometry poses (the glitch gate): the same files either way."""

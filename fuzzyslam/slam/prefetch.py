@@ -33,6 +33,10 @@ without that (SIGKILL), the child gets SIGKILL too (``prctl(PR_SET_PDEATHSIG)`` 
 Linux), and a write to the pipe without a reader ends it elsewhere. (These fork helpers
 are :mod:`fuzzyslam.forked`'s, shared with the run's figure process.)
 
+A system that refuses the child (no process, pipe or memory to spare: ``fork`` or
+``pipe`` failing with EAGAIN, EMFILE, ENOMEM) gets the one-process run, the same
+outputs.
+
 When: :func:`wanted` (``fuzzyslam run``'s default, ``--no-prefetch`` or
 ``FUZZYSLAM_PREFETCH=0`` to turn it off): a platform with ``fork`` (Linux), at least
 two CPUs usable by this process (its affinity and its cgroup's CPU quota,
@@ -147,13 +151,23 @@ def input_events(
     from multiprocessing.connection import Connection
 
     flush_std()
-    taken = Taken(mmap.mmap(-1, Taken.SIZE))  # shared with the child (MAP_SHARED)
-    read_fd, write_fd = os.pipe()
+    try:
+        taken = Taken(mmap.mmap(-1, Taken.SIZE))  # shared with the child (MAP_SHARED)
+        read_fd, write_fd = os.pipe()
+    except OSError:  # no mapping or pipe to spare (EMFILE, ENOMEM): made here
+        yield inputs.events(rings, ring_start)
+        return
     if PIPE_BYTES:
         with contextlib.suppress(OSError):  # the system's limit (pipe-max-size) is lower
             fcntl.fcntl(write_fd, F_SETPIPE_SZ, PIPE_BYTES)
     parent = os.getpid()
-    pid = os.fork()
+    try:
+        pid = os.fork()
+    except OSError:  # no process to spare (EAGAIN: RLIMIT_NPROC; ENOMEM): made here
+        os.close(read_fd)
+        os.close(write_fd)
+        yield inputs.events(rings, ring_start)
+        return
     if pid == 0:  # the child: never returns
         os.close(read_fd)
         code = 1
