@@ -618,6 +618,35 @@ def test_signals_to_the_parent(tmp_path: Path, sig: int, code: int) -> None:
             assert reaped(child)  # the parent waited for it: never ours
 
 
+@pytest.mark.slow
+def test_sigterm_to_a_pose_run_reaps_both_children(tmp_path: Path, tiny) -> None:  # noqa: F811
+    """SIGTERM mid-run to ``fuzzyslam run --fix pose`` with its input and figure
+    processes: exit 143, one error line, nothing written, both children reaped by it."""
+    env = {**os.environ, "FUZZYSLAM_NO_PROGRESS": "1", "FUZZYSLAM_PREFETCH": "1"}
+    out = tmp_path / "est"
+    args = ["--config", str(tiny.config), "--map", str(tiny.dir / "fgm"), "--fix", "pose",
+            "--fix-from", "0"]  # fmt: skip
+    script = SLOW_RUN.replace('"--prefetch"]', '"--prefetch", *sys.argv[3:]]')
+    with subreaper():
+        proc = subprocess.Popen(
+            [sys.executable, "-c", script, str(tiny.log), str(out), *args],
+            env=env, cwd=tmp_path, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+        )  # fmt: skip
+        path = Path(f"/proc/{proc.pid}/task/{proc.pid}/children")
+        t_end = time.monotonic() + 60
+        kids: list[str] = []
+        while len(kids) < 2:  # the figure process, then the input process
+            assert time.monotonic() < t_end and proc.poll() is None, proc.stderr.read()
+            kids = path.read_text().split() if path.exists() else []
+            time.sleep(0.005)
+        time.sleep(0.3)  # the filter under way
+        os.kill(proc.pid, signal.SIGTERM)
+        _, err = proc.communicate(timeout=60)
+    assert proc.returncode == 143, err
+    assert len(error_lines(err)) == 1 and not out.exists() and not leftovers(tmp_path), err
+    assert all(reaped(int(pid)) for pid in kids)  # the parent waited for them: never ours
+
+
 def test_flm_ahead_only_for_aids_that_read_every_ring() -> None:
     """The pose aid's FLM is built ahead only when it matches every ring (the paper's
     pose fixes); the building presets match every metre or 30 deg, and so the child
