@@ -304,7 +304,8 @@ class Pending:
 
     def result(self) -> Any:
         """Wait for the call's result: the child's, its exception raised here, or, when
-        the call was not sent or the child is gone, ``fn(*args)`` made here.
+        the call was not sent or the child is gone, ``fn(*args)`` made here (once: a
+        second ``result()`` gives the same answer).
 
         Returns
         -------
@@ -313,8 +314,8 @@ class Pending:
         """
         if self.sent and not self.done:
             self.calls._collect(self)
-        if not self.sent or self.reply is None:
-            return self.fn(*self.args)
+        if self.reply is None:  # not sent, or the child gone: made here, once
+            self.reply = ("ok", self.fn(*self.args))
         kind, payload = self.reply
         if kind == "error":
             raise_child_error(payload)

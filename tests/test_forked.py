@@ -135,6 +135,8 @@ def test_a_refused_fork_makes_the_calls_here(monkeypatch) -> None:
     before = len(os.listdir("/proc/self/fd"))
     with ChildCalls(warm=()) as calls:
         assert calls.pid is None
-        where, total = calls.submit(where_and_sum, np.ones(2), np.ones(2)).result()
+        job = calls.submit(where_and_sum, np.ones(2), np.ones(2))
+        where, total = job.result()
         assert where == os.getpid() and np.all(total == 2.0)
+        assert job.result()[1] is total  # made once
     assert len(os.listdir("/proc/self/fd")) == before and refused == [1]
