@@ -315,6 +315,8 @@ def main() -> None:
         "--figures", type=Path, default=None, help="write BUILDING_RANGES.png (FGM and paths) here"
     )
     a = ap.parse_args()
+    if a.figures is not None:
+        a.figures.mkdir(parents=True, exist_ok=True)
     names = a.buildings or sorted(
         p.name for p in a.data.iterdir() if (p / "truth.tum").is_file() and _has_scan(p)
     )
