@@ -92,9 +92,10 @@ def _parse_pose(_ctx, _param, value: str | None) -> tuple[float, float, float] |
 @click.option(
     "--prefetch/--no-prefetch",
     default=True,
-    help="Read and decode the log in a second process, on a second core (default: on "
-    "where the platform forks and this process may use >= 2 CPUs; FUZZYSLAM_PREFETCH=0 "
-    "turns it off too). The outputs are the same either way.",
+    help="Read and decode the log in a second process, on a second core, and with --fix "
+    "pose draw changes.png in a third (default: on where the platform forks and this "
+    "process may use >= 2 CPUs; FUZZYSLAM_PREFETCH=0 turns it off too). The outputs are "
+    "the same either way.",
 )
 @seed_option
 def run_command(
