@@ -33,6 +33,7 @@ if TYPE_CHECKING:  # multiprocessing loaded only for a child (16 ms of start-up)
     from multiprocessing.connection import Connection
 
 _PR_SET_PDEATHSIG = 1  # linux/prctl.h
+F_SETPIPE_SZ = 1031  # linux/fcntl.h (fcntl.F_SETPIPE_SZ from Python 3.10, Linux only)
 # what a figure process imports while the filter runs (fuzzyslam/figsave.py's matplotlib)
 FIGURE_MODULES = ("fuzzyslam.figsave",)
 # the figure process's niceness: its imports use what the filter and the input process
@@ -153,13 +154,79 @@ def reap(pid: int) -> None:
         raise interrupted
 
 
+TO_CHILD, TO_PARENT = "to_child", "to_parent"  # a pipe's direction (fork_child)
+
+
+def fork_child(
+    target: Callable[[list[Connection]], None],
+    directions: Sequence[str],
+    pipe_bytes: int = 0,
+) -> tuple[int, list[Connection]] | None:
+    """Fork a child that runs ``target`` on its ends of new pipes, then ends (module
+    docstring: ``os._exit``, Ctrl-C ignored, SIGKILL with its parent).
+
+    Parameters
+    ----------
+    target : callable
+        ``target(conns)`` in the child, ``conns`` its end of each pipe in the order of
+        ``directions``; not run if the parent died before the orphan guard was set. An
+        exception it lets through ends the child with code 1.
+    directions : sequence of str
+        Per pipe, ``TO_CHILD`` (the parent writes) or ``TO_PARENT`` (the child writes).
+    pipe_bytes : int
+        The pipes' buffer size (Linux ``F_SETPIPE_SZ``; 0: the system's, and a lower
+        system limit keeps it).
+
+    Returns
+    -------
+    (int, list of Connection) or None
+        The child's pid and this process's end of each pipe; None when the system
+        refuses a pipe or the fork (EMFILE, EAGAIN under a process limit, ENOMEM): the
+        caller does the work itself.
+    """
+    from multiprocessing.connection import Connection
+
+    flush_std()
+    pipes: list[tuple[int, int]] = []
+    try:
+        for _ in directions:
+            pipes.append(os.pipe())
+        parent = os.getpid()
+        pid = os.fork()
+    except OSError:
+        for fd in (fd for pipe in pipes for fd in pipe):
+            os.close(fd)
+        return None
+    child = pid == 0
+    ends = []
+    for (r, w), way in zip(pipes, directions, strict=True):
+        reads = (way == TO_CHILD) == child  # this process's end is the read end
+        keep, drop = (r, w) if reads else (w, r)
+        os.close(drop)
+        if pipe_bytes and not reads:
+            with contextlib.suppress(OSError, AttributeError):  # fcntl: Linux only
+                import fcntl
+
+                fcntl.fcntl(keep, F_SETPIPE_SZ, pipe_bytes)
+        ends.append(Connection(keep, readable=reads, writable=not reads))
+    if not child:
+        return pid, ends
+    code = 1  # the child: never returns
+    try:
+        if orphan_guard(parent):
+            target(ends)
+        code = 0
+    finally:
+        os._exit(code)
+
+
 class ChildCalls:
     """Calls made in a child process, which imports ``warm`` first (module docstring); a
     context manager: the child is forked on entering and reaped on leaving.
 
     ``submit(fn, *args)`` sends the module-level function ``fn`` and its arguments, and
-    its ``result()`` waits for the result or raises the exception as the child raised it
-    (``call``: both at once). If there is no child (the system refused the fork or the
+    its ``result()`` waits for the result or raises the exception as the child raised it.
+    If there is no child (the system refused the fork or the
     pipes) or it is gone (killed), or ``fn`` or its arguments do not pickle, the call is
     made in this process instead: the result is the same, only later.
 
@@ -178,55 +245,11 @@ class ChildCalls:
         self._queue: list[Pending] = []  # sent, reply not yet read
 
     def start(self) -> None:
-        """Fork the child (``with`` does it)."""
-        from multiprocessing.connection import Connection
-
+        """Fork the child (``with`` does it); none when the system refuses it."""
         warm = self.warm
-        flush_std()
-        fds: list[int] = []
-        try:
-            fds.extend(os.pipe())
-            fds.extend(os.pipe())
-            parent = os.getpid()
-            pid = os.fork()
-        except OSError:  # no pipe or process to spare (EMFILE, EAGAIN, ENOMEM): calls made here
-            for fd in fds:
-                os.close(fd)
-            return
-        calls_r, calls_w, replies_r, replies_w = fds
-        if pid == 0:  # the child: never returns
-            os.close(calls_w)
-            os.close(replies_r)
-            code = 1
-            try:
-                if orphan_guard(parent):
-                    _serve(Connection(calls_r, writable=False),
-                           Connection(replies_w, readable=False), warm)  # fmt: skip
-                code = 0
-            finally:
-                os._exit(code)
-        os.close(calls_r)
-        os.close(replies_w)
-        self.pid = pid
-        self._send = Connection(calls_w, readable=False)
-        self._recv = Connection(replies_r, writable=False)
-
-    def call(self, fn: Callable[..., Any], *args: Any) -> Any:
-        """``fn(*args)``, made in the child (:meth:`submit`, then its result).
-
-        Parameters
-        ----------
-        fn : callable
-            A module-level function (pickled by name).
-        *args
-            Its arguments (pickled).
-
-        Returns
-        -------
-        object
-            ``fn``'s result.
-        """
-        return self.submit(fn, *args).result()
+        forked = fork_child(lambda ends: _serve(*ends, warm), (TO_CHILD, TO_PARENT))
+        if forked is not None:
+            self.pid, (self._send, self._recv) = forked
 
     def submit(self, fn: Callable[..., Any], *args: Any) -> Pending:
         """Send ``fn(*args)`` to the child and return at once; the child makes the calls

@@ -9,7 +9,6 @@ tests/test_prefetch.py's ``test_fixes_outputs_are_the_same``.)
 
 from __future__ import annotations
 
-import errno
 import os
 import signal
 import sys
@@ -17,7 +16,7 @@ import time
 
 import numpy as np
 import pytest
-from test_prefetch import reaped
+from test_prefetch import reaped, refused_fork  # noqa: F401
 
 from fuzzyslam.forked import ChildCalls, ChildTraceback
 
@@ -61,7 +60,7 @@ def test_calls_are_made_in_the_child_with_their_results() -> None:
     with ChildCalls(warm=()) as calls:
         pid = calls.pid
         for _ in range(2):  # one child serves several calls
-            where, total = calls.call(where_and_sum, a, b)
+            where, total = calls.submit(where_and_sum, a, b).result()
             assert where == pid != os.getpid()
             np.testing.assert_array_equal(total, a + b)
     assert calls.pid is None and reaped(pid)
@@ -72,14 +71,14 @@ def test_the_child_imports_its_modules_first() -> None:
     if name in sys.modules:
         pytest.skip(f"{name} is already imported here")
     with ChildCalls(warm=(name, "no_such_module_at_all")) as calls:
-        assert calls.call(imported, name)  # the failed import is left for a call to meet
+        assert calls.submit(imported, name).result()  # the failed import is left for a call to meet
     assert name not in sys.modules
 
 
 @pytest.mark.parametrize("kind", ["value", "unpicklable"])
 def test_the_childs_exception_is_raised_here(kind: str) -> None:
     with ChildCalls(warm=()) as calls, pytest.raises(Exception) as info:
-        calls.call(fail, kind)
+        calls.submit(fail, kind).result()
     assert type(info.value).__name__ == ("ValueError" if kind == "value" else "TwoArgs")
     assert str(info.value) == ("a bug in the figure" if kind == "value" else "one and two")
     assert isinstance(info.value.__cause__, ChildTraceback)
@@ -90,9 +89,9 @@ def test_a_child_that_is_gone_or_a_call_that_does_not_pickle_is_made_here() -> N
     a, b = np.ones(3), np.ones(3)
     with ChildCalls(warm=()) as calls:
         pid = calls.pid
-        assert calls.call(lambda: os.getpid()) == os.getpid()  # a lambda: not sent
+        assert calls.submit(lambda: os.getpid()).result() == os.getpid()  # a lambda: not sent
         os.kill(pid, signal.SIGKILL)
-        where, total = calls.call(where_and_sum, a, b)
+        where, total = calls.submit(where_and_sum, a, b).result()
         assert where == os.getpid() and np.all(total == 2.0)
         assert calls.pid is None and reaped(pid)  # reaped when found gone
 
@@ -121,17 +120,10 @@ def test_submitted_calls_run_while_this_process_goes_on() -> None:
     assert reaped(pid)
 
 
-def test_a_refused_fork_makes_the_calls_here(monkeypatch) -> None:
+def test_a_refused_fork_makes_the_calls_here(refused_fork: list[int]) -> None:  # noqa: F811
     """No process to spare (``fork`` failing with EAGAIN): no child, the calls made here,
     no descriptor left open."""
-
-    refused = []
-
-    def refuse() -> int:
-        refused.append(1)
-        raise OSError(errno.EAGAIN, "Resource temporarily unavailable")
-
-    monkeypatch.setattr(os, "fork", refuse)
+    refused = refused_fork
     before = len(os.listdir("/proc/self/fd"))
     with ChildCalls(warm=()) as calls:
         assert calls.pid is None

@@ -114,18 +114,26 @@ def test_sample_log_outputs_are_the_same(tmp_path: Path, forks) -> None:
     assert s["counts"]["frames"] > 200 and s["trajectory_rows"] > 600
 
 
-def test_a_refused_fork_is_the_one_process_run(tmp_path: Path, monkeypatch) -> None:
-    """No process to spare (``fork`` failing with EAGAIN, as under RLIMIT_NPROC): the run
-    makes its events itself, the same files as --no-prefetch."""
-    monkeypatch.setattr(stage, "prefetch_wanted", lambda requested: requested)
-
-    refused = []
+@pytest.fixture
+def refused_fork(monkeypatch) -> list[int]:
+    """``os.fork`` failing with EAGAIN (as under RLIMIT_NPROC); one entry per refusal."""
+    refused: list[int] = []
 
     def refuse() -> int:
         refused.append(1)
         raise OSError(errno.EAGAIN, "Resource temporarily unavailable")
 
     monkeypatch.setattr(os, "fork", refuse)
+    return refused
+
+
+def test_a_refused_fork_is_the_one_process_run(
+    tmp_path: Path, monkeypatch, refused_fork: list[int]
+) -> None:
+    """No process to spare (``fork`` failing with EAGAIN, as under RLIMIT_NPROC): the run
+    makes its events itself, the same files as --no-prefetch."""
+    monkeypatch.setattr(stage, "prefetch_wanted", lambda requested: requested)
+    refused = refused_fork
     before = len(os.listdir("/proc/self/fd"))
     for mode in ("prefetch", "no-prefetch"):
         code, _, err = cli("run", SAMPLE, "-o", tmp_path / mode, f"--{mode}")

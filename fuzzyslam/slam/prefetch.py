@@ -56,7 +56,7 @@ from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 from fuzzyslam.cpus import usable_cpus
-from fuzzyslam.forked import flush_std, orphan_guard, pickled_error, raise_child_error, reap
+from fuzzyslam.forked import TO_PARENT, fork_child, pickled_error, raise_child_error, reap
 from fuzzyslam.slam.events import Event, RingEvent
 
 if TYPE_CHECKING:  # multiprocessing loaded only for a child (16 ms of start-up)
@@ -74,7 +74,6 @@ FIRST_BATCH = 16
 # heading fixes (4791 rings) 6.61 -> 6.44 s (3 runs each); outputs byte-identical
 AHEAD_BACKLOG = 2 * BATCH
 ENV = "FUZZYSLAM_PREFETCH"  # "0" (or off, no, false): never a child process
-F_SETPIPE_SZ = 1031  # linux/fcntl.h (fcntl.F_SETPIPE_SZ from Python 3.10, Linux only)
 # the pipe's buffer (Linux's default 64 KiB): 1 MiB lets the child run further ahead of a
 # parent whose steps come in bursts (a multi-ring fix, a relocalisation); paper log, in one
 # warm process, two cores: heading fixes 3.12 s wall with 64 KiB, 2.29 s with 1 MiB
@@ -146,39 +145,23 @@ def input_events(
     if not child:
         yield inputs.events(rings, ring_start)
         return
-    import fcntl
     import mmap
-    from multiprocessing.connection import Connection
 
-    flush_std()
     try:
         taken = Taken(mmap.mmap(-1, Taken.SIZE))  # shared with the child (MAP_SHARED)
-        read_fd, write_fd = os.pipe()
-    except OSError:  # no mapping or pipe to spare (EMFILE, ENOMEM): made here
+    except OSError:  # no memory to spare: made here
+        taken = None
+    forked = None
+    if taken is not None:
+        forked = fork_child(
+            lambda ends: _child(ends[0], inputs, rings, ring_start, aids, taken),
+            (TO_PARENT,),
+            PIPE_BYTES,
+        )
+    if forked is None:  # the system refused the child (module docstring): made here
         yield inputs.events(rings, ring_start)
         return
-    if PIPE_BYTES:
-        with contextlib.suppress(OSError):  # the system's limit (pipe-max-size) is lower
-            fcntl.fcntl(write_fd, F_SETPIPE_SZ, PIPE_BYTES)
-    parent = os.getpid()
-    try:
-        pid = os.fork()
-    except OSError:  # no process to spare (EAGAIN: RLIMIT_NPROC; ENOMEM): made here
-        os.close(read_fd)
-        os.close(write_fd)
-        yield inputs.events(rings, ring_start)
-        return
-    if pid == 0:  # the child: never returns
-        os.close(read_fd)
-        code = 1
-        try:
-            send = Connection(write_fd, readable=False)
-            _child(send, parent, inputs, rings, ring_start, aids, taken)
-            code = 0
-        finally:
-            os._exit(code)
-    os.close(write_fd)
-    conn = Connection(read_fd, writable=False)
+    pid, (conn,) = forked
     try:
         yield _received(conn, inputs, pid, taken)
     finally:
@@ -238,15 +221,11 @@ def ahead_wanted(sent: int, taken: int) -> bool:
     return sent - taken >= AHEAD_BACKLOG
 
 
-def _child(
-    conn: Connection, parent: int, inputs, rings: bool, ring_start, aids, taken: Taken
-) -> None:
+def _child(conn: Connection, inputs, rings: bool, ring_start, aids, taken: Taken) -> None:
     """The child's work: the events in batches of ``FIRST_BATCH``, twice that, ... up to
     ``BATCH``, then the last batch with the reading state; or an exception, pickled
     (``fuzzyslam.forked.pickled_error``). Its own exceptions, and a parent gone (a
     broken pipe), end it quietly."""
-    if not orphan_guard(parent):  # the parent died before the guard was set
-        return
     buf: list[Event] = []
     limit = FIRST_BATCH
     sent = 0
