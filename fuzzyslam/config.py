@@ -138,13 +138,90 @@ def _check_shape(data: Any, source: str) -> None:
             stack.extend((v, depth + 1) for v in node)
 
 
+_SafeLoader: Any = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml where available
+_MERGE_TAG = "tag:yaml.org,2002:merge"
+
+
+class StrictLoader(_SafeLoader):
+    """A safe YAML loader that refuses a key given twice in one mapping (plain YAML
+    keeps the last one silently): a ConfigError naming the config, the dotted key and
+    its lines. A ``<<`` merge key may still be overridden by the mapping's own keys.
+
+    Parameters
+    ----------
+    stream : str
+        The YAML text.
+    source : str
+        The config's label in errors (its path as the user gave it).
+    """
+
+    def __init__(self, stream: str, source: str = "<config>") -> None:
+        super().__init__(stream)
+        self.source = source
+
+    def construct_document(self, node: Any) -> Any:
+        """Check every mapping of the document for repeated keys, then build it.
+
+        Parameters
+        ----------
+        node : yaml.Node
+            The document's root node.
+
+        Returns
+        -------
+        object
+            The document's data, as the safe loader builds it.
+        """
+        self._check_repeated_keys(node)
+        return super().construct_document(node)
+
+    def _check_repeated_keys(self, root: Any) -> None:
+        """Walk the node graph iteratively, each node once (an alias is not walked
+        again, so an alias bomb costs its size, not its expansion), and raise at the
+        first mapping that holds a key twice."""
+        walked: set[int] = set()
+        stack: list[tuple[Any, str]] = [(root, "")]
+        while stack:
+            node, path = stack.pop()
+            if id(node) in walked:
+                continue
+            walked.add(id(node))
+            if isinstance(node, yaml.SequenceNode):
+                stack.extend((v, f"{path}[{i}]") for i, v in reversed(list(enumerate(node.value))))
+            elif isinstance(node, yaml.MappingNode):
+                first: dict[Any, int] = {}
+                children = []
+                for key_node, value_node in node.value:
+                    child = f"{path}.?" if path else "?"
+                    if isinstance(key_node, yaml.ScalarNode) and key_node.tag != _MERGE_TAG:
+                        key = self.construct_object(key_node)
+                        child = f"{path}.{key}" if path else str(key)
+                        line = key_node.start_mark.line + 1
+                        try:
+                            seen = first.get(key)
+                            first.setdefault(key, line)
+                        except TypeError:  # unhashable: the constructor refuses it next
+                            seen = None
+                        if seen is not None:
+                            raise ConfigError(
+                                self.source,
+                                f"repeated key {short(child, 80)} at line {line} (first at "
+                                f"line {seen}); give each key once",
+                            )
+                    children.append((value_node, child))
+                stack.extend(reversed(children))
+
+
 def _read_yaml(text: str, source: str) -> dict[str, Any]:
     if len(text) > MAX_CONFIG_BYTES:
         raise ConfigError(source, f"config larger than {MAX_CONFIG_BYTES} bytes; refusing")
-    loader = getattr(yaml, "CSafeLoader", yaml.SafeLoader)  # libyaml where available
     try:
-        _check_events(text, source, loader)
-        data = yaml.load(text, Loader=loader)  # a safe loader
+        _check_events(text, source, _SafeLoader)
+        loader = StrictLoader(text, source)  # a safe loader
+        try:
+            data = loader.get_single_data()
+        finally:
+            loader.dispose()
     except yaml.YAMLError as exc:
         mark = getattr(exc, "problem_mark", None)
         where = f" at line {mark.line + 1}" if mark is not None else ""
@@ -184,7 +261,7 @@ def _locate(name: str, relative_to: Path | None, owner: str = "") -> tuple[str, 
     ``relative_to`` is the folder of the config that names it in ``extends``: then only
     an embedded name or a file in that folder or below it is accepted (no absolute
     path, no ``..`` out of it, no symlink pointing elsewhere); an embedded config
-    (``relative_to`` None after an embedded one, see ``_load_raw``) extends embedded
+    (``relative_to`` None after an embedded one, see ``config_layers``) extends embedded
     names only."""
     embedded = name if name.endswith(".yaml") else f"{name}.yaml"
     p = Path(name)
@@ -204,11 +281,16 @@ def _locate(name: str, relative_to: Path | None, owner: str = "") -> tuple[str, 
         return _read_text(p), str(p)
     if embedded in embedded_names():
         return _embedded_text(embedded)
+    # named by an ``extends``: the error names the config holding it, and the key
+    label, what = clip(name, 200), ""
+    if relative_to is not None:
+        label, what, p = owner or label, f"extends {short(name, 80)}: ", relative_to / p
     if p.exists():
-        raise ConfigError(p, "config path is not a file")
+        raise ConfigError(label if what else p, f"{what}config path is not a file")
     raise ConfigError(
-        clip(name, 200),
-        f"config not found (not a file, nor one of the embedded: {', '.join(embedded_names())})",
+        label,
+        f"{what}config not found (not a file, nor one of the embedded: "
+        f"{', '.join(embedded_names())})",
     )
 
 
@@ -234,10 +316,24 @@ def _merge(base: dict[str, Any], over: dict[str, Any]) -> dict[str, Any]:
     return out
 
 
-def _load_raw(name: str) -> tuple[dict, str]:
+def config_layers(name: str) -> tuple[dict[str, Any], list[str]]:
     """The merged raw mapping of config ``name`` and its ``extends`` chain (followed
-    iteratively, at most MAX_EXTENDS long, cycles refused), and the source label of the
-    first file."""
+    iteratively, at most MAX_EXTENDS long, cycles refused), unchecked, and the chain.
+
+    Parameters
+    ----------
+    name : str
+        A config file's path or an embedded config's name.
+
+    Returns
+    -------
+    dict
+        The keys of every file of the chain, each file's over those of the one it
+        extends (``extends`` removed).
+    list of str
+        The source labels of the chain: ``name``'s own first (its path as given), then
+        each file it extends (``<embedded NAME.yaml>`` for an embedded config).
+    """
     layers: list[dict] = []
     chain: list[str] = []
     relative_to: Path | None = None
@@ -270,15 +366,27 @@ def _load_raw(name: str) -> tuple[dict, str]:
     merged: dict = {}
     for data in reversed(layers):
         merged = _merge(merged, data)
-    return merged, chain[0]
+    return merged, chain
 
 
-def load_config(path: str | Path | None = None, seed: int | None = None) -> Config:
-    """Load a config by path or embedded name (default: the paper scenario).
+def config_from_raw(data: dict[str, Any], source: str, seed: int | None = None) -> Config:
+    """The checked Config of a raw mapping (:func:`config_layers`, possibly with keys
+    merged over it): unknown keys, types, ranges and sizes refused (``data`` is not
+    changed).
 
-    ``seed`` overrides the file's seed when given (the CLI's ``--seed``).
+    Parameters
+    ----------
+    data : dict
+        The raw mapping of sections.
+    source : str
+        What an error names: the config file, or what set the keys (``--set K=V``).
+    seed : int or None
+        Overrides the mapping's seed when given.
+
+    Returns
+    -------
+    Config
     """
-    data, source = _load_raw(str(path) if path is not None else DEFAULT_CONFIG)
     cfg = from_dict(Config, data, source)
     if seed is not None:
         if seed < 0:
@@ -286,6 +394,15 @@ def load_config(path: str | Path | None = None, seed: int | None = None) -> Conf
         cfg.seed = seed
     check_sizes(cfg, source)
     return cfg
+
+
+def load_config(path: str | Path | None = None, seed: int | None = None) -> Config:
+    """Load a config by path or embedded name (default: the paper scenario).
+
+    ``seed`` overrides the file's seed when given (the CLI's ``--seed``).
+    """
+    data, chain = config_layers(str(path) if path is not None else DEFAULT_CONFIG)
+    return config_from_raw(data, chain[0], seed)
 
 
 def check_sizes(cfg: Config, source: str) -> None:

@@ -10,6 +10,7 @@ from pathlib import Path
 import pytest
 from test_robust_logs import cli, error_lines
 
+from fuzzyslam.config import embedded_names
 from fuzzyslam.errors import EXIT_INPUT
 
 BOMB = "a: &a [x, x, x, x, x, x, x, x, x, x]\n" + "".join(
@@ -41,6 +42,10 @@ BAD = {
     "start sigma zero": "extends: quick.yaml\nslam: {start_sigma: [0, 0, 0]}\n",
     "extends outside": "extends: ../outside.yaml\n",
     "extends absolute": "extends: /etc/hostname\n",
+    "repeated key": Q + "robot: {radius: 0.2, radius: 0.3}\n",
+    "repeated section": Q + "robot: {radius: 0.2}\nrobot: {radius: 0.3}\n",
+    "repeated key in a list": Q + "world: {lamps: [{a: 1, a: 2}]}\n",
+    "repeated key in an alias bomb": BOMB + "z: {k: *i, k: 1}\n" + Q,
 }
 
 
@@ -82,3 +87,63 @@ def test_extends_below_and_embedded_still_work(tmp_path: Path) -> None:
     (tmp_path / "top.yaml").write_text("extends: base/b.yaml\nseed: 7\n", encoding="utf-8")
     cfg = load_config(tmp_path / "top.yaml")
     assert (cfg.name, cfg.seed, cfg.scenario.runs) == ("b", 7, load_config("quick").scenario.runs)
+
+
+@pytest.mark.parametrize(
+    ("text", "says"),
+    [
+        (Q + "robot: {radius: 0.2, radius: 0.3}\n",
+         "repeated key 'robot.radius' at line 2 (first at line 2)"),
+        (Q + "seed: 1\nrobot:\n  radius: 0.2\nseed: 2\n",
+         "repeated key 'seed' at line 5 (first at line 2)"),
+        (Q + "slam:\n  start_pose: [0, 0, 0]\n  gate: 9\n  start_pose: [1, 1, 1]\n",
+         "repeated key 'slam.start_pose' at line 5 (first at line 3)"),
+        (Q + "extends: paper.yaml\n", "repeated key 'extends' at line 2 (first at line 1)"),
+        (Q + "world: {lamps: [{a: 1, a: 2}]}\n", "repeated key 'world.lamps[0].a' at line 2"),
+        (BOMB + "z: {k: *i, k: 1}\n", "repeated key 'z.k' at line 10 (first at line 10)"),
+        ("extends: nonexist\n", "extends 'nonexist': config not found"),
+    ],
+)  # fmt: skip
+def test_repeated_keys_and_missing_extends_name_the_file_and_key(
+    text: str, says: str, tmp_path: Path
+) -> None:
+    """Plain YAML keeps the last of a repeated key silently; a config refuses it, naming
+    the file, the dotted key and both lines. A missing ``extends`` names the config that
+    holds it and the key."""
+    cfg = tmp_path / "c.yaml"
+    cfg.write_text(text, encoding="utf-8")
+    code, out, err = cli("simulate", cfg, "-o", tmp_path / "x.mcap")
+    lines = error_lines(err)
+    assert code == EXIT_INPUT and len(lines) == 1, err
+    assert lines[0].startswith(f"fuzzyslam: error: {cfg}: {says}"), lines[0]
+    assert out == "" and not (tmp_path / "x.mcap").exists()
+
+
+def test_a_missing_extends_deeper_in_the_chain_names_its_own_file(tmp_path: Path) -> None:
+    (tmp_path / "sub").mkdir()
+    mid = tmp_path / "sub" / "mid.yaml"
+    mid.write_text("extends: gone.yaml\n", encoding="utf-8")
+    (tmp_path / "top.yaml").write_text("extends: sub/mid.yaml\n", encoding="utf-8")
+    code, _, err = cli("simulate", tmp_path / "top.yaml", "-o", tmp_path / "x.mcap")
+    assert code == EXIT_INPUT
+    assert error_lines(err) == [
+        f"fuzzyslam: error: {mid}: extends 'gone.yaml': config not found "
+        f"(not a file, nor one of the embedded: {', '.join(embedded_names())})"
+    ]
+
+
+def test_merge_keys_and_anchors_still_load(tmp_path: Path) -> None:
+    """A ``<<`` merge may be overridden by the mapping's own keys, and one anchored
+    mapping used twice is not a repeat (the raw mapping, before the keys are checked)."""
+    from fuzzyslam.config import config_layers
+
+    cfg = tmp_path / "m.yaml"
+    cfg.write_text(
+        Q + "base: &r {radius: 0.2, wheel_noise: 0.01}\nrobot:\n  <<: *r\n  radius: 0.3\n"
+        "again: *r\n",
+        encoding="utf-8",
+    )
+    raw, chain = config_layers(str(cfg))
+    assert (raw["robot"]["radius"], raw["robot"]["wheel_noise"]) == (0.3, 0.01)
+    assert raw["again"] == raw["base"] == {"radius": 0.2, "wheel_noise": 0.01}
+    assert chain[:2] == [str(cfg), "<embedded quick.yaml>"]

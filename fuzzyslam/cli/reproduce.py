@@ -119,11 +119,17 @@ def reproduce_command(
     line per finished step), the path of the report and the headline figures to
     stdout (JSON).
     """
+    from fuzzyslam.errors import InputError
     from fuzzyslam.reproduce.overrides import parse_one
     from fuzzyslam.reproduce.stage import run
 
     seed_list = list(range(first_seed, first_seed + seeds))
-    overrides = dict(parse_one(s) for s in sets)
+    overrides: dict = {}
+    for s in sets:
+        key, value = parse_one(s)
+        if key in overrides:
+            raise InputError(f"--set {s}", f"'{key}' is given in more than one --set")
+        overrides[key] = value
     emit(run(outdir, seed_list, quick, jobs, beyond=not paper_only,
              scheduler=scheduler, keep_logs=keep_logs, ship=ship_files,
              overrides=overrides))  # fmt: skip

@@ -27,7 +27,8 @@ from fuzzyslam.cli import cli, emit
               "(aligned) or the log's own ground truth.")  # fmt: skip
 @click.option("-o", "--output", "outdir", default="sweep", show_default=True,
               type=click.Path(path_type=Path),
-              help="Output directory; rerun into it to go on where it stopped.")  # fmt: skip
+              help="Output directory: absent, empty or a previous sweep's; rerun into it "
+              "to go on where it stopped.")  # fmt: skip
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
               help="Steps at once (default: the usable CPUs, or the Dask threads).")  # fmt: skip
 @click.option("--scheduler", metavar="ADDRESS", default=None,
@@ -44,13 +45,15 @@ def sweep_command(config: str, sets: tuple[str, ...], seeds: int | None,
     \b
     CONFIG is a YAML file or an embedded config name, e.g.
       fuzzyslam sweep quick.yaml --set fgm.freeze_run=1,2 --seeds 3 -o sweep
-      fuzzyslam sweep real.yaml --set slam.gate=9,16 --logs 'runs/*/log.mcap' -o sw
+      fuzzyslam sweep real_detections.yaml --set slam.gate_chi2=9,16 --logs 'runs/*/log.mcap' -o sw
 
     Writes OUTDIR/sweep.md and sweep.json (per grid point: mean, sd, min, max over
     seeds or logs of the position and heading errors), one figure per swept key
     (sweep_KEY.png) and each step's files under gI/seedS/ (gI/logJ_NAME/).
     Resumable: a step whose command, configs and inputs are unchanged is skipped
     (counted as "skipped" in the summary), so a sweep killed halfway goes on.
+    Every grid point's config is checked before anything is written; an OUTDIR that
+    is neither empty nor a previous sweep's output is refused.
     """
     import glob
 

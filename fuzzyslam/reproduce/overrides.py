@@ -10,21 +10,42 @@ per key (a grid, reproduce/sweep.py); ``reproduce`` one value per key
 from __future__ import annotations
 
 import dataclasses
+import itertools
 from pathlib import Path
 from typing import Any
 
 import yaml
 
-from fuzzyslam.config import _merge, load_config
-from fuzzyslam.errors import InputError
+from fuzzyslam.config import Config, _merge, clip, config_from_raw, config_layers
+from fuzzyslam.errors import ConfigError, InputError
 
 
 def parse_set(text: str) -> tuple[str, list[Any]]:
-    """``KEY=V1,V2,...`` -> (KEY, [values]); each value is read as YAML (0.5, true, text)."""
+    """``KEY=V1,V2,...`` -> (KEY, [values]); each value is read as YAML (0.5, true, text).
+
+    Parameters
+    ----------
+    text : str
+        The option's text, e.g. ``fgm.freeze_run=1,2``.
+
+    Returns
+    -------
+    (str, list)
+        The dotted key and its values. A malformed option is an InputError naming it
+        (``--set TEXT``).
+    """
+    label = f"--set {text}"
     key, sep, values = text.partition("=")
-    if not sep or not key.strip() or not values.strip():
-        raise InputError(text, "--set must be KEY=V1,V2,... (e.g. fgm.freeze_run=1,2)")
-    return key.strip(), [yaml.safe_load(v) for v in values.split(",")]
+    key = key.strip()
+    if not sep or not key or not values.strip():
+        raise InputError(label, "--set must be KEY=V1,V2,... (e.g. fgm.freeze_run=1,2)")
+    if key.split(".")[0] == "extends":
+        raise InputError(label, "'extends' cannot be set; give the config to extend as CONFIG")
+    try:
+        return key, [yaml.safe_load(v) for v in values.split(",")]
+    except yaml.YAMLError as exc:
+        problem = getattr(exc, "problem", None) or "syntax error"
+        raise InputError(label, f"a value is not YAML: {clip(problem, 80)}") from None
 
 
 def parse_one(text: str) -> tuple[str, Any]:
@@ -42,7 +63,9 @@ def parse_one(text: str) -> tuple[str, Any]:
     """
     key, values = parse_set(text)
     if len(values) != 1:
-        raise InputError(text, "--set takes one value (KEY=VALUE); a grid is 'fuzzyslam sweep'")
+        raise InputError(
+            f"--set {text}", "--set takes one value (KEY=VALUE); a grid is 'fuzzyslam sweep'"
+        )
     return key, values[0]
 
 
@@ -77,11 +100,116 @@ def override_text(base: str, overrides: dict[str, Any], comment: str) -> str:
     return f"# {comment}\n" + yaml.safe_dump(doc, sort_keys=True)
 
 
+def overridden(raw: dict[str, Any], overrides: dict[str, Any]) -> dict[str, Any]:
+    """The raw mapping of a config (:func:`~fuzzyslam.config.config_layers`) with
+    ``overrides`` set, as the file of :func:`override_text` loads (``raw`` unchanged).
+
+    Parameters
+    ----------
+    raw : dict
+        The base config's merged keys.
+    overrides : dict
+        Dotted key -> value.
+
+    Returns
+    -------
+    dict
+    """
+    doc: dict[str, Any] = {}
+    for k, v in overrides.items():
+        doc = _merge(doc, nested(k, v))
+    return _merge(raw, doc)
+
+
+def set_label(key: str, values: list[Any]) -> str:
+    """The ``--set`` option of ``key`` and its ``values`` as a command line's text, what
+    an error caused by it names: ``--set robot.wheel_noise=0.1,0.2``.
+
+    Parameters
+    ----------
+    key : str
+        The dotted key.
+    values : list
+        Its values.
+
+    Returns
+    -------
+    str
+    """
+    return f"--set {key}={','.join(_scalar(v) for v in values)}"
+
+
+def _checked(
+    raw: dict[str, Any], source: str, overrides: dict[str, Any], labels: dict[str, str]
+) -> Config:
+    """The Config of ``raw`` (from config ``source``) with ``overrides`` set; an error is
+    told to what caused it: the config alone (naming ``source``), else the first key
+    whose value alone is refused (naming ``labels[key]``, its ``--set`` option), else the
+    combination (naming every option)."""
+    try:
+        return config_from_raw(overridden(raw, overrides), source)
+    except ConfigError:
+        config_from_raw(raw, source)
+        for k, v in overrides.items():
+            config_from_raw(overridden(raw, {k: v}), labels[k])
+        config_from_raw(overridden(raw, overrides), " ".join(dict.fromkeys(labels.values())))
+        raise
+
+
+def check_grid(base: str, sets: list[tuple[str, list[Any]]]) -> list[Config]:
+    """Check, in memory and before any file is written, each grid point of ``sets`` (the
+    product of their values) set over the config ``base``. An error names what causes
+    it: ``base``'s file (its own keys or values), a value's ``--set KEY=V1,V2`` option,
+    or every ``--set`` option (a combination: sizes). A key given twice is refused.
+
+    Parameters
+    ----------
+    base : str
+        The config: a path or an embedded name.
+    sets : list of (str, list)
+        Dotted keys and their values.
+
+    Returns
+    -------
+    list of Config
+        The config of each grid point, in the order of ``itertools.product``.
+    """
+    keys = [k for k, _ in sets]
+    labels = {k: set_label(k, vs) for k, vs in sets}
+    for key in keys:
+        if keys.count(key) > 1:
+            raise InputError(labels[key], f"'{clip(key, 80)}' is given in more than one --set")
+    raw, chain = config_layers(base)
+    return [
+        _checked(raw, chain[0], dict(zip(keys, point, strict=True)), labels)
+        for point in itertools.product(*(vs for _, vs in sets))
+    ]
+
+
+def check_suite(suite, overrides: dict[str, Any]) -> None:
+    """Check, in memory, every config of ``suite`` with ``overrides`` set (what
+    :func:`suite_with` writes): an error names the ``--set KEY=VALUE`` option causing it
+    (every option: a combination's).
+
+    Parameters
+    ----------
+    suite : Suite
+        The embedded configs (reproduce/plan.py).
+    overrides : dict
+        Dotted key -> value (:func:`parse_one`).
+    """
+    labels = {k: set_label(k, [v]) for k, v in overrides.items()}
+    for field in dataclasses.fields(suite):
+        raw, chain = config_layers(getattr(suite, field.name))
+        _checked(raw, chain[0], overrides, labels)
+
+
 def suite_with(suite, overrides: dict[str, Any], root: Path):
     """``suite`` (reproduce/plan.py ``Suite``) with ``overrides`` set in each of its
     configs: ``set_NAME`` files in ``root`` (the plan's directory, where the steps run),
-    each loaded once to check it (an unknown key or a bad value: one line, before any
-    step). The suite itself without overrides.
+    written after every one is checked (:func:`check_suite`: an unknown key or a bad
+    value is one line naming the ``--set`` option, and nothing is written). The suite
+    itself without overrides.
 
     Parameters
     ----------
@@ -99,6 +227,7 @@ def suite_with(suite, overrides: dict[str, Any], root: Path):
     """
     if not overrides:
         return suite
+    check_suite(suite, overrides)
     names = {}
     for field in dataclasses.fields(suite):
         base = getattr(suite, field.name)
@@ -106,7 +235,6 @@ def suite_with(suite, overrides: dict[str, Any], root: Path):
         (root / name).write_text(
             override_text(base, overrides, f"reproduce{set_options(overrides)}"), encoding="utf-8"
         )
-        load_config(str(root / name))
         names[field.name] = name
     return dataclasses.replace(suite, **names)
 

@@ -24,7 +24,7 @@ from fuzzyslam.cpus import usable_cpus
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, _in_place_only
 from fuzzyslam.reproduce.execute import StepResult, execute
-from fuzzyslam.reproduce.overrides import set_options, suite_with
+from fuzzyslam.reproduce.overrides import check_suite, set_options, suite_with
 from fuzzyslam.reproduce.plan import FULL, QUICK, Suite, build_plan, evaluations
 from fuzzyslam.reproduce.report import (
     RunInfo,
@@ -228,6 +228,7 @@ def reproduce(
     if keep_logs is None:
         keep_logs = len(seeds) == 1
     t0 = time.perf_counter()
+    check_suite(QUICK if quick else FULL, overrides)  # --set: one line, nothing written
     check_outdir(Path(outdir))
     with OutputDir(outdir, owns=("*",)) as tmp:
         suite = suite_with(QUICK if quick else FULL, overrides, tmp)

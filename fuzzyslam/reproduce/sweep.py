@@ -39,11 +39,11 @@ from pathlib import Path
 from typing import Any
 
 from fuzzyslam import __version__
-from fuzzyslam.config import load_config
+from fuzzyslam.config import config_layers
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.reproduce.execute import StepResult, execute
-from fuzzyslam.reproduce.overrides import override_text
+from fuzzyslam.reproduce.overrides import check_grid, override_text
 from fuzzyslam.reproduce.plan import Step, _topological
 
 # (name, path in metrics.json's phases.overall, scale, unit)
@@ -54,11 +54,63 @@ MEASURES = (
 )
 
 
+def check_base(config: str, outdir: Path) -> None:
+    """Refuse a base config a sweep cannot use (one line naming it): a file that
+    ``extends`` a file of its own (copied to ``OUTDIR/base.yaml``, it would not find it;
+    an embedded config is fine), or a grid point's config of the sweep in ``outdir``
+    (``gI.yaml``, which the sweep rewrites).
+
+    Parameters
+    ----------
+    config : str
+        The base config: a YAML file or an embedded name.
+    outdir : Path
+        The sweep's output directory.
+    """
+    _, chain = config_layers(config)
+    if not Path(config).is_file():
+        return
+    local = [c for c in chain[1:] if not c.startswith("<embedded ")]
+    if local:
+        raise InputError(
+            config,
+            f"extends the file {local[0]}: a sweep's CONFIG may extend embedded configs "
+            "only (it is copied to OUTDIR/base.yaml); merge the files into one",
+        )
+    path = Path(config).resolve()
+    if path.parent == outdir.resolve() and re.fullmatch(r"g\d+\.yaml", path.name):
+        raise InputError(
+            config, "is a grid point's config of this sweep's OUTDIR, which it rewrites; "
+            "copy it elsewhere first",
+        )  # fmt: skip
+
+
+def check_outdir(outdir: Path) -> None:
+    """Raise InputError (one line) unless ``outdir`` is absent, empty or a previous sweep
+    output (it holds ``.sweep/``), which the sweep goes on with.
+
+    Parameters
+    ----------
+    outdir : Path
+        The sweep's output directory.
+    """
+    if not outdir.is_dir() or not any(outdir.iterdir()):
+        return
+    if not (outdir / ".sweep").is_dir():
+        raise InputError(
+            outdir,
+            "exists and is not a sweep output (no .sweep/ folder); refusing to write into "
+            "it: remove it or choose another -o",
+        )
+
+
 def grid_configs(
     config: str, sets: list[tuple[str, list[Any]]], outdir: Path
 ) -> list[tuple[str, dict[str, Any]]]:
     """Write ``gI.yaml`` per grid point into ``outdir`` (and ``base.yaml``, a copy of a
-    config file); return [(file name, {key: value})]. Each is loaded once to check it."""
+    config file), each only when its text changed; return [(file name, {key: value})].
+    Call :func:`~fuzzyslam.reproduce.overrides.check_grid` first: nothing is loaded
+    here."""
     base = config
     if Path(config).is_file():
         text = Path(config).read_text(encoding="utf-8")
@@ -66,18 +118,32 @@ def grid_configs(
         if not base_file.is_file() or base_file.read_text(encoding="utf-8") != text:
             shutil.copyfile(config, base_file)
         base = "base.yaml"
-    keys = [k for k, _ in sets]
     points = []
-    for i, values in enumerate(itertools.product(*(v for _, v in sets))):
-        overrides = dict(zip(keys, values, strict=True))
+    for i, overrides in enumerate(grid_points(sets)):
         name = f"g{i}.yaml"
         text = override_text(base, overrides, f"sweep grid point {i}: {overrides}")
         path = outdir / name
         if not path.is_file() or path.read_text(encoding="utf-8") != text:
             path.write_text(text, encoding="utf-8")
-        load_config(str(path))  # an unknown key or a bad value: one line, before any step
         points.append((name, overrides))
     return points
+
+
+def grid_points(sets: list[tuple[str, list[Any]]]) -> list[dict[str, Any]]:
+    """The grid: {key: value} of each point, the product of the keys' values.
+
+    Parameters
+    ----------
+    sets : list of (str, list)
+        Dotted keys and their values.
+
+    Returns
+    -------
+    list of dict
+    """
+    keys = [k for k, _ in sets]
+    return [dict(zip(keys, values, strict=True))
+            for values in itertools.product(*(v for _, v in sets))]  # fmt: skip
 
 
 def sweep_steps(points: list[tuple[str, dict]], seeds: list[int]) -> list[Step]:
@@ -217,7 +283,8 @@ def sweep(
     seeds : list of int
         Seeds of every grid point (ignored with ``logs``).
     outdir : path
-        Output directory; kept between runs (its finished steps are skipped).
+        Output directory; kept between runs (its finished steps are skipped). It must be
+        absent, empty or a previous sweep's output (it holds ``.sweep/``).
     jobs, scheduler
         As for ``reproduce``.
     logs : list of path or None
@@ -238,16 +305,20 @@ def sweep(
         raise InputError(root, "output path exists and is not a directory")
     if not root.resolve().parent.is_dir():
         raise InputError(root, f"parent directory {root.resolve().parent} does not exist")
-    (root / ".sweep").mkdir(parents=True, exist_ok=True)
-    points = grid_configs(config, sets, root)
+    # every input is checked before anything is written: nothing is left on an error
+    check_base(config, root)
+    configs = check_grid(config, sets)
+    check_outdir(root)
+    points = [(f"g{i}.yaml", p) for i, p in enumerate(grid_points(sets))]
     if logs:
         log_paths = [Path(p).resolve() for p in logs]
         units = log_units(log_paths)
-        topic = load_config(str(root / points[0][0])).topics.ground_truth
-        steps = log_steps(points, log_paths, topic)
+        steps = log_steps(points, log_paths, configs[0].topics.ground_truth)
     else:
         units = [f"seed{s}" for s in seeds]
         steps = sweep_steps(points, seeds)
+    (root / ".sweep").mkdir(parents=True, exist_ok=True)
+    grid_configs(config, sets, root)  # the files the steps name: the same points
     hashes = step_hashes(steps, root)
     skipped: dict[str, StepResult] = {}
     for s in steps:
