@@ -26,8 +26,9 @@ For each building and each range sensor (``--ranges``, with the embedded config
 - ``pose`` and ``heading``: ``fuzzyslam run --map FGM --fix pose|heading --fix-from 0``
   over the whole log from /odom; position error mean and max (m), heading error mean
   (deg) against truth at the estimate's stamps (truth lines that jump away and back,
-  stray copies of the first pose in these conversions, dropped by the odometry glitch
-  gate and counted), and the real-time factor (log duration /
+  stray copies of the first pose in these conversions, dropped and counted as
+  ``fuzzyslam evaluate`` drops them: ``evaluation.evaluate.read_truth``, the odometry
+  glitch gate), and the real-time factor (log duration /
   wall time of the command, reading included). Targets: pose mean <= 0.3 m, max <= 1.0 m;
   heading mean <= 1 deg; pose >= 100x real time. For ``heading`` also ``fixes``: the
   fixes applied, their own error against truth (mean, median), and the share of the run
@@ -57,10 +58,10 @@ from pathlib import Path
 import numpy as np
 
 from fuzzyslam.config import load_config
+from fuzzyslam.evaluation.evaluate import read_truth
 from fuzzyslam.evaluation.metrics import interpolate_poses, pose_errors
 from fuzzyslam.maps.hough import dominant_direction, map_wall_direction
 from fuzzyslam.maps.mapio import load_fgm
-from fuzzyslam.slam.odom_gate import plausible_mask
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.tum import read_tum
 
@@ -87,12 +88,12 @@ def fuzzyslam(*args: str) -> dict:
 
 
 def clean_truth(truth: Path) -> tuple[np.ndarray, np.ndarray, int]:
-    """The truth's times and poses without its stray lines (the odometry glitch gate,
-    ``slam.odom_gate``: the CARMEN conversions repeat the first pose now and then), and
-    how many were dropped."""
-    t, p = read_tum(truth)
-    keep = plausible_mask(t, p)
-    return t[keep], p[keep], int((~keep).sum())
+    """The truth's times and poses without its stray lines, and how many were dropped:
+    the truth ``fuzzyslam evaluate`` uses (``read_truth``, which drops them with
+    ``evaluation.core.drop_stray_truth``, the odometry glitch gate: the CARMEN
+    conversions repeat the first pose now and then)."""
+    tr = read_truth(truth, progress=False)
+    return tr.t, tr.poses, int(tr.lines_dropped or 0)
 
 
 def scan_end_points(log: Path, truth: Path) -> Iterator[tuple[np.ndarray, np.ndarray]]:

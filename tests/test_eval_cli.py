@@ -213,6 +213,8 @@ def test_report_known_answers(case: dict, report: tuple) -> None:
     assert ov["x_m"]["bias"] == pytest.approx(OFFSET[0], abs=1e-5)
     assert ov["ape_m"]["raw"]["rmse"] == pytest.approx(off, abs=1e-5)
     assert ov["ape_m"]["aligned"]["rmse"] < 1e-4
+    # a simulated log's truth is exact: not passed through the stray-line test
+    assert "truth_lines_dropped" not in m and "truth_lines_dropped" not in summary
     assert abs(ov["heading_deg"]["mean"]) < 1e-3
     assert ov["nees"]["mean"] == pytest.approx(off**2 / SIGMA_XY**2, rel=1e-3)
     assert set(m["phases"]) == {"overall", "run1", "run2", "A", "after"}
@@ -270,6 +272,29 @@ def test_tum_pair(case: dict) -> None:
     m = json.loads((out / "metrics.json").read_text())
     assert set(m["phases"]) == {"overall"}
     assert m["phases"]["overall"]["position_m"]["mean"] == pytest.approx(np.hypot(*OFFSET), 1e-4)
+
+
+def test_recorded_log_truth_loses_its_stray_poses(case: dict) -> None:
+    """A log without a scenario (a recorded one) whose ground truth topic holds three
+    stray copies of its first pose: they are dropped and counted; the same poses in a
+    simulated log (with a scenario) are kept."""
+    from fuzzyslam.evaluation.evaluate import read_truth
+
+    t = np.arange(0.0, 60.0, 0.05)  # a circle of 2 m radius in 60 s, at 20 Hz
+    a = 2 * np.pi * t / 60.0
+    truth = np.column_stack([2 * np.sin(a), 2 - 2 * np.cos(a), a])
+    strays = [100, 300, 500]
+    ts = np.concatenate([t, t[strays] + 0.025])
+    ps = np.vstack([truth, np.repeat(truth[:1], len(strays), 0)])
+    order = np.argsort(ts)
+    log = case["root"] / "recorded.mcap"
+    with LogWriter(log) as w:
+        for ti, p in zip(ts[order], ps[order], strict=True):
+            w.write("/ground_truth/odom", ODOMETRY, odometry(ti, "map", "base_link", p), ti)
+    tr = read_truth(log, progress=False)
+    assert tr.lines_dropped == len(strays) and tr.t.size == t.size
+    sim = read_truth(case["log"], progress=False)
+    assert sim.lines_dropped is None
 
 
 @pytest.mark.parametrize(

@@ -41,6 +41,17 @@ class Similarity:
         th = np.asarray(wrap_angle(p[:, 2] + self.angle)).reshape(-1)
         return np.column_stack([xy, th])
 
+    def inverse(self) -> Similarity:
+        """The transform that undoes this one: p = (1/s) R^T (p' - t).
+
+        Returns
+        -------
+        Similarity
+            Rotation R^T, translation -(1/s) R^T t, scale 1/s.
+        """
+        r = self.rotation.T
+        return Similarity(r, -(r @ self.translation) / self.scale, 1.0 / self.scale)
+
 
 def umeyama(src: ArrayLike, dst: ArrayLike, with_scale: bool = False) -> Similarity:
     """Rotation, translation (and scale) minimising sum ||dst_i - (s R src_i + t)||^2.

@@ -124,3 +124,56 @@ def consistency(values: ArrayLike, dof: int) -> Consistency:
     frac = float(np.mean((v >= slo) & (v <= shi)))
     above = float(np.mean(v > 100.0))
     return Consistency(dof, int(v.size), m, lo, hi, bool(lo <= m <= hi), frac, above)
+
+
+# An estimate grossly inconsistent with the truth (evaluate's warning). NEES samples along
+# one trajectory are strongly correlated, so the band of the mean of n samples (chi2_band)
+# is far too narrow to call a filter broken: a run whose mean NEES is 7 is out of it. The
+# thresholds therefore hold however correlated the samples are:
+# - the mean above the 99.9 % quantile of ONE chi2(dof) sample (16.3 for 3 dof): the mean
+#   of identically distributed samples is never more spread than one of them (it is
+#   smaller in the convex order), so a consistent filter does not get there by chance; it
+#   claims errors sqrt(16.3 / 3) = 2.3 times smaller than they are, on average;
+# - or more than 5 % of the samples above 100 (for 3 dof a ten-sigma error, probability
+#   1.6e-21 for one sample of a consistent filter): overconfident for a long part of the log.
+OVERCONFIDENT_P = 0.999
+OVERCONFIDENT_SHARE_ABOVE_100 = 0.05
+
+
+def overconfident_threshold(dof: int) -> float:
+    """The mean NEES above which the estimate is called overconfident: the
+    ``OVERCONFIDENT_P`` quantile of one chi-square(dof) sample (16.27 for 3 dof).
+
+    Parameters
+    ----------
+    dof : int
+        Degrees of freedom of one sample.
+
+    Returns
+    -------
+    float
+        The threshold.
+    """
+    return float(chi2_quantile(OVERCONFIDENT_P, dof))
+
+
+def overconfident(c: Consistency) -> bool:
+    """Whether a NEES test shows a grossly overconfident estimate: its mean above
+    :func:`overconfident_threshold`, or more than ``OVERCONFIDENT_SHARE_ABOVE_100`` of its
+    samples above 100 (the module's constants say why).
+
+    Parameters
+    ----------
+    c : Consistency
+        The test of the NEES samples (:func:`consistency`).
+
+    Returns
+    -------
+    bool
+        False without samples.
+    """
+    if c.n == 0:
+        return False
+    return bool(
+        c.mean > overconfident_threshold(c.dof) or c.frac_above_100 > OVERCONFIDENT_SHARE_ABOVE_100
+    )

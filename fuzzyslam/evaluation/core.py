@@ -6,15 +6,16 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 import numpy as np
-from numpy.typing import NDArray
+from numpy.typing import ArrayLike, NDArray
 
 from fuzzyslam.evaluation import metrics as M
 from fuzzyslam.evaluation import results as R
-from fuzzyslam.evaluation.align import anchor, umeyama
+from fuzzyslam.evaluation.align import Similarity, anchor, umeyama
 from fuzzyslam.evaluation.consistency import consistency, nees
 from fuzzyslam.evaluation.lamps import LampMatch, found_within, match_lamps
 from fuzzyslam.evaluation.params import EvalParams
 from fuzzyslam.se2 import wrap_angle
+from fuzzyslam.slam.odom_gate import plausible_mask
 from fuzzyslam.streams.logmeta import Scenario, World
 from fuzzyslam.summary import OMIT, as_json
 
@@ -34,6 +35,10 @@ class Truth:
     log_damage: dict[str, Any] | None = None  # of the log the truth was read from
     # true landmark positions (K, 2) when not in a world (e.g. --landmarks-truth)
     landmarks: Array | None = None
+    # stray lines dropped when read (drop_stray_truth); None: not checked (simulated log)
+    lines_dropped: int | None = None
+    # lines the stray-line test refused (> lines_dropped: too many to be stray, all kept)
+    lines_refused: int = 0
 
     @property
     def landmark_array(self) -> Array | None:
@@ -99,11 +104,74 @@ class Evaluation:
     lamp_match_by_run: dict[int, LampMatch] = field(default_factory=dict)
     fix_t: Array | None = None
     fix_err: Array | None = None
+    # the rigid motion that moved the estimate onto the truth (align), None without one
+    to_truth: Similarity | None = None
+
+    @property
+    def truth_in_estimate_frame(self) -> Array:
+        """The compared truth (``assoc.truth``, at the estimate's stamps) in the frame of
+        the estimate as the run wrote it: moved by the inverse of :attr:`to_truth`, so that
+        ``||estimate - this||`` is the error every metric is taken from (the APE ``raw``
+        with ``evo_ape tum truth.tum trajectory.tum``, no alignment).
+
+        Returns
+        -------
+        ndarray, shape (n, 3)
+            Poses (x, y, theta).
+        """
+        if self.to_truth is None:
+            return self.assoc.truth
+        return self.to_truth.inverse().apply_poses(self.assoc.truth)
 
     @property
     def metrics(self) -> dict[str, Any]:
         """The metrics as metrics.json holds them (:func:`fuzzyslam.summary.as_json`)."""
         return as_json(self.typed)
+
+
+MAX_STRAY_SHARE = 0.01  # a truth whose refused lines are more than this share: none dropped
+
+
+def drop_stray_truth(t: ArrayLike, poses: ArrayLike) -> tuple[Array, Array, int, int]:
+    """A recorded truth without its stray lines: the one rule, used by ``evaluate`` and
+    ``benchmarks/bench_buildings.py``.
+
+    A truth converted from another format may hold lines a robot cannot have been at: the
+    CARMEN conversions repeat the first pose now and then, a jump of metres away and back.
+    Such lines are the stray poses of an odometry stream, and the same test finds them:
+    the odometry glitch gate (:func:`fuzzyslam.slam.odom_gate.plausible_mask`, default
+    limits: a pose the robot cannot reach from the last kept one at 2 m/s and 2 pi rad/s
+    along an arc is dropped; after 10 refusals in a row the stream has really moved and
+    its pose is kept). Stray lines are glitches, a few: when the gate refuses more than
+    ``MAX_STRAY_SHARE`` of the lines, the truth is of something faster than those limits
+    (or an idealised path) and every line is kept. A simulated log's truth is exact and is
+    not passed through this.
+
+    Parameters
+    ----------
+    t : array_like, shape (N,)
+        Increasing times (s).
+    poses : array_like, shape (N, 3)
+        The truth's poses.
+
+    Returns
+    -------
+    t : ndarray, shape (M,)
+        The kept times.
+    poses : ndarray, shape (M, 3)
+        The kept poses.
+    dropped : int
+        N - M.
+    refused : int
+        The lines the gate refused (``dropped``, or more when none were dropped).
+    """
+    t = np.asarray(t, dtype=float).reshape(-1)
+    p = np.asarray(poses, dtype=float).reshape(-1, 3)
+    keep = plausible_mask(t, p)
+    refused = int((~keep).sum())
+    if refused > MAX_STRAY_SHARE * t.size:
+        return t, p, 0, refused
+    return t[keep], p[keep], refused, refused
 
 
 class SpanError(ValueError):
@@ -175,7 +243,33 @@ def _phase_block(
     )
 
 
-def align_estimate(est: Estimate, truth: Truth, params: EvalParams) -> tuple[Estimate, dict]:
+def truth_alignment(est: Estimate, truth: Truth, params: EvalParams) -> Similarity | None:
+    """The rigid 2-D motion (Umeyama, no scale) that best maps the estimate's positions
+    onto the truth's, paired in time (:func:`metrics.associate`).
+
+    Parameters
+    ----------
+    est : Estimate
+        The estimate.
+    truth : Truth
+        The truth.
+    params : EvalParams
+        ``max_dt_s`` for pairing.
+
+    Returns
+    -------
+    Similarity or None
+        The motion; None with fewer than two pairs.
+    """
+    assoc = M.associate(est.t, est.poses, truth.t, truth.poses, params.max_dt_s)
+    if len(assoc) < 2:
+        return None
+    return umeyama(assoc.est[:, :2], assoc.truth[:, :2])
+
+
+def align_estimate(
+    est: Estimate, truth: Truth, params: EvalParams, motion: Similarity | None = None
+) -> tuple[Estimate, dict]:
     """The estimate moved onto the truth by one rigid 2-D motion (Umeyama, as evo's
     ``--align``), found from the positions paired in time: poses, dead reckoning and
     landmarks are mapped by it, covariances rotated (C' = A C A^T, A = diag(R, 1)).
@@ -189,6 +283,8 @@ def align_estimate(est: Estimate, truth: Truth, params: EvalParams) -> tuple[Est
         The truth.
     params : EvalParams
         ``max_dt_s`` for pairing.
+    motion : Similarity, optional
+        The motion, when already found (:func:`truth_alignment`).
 
     Returns
     -------
@@ -196,10 +292,9 @@ def align_estimate(est: Estimate, truth: Truth, params: EvalParams) -> tuple[Est
         The moved estimate (``est`` itself with fewer than two pairs), and the motion
         (tx_m, ty_m, theta_deg; empty without one).
     """
-    assoc = M.associate(est.t, est.poses, truth.t, truth.poses, params.max_dt_s)
-    if len(assoc) < 2:
+    s = motion if motion is not None else truth_alignment(est, truth, params)
+    if s is None:
         return est, {}
-    s = umeyama(assoc.est[:, :2], assoc.truth[:, :2])
     a = np.eye(3)
     a[:2, :2] = s.rotation
     out = replace(
@@ -217,6 +312,9 @@ def align_estimate(est: Estimate, truth: Truth, params: EvalParams) -> tuple[Est
         "ty_m": float(s.translation[1]),
         "theta_deg": float(np.degrees(s.angle)),
         "nees_frame": "first pose",  # see anchored_nees
+        # what the motion moved: every error but the NEES is taken after it
+        "applied_to": "poses, landmarks, dead reckoning (every metric, ape_m.raw included, "
+        "but the NEES)",
     }
     return out, info
 
@@ -283,9 +381,11 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
         The typed metrics (``typed``; ``metrics``: metrics.json) and the figures' series.
     """
     alignment = None
+    to_truth = None
     raw = est
     if align:
-        est, alignment = align_estimate(est, truth, params)
+        to_truth = truth_alignment(est, truth, params)
+        est, alignment = align_estimate(est, truth, params, to_truth)
     assoc = M.associate(est.t, est.poses, truth.t, truth.poses, params.max_dt_s)
     if len(assoc) < 2:
         raise SpanError(
@@ -352,7 +452,14 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
                 heading_deg=M.stats(oe[:, 2]).scaled(180.0 / np.pi),
             )
     coverage = truth_coverage(truth, est, len(assoc))
-    warnings = R.evaluation_warnings(coverage, truth.log_damage)
+    warnings = R.evaluation_warnings(
+        coverage,
+        truth.log_damage,
+        blocks["overall"].nees,
+        truth.lines_dropped,
+        truth.lines_refused,
+        truth.t.size,
+    )
     typed = R.Metrics(
         label=est.label,
         truth=truth.source,
@@ -368,12 +475,15 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
         lamps_by_run=lamps_by_run,
         odometry=odometry,
         truth_coverage=coverage,
+        truth_lines_dropped=OMIT if truth.lines_dropped is None else truth.lines_dropped,
         log_damage=truth.log_damage,
         warnings=warnings,
-        headline=R.headline(blocks, coverage, truth.log_damage, warnings, lamps),
+        headline=R.headline(
+            blocks, coverage, truth.log_damage, warnings, lamps, truth.lines_dropped
+        ),
     )
     return Evaluation(
-        typed, assoc, err, sigma, nees_v, phases, lamp_match, by_run, fix_t, fix_err
+        typed, assoc, err, sigma, nees_v, phases, lamp_match, by_run, fix_t, fix_err, to_truth
     )
 
 

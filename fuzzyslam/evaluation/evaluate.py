@@ -24,6 +24,7 @@ from fuzzyslam.evaluation.core import (
     SpanError,
     Truth,
     Updates,
+    drop_stray_truth,
     evaluate,
 )
 from fuzzyslam.evaluation.params import EvalParams
@@ -82,14 +83,31 @@ def detect_kind(path: str | os.PathLike) -> str:
 
 
 def read_truth(path: str | os.PathLike, progress: bool = True) -> Truth:
-    """Ground truth from a simulated log (with world, scenario, freeze run) or a TUM file;
-    ``progress``: the reading's progress bar (when progress is enabled)."""
+    """Ground truth from a simulated log (with world, scenario, freeze run), another log's
+    ground truth topic or a TUM file.
+
+    A recorded truth (a TUM file, a log without a scenario) loses its stray lines
+    (:func:`fuzzyslam.evaluation.core.drop_stray_truth`), counted in ``lines_dropped``;
+    a simulated log's truth is exact and kept whole (``lines_dropped`` None).
+
+    Parameters
+    ----------
+    path : str or os.PathLike
+        The TUM file or MCAP log.
+    progress : bool
+        The reading's progress bar (when progress is enabled).
+
+    Returns
+    -------
+    Truth
+    """
     kind = detect_kind(path)
     if kind == KIND_TUM:
         t, poses, planar = read_tum_planar(path)
         if not planar:
             note(f"{path}: a 3-D trajectory: evaluated in the plane (z, roll and pitch ignored)")
-        return Truth(t, poses, source=str(path))
+        t, poses, dropped, refused = drop_stray_truth(t, poses)
+        return Truth(t, poses, source=str(path), lines_dropped=dropped, lines_refused=refused)
     if kind != KIND_MCAP:
         raise InputError(path, "TRUTH must be a simulated MCAP log or a TUM file, not a directory")
     reader = LogReader(path)
@@ -114,11 +132,25 @@ def read_truth(path: str | os.PathLike, progress: bool = True) -> Truth:
     raw = np.asarray(rows, dtype=float)
     ps = np.column_stack([raw[:, 0], raw[:, 1], quaternion_to_yaw(raw[:, 2:])])  # as pose_of
     order = np.argsort(t, kind="stable")
-    freeze = None
+    t, ps = t[order], ps[order]
+    freeze = dropped = None
+    refused = 0
     if scenario is not None:
         fr = scenario.config.get("fgm", {}).get("freeze_run")
         freeze = int(fr) if fr is not None else None
-    return Truth(t[order], ps[order], world, scenario, freeze, str(path), reader.damage())
+    else:  # a recorded log's truth
+        t, ps, dropped, refused = drop_stray_truth(t, ps)
+    return Truth(
+        t,
+        ps,
+        world,
+        scenario,
+        freeze,
+        str(path),
+        reader.damage(),
+        lines_dropped=dropped,
+        lines_refused=refused,
+    )
 
 
 # --- estimate -----------------------------------------------------------------------------
@@ -288,7 +320,10 @@ def run_evaluate(
 
     Every input is read and checked before anything is written; the outputs appear together
     (fileio.OutputDir), so a failure leaves ``outdir`` as it was. ``truth.tum`` in
-    ``outdir`` is the truth that was used: interpolated at the estimate's stamps (for evo).
+    ``outdir`` is the truth that was used (stray lines dropped), interpolated at the
+    estimate's compared stamps and written in the estimate's frame (moved by the inverse
+    of the alignment, if any), so that ``evo_ape tum truth.tum trajectory.tum`` gives
+    the overall ``ape_m.raw`` and, with ``-a``, ``ape_m.aligned``.
     """
     from fuzzyslam.evaluation import figures, report
 
@@ -328,9 +363,12 @@ def run_evaluate(
         if others:
             figures.fig_compare(tmp / "compare.png", truth, [(e.label, v) for e, v in evs])
             figs["compare"] = "compare.png"
-        # the truth as compared: interpolated at the estimate's stamps, so that evo pairs
-        # the two files exactly (`evo_ape tum truth.tum trajectory.tum -a` = this report)
-        (tmp / "truth.tum").write_text(format_tum(ev.assoc.t, ev.assoc.truth), encoding="utf-8")
+        # the truth as compared, at the estimate's stamps (evo pairs the two files exactly)
+        # and in the frame of trajectory.tum (the alignment undone): `evo_ape tum truth.tum
+        # trajectory.tum` = the overall ape_m.raw, with -a = ape_m.aligned
+        (tmp / "truth.tum").write_text(
+            format_tum(ev.assoc.t, ev.truth_in_estimate_frame), encoding="utf-8"
+        )
         report.write_metrics(tmp / "metrics.json", ev.metrics)
         report.write_report(tmp / "report.md", ev.metrics, figs)
         files = sorted(x.name for x in tmp.iterdir())

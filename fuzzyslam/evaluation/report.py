@@ -90,6 +90,24 @@ def comparison_table(rows: list[dict[str, Any]]) -> str:
     return head + "\n".join(out) + "\n"
 
 
+def _truth_lines(metrics: dict[str, Any]) -> list[str]:
+    """The report's lines on the truth itself: its stray lines dropped, the alignment."""
+    out = []
+    if "truth_lines_dropped" in metrics:
+        out.append(
+            f"- truth lines dropped as stray (odometry glitch gate): "
+            f"{metrics['truth_lines_dropped']}"
+        )
+    al = metrics.get("aligned_to_truth")
+    if al:
+        out.append(
+            f"- estimate aligned to the truth by one rigid motion: {_f(al['tx_m'], nd=3)} m, "
+            f"{_f(al['ty_m'], nd=3)} m, {_f(al['theta_deg'], nd=2)} deg "
+            "(NEES in the estimate's own frame, anchored at its first pose)"
+        )
+    return out
+
+
 def write_report(path: Path, metrics: dict[str, Any], figs: dict[str, str]) -> None:
     """report.md: the headline, the phase table, lamps, fixes, consistency and the figures."""
     lines = [
@@ -100,13 +118,22 @@ def write_report(path: Path, metrics: dict[str, Any], figs: dict[str, str]) -> N
         f"- compared samples: {metrics['samples']} over "
         f"{metrics['span_s'][0]:.1f}-{metrics['span_s'][1]:.1f} s "
         f"(truth interpolated at estimate times, max gap {metrics['params']['max_dt_s']} s)",
+        *_truth_lines(metrics),
         *(f"- **warning**: {w}" for w in metrics.get("warnings", [])),
         "",
         "## Pose errors by phase",
         "",
         "Phase `A` = runs 1..freeze run (map building), `after` = later runs; errors are "
-        "estimate minus truth in the map frame. APE aligned = after a rigid Umeyama fit of the "
-        "positions (as `evo_ape --align`; fitted within each phase). RPE per metre of true travel.",
+        "estimate minus truth in the truth's frame"
+        + (
+            " (the estimate moved by one rigid motion fitted on the whole log, `aligned_to_truth`)"
+            if "aligned_to_truth" in metrics
+            else ""
+        )
+        + ". APE raw = no fit of its own (`evo_ape tum truth.tum trajectory.tum` overall: "
+        "truth.tum is written in the estimate's frame); APE aligned = after a rigid Umeyama "
+        "fit of the positions (as `evo_ape --align`; fitted within each phase). RPE per metre "
+        "of true travel.",
         "",
         phase_table(metrics),
     ]

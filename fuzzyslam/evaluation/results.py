@@ -7,7 +7,14 @@ missing from metrics.json (the experiment's table would then raise ``MissingMetr
 Sections left :data:`~fuzzyslam.summary.OMIT` are absent from the file: a phase
 without samples has only its span, runs and samples; ``lamps`` needs true and
 estimated landmarks, ``lamps_by_run`` the map's history and a simulated world,
-``odometry`` the run's dead reckoning, ``heading_fix`` heading_fixes.csv.
+``odometry`` the run's dead reckoning, ``heading_fix`` heading_fixes.csv,
+``aligned_to_truth`` an alignment (``--align``, ``--landmarks-truth``),
+``truth_lines_dropped`` a truth that is not a simulated log's (``core.drop_stray_truth``).
+
+Every error is taken in the truth's frame: the estimate as the run wrote it, or, with
+``aligned_to_truth``, after that one rigid motion (fitted on the whole log). ``raw`` in
+``ape_m`` means no alignment of its own on top of that; ``aligned`` and
+``aligned_scale`` are refitted within each phase.
 """
 
 from __future__ import annotations
@@ -15,14 +22,18 @@ from __future__ import annotations
 from dataclasses import dataclass, field
 from typing import Any
 
-from fuzzyslam.evaluation.consistency import Consistency
+from fuzzyslam.evaluation.consistency import Consistency, overconfident, overconfident_threshold
 from fuzzyslam.evaluation.metrics import Stats
 from fuzzyslam.summary import OMIT, key
 
 
 @dataclass(frozen=True, kw_only=True)
 class ApeMetrics:
-    """APE of positions (m): raw, after a rigid and after a similarity alignment."""
+    """APE of positions (m) in the truth's frame: ``raw`` with no fit of its own (the
+    estimate as written, or after ``aligned_to_truth`` when the whole log was aligned:
+    ``evo_ape tum truth.tum trajectory.tum`` on evaluate's files), ``aligned`` after a
+    rigid and ``aligned_scale`` after a similarity Umeyama fit within the phase
+    (``alignment``: that rigid fit and the similarity's scale)."""
 
     raw: Stats
     aligned: Stats
@@ -135,7 +146,10 @@ class TruthCoverage:
 
 @dataclass(frozen=True, kw_only=True)
 class Headline:
-    """The few numbers printed on stdout and shown first in the report."""
+    """The few numbers printed on stdout and shown first in the report. ``ape_rmse_m``:
+    the overall APE with no fit of its own (after ``aligned_to_truth`` when there is
+    one: what evo gives on truth.tum and trajectory.tum without ``-a``);
+    ``ape_aligned_rmse_m``: after a rigid fit (evo's ``-a``)."""
 
     position_mean_m: float
     heading_mean_deg: float
@@ -158,6 +172,7 @@ class Headline:
     lamps_estimated: int = OMIT
     heading_fix_error_mean_deg: float = OMIT
     heading_fix_error_std_deg: float = OMIT
+    truth_lines_dropped: int = OMIT
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -198,6 +213,8 @@ class Metrics:
     lamps_by_run: dict[str, RunLampMetrics] = OMIT
     odometry: OdometryMetrics = OMIT
     truth_coverage: TruthCoverage
+    # stray lines dropped from the truth (core.drop_stray_truth); absent for a simulated log
+    truth_lines_dropped: int = OMIT
     log_damage: dict[str, Any] | None
     warnings: list[str]
     headline: Headline
@@ -208,9 +225,17 @@ class Metrics:
 COVERAGE_WARN = 0.99  # below this fraction of the estimate compared, the summary says so
 
 
-def evaluation_warnings(cov: TruthCoverage, dmg: dict[str, Any] | None) -> list[str]:
-    """What the numbers do not cover, in words: a truth covering only part of the
-    estimate, a damaged truth log.
+def evaluation_warnings(
+    cov: TruthCoverage,
+    dmg: dict[str, Any] | None,
+    nees: Consistency = OMIT,
+    truth_lines_dropped: int | None = None,
+    truth_lines_refused: int = 0,
+    truth_lines: int = 0,
+) -> list[str]:
+    """What the numbers do not cover, or say loudly, in words: a truth covering only part
+    of the estimate, a damaged truth log, truth lines dropped as stray, an estimate
+    grossly overconfident against the truth (:func:`consistency.overconfident`).
 
     Parameters
     ----------
@@ -218,6 +243,14 @@ def evaluation_warnings(cov: TruthCoverage, dmg: dict[str, Any] | None) -> list[
         The truth's coverage of the estimate (:func:`truth_coverage`).
     dmg : dict or None
         The truth log's damage report (``LogReader.damage()``).
+    nees : Consistency or OMIT
+        The overall NEES test (OMIT: no covariances).
+    truth_lines_dropped : int or None
+        Stray truth lines dropped (``core.drop_stray_truth``; None: not checked).
+    truth_lines_refused : int
+        Truth lines the stray-line test refused (more than dropped: too many, all kept).
+    truth_lines : int
+        The truth's lines.
 
     Returns
     -------
@@ -236,6 +269,23 @@ def evaluation_warnings(cov: TruthCoverage, dmg: dict[str, Any] | None) -> list[
             f"the truth log is damaged ({dmg.get('lost_bytes', 0)} bytes lost); ground truth "
             "is missing where it was"
         )
+    if truth_lines_dropped is not None and truth_lines_refused > truth_lines_dropped:
+        out.append(
+            f"the odometry glitch gate refuses {truth_lines_refused} of {truth_lines} truth "
+            "lines, too many to be stray: the truth moves faster than a wheeled robot's "
+            "limits (2 m/s, 2 pi rad/s) or is idealised; every line kept"
+        )
+    if truth_lines_dropped:
+        out.append(
+            f"{truth_lines_dropped} stray truth line(s) dropped: poses the robot cannot "
+            "have reached from the lines around them (the odometry glitch gate)"
+        )
+    if nees is not OMIT and overconfident(nees):
+        out.append(
+            f"the filter is overconfident: NEES mean {nees.mean:.3g} ({nees.dof} expected, "
+            f"{overconfident_threshold(nees.dof):.1f} the limit), above 100 for "
+            f"{100 * nees.frac_above_100:.0f} % of the compared samples"
+        )
     return out
 
 
@@ -245,6 +295,7 @@ def headline(
     log_damage: dict[str, Any] | None,
     warnings: list[str],
     lamps: LampMetrics,
+    truth_lines_dropped: int | None = None,
 ) -> Headline:
     """The few numbers printed on stdout and shown first in the report.
 
@@ -260,6 +311,8 @@ def headline(
         :func:`evaluation_warnings`.
     lamps : LampMetrics or OMIT
         The final map's lamps against the truth (OMIT: no landmarks to compare).
+    truth_lines_dropped : int or None
+        Stray truth lines dropped (None: not checked, a simulated log).
 
     Returns
     -------
@@ -296,4 +349,5 @@ def headline(
         lamps_estimated=lamps.estimated if has_lamps else OMIT,
         heading_fix_error_mean_deg=fix.mean if fix is not None else OMIT,
         heading_fix_error_std_deg=fix.std if fix is not None else OMIT,
+        truth_lines_dropped=OMIT if truth_lines_dropped is None else truth_lines_dropped,
     )
