@@ -197,7 +197,10 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     """
     path = Path(path)
     check_output_target(path, "file")
-    fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
+    try:
+        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
+    except OSError as exc:  # a read-only or full directory: the user's name, not the temp's
+        raise write_error(path, exc) from exc
     os.close(fd)
     tmp_path = Path(tmp)
     try:
@@ -244,10 +247,17 @@ class OutputDir:
 
     def __enter__(self) -> Path:
         check_output_target(self.path, "directory")
-        parent = self.path.resolve().parent
+        real = self.path.resolve()
+        parent = real.parent
         if not parent.is_dir():
             raise InputError(self.path, f"parent directory {parent} does not exist")
-        self.tmp = Path(tempfile.mkdtemp(prefix=f".{self.path.name}.", suffix=".part", dir=parent))
+        # a directory filled in place (a mount point, the working directory) is staged
+        # inside itself: its files are then renamed within one file system
+        where = real if real.is_dir() and _in_place_only(real) else parent
+        try:
+            self.tmp = Path(tempfile.mkdtemp(prefix=f".{real.name}.", suffix=".part", dir=where))
+        except OSError as exc:  # read-only or full: the user's name, not the temporary one
+            raise write_error(self.path, exc) from exc
         return self.tmp
 
     def __exit__(self, exc_type, exc, tb) -> None:
@@ -305,12 +315,14 @@ class OutputDir:
         """Put the staging directory in place of ``self.path``: one rename for a new
         directory, an atomic exchange for an existing one (the old one is then removed).
         The working directory or a mount point cannot be swapped: its files are replaced
-        one by one (Ctrl-C is held meanwhile)."""
+        one by one from a staging directory inside it (Ctrl-C is held meanwhile), and the
+        stage's optional outputs that this run did not write are removed."""
         assert self.tmp is not None
         real = self.path.resolve()
         if not real.exists():
             os.rename(self.tmp, real)
         elif _in_place_only(real):
+            rels = {item.relative_to(self.tmp) for item in items}
             for item in items:
                 dest = real / item.relative_to(self.tmp)
                 if item.is_dir():
@@ -318,6 +330,12 @@ class OutputDir:
                 else:
                     dest.parent.mkdir(parents=True, exist_ok=True)
                     os.replace(item, dest)
+            for old in sorted(real.rglob("*")):  # the stage's stale optional outputs
+                rel = old.relative_to(real)
+                if old.is_relative_to(self.tmp.resolve()):
+                    continue
+                if rel not in rels and old.is_file() and _owned(rel, self.owns):
+                    old.unlink()
         elif not _exchange(self.tmp, real):
             old = Path(tempfile.mkdtemp(prefix=f".{real.name}.", suffix=".old", dir=real.parent))
             os.rmdir(old)

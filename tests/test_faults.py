@@ -271,6 +271,31 @@ def micro_map(micro, tmp_path_factory) -> Path:
     return out
 
 
+def test_inputs_inside_the_output_directory_are_kept(micro, micro_map, tmp_path: Path) -> None:
+    """Outputs that would replace what the command reads: run into its --map directory,
+    run into the directory of its --calibration file, map into the run directory its
+    trajectory comes from. Each is exit 3 with one line, and the directory unchanged."""
+    cfg, log, est = micro
+    fgm = tmp_path / "fgm"
+    shutil.copytree(micro_map, fgm)
+    run_dir = tmp_path / "est"
+    shutil.copytree(est, run_dir)
+    assert (run_dir / "calibration.yaml").is_file()
+    cases = (
+        (["run", log, "--config", cfg, "--map", fgm, "--fix", "heading", "-o", fgm], fgm),
+        (["run", log, "--config", cfg, "--calibration", run_dir / "calibration.yaml",
+          "-o", run_dir], run_dir),
+        (["map", log, "--trajectory", run_dir / "trajectory.tum", "--config", cfg,
+          "--no-figures", "--until", "10", "-o", run_dir], run_dir),
+    )  # fmt: skip
+    for args, folder in cases:
+        before = snapshot(folder)
+        code, _, err = cli(*args)
+        assert code == errors.EXIT_INPUT, err
+        assert len(error_lines(err)) == 1, err
+        assert snapshot(folder) == before and not leftovers(folder)
+
+
 def damaged(src: Path, dst: Path, **changes: object) -> Path:
     """A copy of the map directory ``src`` with fgm.npz's entries replaced."""
     import numpy as np
@@ -422,6 +447,45 @@ def test_working_directory_as_output_is_filled_in_place(tmp_path: Path, monkeypa
         (tmp / "a.txt").write_text("new", encoding="utf-8")
     assert out.stat().st_ino == ino and Path.cwd().resolve() == out.resolve()
     assert snapshot(out) == {"a.txt": b"new"} and not leftovers(tmp_path)
+
+
+def test_mount_point_as_output_is_filled_in_place(micro, tmp_path: Path) -> None:
+    """A mount point as the output directory (another file system than its parent, so
+    nothing can be renamed into it from outside): run fills it in place from a staging
+    directory inside it, replaces the stage's stale optional outputs and keeps the user's
+    files; the same run into a plain directory gives the same files."""
+    cfg, log, _ = micro
+    plain = tmp_path / "plain"
+    code, _, err = cli("run", log, "-o", plain, "--config", cfg)
+    assert code == 0, err
+    with small_tmpfs("20m") as fs:
+        (fs / "notes.txt").write_text("mine", encoding="utf-8")
+        (fs / "heading_fixes.csv").write_text("stale", encoding="utf-8")  # a run with --map
+        code, _, err = cli("run", log, "-o", fs, "--config", cfg)
+        assert code == 0, err
+        got = snapshot(fs)
+        assert got.pop("notes.txt") == b"mine" and "heading_fixes.csv" not in got
+        want = snapshot(plain)
+        assert sorted(got) == sorted(want) and not leftovers(fs)
+        for name in ("trajectory.tum", "landmarks.yaml", "covariance.csv"):
+            assert got[name] == want[name], name
+
+
+def test_read_only_output_names_the_users_path(micro, tmp_path: Path) -> None:
+    """An output in a read-only file system: exit 3 and one line naming the user's path
+    (not the temporary .part name), for a file (simulate) and a directory (run, also a
+    read-only mount point as the output directory itself)."""
+    cfg, log, _ = micro
+    with small_tmpfs("1m") as fs:
+        subprocess.run(["mount", "-o", "remount,ro", str(fs)], check=True)
+        for args, out in (
+            (["simulate", cfg], fs / "x.mcap"),
+            (["run", log, "--config", cfg], fs / "est"),
+            (["run", log, "--config", cfg], fs),
+        ):
+            code, _, err = cli(*args, "-o", out)
+            assert code == errors.EXIT_INPUT, err
+            assert_one_line(err, out, "read-only file system")
 
 
 def test_map_of_a_path_too_large_is_refused(micro, tmp_path: Path) -> None:

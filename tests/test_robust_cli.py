@@ -114,6 +114,41 @@ def test_inputs_are_never_overwritten(tmp_path: Path, tiny_log) -> None:
     assert code == 3 and log.read_bytes() == before
 
 
+def _child(args: list, cwd: Path, close: int | None = None, env_progress: bool = False):
+    """Start ``fuzzyslam ARGS`` with stdout piped (its read end closed at once when
+    ``close`` is None) or descriptor ``close`` closed in the child; (exit code, stderr)."""
+    env = {**os.environ}
+    if not env_progress:
+        env["FUZZYSLAM_NO_PROGRESS"] = "1"
+    pre = None if close is None else (lambda: os.close(close))
+    p = subprocess.Popen(
+        [*FUZZYSLAM, *map(str, args)], cwd=cwd, env=env, preexec_fn=pre,
+        stdout=subprocess.PIPE if close is None else None, stderr=subprocess.PIPE,
+    )  # fmt: skip
+    if close is None:
+        p.stdout.close()  # the reader goes away before the summary is written
+    _, err = p.communicate(timeout=120)
+    return p.returncode, err.decode()
+
+
+def test_reader_gone_or_stream_closed_is_not_a_failure(tmp_path: Path, tiny_log) -> None:
+    """A summary nobody reads (the pipe's reader gone, ``| true``), stdout closed
+    (``>&-``) or stderr closed (``2>&-``, with progress on): exit 0, nothing on stderr
+    but progress, and the outputs written as by a plain run."""
+    cfg, log = tiny_log
+    code, _, err = cli("run", log, "-o", tmp_path / "plain", "--config", cfg)
+    assert code == 0, err
+    want = (tmp_path / "plain" / "trajectory.tum").read_bytes()
+    for name, close in (("gone", None), ("stdout", 1), ("stderr", 2)):
+        out = tmp_path / name
+        code, err = _child(["run", log, "-o", out, "--config", cfg], tmp_path, close, True)
+        assert code == errors.EXIT_OK, err
+        assert "error" not in err and "Traceback" not in err, err
+        assert (out / "trajectory.tum").read_bytes() == want
+    code, err = _child(["--help"], tmp_path)
+    assert code == errors.EXIT_OK and not err
+
+
 def test_internal_error_is_one_line_and_debug_shows_traceback(monkeypatch, tmp_path: Path):
     import fuzzyslam.sim.record as record
 

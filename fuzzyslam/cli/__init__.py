@@ -84,24 +84,31 @@ def cli(debug: bool) -> None:
 MAX_LOG_TIME_S = 1e10  # s: a log time beyond this (epoch time of year 2286) is not one
 
 
-class LogTime(click.ParamType):
-    """A log time in seconds: a finite number in [0, MAX_LOG_TIME_S] (nan, inf and 1e300
-    are usage errors, exit 2, not crashes further on)."""
+class LogTimeType(click.ParamType):
+    """A log time in seconds (:class:`fuzzyslam.stamps.LogTime`): the log's own stamp, or
+    ``+S`` for S seconds after its first message; a finite number in [0, MAX_LOG_TIME_S]
+    (nan, inf and 1e300 are usage errors, exit 2, not crashes further on)."""
 
     name = "SECONDS"
 
-    def convert(self, value: Any, param: Any, ctx: Any) -> float:
+    def convert(self, value: Any, param: Any, ctx: Any) -> Any:
+        from fuzzyslam.stamps import LogTime
+
+        if isinstance(value, LogTime):
+            return value
+        text = str(value).strip()
+        relative = text.startswith("+")
         try:
-            t = float(value)
+            t = float(text[1:] if relative else text)
         except (TypeError, ValueError):
-            self.fail(f"{value!r} is not a number of seconds", param, ctx)
+            self.fail(f"{value!r} is not a number of seconds (or +SECONDS)", param, ctx)
         if not (math.isfinite(t) and 0.0 <= t <= MAX_LOG_TIME_S):
             self.fail(f"must be a finite log time in [0, {MAX_LOG_TIME_S:g}] s, got {value}",
                       param, ctx)
-        return t
+        return LogTime(t, relative)
 
 
-LOG_TIME = LogTime()
+LOG_TIME = LogTimeType()
 
 
 def seed_option(f):
@@ -255,7 +262,12 @@ def entry() -> None:
     the interpreter's finalisation: a second KeyboardInterrupt raised there (a signal
     arriving late, or one left pending by a C extension) would otherwise turn the exit
     status into death by SIGINT (-2) after the one-line message was already written.
-    Every temporary output is removed before :func:`main` returns (context managers)."""
+    Every temporary output is removed before :func:`main` returns (context managers).
+    Closed standard descriptors get the null device and a reader that goes away is not
+    an error (:func:`fuzzyslam.cli.std.guard_streams`)."""
+    from fuzzyslam.cli.std import guard_streams
+
+    guard_streams()
     try:
         main()
     except SystemExit as exc:

@@ -19,6 +19,7 @@ import numpy as np
 import yaml
 
 from fuzzyslam.errors import InputError
+from fuzzyslam.fileio import check_input_file
 from fuzzyslam.slam.calibration import NAMES, Calibration
 from fuzzyslam.stamps import format_time
 
@@ -149,7 +150,7 @@ def load(path: str | Path, model: Calibration) -> Calibration:
     Calibration
         ``model`` with the file's factors and covariance (InputError naming the file).
     """
-    path = Path(path)
+    path = check_input_file(path, "calibration")  # an input: never replaced by an output
     try:
         d = yaml.safe_load(path.read_text())
         kind = d["model"]
@@ -190,6 +191,7 @@ def at_time(csv_path: Path, t_end: float) -> dict | None:
     """
     if not csv_path.is_file():
         return None
+    check_input_file(csv_path, "calibration")  # an input: never replaced by an output
     with csv_path.open(newline="") as f:
         rows = list(csv.reader(f))
     if len(rows) < 2:
