@@ -102,8 +102,9 @@ def run_rtf(log: Path | None, fgm_dir: Path | None, config: str, seed: int) -> d
         )  # fmt: skip
         assert res.exit_code == 0, res.output
         fgm_dir = tmp / "fgm"
-    world = read_world(LogReader(log))
-    lid = log_identity(world.to_dict() if world else None, Path(log).name)
+    reader = LogReader(log)
+    world = read_world(reader)
+    lid = log_identity(world.to_dict() if world else None, reader.fingerprint())
     out = {"log": str(log)}
     for mode in ("none", "heading", "pose"):
         best = 0.0

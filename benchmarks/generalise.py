@@ -160,7 +160,7 @@ def carmen(data: Path, out: Path, variants: list[str]) -> list[dict]:
                           f"real_building_{rs}.yaml", "-o", str(fgm))  # fmt: skip
         for v in variants:
             e = variant(v)
-            # the same file name: a map's identity is its log's name (maps.mapio.log_identity)
+            # another recording of the building: its map is taken with --fix-from
             vlog = log if e is None else work / v / "log.mcap"
             if e is not None and not vlog.is_file():
                 vlog.parent.mkdir(exist_ok=True)

@@ -543,6 +543,37 @@ def test_pose_fixes_on_sonar_rings_bounded_and_consistent(room):
     assert np.mean(errs) < 0.15 and max(errs) < 0.2
     assert np.mean([n[10:].mean() for _, n, _ in runs]) < 7.81
     assert all(a.summary().accepted >= 15 for _, _, a in runs)
+    assert all(a.trouble() is None for _, _, a in runs)  # localised: no health finding
+
+
+def test_pose_aid_flags_a_run_of_ambiguous_matches(room):
+    """filter_health's pose finding: more than half of 40 successive match attempts flat
+    or multimodal, found at the attempt that completes the window; exactly half is not
+    enough, and the rings the filter knew better than the map do not count."""
+    from fuzzyslam.fixes.pose_aid import AMBIGUOUS_SHARE, AMBIGUOUS_WINDOW, PoseDecision
+
+    _, fgm = room
+    nan3, nan33 = np.full(3, np.nan), np.full((3, 3), np.nan)
+    half = int(AMBIGUOUS_SHARE * AMBIGUOUS_WINDOW)
+
+    def aid_of(reasons):
+        aid = PoseFixAid(fgm, FixParams(), lambda r, m: None, 0.0)
+        aid.decisions = [PoseDecision(float(k), r == "ok", r, nan3, nan33, 0, 1.0)
+                         for k, r in enumerate(reasons)]  # fmt: skip
+        return aid
+
+    ok, bad = "ok", ["flat", "multimodal"]
+    lead = [ok] * AMBIGUOUS_WINDOW
+    at_half = lead + (bad * AMBIGUOUS_WINDOW)[:half] + [ok] * AMBIGUOUS_WINDOW
+    assert aid_of(at_half).trouble() is None
+    over = lead + (bad * AMBIGUOUS_WINDOW)[: half + 1] + [ok] * 5
+    reason, t = aid_of(over).trouble()
+    n = AMBIGUOUS_WINDOW + half  # the attempt that makes it more than half: the (half + 1)-th
+    assert reason == "pose_matches_ambiguous" and t == n
+    # prior_better rings between them are not attempts: the same finding, later in time
+    spaced = [x for r in over for x in (r, "prior_better")]
+    assert aid_of(spaced).trouble() == ("pose_matches_ambiguous", 2.0 * n)
+    assert aid_of(bad * (AMBIGUOUS_WINDOW // 2 - 1)).trouble() is None  # too few to judge
 
 
 def test_pose_match_refuses_flat_surface(room):
@@ -651,14 +682,14 @@ def test_change_detector_plugin_writes_csv(room, tmp_path):
 # --- the edge: map directory -> aids -------------------------------------------------------------
 
 
-def _write_map(d, fgm, frozen=True, refs=True):
+def _write_map(d, fgm, frozen=True, refs=True, log_id="world-x"):
     d.mkdir()
     g = fgm.grid
     np.savez(
         d / "fgm.npz",
         m_e=fgm.m_e, m_o=fgm.m_o, m_t=fgm.m_t, m_c=fgm.m_c,
         origin=np.array(g.origin), resolution=g.resolution, shape=np.array(g.shape),
-        frozen=frozen, freeze_time=123.5, log_id="world-x",
+        frozen=frozen, freeze_time=123.5, log_id=log_id,
     )  # fmt: skip
     if refs:
         data = {"references": [{"id": 0, "name": "a", "angle": 0.0, "angle_deg": 0.0,
@@ -701,9 +732,17 @@ def test_make_aids_loads_and_checks_map_dir(room, tmp_path):
     ]  # fmt: skip
     fm = load_frozen_map(tmp_path / "ok")
     assert np.array_equal(fm.fgm.m_o, fgm.m_o) and fm.log_id == "world-x"
-    with pytest.raises(InputError, match="another log or world"):
+    with pytest.raises(InputError, match="another world"):
         make_aids(tmp_path / "ok", "heading", cfg, expect_log_id="world-y")
+    with pytest.raises(InputError, match="another world"):  # a real log on a simulated map
+        make_aids(tmp_path / "ok", "heading", cfg, start_time=0.0, expect_log_id="log-y")
     assert len(make_aids(tmp_path / "ok", "heading", cfg, expect_log_id="world-x")) == 1
+    # a map of another real recording: only from a time of this log (--fix-from)
+    _write_map(tmp_path / "real", fgm, log_id="log-x")
+    with pytest.raises(InputError, match=r"another recording.*--fix-from"):
+        make_aids(tmp_path / "real", "heading", cfg, expect_log_id="log-y")
+    (aid,) = make_aids(tmp_path / "real", "heading", cfg, start_time=3.0, expect_log_id="log-y")
+    assert aid.start_time == 3.0
     _write_map(tmp_path / "thawed", fgm, frozen=False)
     with pytest.raises(InputError, match="never frozen"):
         make_aids(tmp_path / "thawed", "heading", cfg)
@@ -1185,3 +1224,21 @@ def test_pose_matches_wait_for_travel_or_turn(room):
     aid.on_ring(11.0, ring(11.0), MOUNTS, ekf)
     assert len(aid.decisions) == 4
     assert cov_inflation(0.5, 1.0, 100.0) == pytest.approx(1.0 / math.tanh(0.25))
+
+
+def test_scan_heading_aid_reports_the_position_sigma():
+    """The laser's heading aid keeps position_sigma_max_m as the FLM aid does (it said
+    0.0 whatever the filter's position covariance), and makes no position_unresolved
+    finding of it (its candidates cover 3 sigma_xy)."""
+    from fuzzyslam.fixes.scan_heading import ScanLineHeadingAid
+
+    aid = ScanLineHeadingAid([], FixParams(junction_margin=0.5), 0.0)
+    ekf = SmallEkf([0.0, 0.0, 0.0], np.array([[0.25, 0.1, 0.0], [0.1, 0.04, 0.0],
+                                              [0.0, 0.0, 0.01]]))  # fmt: skip
+    a = np.linspace(-1.5, 1.5, 30)
+    mounts = np.column_stack([np.zeros(30), np.zeros(30), a])
+    scan = SimpleNamespace(t=1.0, ranges=np.full(30, np.inf), max_range=30.0, fov=0.01)
+    aid.on_ring(1.0, scan, mounts, ekf)
+    lam = np.linalg.eigvalsh(ekf.P[:2, :2])[-1]
+    assert aid.summary().position_sigma_max_m == pytest.approx(np.sqrt(lam), abs=1e-4)
+    assert np.sqrt(lam) * 3.03 > 0.5 and aid.trouble() is None

@@ -171,9 +171,11 @@ def test_missing_sonar_stream(one_run_log, tmp_path, capsys):
 
 
 def test_window_without_readings(tmp_path, capsys):
-    """A log whose sonar rings all come after the window's end."""
+    """A log whose sonar rings all come after the window's end (the log itself starting
+    before it: a window ending before the log's first message is refused as such)."""
     log = tmp_path / "late.mcap"
     with LogWriter(log) as w:
+        w.write("/other", "sensor_msgs/msg/Range", range_msg(0.5, "x", 1.0, 0.4, 0.1, 6.0), 0.5)
         for t in (5.0, 5.25):
             for i in range(16):
                 w.write(
@@ -189,4 +191,9 @@ def test_window_without_readings(tmp_path, capsys):
         ["map", str(log), "--trajectory", str(tum), "-o", str(out), "--until", "1.0"], capsys
     )
     assert code == 3 and "no sonar readings" in err
+    assert not out.exists()
+    code, _, err = run_cli(
+        ["map", str(log), "--trajectory", str(tum), "-o", str(out), "--until", "0.1"], capsys
+    )
+    assert code == 3 and "--until 0.1 s is before the log's first message at 0.500 s" in err
     assert not out.exists()

@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import json
 import math
+import shutil
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -326,9 +327,70 @@ def test_real_excerpt_map_and_lampless_pose_fixes(ranges, tmp_path, capsys):
     assert s["start_pose"] == pytest.approx([float(v) for v in start.split(",")])
     assert code == 0, err
     assert s["lamp_source"].startswith("none") and s["aids"]["PoseFixAid"]["accepted"] > 10
+    assert "pose_matches_ambiguous" not in s["filter_health"]["reasons"]
     dr = _errors(tmp_path / "dr" / "trajectory.tum", truth)
     pose = _errors(tmp_path / "pose" / "trajectory.tum", truth)
     assert pose.mean() <= 0.3 and pose.mean() < dr.mean()
+
+
+@pytest.mark.slow
+def test_a_map_knows_its_recording_not_its_file_name(tmp_path, capsys):
+    """A map of a real log (no world record) is tied to the recording: a copy under
+    another name is the same log; another recording under the same file name is refused
+    (its map would be of another building for all the run knows) unless --fix-from says
+    from when to use it, and then a note says so."""
+    from test_robust_logs import rewrite
+
+    log, truth = EXCERPT / "log.mcap", EXCERPT / "truth.tum"
+    cfg = "real_building_scan.yaml"
+    fgm = tmp_path / "fgm"
+    args = ["map", str(log), "--trajectory", str(truth), "--config", cfg, "--no-figures"]
+    code, _, err = run_cli([*args, "-o", str(fgm)], capsys)
+    assert code == 0, err
+    copy = tmp_path / "renamed.mcap"
+    shutil.copyfile(log, copy)
+    other = tmp_path / "other" / "log.mcap"  # the same name, another recording
+    other.parent.mkdir()
+    t_end = LogReader(log).end
+    rewrite(log, other, lambda m: [] if m.t > t_end - 5.0 else [(m.topic, m.typename, m.msg, m.t)])
+    run = ["run", "--config", cfg, "--map", str(fgm), "--fix", "pose"]
+    code, _, err = run_cli([*run, str(copy), "-o", str(tmp_path / "copy")], capsys)
+    assert code == 0, err
+    code, _, err = run_cli([*run, str(other), "-o", str(tmp_path / "refused")], capsys)
+    assert code == 3 and "another recording" in err and "--fix-from" in err
+    assert not (tmp_path / "refused").exists()
+    code, _, err = run_cli(
+        [*run, str(other), "--fix-from", "0", "-o", str(tmp_path / "taken")], capsys
+    )
+    assert code == 0 and "map of another recording" in err, err
+
+
+@pytest.mark.slow
+def test_times_on_a_unix_time_log(tmp_path, capsys):
+    """A real log is stamped in Unix time: --until 600 (600 s into it, meant) is refused
+    with one line saying so, +30 freezes the map 30 s after the first message; fixes
+    that would start after the log's end (the freeze time of a map of the whole log) or
+    at a time before its start other than 0 get a note; +30 starts them 30 s in."""
+    log, truth = EXCERPT / "log.mcap", EXCERPT / "truth.tum"
+    first, last = LogReader(log).start, LogReader(log).end
+    cfg = "real_building_scan.yaml"
+    args = ["map", str(log), "--trajectory", str(truth), "--config", cfg, "--no-figures"]
+    code, _, err = run_cli([*args, "--until", "600", "-o", str(tmp_path / "m600")], capsys)
+    assert code == 3 and "--until 600 s is before the log's first message" in err
+    code, s, err = run_cli([*args, "--until", "+30", "-o", str(tmp_path / "m30")], capsys)
+    assert code == 0, err
+    assert s["freeze_time"] == pytest.approx(first + 30.0, abs=1e-6)
+    code, s, err = run_cli([*args, "-o", str(tmp_path / "all")], capsys)
+    assert code == 0 and s["freeze_time"] == pytest.approx(last, abs=1e-6)
+    run = ["run", str(log), "--config", cfg, "--map", str(tmp_path / "all"), "--fix", "pose"]
+    for extra, words in (([], "no fix will be applied"), (["--fix-from", "600"], "+600")):
+        code, s, err = run_cli([*run, *extra, "-o", str(tmp_path / "r")], capsys)
+        assert code == 0 and words in err, err
+    code, s, err = run_cli([*run, "--fix-from", "+30", "-o", str(tmp_path / "r30")], capsys)
+    assert code == 0 and "note" not in err, err
+    t, *_ = np.loadtxt(tmp_path / "r30" / "pose_fixes.csv", delimiter=",", skiprows=1,
+                       usecols=0, unpack=True, ndmin=2)  # fmt: skip
+    assert t.min() >= first + 30.0
 
 
 def _laser_direction(log: Path, truth: Path, near: float) -> float:

@@ -34,7 +34,8 @@ from fuzzyslam.cli import LOG_TIME, cli, config_option, emit, ranges_option, sta
     "--until",
     type=LOG_TIME,
     default=None,
-    help="Freeze the map at this log time (s) instead of at the end of a run.",
+    help="Freeze the map at this log time (s: the log's own stamps, Unix time on most real "
+    "logs; +S for S seconds after the log's start) instead of at the end of a run.",
 )
 @click.option(
     "--skip-uncovered",

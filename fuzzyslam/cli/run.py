@@ -61,8 +61,9 @@ def _parse_pose(_ctx, _param, value: str | None) -> tuple[float, float, float] |
     type=LOG_TIME,
     default=None,
     metavar="SECONDS",
-    help="Log time (s) from which the fixes are applied. Default: the map's freeze time "
-    "(e.g. 0 to use a map frozen on another log of the same world from the start).",
+    help="Log time (s: the log's own stamps, Unix time on most real logs; +S for S seconds "
+    "after the log's start) from which the fixes are applied. Default: the map's freeze "
+    "time (e.g. 0 to use a map frozen on another log of the same world from the start).",
 )
 @ranges_option
 @click.option(
@@ -126,8 +127,9 @@ def run_command(
     Writes trajectory.tum, odometry.tum (dead reckoning), covariance.csv,
     landmarks.yaml, updates.csv (innovation and NIS of every update attempt),
     estimates.mcap (/slam/pose, /tf, /slam/landmarks for Foxglove) and summary.json;
-    with --map also heading_fixes.csv (and changes.csv with --fix pose), and /map and
-    the fixes in estimates.mcap.
+    with --map also heading_fixes.csv (heading fixes), pose_fixes.csv (--fix pose),
+    changes.csv and changes.png (--fix pose with fixes.detect_changes), and /map and the
+    fixes in estimates.mcap.
     The JSON summary is also printed on stdout; progress goes to stderr.
     """
     from fuzzyslam.slam.stage import run

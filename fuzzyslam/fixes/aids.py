@@ -29,6 +29,7 @@ import numpy as np
 
 from fuzzyslam.errors import InputError, UsageError
 from fuzzyslam.references import Reference, read_references
+from fuzzyslam.stamps import LogTime, format_seconds, log_time
 
 if TYPE_CHECKING:  # the plug-ins and the maps stage load with a map only (lazy below):
     from fuzzyslam.maps.grid import BeliefMap  # a run without --map does not import them
@@ -47,7 +48,10 @@ class FrozenMap:
 
 
 def load_frozen_map(
-    fgm_dir: Path, expect_log_id: str | None = None, need_references: bool = True
+    fgm_dir: Path,
+    expect_log_id: str | None = None,
+    need_references: bool = True,
+    other_recording: bool = False,
 ) -> FrozenMap:
     """Load and check a map directory written by ``fuzzyslam map`` (through maps.mapio).
 
@@ -55,6 +59,10 @@ def load_frozen_map(
     masses that are not finite or do not sum to 1, a map never frozen, a map built from
     another log or world (``log_id`` differs from ``expect_log_id`` when given), a
     malformed references.yaml (or a missing one when ``need_references``: heading fixes).
+    A map of another real recording (both identities ``log-``: no world record tells
+    whether the building is the same) is taken when ``other_recording`` (the user gave
+    ``--fix-from``: the fixes then start at a time of this log, not at the other log's
+    freeze time), with a note on stderr.
 
     Parameters
     ----------
@@ -64,6 +72,8 @@ def load_frozen_map(
         The log's identity the map must have (None: any).
     need_references : bool
         references.yaml is required (heading fixes).
+    other_recording : bool
+        Take a map of another real recording.
 
     Returns
     -------
@@ -73,7 +83,8 @@ def load_frozen_map(
 
     fgm_dir = Path(fgm_dir)
     if not fgm_dir.is_dir():
-        raise InputError(fgm_dir, "map directory does not exist")
+        what = "is not a directory (--map takes the map directory 'map' wrote)"
+        raise InputError(fgm_dir, what if fgm_dir.exists() else "map directory does not exist")
     npz = fgm_dir / "fgm.npz"
     f = load_fgm(npz)
     m = f.map
@@ -87,9 +98,21 @@ def load_frozen_map(
     if not np.isfinite(f.freeze_time):
         raise InputError(npz, "the frozen map has no freeze_time")
     if expect_log_id is not None and f.log_id != expect_log_id:
-        raise InputError(
-            npz, f"map was built from another log or world ({f.log_id!r}, not {expect_log_id!r})"
-        )
+        real = f.log_id.startswith("log-") and expect_log_id.startswith("log-")
+        if not real:
+            raise InputError(
+                npz, f"map was built in another world ({f.log_id!r}, not {expect_log_id!r})"
+            )
+        if not other_recording:
+            raise InputError(
+                npz,
+                f"map was built from another recording ({f.log_id!r}, not this log's "
+                f"{expect_log_id!r}); to use it as a map of this log's building, give "
+                "--fix-from SECONDS (this log's time from which its fixes apply)",
+            )
+        from fuzzyslam.progress import note
+
+        note(f"{npz}: a map of another recording, used as a map of this log's building")
     refs_path = fgm_dir / "references.yaml"
     refs: list[Reference] = []
     if need_references or refs_path.exists():
@@ -108,8 +131,9 @@ def make_aids(
 ) -> list[Any]:
     """The plug-ins of ``run`` for ``mode`` in none|heading|pose (module docstring).
 
-    ``expect_log_id``: the log's identity (``maps.mapio.log_identity``); a map built from
-    another log or world is refused.
+    ``expect_log_id``: the log's identity (``maps.mapio.log_identity``); a map built in
+    another world is refused, and one of another real recording unless ``start_time`` is
+    given (:func:`load_frozen_map`).
 
     Parameters
     ----------
@@ -132,7 +156,9 @@ def make_aids(
         raise ValueError(f"mode must be one of {', '.join(MODES)}, got {mode!r}")
     if mode == "none":
         return []
-    fm = load_frozen_map(Path(fgm_dir), expect_log_id, need_references=mode == "heading")
+    fm = load_frozen_map(
+        Path(fgm_dir), expect_log_id, mode == "heading", other_recording=start_time is not None
+    )
     return aids_for_map(fm, mode, cfg, start_time)
 
 
@@ -223,8 +249,8 @@ def aids_for_log(
         The run's config.
     log : path
         The log (its world's identity).
-    fix_from : float or None
-        ``--fix-from``.
+    fix_from : float, LogTime or None
+        ``--fix-from`` (a plain number: the log's own stamp).
 
     Returns
     -------
@@ -240,8 +266,38 @@ def aids_for_log(
     from fuzzyslam.streams.logmeta import read_world
     from fuzzyslam.streams.reader import LogReader
 
-    world = read_world(LogReader(log))  # the identity the map stage recorded (maps/build.py)
+    reader = LogReader(log)
+    world = read_world(reader)  # the identity the map stage recorded (maps/build.py)
     world_dict = world.to_dict() if world is not None else None
-    return make_aids(
-        map_dir, mode, cfg, fix_from, expect_log_id=log_identity(world_dict, Path(log).name)
+    start = log_time(fix_from, reader.start)
+    aids = make_aids(
+        map_dir, mode, cfg, start, expect_log_id=log_identity(world_dict, reader.fingerprint())
     )
+    when = min((a.start_time for a in aids), default=None)
+    if when is not None:
+        _tell_fix_start(when, fix_from, reader.start, reader.end)
+    return aids
+
+
+def _tell_fix_start(when: float, given: Any, first: float, last: float) -> None:
+    """A note when the fixes would start where the user probably did not mean them to:
+    after the log's last message (no fix at all; e.g. the freeze time of a map built on
+    the whole log), or at a stamp before its first message other than 0 (``600`` on a
+    log stamped in Unix time: from its start, not 600 s into it)."""
+    from fuzzyslam.progress import note
+
+    if given is None:
+        text, how = "", "the map's freeze time"
+    else:
+        text = str(given) if isinstance(given, LogTime) else format_seconds(given)
+        how = f"--fix-from {text}"
+    if when >= last:
+        note(
+            f"fixes start at {when:.3f} s ({how}), at or after the log's last message at "
+            f"{last:.3f} s: no fix will be applied (--fix-from +0 applies them from the start)"
+        )
+    elif given is not None and 0.0 < when < first:
+        note(
+            f"--fix-from {text} s is before the log's first message at {first:.3f} s: the "
+            f"fixes apply from its start (+{text} is {text} s after the start)"
+        )

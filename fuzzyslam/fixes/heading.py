@@ -331,9 +331,7 @@ class HeadingFixAid(FixAid):
         cov : ndarray, shape (3, 3)
             The robot's covariance.
         """
-        a, b, c = float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1])
-        lam = 0.5 * (a + c) + math.hypot(0.5 * (a - c), b)  # the 2x2 block's largest
-        self.position_sigma_max = max(self.position_sigma_max, math.sqrt(max(lam, 0.0)))
+        lam = self._track_position_sigma(cov)
         margin = self.params.junction_margin
         if (
             self.position_unresolved_at is None
@@ -341,6 +339,14 @@ class HeadingFixAid(FixAid):
             and chi2_quantile(0.99, 2) * lam > margin * margin
         ):
             self.position_unresolved_at = t
+
+    def _track_position_sigma(self, cov: np.ndarray) -> float:
+        """Keep ``position_sigma_max`` (the summary's ``position_sigma_max_m``) and return
+        lambda_max of the position's 2x2 block of ``cov`` (3, 3)."""
+        a, b, c = float(cov[0, 0]), float(cov[0, 1]), float(cov[1, 1])
+        lam = 0.5 * (a + c) + math.hypot(0.5 * (a - c), b)  # the 2x2 block's largest
+        self.position_sigma_max = max(self.position_sigma_max, math.sqrt(max(lam, 0.0)))
+        return lam
 
     def trouble(self) -> tuple[str, float] | None:
         """The aid's finding for the run's ``filter_health`` (slam/run_results.py):

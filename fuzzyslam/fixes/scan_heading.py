@@ -155,7 +155,10 @@ def measure_heading(
 class ScanLineHeadingAid(HeadingFixAid):
     """Heading fixes from the scan's wall lines, one per scan (module docstring): the
     :class:`HeadingFixAid` plug-in with its measurement replaced (no FLM, no multi-ring
-    window, no bump recovery: a laser's fix per scan needs none of them)."""
+    window, no bump recovery: a laser's fix per scan needs none of them). The summary's
+    ``position_sigma_max_m`` is kept as by the FLM aid; ``position_unresolved`` is not a
+    finding here: the candidates are every corridor within ``junction_margin`` + 3
+    sigma_xy, so the corridor is never chosen at the mean position alone."""
 
     def __init__(self, refs: Sequence[Reference], params: FixParams, start_time: float = 0.0):
         super().__init__(refs, params, None, None, start_time)  # type: ignore[arg-type]
@@ -166,6 +169,7 @@ class ScanLineHeadingAid(HeadingFixAid):
         p = self.params
         pose = np.asarray(ekf.pose, dtype=float)
         cov = np.asarray(ekf.pose_cov, dtype=float)
+        self._track_position_sigma(cov)
         predicted = float(pose[2])
         odo = float(ekf.odometry_pose[2])
         x0, y0 = float(pose[0]), float(pose[1])

@@ -30,6 +30,7 @@ from fuzzyslam.maps.summary import MapSummary, ReferenceEntry, ReferenceTruth, W
 from fuzzyslam.progress import Progress
 from fuzzyslam.se2 import interpolate_poses, wrap_angle_period
 from fuzzyslam.slam import calibration_files
+from fuzzyslam.stamps import LogTime, log_time
 from fuzzyslam.streams.logmeta import World, read_scenario, read_world
 from fuzzyslam.streams.ranges import open_ranges
 from fuzzyslam.streams.reader import LogReader
@@ -43,7 +44,7 @@ class MapOptions:
     """Command-line choices of the map stage."""
 
     until_run: int | None = None
-    until: float | None = None
+    until: float | LogTime | None = None  # a plain number: the log's own stamp
     skip_uncovered: bool = False
     landmarks: Path | None = None
     figures: bool = True
@@ -107,7 +108,15 @@ def freeze_time(reader: LogReader, cfg: Config, opts: MapOptions) -> tuple[float
         How it was chosen.
     """
     if opts.until is not None:
-        return float(opts.until), "--until"
+        t = log_time(opts.until, reader.start)
+        if t < reader.start:  # e.g. 600 on a log stamped in Unix time
+            raise InputError(
+                reader.path,
+                f"--until {opts.until} s is before the log's first message at "
+                f"{reader.start:.3f} s (log times are the log's own stamps; +S is S seconds "
+                "after its start)",
+            )
+        return t, "--until"
     scenario = read_scenario(reader)
     if opts.until_run is not None:
         run, how = opts.until_run, "--until-run"
@@ -298,6 +307,13 @@ def build_map(
     params: MapParams = cfg.fgm
     outdir = Path(outdir)
     check_outputs([log_path, traj_path], [outdir])
+    run_dir = Path(traj_path).resolve().parent
+    if outdir.resolve() == run_dir and (run_dir / "summary.json").is_file():
+        raise InputError(
+            outdir,
+            "output directory is the trajectory's run directory; the map would replace "
+            "its summary.json and calibration.yaml: choose another directory",
+        )
     reader = LogReader(log_path)
     t_traj, p_traj, tum_dropped = read_tum(traj_path, sort=opts.sort, report=True)
     t_end, how = freeze_time(reader, cfg, opts)
@@ -337,7 +353,7 @@ def build_map(
     refs = extract_references(fgm, poses[:, :2], params)
     world = read_world(reader)
     world_dict = world.to_dict() if world is not None else None
-    log_id = mapio.log_identity(world_dict, Path(log_path).name)
+    log_id = mapio.log_identity(world_dict, reader.fingerprint())
     truth = reference_truth(refs, world)
     quality = None
     if world is not None:

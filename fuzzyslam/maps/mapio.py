@@ -51,15 +51,17 @@ class FgmFile:
 
 def log_identity(world: dict[str, Any] | None, fallback: str = "") -> str:
     """Identity of the world a log was recorded in: ``world-`` + 16 hex digits of the
-    SHA-256 of its canonical JSON; for logs without a world record, ``log-`` + the hash
-    of ``fallback`` (e.g. the log's file name). ``run --map`` compares it with its log's.
+    SHA-256 of its canonical JSON (a simulated log: every log of that world has it); for
+    logs without a world record (real robots), ``log-`` + the hash of ``fallback``, the
+    recording's own fingerprint (``LogReader.fingerprint``: a copy under another name
+    has the same, another recording does not). ``run --map`` compares it with its log's.
 
     Parameters
     ----------
     world : dict or None
         The log's world record.
     fallback : str
-        Used without a world.
+        Used without a world: the log's fingerprint.
 
     Returns
     -------

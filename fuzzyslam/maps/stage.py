@@ -10,6 +10,7 @@ from typing import Any
 from fuzzyslam.config import load_config
 from fuzzyslam.errors import InputError, UsageError
 from fuzzyslam.maps.build import MapOptions, build_map
+from fuzzyslam.stamps import LogTime
 
 
 def run(
@@ -18,7 +19,7 @@ def run(
     outdir: str | os.PathLike,
     config: str | None = None,
     until_run: int | None = None,
-    until: float | None = None,
+    until: float | LogTime | None = None,
     skip_uncovered: bool = False,
     landmarks: str | os.PathLike | None = None,
     figures: bool = True,
@@ -42,7 +43,7 @@ def run(
         A YAML path or an embedded name.
     until_run : int or None
         ``--until-run``.
-    until : float or None
+    until : float, LogTime or None
         ``--until``.
     skip_uncovered : bool
         ``--skip-uncovered``.

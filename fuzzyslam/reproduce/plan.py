@@ -23,6 +23,8 @@ import shlex
 from dataclasses import dataclass, field
 from typing import Any
 
+from fuzzyslam.stamps import LogTime
+
 
 @dataclass(frozen=True)
 class Suite:
@@ -148,7 +150,7 @@ def seed_steps(
             call |= {"map_dir": f"{d}/{fgm}", "fix": fix}
             if fix_from is not None:
                 argv += ["--fix-from", f"{fix_from:g}"]
-                call["fix_from"] = fix_from
+                call["fix_from"] = LogTime(fix_from)  # as the CLI parses the option
             deps.append(fgm)
         cost = COST["run"] if fix == "none" else COST[f"run_{fix}"]
         if fix_from is not None:  # the aid from the log's start (the plan gives only 0)

@@ -35,6 +35,9 @@ from fuzzyslam.slam.runner import SlamResult, SlamRunner
 from fuzzyslam.slam.summary import RunSummary
 from fuzzyslam.summary import OMIT, as_json
 
+# message types that could carry lamps or landmarks under topics the config does not name
+LAMP_TYPES = ("geometry_msgs/msg/PoseArray", "sensor_msgs/msg/Image")
+
 
 def make_summary(
     res: SlamResult, inputs, wall: float, aids: list, streamed: StreamingOutputs
@@ -138,8 +141,8 @@ def run(
         ``--map``.
     fix : str or None
         ``--fix``.
-    fix_from : float or None
-        ``--fix-from``.
+    fix_from : float, LogTime or None
+        ``--fix-from`` (a plain number: the log's own stamp).
     ranges : str or None
         ``--ranges`` (sonar|scan).
     start_pose : (float, float, float) or None
@@ -160,6 +163,8 @@ def run(
     from fuzzyslam.errors import UsageError
 
     cfg = load_config(config, seed)
+    if map_dir is not None:  # the map's directory is an input: a run never writes into it
+        check_outputs([map_dir], [outdir])
     if map_dir is None and fix in (None, "none"):
         aids = []  # lamps only (aids_for_log's answer), the plug-ins not even imported
     else:
@@ -307,10 +312,13 @@ def _run_once(
     check_outputs([log], [outdir])
     inputs = open_inputs(log, cfg, bool(aids), ranges, start_pose)
     if inputs.lamp_source == "none" and not aids and not _quiet:
+        unread = sorted(t for t, ty in inputs.reader.topics.items() if ty in LAMP_TYPES)
         note(
             f"{log}: no lamps (topics.image {cfg.topics.image}, "
             f"topics.detections {cfg.topics.detections}) and no map: the estimate is dead "
-            "reckoning (give --map FGMDIR --fix pose|heading)"
+            "reckoning (give --map FGMDIR --fix pose|heading"
+            + (f"; the log has {', '.join(unread)}, not read: a config for it?" if unread else "")
+            + ")"
         )
     model = calibration_model(inputs, cfg, calibration)
     staged = OutputDir(outdir, owns=OPTIONAL_OUTPUTS)

@@ -20,6 +20,7 @@ from functools import lru_cache
 import numpy as np
 
 from fuzzyslam.se2 import yaw_to_quaternion
+from fuzzyslam.stamps import split_ns, to_ns
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.typestore import serialize
 
@@ -30,15 +31,14 @@ _F32 = struct.Struct("<f")
 
 def _stamps(t: np.ndarray) -> tuple[list[int], list[int]]:
     """(sec, nanosec) of stamps in seconds, rounded to ns as ``messages.stamp``."""
-    ns = [round(v * 1e9) for v in np.asarray(t, dtype=float).tolist()]
+    ns = [to_ns(v) for v in np.asarray(t, dtype=float).tolist()]
     return [v // 1_000_000_000 for v in ns], [v % 1_000_000_000 for v in ns]
 
 
 def restamp(cdr: bytes, t: float) -> bytes:
     """The CDR bytes of a message whose first field is a std_msgs/Header, stamped ``t``
     (s, rounded to ns as ``messages.stamp``) instead."""
-    ns = round(t * 1e9)
-    return cdr[:4] + _STAMP.pack(ns // 1_000_000_000, ns % 1_000_000_000) + cdr[12:]
+    return cdr[:4] + _STAMP.pack(*split_ns(t)) + cdr[12:]
 
 
 def _rows(template: bytes, t: np.ndarray, fields: list[tuple[int, object, object]]) -> list[bytes]:
@@ -110,8 +110,7 @@ def encode_ranges(
 ) -> list[bytes]:
     """sensor_msgs/Range of ``messages.range_msg(t, frames[j], r[j], fov, rmin, rmax)``
     for every sonar j of one ring (one stamp)."""
-    ns = round(t * 1e9)
-    stamp = _STAMP.pack(ns // 1_000_000_000, ns % 1_000_000_000)
+    stamp = _STAMP.pack(*split_ns(t))
     out = []
     for frame, rj in zip(frames, np.asarray(r, dtype=float).tolist(), strict=True):
         head, body = _range_template(frame, float(fov), float(rmin), float(rmax))
@@ -168,9 +167,7 @@ def encode_pose_with_covariance_block(
     n = len(t)
     a = np.zeros(n, dtype=dt)
     a["encaps"] = b"\x00\x01\x00\x00"
-    ns = [round(v * 1e9) for v in np.asarray(t, dtype=float).tolist()]  # messages.stamp
-    a["sec"] = [v // 1_000_000_000 for v in ns]
-    a["nsec"] = [v % 1_000_000_000 for v in ns]
+    a["sec"], a["nsec"] = _stamps(t)
     a["flen"] = len(name)
     a["frame"] = name + b"\0" * pad
     a["pose"][:, :2] = poses[:, :2]
@@ -239,9 +236,7 @@ def encode_tf_block(
     n = len(t)
     buf = np.frombuffer(bytes(template) * n, dtype=np.uint8).copy()  # padding kept
     a = buf.view(dt)
-    ns = [round(v * 1e9) for v in np.asarray(t, dtype=float).tolist()]  # messages.stamp
-    sec = [v // 1_000_000_000 for v in ns]
-    nsec = [v % 1_000_000_000 for v in ns]
+    sec, nsec = _stamps(t)
     for k, p in enumerate(poses):
         p = np.asarray(p, dtype=float).reshape(-1, 3)
         a[f"sec{k}"] = sec
@@ -312,7 +307,7 @@ def encode_marker_array(markers: Sequence[MarkerSpec]) -> bytes:
     w = _Cdr()
     w.put("I", 4, len(markers))
     for m in markers:
-        sec, nsec = divmod(round(m.t * 1e9), 1_000_000_000)  # messages.stamp
+        sec, nsec = split_ns(m.t)  # messages.stamp
         x, y, theta = m.pose
         z = float(m.z)
         w.put("iI", 4, sec, nsec)  # header
@@ -369,7 +364,7 @@ def encode_occupancy_grid(
     """
     data = np.ascontiguousarray(data, dtype=np.int8)
     h, wd = data.shape
-    sec, nsec = divmod(round(t * 1e9), 1_000_000_000)
+    sec, nsec = split_ns(t)
     w = _Cdr()
     w.put("iI", 4, sec, nsec)  # header
     w.string(frame_id)
@@ -402,7 +397,7 @@ def _marker_layout(
     pad = s3[8 + len(body) : 8 + stride]
     if s3 != s3[:8] + (body + pad) * 2 + body or pad.strip(b"\0"):
         return None
-    sec, nsec = divmod(round(_SENT_T * 1e9), 1_000_000_000)
+    sec, nsec = split_ns(_SENT_T)
     stamps = [k for k in range(len(body) - 7) if body[k : k + 8] == _STAMP.pack(sec, nsec)]
     at_id = body.find(struct.pack("<i", _SENT_ID))
     at_pose = body.find(struct.pack("<2d", *_SENT_XY))
@@ -481,7 +476,7 @@ def encode_markers(
     # one yaw at a time, as messages.marker (the same sin and cos calls)
     pose[:, 3:] = [yaw_to_quaternion(th) for th in poses[:, 2].tolist()]
     a["scale"] = np.asarray(scales, dtype=float).reshape(n, 2)
-    sec, nsec = divmod(round(t * 1e9), 1_000_000_000)
+    sec, nsec = split_ns(t)
     for k in range(n_stamps):
         a[f"sec{k}"] = sec
         a[f"nsec{k}"] = nsec

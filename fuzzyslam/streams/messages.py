@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 
 from fuzzyslam.se2 import quaternion_to_yaw, yaw_to_quaternion
+from fuzzyslam.stamps import split_ns
 from fuzzyslam.streams.typestore import msgtype
 
 RANGE = "sensor_msgs/msg/Range"
@@ -29,11 +30,9 @@ STRING = "std_msgs/msg/String"
 
 
 def stamp(t: float) -> Any:
-    """builtin_interfaces/Time from seconds."""
-    ns = round(t * 1e9)
-    return msgtype("builtin_interfaces/msg/Time")(
-        sec=ns // 1_000_000_000, nanosec=ns % 1_000_000_000
-    )
+    """builtin_interfaces/Time from seconds (:func:`fuzzyslam.stamps.split_ns`)."""
+    sec, nanosec = split_ns(t)
+    return msgtype("builtin_interfaces/msg/Time")(sec=sec, nanosec=nanosec)
 
 
 def stamp_to_sec(s: Any) -> float:

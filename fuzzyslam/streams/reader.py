@@ -24,6 +24,7 @@ from mcap.records import Attachment, Channel, Message, Metadata, Schema
 
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import check_input_file
+from fuzzyslam.stamps import to_ns
 from fuzzyslam.streams.cdr import DECODERS, decoder
 from fuzzyslam.streams.indexed import (
     IndexMismatch,
@@ -107,6 +108,7 @@ class LogReader:
         for topic, schema in s.channels.values():
             self.topics[topic] = normalise_typename(schema)
         self.counts = dict(s.counts)
+        self._span_ns = (int(s.start), int(s.end))
         self.start, self.end = s.start / 1e9, s.end / 1e9
         self.metadata, self.attachments = s.metadata, s.attachments
 
@@ -137,6 +139,7 @@ class LogReader:
                 elif isinstance(rec, Attachment):
                     self.attachments[rec.name] = bytes(rec.data)
         dmg.truncated = True  # no usable summary: the file is damaged even if all parsed
+        self._span_ns = (int(t0 or 0), int(t1 or 0))
         self.start = (t0 or 0) / 1e9
         self.end = (t1 or 0) / 1e9
         if n == 0 and not self.topics:
@@ -173,6 +176,23 @@ class LogReader:
         """Take the damage counted by another reader of the same file (``damage_state``)."""
         self._damage = damage
 
+    def fingerprint(self) -> str:
+        """What tells this recording from another, whatever the file is called: the
+        log times (ns) of its first and last message and its topics with their message
+        counts (from the summary, or the record walk of a file without one), as a
+        canonical JSON text. A copy of the file has the same; another recording of the
+        same place does not.
+
+        Returns
+        -------
+        str
+        """
+        return json.dumps(
+            {"span_ns": list(self._span_ns), "counts": dict(sorted(self.counts.items()))},
+            sort_keys=True,
+            separators=(",", ":"),
+        )
+
     def has(self, topic: str) -> bool:
         return topic in self.topics
 
@@ -208,7 +228,7 @@ class LogReader:
         decode are skipped and counted in ``undecodable``.
         """
         wanted = set(topics) if topics is not None else None
-        start_ns = -1 if start is None else round(start * 1e9)
+        start_ns = -1 if start is None else to_ns(start)
         s = self._summary
         if s is None:
             # the damage was counted when opening: this walk's counts are dropped

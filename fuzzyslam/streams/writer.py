@@ -24,13 +24,8 @@ from mcap.writer import CompressionType, IndexType, Writer
 
 from fuzzyslam import __version__
 from fuzzyslam.fileio import atomic_path
+from fuzzyslam.stamps import to_ns
 from fuzzyslam.streams.typestore import msgdef, normalise_typename, serialize
-
-
-def sec_to_ns(t: float) -> int:
-    """Seconds (float) to integer nanoseconds, rounded."""
-    return round(t * 1e9)
-
 
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, 2 times
 _MESSAGE_OPCODE = 0x05
@@ -238,7 +233,7 @@ class LogWriter:
         cid = self._known.get((topic, typename))
         if cid is None:
             cid = self._known[topic, typename] = self._channel(topic, typename)
-        ns = sec_to_ns(t)
+        ns = to_ns(t)
         self._writer.add_message(
             channel_id=cid, log_time=ns, publish_time=ns, data=data, sequence=self._seq[topic]
         )
@@ -261,7 +256,7 @@ class LogWriter:
             seqs.append(self._seq[topic])
             self._seq[topic] += 1
             self.counts[topic] += 1
-        self._writer.add_messages(ids, sec_to_ns(t), datas, seqs)
+        self._writer.add_messages(ids, to_ns(t), datas, seqs)
 
     def metadata(self, name: str, data: dict[str, str]) -> None:
         """Add an MCAP metadata record (string to string map)."""
@@ -273,7 +268,7 @@ class LogWriter:
 
     def attachment(self, name: str, media_type: str, data: bytes, t: float = 0.0) -> None:
         """Add an attachment (e.g. the world as YAML) at log time ``t``."""
-        ns = sec_to_ns(t)
+        ns = to_ns(t)
         self._writer.add_attachment(
             log_time=ns, create_time=ns, name=name, media_type=media_type, data=data
         )
