@@ -87,12 +87,18 @@ def test_missing_config_and_missing_log(tmp_path: Path, tiny_log) -> None:
 
 
 def test_usage_errors_exit_2(tmp_path: Path, tiny_log) -> None:
+    """A usage error is exit 2 and one line naming the command and where its help is."""
     code, _, stderr = cli("run", tiny_log[1])  # no -o
     assert code == errors.EXIT_USAGE and "Missing option" in stderr
-    code, _, _ = cli("simulate", "-o", tmp_path / "x.mcap", "--seed", "-1")
+    assert error_lines(stderr) == [
+        "fuzzyslam run: usage error: Missing option '-o' / '--output'. "
+        "(see 'fuzzyslam run --help')"
+    ]
+    code, _, stderr = cli("simulate", "-o", tmp_path / "x.mcap", "--seed", "-1")
     assert code == errors.EXIT_USAGE and not (tmp_path / "x.mcap").exists()
-    code, _, _ = cli("nosuchcommand")
-    assert code == errors.EXIT_USAGE
+    assert len(error_lines(stderr)) == 1 and "--seed" in stderr
+    code, _, stderr = cli("nosuchcommand")
+    assert code == errors.EXIT_USAGE and len(error_lines(stderr)) == 1
 
 
 def test_inputs_are_never_overwritten(tmp_path: Path, tiny_log) -> None:

@@ -213,6 +213,13 @@ def main(argv: list[str] | None = None) -> None:
         cli.main(args=args, prog_name="fuzzyslam", standalone_mode=False)
     except click.exceptions.Exit as exc:
         code = exc.exit_code
+    except click.UsageError as exc:  # one line, as every failure (click's is four)
+        cmd = exc.ctx.command_path if exc.ctx is not None else "fuzzyslam"
+        click.echo(
+            f"{cmd}: usage error: {_one_line(exc.format_message())} (see '{cmd} --help')",
+            err=True,
+        )
+        code = exc.exit_code
     except click.ClickException as exc:
         exc.show()
         code = exc.exit_code
