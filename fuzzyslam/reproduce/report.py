@@ -285,6 +285,8 @@ def write_report(
         ("Fig. 4: per-lamp errors (phase C)", f"{s0}/eval_C/fig4_lamps.png"),
         ("Fig. 4: per-lamp errors with bumps (phase D)", f"{s0}/eval_D/fig4_lamps.png"),
         ("Every lamp off after the freeze, pose fixes", f"{s0}/eval_dark_pose/fig3_errors.png"),
+        ("Change detections with people and boxes in the corridors (pose fixes)",
+         f"{s0}/people_pose/changes.png"),
     ]  # fmt: skip
     root = path.parent
     for title, rel in figs:

@@ -1,4 +1,4 @@
-"""The odometry motion model of the EKF (docs/models.md sec. 4.1): the noise of one
+"""The odometry motion model of the EKF (docs/models.md sec. 2): the noise of one
 increment as random walks per metre and per radian (rate invariant; Thrun, Burgard, Fox,
 Probabilistic Robotics (2005), ch. 5, applied to increments of any size), its Jacobians,
 and the preintegration of many increments into one relative motion between updates.
