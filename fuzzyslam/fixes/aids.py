@@ -108,7 +108,8 @@ def load_frozen_map(
                 npz,
                 f"map was built from another recording ({f.log_id!r}, not this log's "
                 f"{expect_log_id!r}); to use it as a map of this log's building, give "
-                "--fix-from SECONDS (this log's time from which its fixes apply)",
+                "--fix-from SECONDS (this log's time from which its fixes apply); a map "
+                "made by fuzzyslam before maps knew their recording: run 'fuzzyslam map' again",
             )
         from fuzzyslam.progress import note
 
