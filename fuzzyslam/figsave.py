@@ -24,6 +24,19 @@ from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import to_rgba_array
 from matplotlib.figure import Figure
 
+# The figures' one palette: Okabe & Ito (2008), "Color Universal Design", told apart with
+# any colour vision (tab10's orange and green are not, for deuteranopes). SERIES colours
+# the curves of a plot, in order, with SERIES_DASHES where curves overlap; the events
+# marked across plots (fig3, compare, consistency) keep colours of their own, none of
+# them a curve's; EXPECTED draws an expected value (black, dashed).
+OKABE_ITO = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442",
+             "#000000")  # fmt: skip
+BLUE, ORANGE, GREEN, PURPLE, SKY, VERMILLION, YELLOW, BLACK = OKABE_ITO
+SERIES = (BLUE, ORANGE, SKY, BLACK)
+SERIES_DASHES = ("-", "--", "-.", ":")
+EVENT_COLOURS = {"FGM frozen": GREEN, "lamp failure": VERMILLION, "bump": PURPLE}
+EXPECTED = BLACK
+
 COMPRESS_LEVEL = 3  # zlib: 6 (PIL's default) costs 1.5x the time for files 5-8 % smaller
 SOFTWARE = f"Matplotlib version{matplotlib.__version__}, https://matplotlib.org/"
 

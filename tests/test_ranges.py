@@ -412,8 +412,9 @@ def test_excerpt_is_small_and_named():
 
 @pytest.mark.slow
 def test_hough_figure_is_a_grid_for_many_corridors(tmp_path, capsys):
-    """hough.png of a building with 17 corridors: rows of at most HOUGH_COLUMNS panels,
-    not a strip 17 panels wide."""
+    """hough.png of a building with 17 corridors: rows of at most HOUGH_COLUMNS (3)
+    panels of one size, not a strip 17 panels wide: as wide as three panels with their
+    margins (a 7-inch column), as tall as its rows of panels."""
     import cv2
 
     from fuzzyslam.maps import figures
@@ -438,7 +439,12 @@ def test_hough_figure_is_a_grid_for_many_corridors(tmp_path, capsys):
     figures.fig_hough(path, fgm, many, None, None, cfg.fgm)
     h, w = cv2.imread(str(path)).shape[:2]
     cols, rows = figures.HOUGH_COLUMNS, -(-17 // figures.HOUGH_COLUMNS)
-    assert w <= 3.6 * cols * 110 + 1 and h >= 2 * rows * 3.0 * 110
+    assert cols <= 3
+    width = (
+        figures.H_LEFT + figures.H_RIGHT + cols * figures.PANEL_W + (cols - 1) * figures.H_WSPACE
+    )
+    assert w <= width * figures.DPI + 1 and width <= 7.5 + 1e-9
+    assert h >= 2 * rows * figures.PANEL_H * figures.DPI
 
 
 @pytest.mark.slow

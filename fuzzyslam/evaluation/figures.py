@@ -17,14 +17,28 @@ from numpy.typing import NDArray
 
 from fuzzyslam.evaluation.core import Estimate, Evaluation, Truth
 from fuzzyslam.evaluation.lamps import LampMatch
-from fuzzyslam.figsave import fixed_layout, save_png
+from fuzzyslam.figsave import (
+    BLACK,
+    BLUE,
+    EVENT_COLOURS,
+    EXPECTED,
+    GREEN,
+    ORANGE,
+    PURPLE,
+    SERIES,  # fmt: skip
+    SERIES_DASHES,
+    SKY,
+    VERMILLION,
+    fixed_layout,
+    save_png,
+)
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.slam.health import chi2_quantile
 from fuzzyslam.streams.logmeta import World
 
 Array = NDArray[np.float64]
 DPI = 120  # figures are made at their PNG's dpi: the layout's text sizes are the drawing's
-C_TRUTH, C_EST, C_ODOM = "black", "tab:blue", "tab:red"
+C_TRUTH, C_EST, C_ODOM = BLACK, BLUE, VERMILLION  # the Okabe-Ito palette (figsave.py)
 
 
 # Margins of the figures' fixed layouts (inches; fuzzyslam/figsave.py): tick labels and
@@ -35,6 +49,7 @@ C_TRUTH, C_EST, C_ODOM = "black", "tab:blue", "tab:red"
 LEFT, RIGHT, TOP, BOTTOM = 0.95, 0.25, 0.45, 0.65
 EVENTS_BELOW = 0.28  # the events' legend: its top this far below the last axes (axes heights)
 LEGEND_RIGHT = 3.6  # Fig. 1's legend right of the axes (its longest label, font size 8)
+LEGEND_SIDE = 2.6  # consistency's and compare's legends right of their axes (font size 8)
 
 
 EVENTS_HEIGHT = 0.4  # the events' legend: one row of font size 8, and a blank to spare
@@ -91,11 +106,13 @@ def fig1_paths(
                 lw=1.2,
                 label=("true walls" if i == 0 else None),
             )
-    ax.plot(truth.poses[:, 0], truth.poses[:, 1], color=C_TRUTH, lw=1.0, label="true path")
     if est.odometry is not None:
         op = est.odometry[1]
         ax.plot(op[:, 0], op[:, 1], color=C_ODOM, lw=0.8, ls="--", label="odometry only")
-    ax.plot(est.poses[:, 0], est.poses[:, 1], color=C_EST, lw=0.9, label=f"estimate ({est.label})")
+    ax.plot(est.poses[:, 0], est.poses[:, 1], color=C_EST, lw=1.6, label=f"estimate ({est.label})")
+    # the truth over the estimate, thin and dashed: where they agree both show
+    ax.plot(truth.poses[:, 0], truth.poses[:, 1], color=C_TRUTH, lw=0.7, ls=(0, (4, 2)),
+            label="true path", zorder=4)  # fmt: skip
     if world is not None and world.lamp_array.size:
         la = world.lamp_array
         ax.scatter(
@@ -104,7 +121,7 @@ def fig1_paths(
             s=70,
             marker="o",
             facecolors="none",
-            edgecolors="darkorange",
+            edgecolors=ORANGE,
             linewidths=1.5,
             label="true lamps",
             zorder=5,
@@ -117,15 +134,15 @@ def fig1_paths(
             est.landmarks[:, 1],
             s=40,
             marker="x",
-            color="green",
+            color=GREEN,
             linewidths=1.5,
             label="estimated lamps",
             zorder=6,
         )
         left = (  # the estimates the matching left over: (indices, size, colour, width, label)
-            (lamp_match.spurious, 40, "tab:purple", 1.5,
+            (lamp_match.spurious, 40, PURPLE, 1.5,
              f"spurious lamps ({{}}, > {lamp_match.max_dist:.2f} m from any)"),
-            (lamp_match.duplicates, 90, "red", 2.0, "duplicated lamps ({})"),
+            (lamp_match.duplicates, 90, VERMILLION, 2.0, "duplicated lamps ({})"),
         ) if lamp_match is not None else ()  # fmt: skip
         for idx, size, colour, width, label in left:
             if idx:
@@ -140,7 +157,7 @@ def fig1_paths(
                 s=110,
                 marker="s",
                 facecolors="none",
-                edgecolors="red",
+                edgecolors=VERMILLION,
                 linewidths=1.5,
                 label=f"missed lamps ({len(m)})",
                 zorder=7,
@@ -180,9 +197,9 @@ def _mark_events(axes: list[plt.Axes], truth: Truth) -> None:
 
     style = {
         "run start": {"color": "0.6", "lw": 0.8, "ls": ":"},
-        "FGM frozen": {"color": "tab:green", "lw": 1.2, "ls": "-"},
-        "lamp failure": {"color": "tab:red", "lw": 1.2, "ls": "--"},
-        "bump": {"color": "tab:purple", "lw": 1.0, "ls": "-."},
+        "FGM frozen": {"color": EVENT_COLOURS["FGM frozen"], "lw": 1.2, "ls": "-"},
+        "lamp failure": {"color": EVENT_COLOURS["lamp failure"], "lw": 1.2, "ls": "--"},
+        "bump": {"color": EVENT_COLOURS["bump"], "lw": 1.0, "ls": "-."},
     }
     times: dict[str, list[float]] = {k: [] for k in style}
     for r, t0, _t1 in truth.scenario.run_intervals():
@@ -267,12 +284,12 @@ def fig4_lamp_errors(
     width = 0.8 / max(len(labels), 1)
     x = np.arange(n)
     for j, lab in enumerate(labels):
+        colour = SERIES[j % len(SERIES)]
         v = np.asarray(per_lamp[lab], dtype=float) * 100.0
         pos = x[: v.size] - 0.4 + width * (j + 0.5)
         mean = np.nanmean(v) if np.isfinite(v).any() else np.nan
-        bars = ax.bar(
-            pos, np.nan_to_num(v), width=width * 0.95, label=f"{lab} (mean {mean:.1f} cm)"
-        )
+        bars = ax.bar(pos, np.nan_to_num(v), width=width * 0.95, color=colour,
+                      label=f"{lab} (mean {significant(mean)} cm)")  # fmt: skip
         miss = ~np.isfinite(v)
         if miss.any():
             ax.scatter(
@@ -298,6 +315,46 @@ def fig4_lamp_errors(
     _save(fig, path)
 
 
+def significant(v: float, digits: int = 2) -> str:
+    """``v`` with ``digits`` significant figures, no exponent (0.14, 0.063, 12, 130).
+
+    Parameters
+    ----------
+    v : float
+        The value.
+    digits : int
+        Significant figures.
+
+    Returns
+    -------
+    str
+    """
+    if not np.isfinite(v) or v == 0:
+        return f"{v:.{digits - 1}f}" if np.isfinite(v) else "nan"
+    raw = digits - 1 - int(np.floor(np.log10(abs(v))))  # decimals; < 0: rounds to tens
+    return f"{round(float(v), raw):.{max(0, raw)}f}"
+
+
+def log_floor(*values: Array) -> float:
+    """The lower limit of a log axis that shows every positive finite value: the power of
+    ten at or below the smallest (1e-3 without one).
+
+    Parameters
+    ----------
+    *values : ndarray
+        The values drawn.
+
+    Returns
+    -------
+    float
+    """
+    pos = [v[np.isfinite(v) & (v > 0)] for v in (np.asarray(x, dtype=float) for x in values)]
+    pos = [p for p in pos if p.size]
+    if not pos:
+        return 1e-3
+    return float(10.0 ** np.floor(np.log10(min(float(p.min()) for p in pos))))
+
+
 def running_mean(v: Array, frac: float = 0.02) -> Array:
     """Centred moving average over max(5, frac * n) samples (NaNs ignored)."""
     v = np.asarray(v, dtype=float)
@@ -315,58 +372,59 @@ def fig_consistency(path: Path, truth: Truth, est: Estimate, ev: Evaluation) -> 
     has_nis = est.updates is not None and est.updates.t.size > 0
     if ev.nees is None and not has_nis:
         return False
-    fig, axes = plt.subplots(2, 1, figsize=(10, 6), sharex=True, dpi=DPI)
+    fig, axes = plt.subplots(2, 1, figsize=(10 + LEGEND_SIDE, 6), sharex=True, dpi=DPI)
     ax = axes[0]
+    side = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "fontsize": 8, "frameon": False}
     if ev.nees is not None:
         lo, hi = chi2_quantile(0.025, 3), chi2_quantile(0.975, 3)
+        floor = log_floor(ev.nees)  # every sample inside the axes (zeros drawn at it)
         ax.semilogy(
             ev.assoc.t,
-            np.maximum(ev.nees, 1e-2),
-            color=C_EST,
+            np.maximum(ev.nees, floor),
+            color=SKY,
             lw=0.5,
-            alpha=0.6,
             label=f"NEES (mean {np.nanmean(ev.nees):.2f})",
         )
         ax.semilogy(
             ev.assoc.t,
             running_mean(ev.nees),
-            color="navy",
+            color=BLUE,
             lw=1.4,
             label="running mean (2 % of samples)",
         )
-        ax.axhspan(lo, hi, color="tab:green", alpha=0.15, label="95 % band, one sample (3 dof)")
-        ax.axhline(3.0, color="tab:green", lw=0.8)
-        ax.legend(fontsize=8, loc="lower left", framealpha=0.9)
+        ax.axhspan(lo, hi, color=ORANGE, alpha=0.15, lw=0, label="95 % band, one sample (3 dof)")
+        ax.axhline(3.0, color=EXPECTED, lw=0.9, ls="--", label="expected NEES = 3")
+        ax.set_ylim(bottom=min(floor, 10.0 ** np.floor(np.log10(lo))))
+        ax.legend(**side)
     ax.set_ylabel("NEES (pose, 3 dof)")
-    ax.set_ylim(bottom=1e-2)
     ax.grid(alpha=0.3, which="both")
     ax = axes[1]
     if has_nis:
         u = est.updates
         assert u is not None
+        kinds = []
         for kind in sorted(set(u.kind.tolist())):
             m = (u.kind == kind) & u.accepted & (u.dof > 0) & np.isfinite(u.nis)
             if m.any():
-                v = u.nis[m] / u.dof[m]
-                pts = ax.semilogy(
-                    u.t[m],
-                    np.maximum(v, 1e-3),
-                    ".",
-                    ms=2,
-                    alpha=0.5,
-                    label=f"{kind} ({m.sum()} accepted, mean {v.mean():.2f})",
-                )
-                ax.semilogy(u.t[m], running_mean(v), color=pts[0].get_color(), lw=1.4,
-                            label=f"{kind}, running mean")  # fmt: skip
-        ax.axhline(1.0, color="tab:green", lw=0.8, label="expected NIS / dof = 1")
-        ax.legend(fontsize=8, loc="upper left", markerscale=4)
+                kinds.append((kind, m, u.nis[m] / u.dof[m]))
+        floor = log_floor(*(v for _k, _m, v in kinds))
+        for j, (kind, m, v) in enumerate(kinds):
+            colour = SERIES[j % len(SERIES)]
+            ax.semilogy(u.t[m], np.maximum(v, floor), ".", ms=2, alpha=0.5, color=colour,
+                        label=f"{kind} ({m.sum()} accepted, mean {v.mean():.2f})")  # fmt: skip
+            ax.semilogy(u.t[m], running_mean(v), color=colour, lw=1.4,
+                        ls=SERIES_DASHES[j % len(SERIES_DASHES)],
+                        label=f"{kind}, running mean")  # fmt: skip
+        ax.axhline(1.0, color=EXPECTED, lw=0.9, ls="--", label="expected NIS / dof = 1")
+        ax.set_ylim(bottom=min(floor, 0.1))
+        ax.legend(**side, markerscale=4)
     ax.set_ylabel("NIS / dof (dimensionless)")
-    ax.set_ylim(bottom=1e-3)
     ax.set_xlabel("time (s)")
     ax.grid(alpha=0.3, which="both")
     _mark_events(list(axes), truth)
     axes[0].set_title("Filter consistency against truth (NEES) and innovations (NIS)", y=1.0)
-    fixed_layout(fig, LEFT, RIGHT, _events_bottom(fig, 2, 0.28), TOP, hspace=0.28)
+    bottom = _events_bottom(fig, 2, 0.28)
+    fixed_layout(fig, LEFT, RIGHT + LEGEND_SIDE, bottom, TOP, hspace=0.28)
     _save(fig, path)
     return True
 
@@ -388,18 +446,23 @@ def fig_compare(path: Path, truth: Truth, runs: Sequence[tuple[str, Evaluation]]
     """Position error (cm, log scale) against time of several estimates of one truth, with
     the run boundaries, the FGM freeze, lamp failures and bumps marked (``evaluate
     --compare``)."""
-    fig, ax = plt.subplots(figsize=(10, 4.2), dpi=DPI)
-    for label, ev in runs:
-        err = np.hypot(ev.errors[:, 0], ev.errors[:, 1]) * 100.0
-        ax.plot(ev.assoc.t, np.maximum(err, 1e-3), lw=0.9, label=label)
+    fig, ax = plt.subplots(figsize=(10 + LEGEND_SIDE, 4.2), dpi=DPI)
+    errs = [np.hypot(ev.errors[:, 0], ev.errors[:, 1]) * 100.0 for _label, ev in runs]
+    floor = log_floor(*errs)  # every error inside the axes (zeros drawn at it)
+    for j, ((label, ev), err) in enumerate(zip(runs, errs, strict=True)):
+        # the palette's colours, none an event's, and dashes: curves that coincide show
+        ax.plot(ev.assoc.t, np.maximum(err, floor), lw=1.0, color=SERIES[j % len(SERIES)],
+                ls=SERIES_DASHES[j % len(SERIES_DASHES)], label=label)  # fmt: skip
     ax.set_yscale("log")
+    ax.set_ylim(bottom=floor)
     ax.set_ylabel("position error (cm)")
     ax.set_xlabel("time (s)")
     ax.grid(alpha=0.3, which="both")
-    ax.legend(loc="upper left", fontsize=8)  # first: _mark_events keeps it beside its own
+    # right of the axes (none over the data); first: _mark_events keeps it beside its own
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
     _mark_events([ax], truth)
     ax.set_title("position error against time, side by side", y=1.0)
-    fixed_layout(fig, LEFT, RIGHT, _events_bottom(fig, 1, 0.0), TOP)
+    fixed_layout(fig, LEFT, RIGHT + LEGEND_SIDE, _events_bottom(fig, 1, 0.0), TOP)
     _save(fig, path)
 
 

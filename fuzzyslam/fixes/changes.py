@@ -348,7 +348,7 @@ def change_messages(changes: Sequence[Change], topic: str) -> list[tuple[str, st
 
 def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change]) -> None:
     """changes.png: the frozen FGM (pignistic occupancy, grey) with every detection drawn
-    over it (red, coloured by time from light to dark).
+    over it (black-edged dots coloured by time, viridis: dark early, light late).
 
     Parameters
     ----------
@@ -376,7 +376,10 @@ def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change]) -> None:
     if changes:
         xy = np.array([[c.x, c.y] for c in changes])
         t = np.array([c.t for c in changes])
-        sc = ax.scatter(xy[:, 0], xy[:, 1], c=t, cmap="autumn_r", s=12, edgecolors="none")
+        # viridis (dark to light, every shade visible on the white corridors, colour-blind
+        # safe), black-edged markers of a readable size
+        sc = ax.scatter(xy[:, 0], xy[:, 1], c=t, cmap="viridis", s=45, edgecolors="black",
+                        linewidths=0.7, zorder=3)  # fmt: skip
         fig.colorbar(sc, ax=ax, label="time (s)")
     ax.set_title(f"change detections ({len(changes)}) over the frozen FGM", y=1.0)
     ax.set_xlabel("x (m)")

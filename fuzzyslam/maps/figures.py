@@ -11,8 +11,11 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib import patheffects
+from matplotlib.lines import Line2D
+from matplotlib.ticker import MaxNLocator, MultipleLocator
 
-from fuzzyslam.figsave import fixed_layout, save_png
+from fuzzyslam.figsave import BLACK, BLUE, ORANGE, VERMILLION, YELLOW, fixed_layout, save_png
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.maps.flm import build_flm
 from fuzzyslam.maps.grid import BeliefMap, Grid
@@ -23,6 +26,8 @@ from fuzzyslam.rundir import read_landmarks
 from fuzzyslam.streams.logmeta import World
 
 DPI = 110  # figures are made at their PNG's dpi: the layout's text sizes are the drawing's
+LEGEND_RIGHT = 2.4  # fgm.png: its legend and corridor key right of the axes (inches)
+HALO = [patheffects.withStroke(linewidth=2.5, foreground="white")]  # labels over the map
 
 
 def _save(fig, path: Path, tight: bool = False) -> None:
@@ -56,7 +61,8 @@ def fig_fgm(
     landmarks : ndarray, shape (K, 2), or None
         Estimated lamps.
     """
-    fig, ax = plt.subplots(figsize=(9, 6), dpi=DPI)
+    fig, ax = plt.subplots(figsize=(9, 6.2), dpi=DPI)
+    fixed_layout(fig, 0.75, LEGEND_RIGHT, 1.15, 0.4)
     im = ax.imshow(
         fgm.pignistic_occupied(),
         origin="lower",
@@ -65,25 +71,43 @@ def fig_fgm(
         vmin=0,
         vmax=1,
     )
-    fig.colorbar(im, ax=ax, shrink=0.7, label="BetP(occupied) (probability)")
-    ax.plot(poses[:, 0], poses[:, 1], "-", color="tab:blue", lw=0.8, label="path")
+    fig.colorbar(im, ax=ax, shrink=0.6, location="bottom", pad=0.1,
+                 label="BetP(occupied) (probability)")  # fmt: skip
+    ax.plot(poses[:, 0], poses[:, 1], "-", color=BLUE, lw=0.9, label="path")
+    centre = np.mean(np.reshape(fgm.grid.extent, (2, 2)), axis=1)
+    key = []
     for k, r in enumerate(refs):
         poly = np.vstack([r.region, r.region[:1]])
-        ax.plot(poly[:, 0], poly[:, 1], "--", color="tab:orange", lw=0.8,
-                label="corridor region: id, reference angle" if k == 0 else "_")  # fmt: skip
-        c = r.region.mean(axis=0)
-        ax.annotate(f"{r.id}: {np.rad2deg(r.angle):.2f} deg", c, color="tab:orange", fontsize=8)
+        ax.plot(poly[:, 0], poly[:, 1], "--", color=ORANGE, lw=1.0,
+                label="corridor region (number: key)" if k == 0 else "_")  # fmt: skip
+        # its number at the region's corner farthest from the map's centre (off the
+        # path, which runs down the region's middle), haloed white: the key beside says
+        # its reference angle
+        corner = r.region[int(np.argmax(np.hypot(*(r.region - centre).T)))]
+        ax.annotate(str(r.id), corner, fontsize=8, fontweight="bold", color=BLACK,
+                    ha="center", va="center", path_effects=HALO)  # fmt: skip
+        key.append(f"{r.id}: {np.rad2deg(r.angle):.2f} deg")
     if world is not None and len(world.lamps):
         la = world.lamp_array
-        ax.plot(la[:, 0], la[:, 1], "o", mfc="none", color="gold", label="true lamps")
+        ax.plot(la[:, 0], la[:, 1], "o", mfc=YELLOW, mec=BLACK, mew=1.0, ms=8,
+                label="true lamps")  # fmt: skip
     if landmarks is not None and len(landmarks):
-        ax.plot(landmarks[:, 0], landmarks[:, 1], "x", color="tab:red", label="estimated lamps")
+        ax.plot(landmarks[:, 0], landmarks[:, 1], "X", mfc=VERMILLION, mec=BLACK, mew=0.6,
+                ms=7, label="estimated lamps")  # fmt: skip
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
     ax.set_title("Fuzzy global map: BetP(occupied) (dark = occupied)", y=1.0)
-    ax.legend(loc="upper right", fontsize=8)
-    _save(fig, path)
+    # the legend and the corridors' key right of the axes (none over the map)
+    leg = ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False)
+    if key:
+        # no measuring: the key hangs below the legend's rows at a fixed offset (points)
+        rows = len(ax.get_legend_handles_labels()[0]) + 1
+        ax.annotate("corridor: reference angle\n" + "\n".join(key), (1.04, 1.0),
+                    xycoords="axes fraction", xytext=(0, -rows * 15), textcoords="offset points",
+                    fontsize=8, va="top", ha="left", annotation_clip=False)  # fmt: skip
+    assert leg is not None
+    _save(fig, path, tight=True)
 
 
 def fig_conflict(path: Path, fgm: BeliefMap) -> None:
@@ -96,50 +120,90 @@ def fig_conflict(path: Path, fgm: BeliefMap) -> None:
     fgm : BeliefMap
         The FGM.
     """
-    fig, ax = plt.subplots(figsize=(9, 6), dpi=DPI)
+    fig, ax = plt.subplots(figsize=(8, 6), dpi=DPI)
+    fixed_layout(fig, 0.75, 1.2, 0.6, 0.4)
     im = ax.imshow(fgm.m_c, origin="lower", extent=fgm.grid.extent, cmap="magma", vmin=0)
     fig.colorbar(im, ax=ax, label="m(conflict) (mass)")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
     ax.set_title("FGM contradiction (conflict mass)", y=1.0)
-    _save(fig, path)
+    _save(fig, path, tight=True)
 
 
-def _hough_panel(ax, wd: WallDirection, title: str) -> None:
-    if wd.plane is None:
-        ax.set_title(title + " (no evidence)", y=1.0)
-        return
+def _wrapped_plane(wd: WallDirection) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    """The Hough plane over normal angles [-HOUGH_PAD_DEG, 180 + HOUGH_PAD_DEG) (deg),
+    scaled to its largest vote: a line (theta, rho) is (theta + 180, -rho), so the
+    columns beyond 0 and 180 are the other end's, rho mirrored (to the nearest row), and a
+    peak at 0 or 180 deg shows whole. Returns the image and its ``imshow`` extent."""
     pl = wd.plane
-    im = ax.imshow(
-        pl.acc,
-        origin="lower",
-        aspect="auto",
-        cmap="viridis",
-        extent=(0, 180, pl.rhos[0], pl.rhos[-1]),
-    )
-    ax.figure.colorbar(im, ax=ax, label="votes (m of wall)")
-    seen = set()
+    assert pl is not None
+    acc = pl.acc / max(float(pl.acc.max()), 1e-12)
+    th = np.rad2deg(pl.thetas)
+    dth = float(th[1] - th[0]) if th.size > 1 else 1.0
+    k = min(int(np.ceil(HOUGH_PAD_DEG / dth)), th.size)
+    rhos = pl.rhos
+    dr = float(rhos[1] - rhos[0]) if rhos.size > 1 else 1.0
+    j = np.rint((-rhos - rhos[0]) / dr).astype(int)  # the row of -rho
+    ok = (j >= 0) & (j < rhos.size)
+    mirrored = np.zeros_like(acc)
+    mirrored[ok] = acc[j[ok]]
+    wide = np.hstack([mirrored[:, th.size - k :], acc, mirrored[:, :k]])
+    extent = (th[0] - (k + 0.5) * dth, th[-1] + (k + 0.5) * dth,
+              rhos[0] - 0.5 * dr, rhos[-1] + 0.5 * dr)  # fmt: skip
+    return wide, extent
+
+
+def _hough_panel(ax, wd: WallDirection | None, title: str, cbar_of: dict) -> None:
+    """A Hough plane (votes over the line normal's angle and rho) with its peaks: the wall
+    direction's (red) and the strongest of another direction (white, when there is one),
+    each also drawn at its other end (theta +- 180 deg, -rho) where the padding shows it."""
+    ax.set_xlabel("θ: angle of line normal (deg)")
+    ax.set_ylabel("ρ (m)")
+    ax.xaxis.set_major_locator(MultipleLocator(45))
+    ax.yaxis.set_major_locator(MaxNLocator(4))
+    if wd is None or wd.plane is None:
+        ax.set_title(title + " (no evidence)", y=1.0)
+        ax.set_xlim(-HOUGH_PAD_DEG, 180 + HOUGH_PAD_DEG)
+        return
+    wide, extent = _wrapped_plane(wd)
+    im = ax.imshow(wide, origin="lower", aspect="auto", cmap="viridis", vmin=0.0, vmax=1.0,
+                   extent=extent, interpolation="nearest")  # fmt: skip
+    _shared_colorbar(im, cbar_of, "votes")
+    for t in (0.0, 180.0):  # the plane's period: beyond these lines it repeats
+        ax.axvline(t, color="white", lw=0.6, ls=":")
     for k, pk in enumerate(wd.peaks):
         # the peaks of the wall direction (red), and the strongest peak of another
         # direction (white, last) when the map has one (an ambiguous wall)
         second = k == len(wd.peaks) - 1 and bool(wd.second_strength)
-        label = "peak of another direction" if second else "wall peaks (the direction)"
-        ax.plot(
-            np.rad2deg(pk.theta),
-            pk.rho,
-            "o",
-            color="white" if second else "red",
-            mfc="none",
-            ms=8,
-            label=label if label not in seen else "_",
-        )
-        seen.add(label)
-    if wd.peaks:
-        ax.legend(fontsize=6, loc="upper right", framealpha=0.7)
-    ax.set_xlabel("theta (deg)")
-    ax.set_ylabel("rho (m)")
-    ax.set_title(title, fontsize=9, y=1.0)
+        th, rho = np.rad2deg(pk.theta), pk.rho
+        at = [(th, rho)]  # and the other end where the padding holds the whole circle
+        if th < HOUGH_PAD_DEG - PEAK_ROOM_DEG:
+            at.append((th + 180.0, -rho))
+        if th > 180.0 - HOUGH_PAD_DEG + PEAK_ROOM_DEG:
+            at.append((th - 180.0, -rho))
+        xs, ys = zip(*at, strict=True)
+        ax.plot(xs, ys, **(PEAK_OTHER if second else PEAK_WALL))
+    ax.set_xlim(-HOUGH_PAD_DEG, 180 + HOUGH_PAD_DEG)
+    ax.set_ylim(extent[2], extent[3])
+    ax.set_title(title, y=1.0)
+
+
+def _shared_colorbar(im, cbar_of: dict, kind: str) -> None:
+    """Give ``im`` the figure's one colour bar of its ``kind`` (the images of a kind share
+    its colour map and its 0-1 range): the first image of the kind is drawn into it."""
+    cbar_of.setdefault(kind, []).append(im)
+
+
+def _box_of_aspect(lo: np.ndarray, hi: np.ndarray, aspect: float) -> tuple[np.ndarray, np.ndarray]:
+    """The box [lo, hi] grown about its centre by 4 % and to height / width = ``aspect``
+    (a panel's shape: a map drawn at equal scale fills its panel)."""
+    c, size = (lo + hi) / 2.0, np.maximum(hi - lo, 1e-6) * 1.04  # the box's edges inside
+    if size[1] / size[0] < aspect:
+        size = np.array([size[0], size[0] * aspect])
+    else:
+        size = np.array([size[1] / aspect, size[1]])
+    return c - size / 2.0, c + size / 2.0
 
 
 def crop_cells(
@@ -176,7 +240,34 @@ def crop_cells(
     return values[iy0:iy1, ix0:ix1], extent
 
 
-HOUGH_COLUMNS = 6  # corridor panels per row of hough.png
+HOUGH_COLUMNS = 3  # corridor panels per row of hough.png (a 7-inch column holds three)
+HOUGH_PAD_DEG = 15.0  # the Hough planes drawn over [-15, 195) deg: peaks at 0 or 180 whole
+PEAK_ROOM_DEG = 7.0  # a peak's circle is about this wide on the theta axis: none cut
+# hough.png's layout (inches): every panel the same size, the margins and gaps hold the
+# tick labels, axis labels and titles; the legend on top, the two colour bars right
+PANEL_W, PANEL_H = 1.6, 1.35
+H_LEFT, H_RIGHT, H_BOTTOM, H_TOP = 0.55, 0.95, 0.5, 0.95
+H_WSPACE, H_HSPACE = 0.6, 0.62
+HOUGH_FONTS = {"font.size": 8, "axes.titlesize": 8, "axes.labelsize": 8,
+               "xtick.labelsize": 7, "ytick.labelsize": 7, "legend.fontsize": 8}  # fmt: skip
+# the peaks: red (the wall direction) and white (another), black-edged to show on any
+# colour of the plane and in the legend
+_EDGE = [patheffects.withStroke(linewidth=2.6, foreground="black")]
+PEAK_WALL = {
+    "ls": "none",
+    "marker": "o",
+    "mfc": "none",
+    "color": "#FF3030",
+    "ms": 7,
+    "mew": 1.3,
+    "path_effects": _EDGE,
+    "label": "wall peaks (the wall direction)",
+}
+PEAK_OTHER = {"ls": "none", "marker": "o", "mfc": "none", "color": "white", "ms": 7,
+              "mew": 1.3, "path_effects": _EDGE,
+              "label": "strongest peak of another direction"}  # fmt: skip
+REGION = {"ls": "--", "color": ORANGE, "lw": 1.0, "label": "corridor region"}
+ROBOT = {"ls": "none", "marker": "^", "color": BLUE, "ms": 6, "label": "robot (FLM)"}
 
 
 def fig_hough(
@@ -189,7 +280,8 @@ def fig_hough(
 ) -> None:
     """The paper's Fig. 2: each corridor segment's wall evidence and an FLM (top) with
     their Hough planes and peaks (bottom); a grid of such pairs, ``HOUGH_COLUMNS`` per
-    row, for buildings with many corridors.
+    row, every panel ``PANEL_W`` by ``PANEL_H`` inches, one legend on top and one colour
+    bar per kind of image (wall weight, votes) on the right.
 
     Parameters
     ----------
@@ -206,60 +298,93 @@ def fig_hough(
     params : MapParams
         The ``fgm:`` section.
     """
+    with plt.rc_context(HOUGH_FONTS):  # ticks are made at the draw: it is inside
+        _fig_hough(path, fgm, refs, flm, flm_wd, params)
+
+
+def _fig_hough(path, fgm, refs, flm, flm_wd, params) -> None:
     n = len(refs) + (1 if flm is not None else 0)
     cols = min(max(n, 1), HOUGH_COLUMNS)
     blocks = -(-max(n, 1) // cols)
-    fig, grid = plt.subplots(
-        2 * blocks, cols, figsize=(3.6 * cols, 7 * blocks), squeeze=False, dpi=DPI
-    )
+    rows = 2 * blocks
+    w = H_LEFT + H_RIGHT + cols * PANEL_W + (cols - 1) * H_WSPACE
+    h = H_TOP + H_BOTTOM + rows * PANEL_H + (rows - 1) * H_HSPACE
+    fig, grid = plt.subplots(rows, cols, figsize=(w, h), squeeze=False, dpi=DPI)
     for ax in grid.ravel():
         ax.set_axis_off()
+    aspect = PANEL_H / PANEL_W
+    cbar_of: dict = {}
+    drawn = {"region": False, "robot": False, "other": False}
 
     def pair(k: int):
         top, bottom = grid[2 * (k // cols), k % cols], grid[2 * (k // cols) + 1, k % cols]
         top.set_axis_on()
         bottom.set_axis_on()
+        for ax in (top, bottom):
+            ax.xaxis.set_major_locator(MaxNLocator(4))
+            ax.yaxis.set_major_locator(MaxNLocator(4))
         return top, bottom
 
-    w = wall_weights(fgm, params.wall_threshold)
+    def other(wd: WallDirection | None) -> bool:
+        return (
+            wd is not None and wd.plane is not None and bool(wd.peaks) and bool(wd.second_strength)
+        )
+
+    wts = wall_weights(fgm, params.wall_threshold)
     for k, r in enumerate(refs):
-        lo, hi = r.region.min(axis=0), r.region.max(axis=0)
+        lo, hi = _box_of_aspect(r.region.min(axis=0), r.region.max(axis=0), aspect)
         ax, bottom = pair(k)
-        part, extent = crop_cells(w, fgm.grid, lo, hi)
-        im = ax.imshow(part, origin="lower", extent=extent, cmap="gray_r", vmin=0, vmax=1)
-        fig.colorbar(im, ax=ax, shrink=0.8, label="wall weight (0-1)")
+        part, extent = crop_cells(wts, fgm.grid, lo, hi)
+        im = ax.imshow(part, origin="lower", extent=extent, cmap="gray_r", vmin=0, vmax=1,
+                       interpolation="nearest")  # fmt: skip
+        _shared_colorbar(im, cbar_of, "wall")
         poly = np.vstack([r.region, r.region[:1]])
-        ax.plot(poly[:, 0], poly[:, 1], "--", color="tab:orange", lw=0.8, label="region")
-        ax.legend(fontsize=6, loc="upper right", framealpha=0.7)
+        ax.plot(poly[:, 0], poly[:, 1], **REGION)
+        drawn["region"] = True
         ax.set_xlim(lo[0], hi[0])
         ax.set_ylim(lo[1], hi[1])
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
         ax.set_aspect("equal")
-        ax.set_title(f"{r.name}: {np.rad2deg(r.angle):.2f} deg", fontsize=9, y=1.0)
-        if r.wall is not None:
-            _hough_panel(bottom, r.wall, f"Hough, strength {r.strength:.2f} m")
+        ax.set_title(f"{r.name}: {np.rad2deg(r.angle):.2f} deg", y=1.0)
+        _hough_panel(bottom, r.wall, f"Hough: peak {r.strength:.2f} m", cbar_of)
+        drawn["other"] |= other(r.wall)
     if flm is not None and flm_wd is not None:
         ax, bottom = pair(n - 1)
-        im = ax.imshow(
-            wall_weights(flm, params.wall_threshold),
-            origin="lower",
-            extent=flm.grid.extent,
-            cmap="gray_r",
-            vmin=0,
-            vmax=1,
-        )
-        fig.colorbar(im, ax=ax, shrink=0.8, label="wall weight (0-1)")
-        ax.plot(0, 0, "^", color="tab:blue", label="robot")
-        ax.legend(fontsize=6, loc="upper right", framealpha=0.7)
+        e = flm.grid.extent
+        lo, hi = _box_of_aspect(np.array([e[0], e[2]]), np.array([e[1], e[3]]), aspect)
+        im = ax.imshow(wall_weights(flm, params.wall_threshold), origin="lower", extent=e,
+                       cmap="gray_r", vmin=0, vmax=1, interpolation="nearest")  # fmt: skip
+        _shared_colorbar(im, cbar_of, "wall")
+        ax.plot(0, 0, **ROBOT)
+        drawn["robot"] = True
+        ax.set_xlim(lo[0], hi[0])
+        ax.set_ylim(lo[1], hi[1])
         ax.set_xlabel("x, robot frame (m)")
         ax.set_ylabel("y, robot frame (m)")
         ax.set_aspect("equal")
-        ax.set_title(f"FLM (robot frame): {np.rad2deg(flm_wd.angle):.2f} deg", fontsize=9, y=1.0)
-        _hough_panel(bottom, flm_wd, f"FLM Hough, strength {flm_wd.strength:.2f} m")
-    # fixed margins and gaps (inches) for the tick labels, axis labels, titles and colour
-    # bars' labels between the panels, the blank rest cropped (fuzzyslam/figsave.py)
-    fixed_layout(fig, 0.75, 0.6, 0.6, 0.35, hspace=0.8, wspace=1.1)
+        ax.set_title(f"FLM (robot frame): {np.rad2deg(flm_wd.angle):.2f} deg", y=1.0)
+        _hough_panel(bottom, flm_wd, f"FLM Hough: peak {flm_wd.strength:.2f} m", cbar_of)
+        drawn["other"] |= other(flm_wd)
+    # fixed margins and gaps (inches) for the tick labels, axis labels and titles between
+    # the panels, the blank rest cropped (fuzzyslam/figsave.py)
+    fixed_layout(fig, H_LEFT, H_RIGHT, H_BOTTOM, H_TOP, hspace=H_HSPACE, wspace=H_WSPACE)
+    # one colour bar per kind, right of the first block's last panel (its top row: wall
+    # weight, its bottom row: votes); the images of a kind share it (same map, 0-1)
+    labels = {"wall": (0, "wall weight (0-1)"), "votes": (1, "votes / panel's peak (0-1)")}
+    for kind, ims in cbar_of.items():
+        row, label = labels[kind]
+        box = grid[row, cols - 1].get_position()
+        cax = fig.add_axes((box.x1 + 0.12 / w, box.y0, 0.1 / w, box.height), label="<colorbar>")
+        cb = fig.colorbar(ims[0], cax=cax, label=label)
+        cb.ax.yaxis.set_major_locator(MaxNLocator(3))
+        for im in ims[1:]:
+            im.colorbar = cb  # drawn with the colour bar's map and range
+    entries = ((REGION, drawn["region"]), (ROBOT, drawn["robot"]), (PEAK_WALL, True),
+               (PEAK_OTHER, drawn["other"]))  # fmt: skip
+    handles = [Line2D([], [], **kw) for kw, on in entries if on]
+    fig.legend(handles=handles, loc="upper left", bbox_to_anchor=(H_LEFT / w, 1.0 - 0.05 / h),
+               ncol=2, frameon=False, handlelength=2.2, columnspacing=1.5)  # fmt: skip
     _save(fig, path, tight=True)
 
 

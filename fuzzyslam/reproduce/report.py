@@ -168,7 +168,7 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
 
     from fuzzyslam.evaluation.evaluate import read_truth
     from fuzzyslam.evaluation.metrics import associate, pose_errors
-    from fuzzyslam.figsave import fixed_layout, save_png
+    from fuzzyslam.figsave import SERIES, SERIES_DASHES, fixed_layout, save_png
     from fuzzyslam.streams.tum import read_tum
 
     panels = [p for p in SUMMARY_PANELS if (root / seed_dir / f"{p[0]}.mcap").is_file()]
@@ -178,14 +178,16 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
     axes = fig.subplots(len(panels), 1, squeeze=False)[:, 0]
     for ax, (log, title, runs) in zip(axes, panels, strict=True):
         truth = read_truth(root / seed_dir / f"{log}.mcap", progress=False)  # beside the plan's
-        for name, label in runs:
+        for j, (name, label) in enumerate(runs):
             tum = root / seed_dir / name / "trajectory.tum"
             if not tum.is_file():
                 continue
             t, poses = read_tum(tum)
             a = associate(t, poses, truth.t, truth.poses, 0.05)
             e = pose_errors(a.est, a.truth)
-            ax.plot(a.t, 100.0 * np.hypot(e[:, 0], e[:, 1]), lw=0.9, label=label)
+            # the Okabe-Ito palette and dashes: the curves coincide until the freeze
+            style = {"color": SERIES[j % len(SERIES)], "ls": SERIES_DASHES[j % len(SERIES_DASHES)]}
+            ax.plot(a.t, 100.0 * np.hypot(e[:, 0], e[:, 1]), lw=1.0, label=label, **style)
         if truth.scenario is not None:
             for r, t0, _t1 in truth.scenario.run_intervals():
                 ax.axvline(t0, color="0.8", lw=0.6)

@@ -18,23 +18,64 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 
+from fuzzyslam.figsave import OKABE_ITO  # the figures' one palette (Okabe-Ito)
 from fuzzyslam.fileio import atomic_path
 
 DPI = 150
-# Okabe & Ito (2008), "Color Universal Design": distinguishable with any colour vision
-OKABE_ITO = ("#0072B2", "#E69F00", "#009E73", "#CC79A7", "#56B4E9", "#D55E00", "#F0E442",
-             "#000000")  # fmt: skip
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 # unit of a config key by its name's ending (the config's naming convention)
 SUFFIX_UNITS = {"_deg": "deg", "_m": "m", "_s": "s", "_hz": "Hz", "_px": "px", "_cm": "cm"}
 
 
+def config_unit(key: str) -> str | None:
+    """The unit of a dotted config key (``robot.wheel_noise``) from its field's
+    ``metadata["unit"]`` in the config's dataclasses; None when the field gives none (or
+    the key names no field).
+
+    Parameters
+    ----------
+    key : str
+        The dotted key.
+
+    Returns
+    -------
+    str or None
+    """
+    import dataclasses
+    import typing
+
+    from fuzzyslam.config import Config
+
+    cls: Any = Config
+    field = None
+    for part in key.split("."):
+        if not dataclasses.is_dataclass(cls):
+            return None
+        fields = {f.name: f for f in dataclasses.fields(cls)}
+        if part not in fields:
+            return None
+        field = fields[part]
+        cls = typing.get_type_hints(cls).get(part)
+    return field.metadata.get("unit") if field is not None else None
+
+
 def key_label(key: str) -> str:
-    """Axis label of a config key with its unit (from its name, else the config's)."""
-    for suffix, unit in SUFFIX_UNITS.items():
-        if key.endswith(suffix):
-            return f"{key} ({unit})"
-    return f"{key} (config units)"
+    """Axis label of a config key: its name with its unit, from the config's metadata
+    (:func:`config_unit`), else from its name's ending; the name alone without one.
+
+    Parameters
+    ----------
+    key : str
+        The dotted key.
+
+    Returns
+    -------
+    str
+    """
+    unit = config_unit(key)
+    if unit is None:
+        unit = next((u for suffix, u in SUFFIX_UNITS.items() if key.endswith(suffix)), None)
+    return f"{key} ({unit})" if unit else key
 
 
 def _numeric(values: list[Any]) -> bool:

@@ -47,7 +47,9 @@ class RobotParams:
     right_scale: float = field(default=0.9996, metadata={"min": 0.5, "max": 1.5})
     base_scale: float = field(default=1.01, metadata={"min": 0.5, "max": 1.5})
     # random encoder error: std (rad) of a wheel's angle increment per sqrt(rad) turned
-    wheel_noise: float = field(default=0.01, metadata={"min": 0.0, "max": 1.0})
+    wheel_noise: float = field(
+        default=0.01, metadata={"min": 0.0, "max": 1.0, "unit": "rad/sqrt(rad)"}
+    )
     ticks_per_rev: int = field(default=4096, metadata={"min": 1})
 
 
