@@ -118,6 +118,56 @@ def test_scheduler_unreachable_is_one_line(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+def test_an_address_that_is_no_dask_scheduler_is_one_line(tmp_path):
+    """A server that accepts the connection and says nothing (a dashboard's port, any HTTP
+    server) held the client's handshake for ever: now one line and exit 3 after the
+    connect timeout and its margin; one that answers garbage is refused alike."""
+    import socket
+    import threading
+
+    from fuzzyslam.reproduce.execute import CONNECT_MARGIN_S
+
+    def serve(sock: socket.socket, reply: bytes) -> None:
+        while True:
+            try:
+                conn, _ = sock.accept()
+            except OSError:
+                return
+            conn.sendall(reply)  # then keeps the connection open, silent
+
+    for reply, why in ((b"", "no Dask scheduler answered"),
+                       (b"\xff" * 64, "not a Dask scheduler")):  # fmt: skip
+        sock = socket.create_server(("127.0.0.1", 0))
+        threading.Thread(target=serve, args=(sock, reply), daemon=True).start()
+        port = sock.getsockname()[1]
+        t0 = time.monotonic()
+        p = cli("reproduce", "--quick", "--seeds", "1", "-o", tmp_path / "o",
+                "--scheduler", f"tcp://127.0.0.1:{port}",
+                env={"DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "1s"})  # fmt: skip
+        sock.close()
+        lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+        assert p.returncode == 3 and len(lines) == 1 and why in lines[0], p.stderr
+        assert time.monotonic() - t0 < 1.0 + CONNECT_MARGIN_S + 10.0
+        assert not (tmp_path / "o").exists()
+
+
+def test_stale_temporary_outputs_are_removed(tmp_path):
+    """What a killed step left (a staging directory, a file's temporary) goes once every
+    step has succeeded; the outputs stay."""
+    from fuzzyslam.reproduce.execute import remove_stale_parts
+
+    (tmp_path / "seed0" / "D").mkdir(parents=True)
+    (tmp_path / "seed0" / "D" / "trajectory.tum").write_text("x")
+    stale = tmp_path / "seed0" / ".D.abc123.part"
+    stale.mkdir()
+    (stale / ".estimates.mcap.xyz.part").write_bytes(b"half")
+    (tmp_path / ".paper.mcap.q1w2.part").write_bytes(b"half")
+    gone = remove_stale_parts(tmp_path)
+    assert sorted(p.name for p in gone) == [".D.abc123.part", ".paper.mcap.q1w2.part"]
+    left = sorted(p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*"))
+    assert left == ["seed0", "seed0/D", "seed0/D/trajectory.tum"]
+
+
 def test_sweep_logs_bad_arguments_are_one_line(tmp_path):
     """--logs with --seeds, or a glob matching nothing: one line, exit 3, nothing written."""
     (tmp_path / "a.mcap").write_bytes(b"")
@@ -320,6 +370,7 @@ def test_reproduce_ships_the_files_with_the_tasks(tmp_path, dask_cluster, local_
     local, remote = local_run, tmp_path / "remote"
     p = cli(*args, "-o", remote, "--scheduler", address, "--ship-files")
     assert p.returncode == 0, p.stderr
+    assert "Warning" not in p.stderr and "Traceback" not in p.stderr  # one line per step
     results = json.loads((remote / "results.json").read_text())
     used = {(s["worker"], s["pid"]) for s in results["steps"]}
     assert used <= set(worker_pids.items()) and {w for w, _ in used} == set(worker_pids)
@@ -341,6 +392,61 @@ def test_reproduce_ships_the_files_with_the_tasks(tmp_path, dask_cluster, local_
             assert a == b, rel
     # the workers' private step directories are gone; no output was written beside them
     assert not list(homes.glob("worker*/fuzzyslam-step.*"))
+
+
+@pytest.mark.slow
+def test_a_scheduler_that_goes_away_is_one_line(tmp_path):
+    """The scheduler killed while steps run: one line naming it, exit 3 (was an internal
+    error with Dask's tracebacks), and nothing left of the output."""
+    sched_file = tmp_path / "scheduler.json"
+    env = {k: v for k, v in os.environ.items() if k != "FUZZYSLAM_NO_PROGRESS"}
+    env["MPLBACKEND"] = "Agg"  # progress lines on: the first finished step is seen
+    sched = subprocess.Popen(
+        [BIN / "dask", "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+         "--scheduler-file", sched_file],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, start_new_session=True,
+    )  # fmt: skip
+    worker = None
+    try:
+        for _ in range(300):
+            if sched_file.is_file() and sched_file.stat().st_size > 0:
+                break
+            time.sleep(0.1)
+        worker = subprocess.Popen(
+            [BIN / "dask", "worker", "--scheduler-file", sched_file, "--nthreads", "1",
+             "--host", "127.0.0.1", "--no-dashboard", "--local-directory", tmp_path],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+            start_new_session=True,
+        )  # fmt: skip
+        from distributed import Client
+
+        with Client(scheduler_file=str(sched_file), timeout=30) as client:
+            client.wait_for_workers(1, timeout=60)
+            address = client.scheduler.address
+        log = tmp_path / "stderr.txt"
+        with open(log, "w") as err:
+            run = subprocess.Popen(
+                [sys.executable, "-m", "fuzzyslam", "reproduce", "--quick", "--paper-only",
+                 "--seeds", "1", "-o", tmp_path / "out", "--scheduler", address],
+                stdout=subprocess.PIPE, stderr=err, env=env,
+            )  # fmt: skip
+            for _ in range(600):  # the first finished step, then the scheduler dies
+                if "[1/" in log.read_text() or run.poll() is not None:
+                    break
+                time.sleep(0.1)
+            os.killpg(sched.pid, signal.SIGKILL)
+            run.wait(timeout=120)
+        lines = [ln for ln in log.read_text().splitlines() if ln.startswith("fuzzyslam:")]
+        assert run.returncode == 3, log.read_text()
+        assert len(lines) == 1 and "the Dask cluster failed" in lines[0], log.read_text()
+        assert "Traceback" not in log.read_text()
+        assert not (tmp_path / "out").exists() and not list(tmp_path.glob(".out.*"))
+    finally:
+        for p in (worker, sched):
+            if p is not None:
+                with contextlib.suppress(ProcessLookupError):
+                    os.killpg(p.pid, signal.SIGKILL)
+                p.wait()
 
 
 # --- sweep (slow) ---------------------------------------------------------------------------

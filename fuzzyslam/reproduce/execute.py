@@ -246,13 +246,10 @@ class Engine:
             raise InputError(
                 scheduler, "--scheduler needs Dask: pip install 'fuzzyslam[dask]'"
             ) from None
-        try:
-            # Dask's own connect timeout when the user set it in the environment, else 10 s
-            timeout = os.environ.get("DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT", "10s")
-            self._client = Client(scheduler, timeout=timeout, set_as_default=False)
-        except (OSError, TimeoutError) as exc:
-            msg = " ".join(str(exc).split())
-            raise InputError(scheduler, f"cannot reach the Dask scheduler: {msg}") from None
+        # Dask's own connect timeout when the user set it in the environment, else 10 s
+        timeout = os.environ.get("DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT", "10s")
+        self._client = _connect(Client, scheduler, timeout)
+        quiet_dask()  # its errors become our one line (ClusterFailed), not log tracebacks
         threads = sum(
             w.get("nthreads", 1) for w in self._client.scheduler_info()["workers"].values()
         )
@@ -304,6 +301,121 @@ class Engine:
             return
         self.pool.shutdown(wait=not cancel)  # Dask's executor: wait=False cancels
         self._client.close()
+
+
+CONNECT_MARGIN_S = 5.0  # beyond the connect timeout: the handshake of what answered
+
+
+def _connect(client_type: Any, scheduler: str, timeout: str) -> Any:
+    """A Dask Client of ``scheduler``, or one line (InputError) on why there is none.
+
+    Dask's connect timeout covers the TCP connection; a server that accepts it and then
+    says nothing (the scheduler's dashboard, port 8787, or another HTTP server) would hold
+    the handshake for ever, and one that answers with something else makes the client
+    read garbage (a frame of exabytes). So the client is made in a thread given the
+    timeout plus ``CONNECT_MARGIN_S``, and any failure is the scheduler's: nothing that
+    answered there was a Dask scheduler.
+    """
+    from dask.utils import parse_timedelta
+
+    box: dict[str, Any] = {}
+
+    def make() -> None:
+        try:
+            box["client"] = client_type(scheduler, timeout=timeout, set_as_default=False)
+        except BaseException as exc:  # reported below, in one line
+            box["error"] = exc
+
+    worker = threading.Thread(target=make, name="dask-connect", daemon=True)
+    worker.start()
+    worker.join(float(parse_timedelta(timeout)) + CONNECT_MARGIN_S)
+    if worker.is_alive():
+        raise InputError(
+            scheduler,
+            f"no Dask scheduler answered within {timeout} (is this the scheduler's "
+            "address, port 8786 by default, and not its dashboard's?)",
+        )
+    exc = box.pop("error", None)
+    if exc is not None:
+        msg = " ".join(str(exc).split())[:200] or type(exc).__name__
+        if isinstance(exc, (OSError, TimeoutError)):
+            why = "cannot reach the Dask scheduler"
+        else:
+            why = "what answered is not a Dask scheduler"
+        _drop_half_made_client(exc)
+        raise InputError(scheduler, f"{why}: {msg}") from None
+    return box["client"]
+
+
+def _drop_half_made_client(exc: BaseException) -> None:
+    """Collect the client whose construction raised ``exc`` now, with the errors of its
+    ``__del__`` (closing a connection to something that is no scheduler) kept off
+    stderr: otherwise they would print a traceback at exit, after the one line."""
+    import gc
+
+    exc.__traceback__ = None  # its frames hold the half-made client
+    hook = sys.unraisablehook
+    sys.unraisablehook = lambda unraisable: None
+    try:
+        gc.collect()
+    finally:
+        sys.unraisablehook = hook
+
+
+def quiet_dask() -> None:
+    """Keep Dask's logged errors and warnings off stderr: a scheduler or worker that goes
+    away is reported once, in one line (:class:`ClusterFailed`), and the large-graph
+    warning of steps that carry their files (``--ship-files``) is expected."""
+    import logging
+    import warnings
+
+    for name in ("distributed", "distributed.client", "distributed.worker"):
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+    warnings.filterwarnings("ignore", message="Sending large graph", category=UserWarning)
+
+
+class ClusterFailed(FuzzyslamError):
+    """The Dask cluster failed under a step (its scheduler gone, its connection lost):
+    one line naming the scheduler, exit 3 (not a bug of ours, nor of the step)."""
+
+    exit_code = 3
+
+    def __init__(self, scheduler: str, step: str, exc: BaseException) -> None:
+        msg = " ".join(str(exc).split())[:200]
+        super().__init__(
+            f"{scheduler}: the Dask cluster failed while running {step} "
+            f"({type(exc).__name__}{': ' + msg if msg and msg != type(exc).__name__ else ''})"
+            "; nothing was written"
+        )
+
+
+def remove_stale_parts(root: Path) -> list[Path]:
+    """Remove the temporary outputs (``.NAME.XXXX.part``, fuzzyslam/fileio.py) left in
+    ``root`` by a step whose process was killed (a worker lost, the OOM killer) and that
+    the engine ran again elsewhere: once every step has succeeded none is in use.
+
+    Parameters
+    ----------
+    root : Path
+        The plan's working directory.
+
+    Returns
+    -------
+    list of Path
+        What was removed.
+    """
+    import shutil
+
+    gone = []
+    for part in sorted(root.rglob(".*.part"), key=lambda q: len(q.parts)):
+        if not part.exists():
+            continue  # inside a .part directory removed already
+        if part.is_dir() and not part.is_symlink():
+            shutil.rmtree(part, ignore_errors=True)
+        else:
+            part.unlink(missing_ok=True)
+        gone.append(part)
+    return gone
 
 
 def _task_key(step: Step) -> str:
@@ -383,7 +495,12 @@ def execute(
                     )
                 for fut in finished:
                     s = running.pop(fut)
-                    res = StepResult(s.key, *engine.result(fut, root))
+                    try:
+                        res = StepResult(s.key, *engine.result(fut, root))
+                    except Exception as exc:  # the step's own failures are in its result
+                        if scheduler is None:
+                            raise
+                        raise ClusterFailed(scheduler, s.key, exc) from exc
                     if res.ok:
                         done[s.key] = res
                         if on_done is not None:
@@ -402,4 +519,5 @@ def execute(
     if failure is not None:
         step = next(s for s in steps if s.key == failure.key)
         raise StepFailed(step, failure.error, failure.exit_code)
+    remove_stale_parts(root)  # a killed step's temporary outputs (the step ran again)
     return done
