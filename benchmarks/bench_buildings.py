@@ -220,27 +220,26 @@ def heading_fix_errors(run_dir: Path, truth: Path) -> dict:
 
 def figure(path: Path, fgm, truth: Path, traj: Path, title: str) -> None:
     """The FGM (BetP(occupied)) with the true path and the localised one (PNG)."""
-    import matplotlib
+    from matplotlib.figure import Figure
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    from fuzzyslam.figsave import BLACK, ORANGE, save_png
 
     _, p_tr, _ = clean_truth(truth)
     _, est = read_tum(traj)
-    fig, ax = plt.subplots(figsize=(8, 6))
+    fig = Figure(figsize=(7, 5.6))
+    ax = fig.add_subplot()
     ax.imshow(
         1.0 - fgm.pignistic_occupied(), origin="lower", extent=fgm.grid.extent, cmap="gray",
         vmin=0, vmax=1,
     )  # fmt: skip
-    ax.plot(p_tr[:, 0], p_tr[:, 1], "-", color="tab:green", lw=0.8, label="truth")
-    ax.plot(est[:, 0], est[:, 1], "-", color="tab:blue", lw=0.6, label="localised (pose fixes)")
+    ax.plot(est[:, 0], est[:, 1], "-", color=ORANGE, lw=1.0, label="localised (pose fixes)")
+    ax.plot(p_tr[:, 0], p_tr[:, 1], "--", color=BLACK, lw=0.7, label="truth")  # on top
     ax.set_aspect("equal")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(title, fontsize=9)
-    ax.legend(loc="upper right", fontsize=8)
-    fig.savefig(path, format="png", dpi=80)
-    plt.close(fig)
+    ax.set_title(title, fontsize=9, wrap=True)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
+    save_png(fig, path, 150, tight=True)
 
 
 def bench_building(
