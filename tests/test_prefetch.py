@@ -398,7 +398,8 @@ def test_errors_in_the_child_are_the_same_line_and_code(
 ) -> None:
     """An exception raised while making the events (at the 50th frame) ends the run with
     the same exit code and the same line on stderr either way, after the filter took the
-    49 frames before it; nothing written, the child reaped."""
+    same frames before it (those of the 49 read that the stamp-order buffer had released,
+    slam/inputs.py REORDER_S); nothing written, the child reaped."""
     from fuzzyslam.slam import runner as runner_mod
 
     real = inputs_mod.LogInputs._frame
@@ -427,7 +428,7 @@ def test_errors_in_the_child_are_the_same_line_and_code(
     assert len(forks) == 1 and reaped(forks[0])
     assert got["prefetch"] == got["no-prefetch"]
     code, lines, frames = got["prefetch"]
-    assert len(lines) == 1 and frames == 49
+    assert len(lines) == 1 and 0 < frames <= 49
     assert code == {"bug": 1, "unpicklable": 1}.get(kind, 3)
     if kind == "unpicklable":
         assert "TwoArgs: one and two" in lines[0]

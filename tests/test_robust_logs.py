@@ -410,9 +410,10 @@ def test_frame_glitches_are_counted_and_skipped(tiny: Tiny, tmp_path: Path) -> N
 
 
 def test_stamps_back_in_time_and_repeated_are_counted(tiny: Tiny, tmp_path: Path) -> None:
-    """Header stamps that go back in time: odometry is kept (its motion is real), a
-    frame is dropped; repeated messages (same stamp) are dropped; each is counted once,
-    and the final pose barely moves (wheel angles are cumulative)."""
+    """Header stamps that go back in time and repeated messages (same stamp) are dropped
+    and counted once each; the final pose barely moves (wheel angles are cumulative: the
+    next message carries a dropped one's motion). The dead reckoning written has strictly
+    increasing stamps, so ``evaluate`` reads it."""
     js = Every(JOINTS, 25)
     img = Every(IMAGE, 17)
     js_dup = Every(JOINTS, 33)
@@ -434,6 +435,45 @@ def test_stamps_back_in_time_and_repeated_are_counted(tiny: Tiny, tmp_path: Path
     assert s["counts"]["frames"] == tiny.run["counts"]["frames"] - img.hits
     d = np.subtract(s["final_pose"][:2], tiny.run["final_pose"][:2])
     assert np.hypot(*d) < 3 * max(tiny.run["final_pose_sigma"][:2])
+    for name in ("odometry.tum", "trajectory.tum"):
+        assert np.all(np.diff(load_tum(tmp_path / "est" / name)[:, 0]) > 0), name
+    code, _, err = cli("evaluate", log, tmp_path / "est", "-o", tmp_path / "ev")
+    assert code == 0, err
+
+
+def lag_frames(lag: float) -> Callable[[LogMessage], list[Out]]:
+    """A fault: every camera frame logged ``lag`` s after its exposure (its header stamp
+    unchanged), as a recorder logs the output of an image pipeline that lags."""
+
+    def fault(m: LogMessage) -> list[Out]:
+        return [(m.topic, m.typename, m.msg, m.t + lag)] if m.topic == IMAGE else keep(m)
+
+    return fault
+
+
+def test_frames_logged_late_are_put_back_in_stamp_order(tiny: Tiny, tmp_path: Path) -> None:
+    """Frames logged 0.8 s after their exposure, behind odometry stamped later: the
+    filter takes them in header-stamp order, so the run is the clean run, file for file."""
+    log = rewrite(tiny.log, tmp_path / "late.mcap", lag_frames(0.8))
+    s = run_json(tiny, log, tmp_path / "est")
+    assert s["warnings"]["reordered"] >= s["counts"]["frames"] > 0
+    assert s["counts"]["frames"] == tiny.run["counts"]["frames"]
+    assert s["counts"]["out_of_order"] == 0
+    assert not s["filter_health"]["diverged"]
+    for name in ("trajectory.tum", "odometry.tum", "covariance.csv", "landmarks.yaml"):
+        assert (tmp_path / "est" / name).read_bytes() == (tiny.est / name).read_bytes(), name
+
+
+def test_frames_later_than_the_reorder_window_are_trouble(tiny: Tiny, tmp_path: Path) -> None:
+    """Frames logged 7 s late (beyond the 5 s reorder window): they are lost, counted,
+    and the summary says the filter is in trouble (reason late_events) rather than
+    healthy."""
+    log = rewrite(tiny.log, tmp_path / "late.mcap", lag_frames(7.0))
+    s = run_json(tiny, log, tmp_path / "est")
+    assert s["counts"]["out_of_order"] > 0.5 * tiny.run["counts"]["frames"]
+    assert s["counts"]["frames"] < 0.5 * tiny.run["counts"]["frames"]
+    health = s["filter_health"]
+    assert health["diverged"] and "late_events" in health["reasons"]
 
 
 def test_nan_odometry_is_counted(tiny: Tiny, tmp_path: Path) -> None:

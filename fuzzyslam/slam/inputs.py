@@ -28,12 +28,15 @@ faster than the robot can move (``implausible_odometry``: wheel speeds over
 joints. A CameraInfo that no pinhole ceiling camera can have (a focal length that is
 not finite and positive, fx and fy more than 1 % apart, a field of view outside
 [1, 179] degrees, a principal point off the image) is a bad input. Event times are
-header stamps.
+header stamps, and events come in their order, not in the order they were logged: a
+detection logged up to ``REORDER_S`` after odometry stamped later is put back in its
+place (``warnings.reordered``).
 """
 
 from __future__ import annotations
 
 import heapq
+import itertools
 import math
 import os
 from collections.abc import Callable, Iterator
@@ -65,6 +68,9 @@ CAMERA_FRAME = "ceiling_camera"
 # LogInputs.read_state, which slam/prefetch.py sends back from the child that read them
 READ_STATE = ("warnings", "first_problem", "gap_seconds", "own_covariances", "ring_stats")
 ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
+# s of stamps a late message may lag the newest one read and still be put in its place
+# (LogInputs._stamp_order): camera and detector pipelines deliver within a second
+REORDER_S = 5.0
 
 
 @dataclass
@@ -151,7 +157,7 @@ class LogInputs:
         -------
         iterator of Odom, Frame or RingEvent
         """
-        main = self._main_events()
+        main = self._stamp_order(self._main_events())
         delay = self.cfg.slam.odometry_delay_s
         if delay:
             main = delay_odometry(main, delay)  # stamps lead the motion (slam/latency.py)
@@ -171,10 +177,10 @@ class LogInputs:
             t = M.stamp_to_sec(msg.header.stamp)
             before = last_t[topic]
             if t < before:
+                # odometry is cumulative (wheel angles, poses): the next message carries
+                # the motion of a misstamped one, at a stamp in order
                 self.warn("out_of_order", f"{topic}: header stamp {t:.3f} s goes back in time")
-                if topic == self.lamp_topic:
-                    continue
-                t = before  # an odometry increment is still motion: keep it
+                continue
             elif t == before:
                 # a repeated stamp: a duplicated message; odometry is cumulative (wheel
                 # angles, poses), so the next message still carries any motion in it
@@ -191,6 +197,32 @@ class LogInputs:
                 ev = lamp(t, msg)
             if ev is not None:
                 yield ev
+
+    def _stamp_order(self, events: Iterator[Event]) -> Iterator[Event]:
+        """``events`` (read in log-time order, each topic in stamp order) in header-stamp
+        order: a bounded reorder buffer of ``REORDER_S`` seconds of stamps.
+
+        A log records each message when it arrives: detections from a camera pipeline
+        arrive a processing delay after their exposure, behind odometry stamped later.
+        Merged as logged, such a frame is older than the filter's time and is lost. The
+        buffer holds every event until a message stamped ``REORDER_S`` later has been
+        read, then releases them in stamp order (equal stamps in read order); an event
+        that arrives later than that is released as read and counted by the runner
+        (``counts.out_of_order``; slam/run_results.py flags a run that loses frames so).
+        Events put back in order are counted (``warnings.reordered``).
+        """
+        heap: list[tuple[float, int, Event]] = []
+        order = itertools.count()
+        newest = -np.inf
+        for ev in events:
+            if ev.t < newest:
+                self.warn("reordered")
+            newest = max(newest, ev.t)
+            heapq.heappush(heap, (ev.t, next(order), ev))
+            while heap and heap[0][0] <= newest - REORDER_S:
+                yield heapq.heappop(heap)[2]
+        while heap:
+            yield heapq.heappop(heap)[2]
 
     def _odometry(self, t: float, msg, prev):
         if msg.name != self._names:

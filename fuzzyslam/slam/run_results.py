@@ -49,6 +49,60 @@ class RunCounts:
     relocalisations: int = OMIT  # accepted: the pose had left its covariance
 
 
+LATE_SHARE = 0.05  # more than this share of the frames or odometry too late: trouble
+
+
+@dataclass
+class LateEvents:
+    """Events the runner skipped because they came older than the filter's time: a
+    message logged more than ``slam.inputs.REORDER_S`` after others stamped later (a
+    detector pipeline that lags, a sensor on another clock). Each lost frame is a missed
+    correction and each lost odometry increment is lost motion, so a run that loses more
+    than ``LATE_SHARE`` of either is in trouble (reason ``late_events``)."""
+
+    frames: int = 0
+    odometry: int = 0
+    first_at: float | None = None  # the filter's time when the first was skipped (s)
+
+    def add(self, ev: object, now: float) -> None:
+        """Count one skipped event.
+
+        Parameters
+        ----------
+        ev : Odom, Frame or RingEvent
+            The event (rings are the aids' and are not counted here).
+        now : float
+            The filter's time (s).
+        """
+        kind = type(ev).__name__
+        if kind not in ("Frame", "Odom"):
+            return
+        if kind == "Frame":
+            self.frames += 1
+        else:
+            self.odometry += 1
+        if self.first_at is None:
+            self.first_at = now
+
+    def trouble(self, frames: int, odometry: int) -> tuple[str, float] | None:
+        """``("late_events", time of the first)`` when more than ``LATE_SHARE`` of the
+        frames or of the odometry increments were lost, else None.
+
+        Parameters
+        ----------
+        frames, odometry : int
+            The frames and odometry increments the filter used.
+
+        Returns
+        -------
+        tuple of (str, float) or None
+        """
+        lost = (self.frames, frames), (self.odometry, odometry)
+        if self.first_at is None or all(n <= LATE_SHARE * (n + used) for n, used in lost):
+            return None
+        return "late_events", self.first_at
+
+
 @dataclass(frozen=True, kw_only=True)
 class FilterHealth:
     """The run summary's ``filter_health``: the EKF's numerical guards, the windowed NIS
@@ -82,6 +136,7 @@ def filter_health(
     lamps: list[LampRecord],
     map_motion: MapMotionMonitor | None = None,
     aids: Sequence[Any] = (),
+    late: tuple[LateEvents, RunCounts] | None = None,
 ) -> FilterHealth:
     """The filter's health at the end of a run: the guards' and windows' counts; the map
     turned untrustworthy (orphan landmarks, :func:`~fuzzyslam.slam.health.orphan_landmarks`)
@@ -103,6 +158,8 @@ def filter_health(
         The fix plug-ins; one with a ``trouble()`` that answers (reason, time) adds that
         reason (the heading aid's ``position_unresolved``: the position's 99 % ellipse
         wider than the margin of its corridor choice, fixes/heading.py).
+    late : (LateEvents, RunCounts), optional
+        The events skipped as too late and the run's counts (reason ``late_events``).
 
     Returns
     -------
@@ -130,6 +187,11 @@ def filter_health(
     for aid in aids:
         trouble = getattr(aid, "trouble", None)
         found = trouble() if trouble is not None else None
+        if found is not None:
+            findings.append(found)
+    if late is not None:
+        skipped, counts = late
+        found = skipped.trouble(counts.frames, counts.odometry)
         if found is not None:
             findings.append(found)
     for reason, t in findings:

@@ -46,7 +46,7 @@ from fuzzyslam.slam.map_motion import MapMotionMonitor
 from fuzzyslam.slam.noise import DetectionNoiseEstimator
 from fuzzyslam.slam.params import SlamParams
 from fuzzyslam.slam.relocalise import Relocaliser
-from fuzzyslam.slam.run_results import RunCounts, slam_result
+from fuzzyslam.slam.run_results import LateEvents, RunCounts, slam_result
 from fuzzyslam.slam.start_anchor import StartAnchor
 
 CALIB_PERIOD_S = 1.0  # calibration.csv: a row at most this often (s)
@@ -121,6 +121,7 @@ class SlamRunner:
         self.relocaliser = Relocaliser.from_params(p)
         self.anchor = StartAnchor()  # the map's first lamps at first sight (start_anchor.py)
         self.map_motion = MapMotionMonitor()
+        self.late = LateEvents()  # events skipped as older than the filter's time
         if self.sink is None:
             self.sink = MemorySink()
         # the last trajectory row is held back until the next one: a row of the same
@@ -402,6 +403,7 @@ class SlamRunner:
                 first = False
             if ev.t < self._last_t:
                 self.counts["out_of_order"] += 1
+                self.late.add(ev, self._last_t)
                 continue
             self._last_t = ev.t
             if isinstance(ev, Odom):

@@ -422,7 +422,13 @@ def _run_filter(
         res.delay_estimate = tap.estimate(cfg.slam.odometry_delay_s)
     # numerical guards, the divergence tests, orphan landmarks (slam/run_results.py)
     res.health = filter_health(
-        res.ekf.guards, runner.health, inputs.gap_seconds, res.lamps, runner.map_motion, aids
+        res.ekf.guards,
+        runner.health,
+        inputs.gap_seconds,
+        res.lamps,
+        runner.map_motion,
+        aids,
+        (runner.late, res.counts),
     )
     if inputs.lamp_source == "detections":
         res.counts = replace(res.counts, detections_own_covariance=inputs.own_covariances)
