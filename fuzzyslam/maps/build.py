@@ -30,6 +30,7 @@ from fuzzyslam.maps.summary import MapSummary, ReferenceEntry, ReferenceTruth, W
 from fuzzyslam.progress import Progress
 from fuzzyslam.se2 import interpolate_poses, wrap_angle_period
 from fuzzyslam.slam import calibration_files
+from fuzzyslam.slam.log_setup import base_frame
 from fuzzyslam.stamps import LogTime, log_time
 from fuzzyslam.streams.logmeta import World, read_scenario, read_world
 from fuzzyslam.streams.ranges import open_ranges
@@ -213,7 +214,7 @@ def read_rings_compact(
         An opened range sensor.
     """
     if sensor is None:
-        sensor = open_ranges(reader, cfg, ranges)
+        sensor = open_ranges(reader, cfg, ranges, base=base_frame(reader, cfg))
     mounts = sensor.mounts
     stats = RingStats()
     table, fov = _RingTable(len(mounts)), 0.0
@@ -317,7 +318,7 @@ def build_map(
     reader = LogReader(log_path)
     t_traj, p_traj, tum_dropped = read_tum(traj_path, sort=opts.sort, report=True)
     t_end, how = freeze_time(reader, cfg, opts)
-    sensor = open_ranges(reader, cfg, opts.ranges)
+    sensor = open_ranges(reader, cfg, opts.ranges, base=base_frame(reader, cfg))
     times, ranges, rmax, fov, mounts, stats = read_rings_compact(reader, cfg, t_end, sensor=sensor)
     ok = covered(times, t_traj, params.max_pose_gap)
     skipped_readings = int(np.isfinite(ranges[~ok]).sum())

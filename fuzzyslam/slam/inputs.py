@@ -62,6 +62,7 @@ from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.ranges import RangeSensor, open_ranges
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.sonar import RingStats
+from fuzzyslam.streams.tf import TfProblem, compose_to_base, static_tree
 
 CAMERA_FRAME = "ceiling_camera"
 # what reading the events changes that the run reports (with the reader's damage):
@@ -399,6 +400,7 @@ def open_inputs(
         keys = "topics.odom" if not cfg.slam.use_encoders else "topics.joint_states / topics.odom"
         reader.require(looked, f"the config's {keys}")
         raise AssertionError("unreachable")
+    frames = tf_frames(reader, cfg, odom_topic if odom_source == "odom" else None)
     camera = None
     if reader.has(tp.image):
         lamp_topic, lamp_source = tp.image, "frames"
@@ -407,11 +409,16 @@ def open_inputs(
             reader.require([tp.camera_info], "the config's topics.camera_info")
             raise InputError(reader.path, f"no message on {tp.camera_info}")
         offset = tuple(cfg.camera.offset)
-        if reader.has(tp.tf_static):
-            for m in reader.messages([tp.tf_static]):
-                tf = M.planar_transforms(m.msg)
-                if CAMERA_FRAME in tf:
-                    offset = tuple(tf[CAMERA_FRAME][1][:2])
+        if reader.has(tp.tf_static):  # the lens in the base frame (streams/tf.py)
+            tree = static_tree(m.msg for m in reader.messages([tp.tf_static]))
+            try:
+                mount = compose_to_base(tree, CAMERA_FRAME, frames.base)
+            except TfProblem as e:
+                raise InputError(
+                    reader.path, f"{tp.tf_static} cannot place {CAMERA_FRAME!r}: {e}"
+                ) from None
+            if mount is not None:
+                offset = (float(mount.translation[0]), float(mount.translation[1]))
         problem = camera_info_problem(info)
         if problem:
             raise InputError(reader.path, f"{tp.camera_info}: {problem}")
@@ -420,7 +427,7 @@ def open_inputs(
         lamp_topic, lamp_source = tp.detections, "detections"
     else:
         lamp_topic, lamp_source = "", "none"  # odometry alone (and the aids' fixes)
-    sensor = open_ranges(reader, cfg, ranges) if need_rings else None
+    sensor = open_ranges(reader, cfg, ranges, base=frames.base) if need_rings else None
     mounts = sensor.mounts if sensor is not None else np.zeros((0, 3))
     gate = OdomGate()
     pose = filter_start_pose(reader, cfg, odom_topic, odom_source, start_pose, gate)
@@ -438,5 +445,5 @@ def open_inputs(
         reader.end,
         ranges=sensor,
         _gate=gate,
-        frames=tf_frames(reader, cfg, odom_topic if odom_source == "odom" else None),
+        frames=frames,
     )

@@ -72,6 +72,28 @@ def first_message(reader: LogReader, topic: str):
     return None
 
 
+def base_frame(reader: LogReader, cfg: Config) -> str:
+    """The robot's base frame, in which the sensors' /tf_static mounts are expressed: the
+    child frame of the log's nav_msgs/Odometry when the filter reads it (no encoders, or
+    ``slam.use_encoders`` false), else ``base_link`` (REP 105).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    cfg : Config
+        The config (``topics``, ``slam.use_encoders``).
+
+    Returns
+    -------
+    str
+    """
+    tp = cfg.topics
+    if (cfg.slam.use_encoders and reader.has(tp.joint_states)) or not reader.has(tp.odom):
+        return TfFrames().base
+    return tf_frames(reader, cfg, tp.odom).base
+
+
 def tf_frames(reader: LogReader, cfg: Config, odom_topic: str | None) -> TfFrames:
     """The /tf frames of the estimates (:class:`TfFrames`): the odometry's own frame names
     when it is nav_msgs/Odometry (``odom_topic``), and whether the log's /tf already

@@ -272,7 +272,24 @@ def tf_message(transforms: list[Any]) -> Any:
 
 
 def planar_transforms(msg: Any) -> dict[str, tuple[str, np.ndarray]]:
-    """child frame -> (parent frame, (x, y, yaw)) of a TFMessage."""
+    """Each transform of a TFMessage as a planar pose in its immediate parent.
+
+    For planar /tf such as odom -> base_link: the transform is neither composed with
+    its parent's nor checked for roll and pitch. Sensor mounts from /tf_static, which
+    may chain frames and turn a sensor upside down, are composed in 3D by
+    :mod:`fuzzyslam.streams.tf`.
+
+    Parameters
+    ----------
+    msg : TFMessage
+        A tf2_msgs/TFMessage.
+
+    Returns
+    -------
+    dict of str to (str, ndarray of shape (3,))
+        Child frame -> (parent frame, (x, y, yaw)); yaw is the heading of the child's x
+        axis in the parent's x-y plane; a repeated child keeps its last transform.
+    """
     out = {}
     for ts in msg.transforms:
         tr, r = ts.transform.translation, ts.transform.rotation

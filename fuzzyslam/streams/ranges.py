@@ -6,13 +6,18 @@ sensors sit (one home for ``map`` and ``run``):
 - ``sonar``: the topics ``topics.sonar_prefix``NN present in the log (any number and
   placement: a 9-sonar front ring reads as 9 sensors), each placed by the /tf_static
   mount of its Range messages' ``header.frame_id``. A present topic whose frame has no
-  mount is an error naming it. Only a log without any /tf_static (older simulated logs)
-  falls back to the nominal ``sonar.count`` ring of ``robot.radius``, and says so in
-  ``mounts_source``.
+  mount, or whose mount cannot be composed (two parents, a cycle, a zero quaternion, a
+  cone axis near vertical), is an error naming it. Only a log without any /tf_static
+  (older simulated logs) falls back to the nominal ``sonar.count`` ring of
+  ``robot.radius``, and says so in ``mounts_source``.
 - ``scan``: ``topics.scan`` (sensor_msgs/LaserScan) as a ring of narrow sensors, one per
   kept beam (:mod:`fuzzyslam.streams.scan`), at the laser's /tf_static mount (frame of
   the first message) composed with each beam angle; cone width ``ranges.beam_width_deg``,
   every ``ranges.scan_step``-th beam kept.
+
+A mount is the sensor frame's transform in the robot's base frame (``base``: the
+odometry's child frame), composed down the whole /tf_static chain with full 3D
+rotations and projected onto the base plane (:mod:`fuzzyslam.streams.tf`).
 
 ``ranges.source`` (or ``--ranges``): ``auto`` takes the sonar ring when the log has one,
 else the scan.
@@ -37,6 +42,7 @@ from fuzzyslam.streams.sonar import (
     mounts_of_frames,
     present_sonar_topics,
 )
+from fuzzyslam.streams.tf import TfProblem, frame_mounts
 
 SOURCES = ("auto", "sonar", "scan")
 
@@ -58,8 +64,8 @@ class RangeParams:
 
 @dataclass
 class RangeSensor:
-    """The chosen range sensor: its topics, the (M, 3) mounts of its M sensors in
-    base_link, and how its messages become :class:`Ring` s."""
+    """The chosen range sensor: its topics, the (M, 3) mounts (x, y, yaw) of its M
+    sensors in the robot's base frame, and how its messages become :class:`Ring` s."""
 
     kind: str
     topics: list[str]
@@ -107,7 +113,14 @@ def _first_frames(reader: LogReader, topics: list[str]) -> dict[str, str]:
     return {tp: frames[tp] for tp in topics if tp in frames}
 
 
-def _sonar(reader: LogReader, cfg: Any, topics: list[str]) -> RangeSensor:
+def _tf_problem(reader: LogReader, tf_topic: str, problems: dict[str, str], frames) -> None:
+    """InputError naming each topic whose /tf_static mount cannot be composed."""
+    if problems:
+        why = "; ".join(f"{tp} (frame {frames[tp]!r}): {p}" for tp, p in problems.items())
+        raise InputError(reader.path, f"{tf_topic} cannot place {why}")
+
+
+def _sonar(reader: LogReader, cfg: Any, topics: list[str], base: str) -> RangeSensor:
     tf = _tf_messages(reader, cfg.topics.tf_static)
     if not tf:  # no /tf_static topic, or none of its messages readable (a damaged log)
         count = cfg.sonar.count
@@ -129,14 +142,15 @@ def _sonar(reader: LogReader, cfg: Any, topics: list[str]) -> RangeSensor:
     topics = [tp for tp in topics if tp in frames]
     if not topics:
         raise InputError(reader.path, f"no message on the sonar topics {cfg.topics.sonar_prefix}NN")
-    mounts, missing = mounts_of_frames(tf, frames)
+    mounts, missing, problems = mounts_of_frames(tf, frames, base)
+    _tf_problem(reader, cfg.topics.tf_static, problems, frames)
     if missing:
         names = ", ".join(f"{tp} (frame {frames[tp]!r})" for tp in missing)
         raise InputError(reader.path, f"no {cfg.topics.tf_static} mount for {names}")
     return RangeSensor("sonar", topics, mounts, cfg.topics.tf_static)
 
 
-def _scan(reader: LogReader, cfg: Any) -> RangeSensor:
+def _scan(reader: LogReader, cfg: Any, base: str) -> RangeSensor:
     tp = cfg.topics.scan
     first = next(iter(reader.messages([tp])), None)
     if first is None:
@@ -146,7 +160,14 @@ def _scan(reader: LogReader, cfg: Any) -> RangeSensor:
     if geom.beams == 0 or not (np.isfinite(geom.angle_increment) and geom.angle_increment != 0):
         raise InputError(reader.path, f"{tp}: a scan with no beams or a zero angle increment")
     tf = _tf_messages(reader, cfg.topics.tf_static) or []
-    mounts, missing = mounts_of_frames(tf, {tp: geom.frame})
+    frames = {tp: geom.frame}
+    found, missing, problems = frame_mounts(tf, frames, base)
+    if tp in found:
+        try:
+            beams = geom.mounts(found[tp])
+        except TfProblem as e:
+            problems[tp] = f"the laser is {e}"
+    _tf_problem(reader, cfg.topics.tf_static, problems, frames)
     if missing:
         raise InputError(
             reader.path, f"no {cfg.topics.tf_static} mount for {tp} (frame {geom.frame!r})"
@@ -154,16 +175,40 @@ def _scan(reader: LogReader, cfg: Any) -> RangeSensor:
     return RangeSensor(
         "scan",
         [tp],
-        geom.mounts(mounts[0]),
+        beams,
         cfg.topics.tf_static,
         geom,
         float(np.deg2rad(rp.beam_width_deg)),
     )
 
 
-def open_ranges(reader: LogReader, cfg: Any, choice: str | None = None) -> RangeSensor:
-    """The log's range sensor (module docstring); ``choice`` (``--ranges``) overrides
-    ``cfg.ranges.source``. InputError naming the topics and config keys when absent."""
+def open_ranges(
+    reader: LogReader, cfg: Any, choice: str | None = None, base: str = "base_link"
+) -> RangeSensor:
+    """The log's range sensor (module docstring).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    cfg : Config
+        The config (``topics``, ``ranges``, ``sonar``, ``robot``).
+    choice : str, optional
+        ``--ranges``: overrides ``cfg.ranges.source`` (one of :data:`SOURCES`).
+    base : str
+        The robot's base frame the mounts are expressed in: the odometry's child frame
+        (``TfFrames.base`` of :func:`fuzzyslam.slam.log_setup.tf_frames`).
+
+    Returns
+    -------
+    RangeSensor
+
+    Raises
+    ------
+    InputError
+        Naming the topics and config keys when the sensor is absent, or the topics whose
+        /tf_static mount is missing or cannot be composed.
+    """
     source = choice or cfg.ranges.source
     if source not in SOURCES:
         raise ValueError(f"ranges source must be one of {', '.join(SOURCES)}, got {source!r}")
@@ -172,9 +217,9 @@ def open_ranges(reader: LogReader, cfg: Any, choice: str | None = None) -> Range
     if source == "auto":
         source = "sonar" if sonars else "scan" if has_scan else ""
     if source == "sonar" and sonars:
-        return _sonar(reader, cfg, sonars)
+        return _sonar(reader, cfg, sonars, base)
     if source == "scan" and has_scan:
-        return _scan(reader, cfg)
+        return _scan(reader, cfg, base)
     sonar = f"{cfg.topics.sonar_prefix}00..{cfg.topics.sonar_prefix}NN (topics.sonar_prefix)"
     scan = f"{cfg.topics.scan} (topics.scan)"
     looked = {"sonar": sonar, "scan": scan, "": f"{sonar} or {scan}"}[source]

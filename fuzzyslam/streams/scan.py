@@ -1,9 +1,11 @@
 """Laser scans as rings of narrow range sensors: sensor_msgs/LaserScan into arrays.
 
 A scan of N beams is read as a ring of M = ceil(N / step) sensors, one per kept beam
-(every ``step``-th beam from the first), each sitting at the laser's mount composed with
-its beam angle ``angle_min + k * angle_increment`` (REP 103: counter-clockwise from the
-laser's x axis). The FGM and FLM evidence (:func:`fuzzyslam.maps.evidence.rings_evidence`)
+(every ``step``-th beam from the first), each sitting at the laser's origin and headed
+along its beam angle ``angle_min + k * angle_increment`` (REP 103: counter-clockwise
+from the laser's x axis) rotated by the laser's full 3D /tf_static mount
+(:mod:`fuzzyslam.streams.tf`: an upside-down laser's beams run clockwise in the base
+frame). The FGM and FLM evidence (:func:`fuzzyslam.maps.evidence.rings_evidence`)
 then treats each beam as a sonar whose cone is the laser's beam width, so the maps and
 fixes need no second evidence model.
 
@@ -26,10 +28,12 @@ from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
 import numpy as np
+from numpy.typing import ArrayLike
 
 from fuzzyslam.streams.messages import stamp_to_sec
 from fuzzyslam.streams.reader import LogMessage
 from fuzzyslam.streams.sonar import Ring, RingStats
+from fuzzyslam.streams.tf import Rigid, beam_mounts
 
 
 @dataclass(frozen=True)
@@ -52,14 +56,34 @@ class ScanGeometry:
         """(M,) beam angles of the kept beams in the laser frame (rad)."""
         return self.angle_min + self.kept * self.angle_increment
 
-    def mounts(self, laser: np.ndarray) -> np.ndarray:
-        """(M, 3) poses of the kept beams in base_link: ``laser`` (3,) composed with a pure
-        rotation by each beam angle (the beam's origin is the laser's)."""
-        laser = np.asarray(laser, dtype=float).reshape(3)
-        a = laser[2] + self.angles
-        return np.column_stack(
-            [np.full(len(a), laser[0]), np.full(len(a), laser[1]), np.arctan2(np.sin(a), np.cos(a))]
-        )
+    def mounts(self, laser: Rigid | ArrayLike) -> np.ndarray:
+        """Planar poses of the kept beams in the base frame.
+
+        Each beam sits at the laser's origin, headed along its direction ``(cos a, sin a,
+        0)`` in the laser frame rotated by the laser's full 3D mount
+        (:func:`fuzzyslam.streams.tf.beam_mounts`): a laser upside down (roll = pi) at
+        yaw ``psi`` heads beam ``a`` at ``psi - a``.
+
+        Parameters
+        ----------
+        laser : Rigid or array_like, shape (3,)
+            The laser's composed mount in the base frame (:class:`Rigid`: translation
+            (3,), rotation (3, 3)), or a planar mount (x, y, yaw) (no roll or pitch).
+
+        Returns
+        -------
+        ndarray, shape (M, 3)
+            (x, y, yaw) of each kept beam, yaw in (-pi, pi].
+
+        Raises
+        ------
+        TfProblem
+            When a kept beam points too close to vertical for a planar heading.
+        """
+        if not isinstance(laser, Rigid):
+            x, y, yaw = np.asarray(laser, dtype=float).reshape(3)
+            laser = Rigid.planar(x, y, yaw)
+        return beam_mounts(laser, self.angles)
 
     def matches(self, msg) -> bool:
         """Whether a LaserScan message has this geometry (float32 fields compared exactly)."""

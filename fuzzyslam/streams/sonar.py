@@ -1,9 +1,15 @@
 """Sonar rings from a log: the 16 Range messages of one firing, grouped into an array.
 
-A ring is the set of readings whose header stamps lie within ``tolerance`` of the
-first one (the simulator stamps a whole ring alike; a real robot fires in
-sequence within a fraction of the ring period). A sonar missing from a ring
-reads NaN. Glitches are made explicit and counted, never silently used:
+A ring is one firing cycle: consecutive readings (in log order), each stamped within
+``gap`` of the one before, in which no sonar reads twice, spanning at most
+``MAX_RING_SPAN_S``. The simulator (and CARMEN) stamp a whole ring alike; a real ring
+(a Pioneer's) fires its sonars in sequence, one every 40 ms or so, so one cycle spans a
+third of a second or more, and the next cycle starts when the first sonar fires again.
+The ring's time is the mean of its readings' stamps, the time at which placing all of
+them by one robot pose errs least (by at most half the span times the speed: 9 cm for a
+0.36 s cycle at 0.5 m/s); rings whose readings span more than ``gap`` are counted
+(``sequential``). A sonar missing from a ring reads NaN. Glitches are made explicit and
+counted, never silently used:
 
 - NaN, infinite or negative ranges become NaN (``invalid``);
 - ranges at or beyond max_range are "no echo" and stay as max_range (``no_echo``);
@@ -12,7 +18,7 @@ reads NaN. Glitches are made explicit and counted, never silently used:
 - a reading whose max_range is beyond what an ultrasonic sensor can measure
   (``MAX_PLAUSIBLE_RANGE``) becomes NaN (``invalid`` and ``implausible``);
 - a second reading of the same sonar at the same stamp is dropped (``duplicates``);
-- a reading stamped more than ``tolerance`` before the latest one is dropped
+- a reading stamped more than ``gap`` before the latest one is dropped
   (``out_of_order``);
 - a field of view that is not finite, not positive or wider than a half-plane
   (``MAX_PLAUSIBLE_FOV``) is replaced by the last valid one (``bad_fov``).
@@ -26,11 +32,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from fuzzyslam.streams.messages import planar_transforms, stamp_to_sec
+from fuzzyslam.streams.messages import stamp_to_sec
 from fuzzyslam.streams.reader import LogMessage
+from fuzzyslam.streams.tf import TfProblem, frame_mounts, planar_mount
 
 MAX_PLAUSIBLE_RANGE = 100.0  # m: no ultrasonic ranger reaches this far
 MAX_PLAUSIBLE_FOV = np.pi  # rad: a cone wider than a half-plane is not a sonar beam
+MAX_RING_SPAN_S = 1.0  # s: a firing cycle longer than this is cut (24 sonars at 40 ms)
 
 
 @dataclass
@@ -55,6 +63,7 @@ class RingStats:
     duplicates: int = 0
     bad_fov: int = 0
     implausible: int = 0
+    sequential: int = 0  # rings whose readings' stamps span more than the gap
 
     def as_dict(self) -> dict[str, int]:
         """The counts, for a stage's JSON summary."""
@@ -68,6 +77,7 @@ class RingStats:
             "duplicates": self.duplicates,
             "bad_fov": self.bad_fov,
             "implausible": self.implausible,
+            "sequential": self.sequential,
             **self.extra,
         }
 
@@ -76,38 +86,64 @@ def group_rings(
     messages: Iterable[LogMessage],
     topic_index: dict[str, int],
     count: int,
-    tolerance: float = 0.05,
+    gap: float = 0.05,
     stats: RingStats | None = None,
 ) -> Iterator[Ring]:
-    """Group sonar Range messages (in log order) into rings.
+    """Group sonar Range messages (in log order) into rings, one per firing cycle.
 
-    ``topic_index`` maps each sonar topic to its index in the ring.
+    A reading starts a new ring when its sonar already read in the current one, when it
+    is stamped more than ``gap`` after the reading before it, or more than
+    ``MAX_RING_SPAN_S`` after the ring's first (module docstring).
+
+    Parameters
+    ----------
+    messages : iterable of LogMessage
+        sensor_msgs/Range messages in log order (other topics are skipped).
+    topic_index : dict
+        Sonar topic -> its index in the ring.
+    count : int
+        Sonars in the ring.
+    gap : float
+        Largest stamp step (s) between consecutive readings of one ring.
+    stats : RingStats or None
+        Counts the glitches (module docstring).
+
+    Returns
+    -------
+    iterator of Ring
+        Time (mean stamp of the readings, s), ranges (count,) and max ranges (count,)
+        with NaN for missing or invalid readings, and the field of view.
     """
     st = stats if stats is not None else RingStats()
-    cur_t: float | None = None
+    cur_t: float | None = None  # the ring's first stamp
     ranges = np.full(count, np.nan)
     rmax = np.full(count, np.nan)
     seen = np.zeros(count, dtype=bool)
+    offset = np.zeros(count)  # each reading's stamp - cur_t
     fov = 0.0
     last_t = -np.inf
 
     def flush() -> Ring:
         st.rings += 1
         st.missing += int(count - np.count_nonzero(seen))
-        return Ring(float(cur_t), ranges.copy(), rmax.copy(), fov)
+        read = offset[seen]
+        st.sequential += bool(read.max() - read.min() > gap)
+        # cur_t + mean offset: exactly cur_t for a ring stamped alike
+        t_ring = float(cur_t) + math.fsum(read) / len(read)
+        return Ring(t_ring, ranges.copy(), rmax.copy(), fov)
 
     for m in messages:
         i = topic_index.get(m.topic)
         if i is None:
             continue
         t = stamp_to_sec(m.msg.header.stamp)
-        if t < last_t - tolerance:
+        if t < last_t - gap:
             st.out_of_order += 1
             continue
-        if cur_t is not None and t == cur_t and seen[i]:
+        if cur_t is not None and seen[i] and t - cur_t == offset[i]:
             st.duplicates += 1  # the same sonar twice at one stamp: a repeated message
             continue
-        if cur_t is None or t - cur_t > tolerance or seen[i]:
+        if cur_t is None or seen[i] or t - last_t > gap or t - cur_t > MAX_RING_SPAN_S:
             if cur_t is not None:
                 yield flush()
             cur_t = t
@@ -115,6 +151,7 @@ def group_rings(
             rmax[:] = np.nan
             seen[:] = False
         seen[i] = True
+        offset[i] = t - cur_t
         last_t = max(last_t, t)
         st.readings += 1
         r = float(m.msg.range)
@@ -161,22 +198,42 @@ def present_sonar_topics(topics: Iterable[str], prefix: str) -> list[str]:
 
 
 def mounts_of_frames(
-    tf_msgs: Iterable[object], frames: dict[str, str]
-) -> tuple[np.ndarray, list[str]]:
-    """(M, 3) mounts (x, y, yaw in base_link) of the sensors named by ``frames`` (topic ->
-    child frame of /tf_static, in ring order) and the topics whose frame has no mount.
+    tf_msgs: Iterable[object], frames: dict[str, str], base: str = "base_link"
+) -> tuple[np.ndarray, list[str], dict[str, str]]:
+    """Planar mounts of the sensors named by ``frames``, composed from /tf_static.
 
-    Rows of the topics without a mount are NaN; the caller refuses them (a missing mount
-    is never replaced by a nominal one)."""
-    found: dict[str, np.ndarray] = {}
-    for msg in tf_msgs:
-        for child, (_parent, pose) in planar_transforms(msg).items():
-            found[child] = pose
-    rows, missing = [], []
-    for topic, frame in frames.items():
-        pose = found.get(frame)
-        if pose is None:
-            missing.append(topic)
-            pose = np.full(3, np.nan)
-        rows.append(pose)
-    return np.array(rows, dtype=float).reshape(-1, 3), missing
+    Each mount is the sensor frame's transform in ``base`` composed down the whole
+    /tf_static chain with full 3D rotations, projected onto the base plane
+    (:mod:`fuzzyslam.streams.tf`): the x, y of its origin and the heading of its x axis
+    (a sonar's cone axis).
+
+    Parameters
+    ----------
+    tf_msgs : iterable of TFMessage
+        The /tf_static messages, in log order.
+    frames : dict of str to str
+        Topic -> the child frame of /tf_static that places it, in ring order.
+    base : str
+        The robot's base frame (the odometry's child frame).
+
+    Returns
+    -------
+    mounts : ndarray, shape (M, 3)
+        (x, y, yaw) in ``base`` of each topic; NaN rows for the topics without a mount
+        or with a problem (the caller refuses them: a missing mount is never replaced
+        by a nominal one).
+    missing : list of str
+        The topics whose frame /tf_static does not name.
+    problems : dict of str to str
+        Topic -> why its frame cannot be placed (two parents, a cycle, a zero
+        quaternion, an axis too close to vertical), one line each.
+    """
+    found, missing, problems = frame_mounts(tf_msgs, frames, base)
+    rows = np.full((len(frames), 3), np.nan)
+    for k, topic in enumerate(frames):
+        if topic in found:
+            try:
+                rows[k] = planar_mount(found[topic])
+            except TfProblem as e:
+                problems[topic] = str(e)
+    return rows, missing, problems
