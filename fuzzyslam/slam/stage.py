@@ -24,7 +24,7 @@ from fuzzyslam.progress import Progress, note
 from fuzzyslam.rundir import OPTIONAL_OUTPUTS
 from fuzzyslam.slam import calibration as cal
 from fuzzyslam.slam import calibration_files
-from fuzzyslam.slam.inputs import open_inputs
+from fuzzyslam.slam.inputs import open_inputs, slow_odometry_note
 from fuzzyslam.slam.latency import MotionTap, delay_note
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
 from fuzzyslam.slam.outputs import StreamingOutputs, write_outputs, write_summary
@@ -320,6 +320,9 @@ def _run_once(
             + (f"; the log has {', '.join(unread)}, not read: a config for it?" if unread else "")
             + ")"
         )
+    slow = slow_odometry_note(inputs.odom_topic, inputs.odom_period_s)
+    if slow and not _quiet:
+        note(f"{log}: {slow}")
     model = calibration_model(inputs, cfg, calibration)
     staged = OutputDir(outdir, owns=OPTIONAL_OUTPUTS)
     # the aids' figures drawn in a child that imports matplotlib while the filter runs
