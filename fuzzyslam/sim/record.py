@@ -175,10 +175,13 @@ def write_truth_tum(plan: Plan, path: str | os.PathLike) -> None:
         Path(tmp).write_text(format_tum(plan.drive.t, plan.drive.pose), encoding="utf-8")
 
 
-def robot_payloads(plan: Plan, block: int = 1024) -> Iterator[tuple[bytes, bytes, bytes]]:
-    """CDR of (/joint_states, /odom, /ground_truth/odom) at every robot step, in order,
-    encoded ``block`` steps at a time: the wheel angles, the dead reckoning and the true
-    pose, with the velocities of the step before (0 at the first).
+def robot_payloads(plan: Plan, block: int = 1024) -> Iterator[tuple[bytes, bytes, bytes, bytes]]:
+    """CDR of (/joint_states, /odom, /ground_truth/odom, /tf) at every robot step, in
+    order, encoded ``block`` steps at a time: the wheel angles, the dead reckoning and the
+    true pose, with the velocities of the step before (0 at the first), and the dead
+    reckoning as the transform odom -> base_link, as a robot's driver broadcasts it (REP
+    105), so that the sonars and the camera of /tf_static sit in the odom frame (and, with
+    a run's estimates.mcap and its map -> odom, in the map).
 
     Parameters
     ----------
@@ -189,7 +192,7 @@ def robot_payloads(plan: Plan, block: int = 1024) -> Iterator[tuple[bytes, bytes
 
     Returns
     -------
-    iterator of (bytes, bytes, bytes)
+    iterator of (bytes, bytes, bytes, bytes)
     """
     dr, enc = plan.drive, plan.encoders
     n, dt = len(dr.t), dr.dt
@@ -206,6 +209,7 @@ def robot_payloads(plan: Plan, block: int = 1024) -> Iterator[tuple[bytes, bytes
             E.encode_odometry_block(t, "odom", "base_link", enc.dead_reckoning[k], v_odo[k],
                                     w_odo[k]),
             E.encode_odometry_block(t, "map", "base_link", dr.pose[k], v_true[k], w_true[k]),
+            E.encode_tf_block(t, [("odom", "base_link")], [enc.dead_reckoning[k]]),
             strict=True,
         )  # fmt: skip
 
@@ -272,8 +276,8 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
     )
     sonar_topics = [topics.sonar(i) for i in range(cfg.sonar.count)]
     sonar_types = [M.RANGE] * cfg.sonar.count
-    robot_topics = [topics.joint_states, topics.odom, topics.ground_truth]  # robot_payloads'
-    robot_types = [M.JOINT_STATE, M.ODOMETRY, M.ODOMETRY]
+    robot_topics = [topics.joint_states, topics.odom, topics.ground_truth, topics.tf]
+    robot_types = [M.JOINT_STATE, M.ODOMETRY, M.ODOMETRY, M.TF_MESSAGE]  # robot_payloads'
     frames = [sonar_frame(i) for i in range(cfg.sonar.count)]
     st = Stats()
     lit = np.ones(len(lamps), dtype=bool)

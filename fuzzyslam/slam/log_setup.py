@@ -96,9 +96,9 @@ def base_frame(reader: LogReader, cfg: Config) -> str:
 
 def tf_frames(reader: LogReader, cfg: Config, odom_topic: str | None) -> TfFrames:
     """The /tf frames of the estimates (:class:`TfFrames`): the odometry's own frame names
-    when it is nav_msgs/Odometry (``odom_topic``), and whether the log's /tf already
-    carries odom -> base (looked for in its first messages), so that it is not
-    written twice.
+    when it is nav_msgs/Odometry (``odom_topic``; else odom and base_link), and whether
+    the log's /tf already carries odom -> base (looked for in its first messages: a
+    robot's driver, or ``fuzzyslam simulate``), so that it is not written twice.
 
     Parameters
     ----------
@@ -113,12 +113,12 @@ def tf_frames(reader: LogReader, cfg: Config, odom_topic: str | None) -> TfFrame
     -------
     TfFrames
     """
-    if odom_topic is None:
-        return TfFrames()
-    first = first_message(reader, odom_topic)
-    odom = str(first.header.frame_id).lstrip("/") if first is not None else ""
-    base = str(first.child_frame_id).lstrip("/") if first is not None else ""
-    frames = TfFrames(odom=odom or "odom", base=base or "base_link")
+    frames = TfFrames()
+    if odom_topic is not None:
+        first = first_message(reader, odom_topic)
+        odom = str(first.header.frame_id).lstrip("/") if first is not None else ""
+        base = str(first.child_frame_id).lstrip("/") if first is not None else ""
+        frames = TfFrames(odom=odom or "odom", base=base or "base_link")
     if reader.has(cfg.topics.tf):
         for k, m in enumerate(reader.messages([cfg.topics.tf])):
             for ts in m.msg.transforms:
