@@ -261,3 +261,21 @@ def test_e_upside_down_laser_under_a_chain_matches_a_flat_one(tmp_path: Path):
         if log == flipped:
             assert np.allclose(sensor.mounts[:, 2], 0.3 - a)
     assert np.allclose(pairs[0], pairs[1], atol=1e-5)
+
+
+def test_decimation_keeps_the_same_beams_whichever_way_they_are_listed():
+    """A laser listing 20 beams counter-clockwise and one listing them clockwise (negative
+    angle increment), every 4th kept: the same beam angles (19 is not a multiple of 4,
+    so counting from the first beam of each would keep different beams)."""
+    from types import SimpleNamespace
+
+    from fuzzyslam.streams.scan import scan_geometry
+
+    n, inc = 20, math.radians(5.0)
+    ccw = SimpleNamespace(header=SimpleNamespace(frame_id="laser"), angle_min=-0.8,
+                          angle_increment=inc, ranges=[1.0] * n)  # fmt: skip
+    cw = SimpleNamespace(header=SimpleNamespace(frame_id="laser"), angle_min=-0.8 + (n - 1) * inc,
+                         angle_increment=-inc, ranges=[1.0] * n)  # fmt: skip
+    a = np.sort(scan_geometry(ccw, step=4).angles)
+    b = np.sort(scan_geometry(cw, step=4).angles)
+    assert len(a) == len(b) == 5 and np.allclose(a, b) and a[0] == pytest.approx(-0.8)

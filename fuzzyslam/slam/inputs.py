@@ -70,7 +70,8 @@ CAMERA_FRAME = "ceiling_camera"
 READ_STATE = ("warnings", "first_problem", "gap_seconds", "own_covariances", "ring_stats")
 ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
 GAP_PERIODS = 3.0  # ... or for this many of its mean periods, whichever is longer
-SLOW_ODOMETRY_S = 0.2  # odometry slower than this (mean period): a note (slam/stage.py)
+SLOW_ODOMETRY_S = 0.5  # odometry slower than this (mean period): a note (slam/stage.py)
+# (CARMEN logs at 4.6 and 5.4 Hz localise as well as faster ones; ACES cut to 1.1 Hz not)
 # s of stamps a late message may lag the newest one read and still be put in its place
 # (LogInputs._stamp_order): camera and detector pipelines deliver within a second
 REORDER_S = 5.0

@@ -1,9 +1,10 @@
 """Laser scans as rings of narrow range sensors: sensor_msgs/LaserScan into arrays.
 
 A scan of N beams is read as a ring of M = ceil(N / step) sensors, one per kept beam
-(every ``step``-th beam from the first), each sitting at the laser's origin and headed
-along its beam angle ``angle_min + k * angle_increment`` (REP 103: counter-clockwise
-from the laser's x axis) rotated by the laser's full 3D /tf_static mount
+(every ``step``-th beam from the one of smallest angle, whichever way the laser lists
+them), each sitting at the laser's origin and headed along its beam angle
+``angle_min + k * angle_increment`` (REP 103: counter-clockwise from the laser's x axis)
+rotated by the laser's full 3D /tf_static mount
 (:mod:`fuzzyslam.streams.tf`: an upside-down laser's beams run clockwise in the base
 frame). The FGM and FLM evidence (:func:`fuzzyslam.maps.evidence.rings_evidence`)
 then treats each beam as a sonar whose cone is the laser's beam width, so the maps and
@@ -48,8 +49,11 @@ class ScanGeometry:
 
     @property
     def kept(self) -> np.ndarray:
-        """Indices (M,) of the kept beams: every ``step``-th from the first."""
-        return np.arange(0, self.beams, self.step)
+        """Indices (M,) of the kept beams: every ``step``-th from the one of smallest angle
+        (the first, or the last when ``angle_increment`` < 0), so that a laser listing its
+        beams clockwise keeps the same beams as one listing them counter-clockwise."""
+        first = 0 if self.angle_increment > 0 else (self.beams - 1) % self.step
+        return np.arange(first, self.beams, self.step)
 
     @property
     def angles(self) -> np.ndarray:
