@@ -474,6 +474,8 @@ def test_frames_later_than_the_reorder_window_are_trouble(tiny: Tiny, tmp_path: 
     assert s["counts"]["frames"] < 0.5 * tiny.run["counts"]["frames"]
     health = s["filter_health"]
     assert health["diverged"] and "late_events" in health["reasons"]
+    assert s["warnings"]["late_messages"] >= s["counts"]["out_of_order"] > 0
+    assert "beyond the 5 s reorder window" in s["first_warning"]
 
 
 def test_nan_odometry_is_counted(tiny: Tiny, tmp_path: Path) -> None:

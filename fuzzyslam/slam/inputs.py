@@ -213,15 +213,24 @@ class LogInputs:
         Merged as logged, such a frame is older than the filter's time and is lost. The
         buffer holds every event until a message stamped ``REORDER_S`` later has been
         read, then releases them in stamp order (equal stamps in read order); an event
-        that arrives later than that is released as read and counted by the runner
-        (``counts.out_of_order``; slam/run_results.py flags a run that loses frames so).
-        Events put back in order are counted (``warnings.reordered``).
+        that arrives later than that is released as read and skipped by the runner
+        (``counts.out_of_order``; slam/run_results.py flags a run that loses frames so),
+        counted here too (``warnings.late_messages``, the first one described). Events put
+        back in order are counted (``warnings.reordered``).
         """
         heap: list[tuple[float, int, Event]] = []
         order = itertools.count()
         newest = -np.inf
         for ev in events:
-            if ev.t < newest:
+            if ev.t < newest - REORDER_S:
+                lag = newest - ev.t
+                self.warn(
+                    "late_messages",
+                    f"a {type(ev).__name__.lower()} stamped {ev.t:.3f} s was logged after a "
+                    f"message stamped {lag:.3f} s later, beyond the {REORDER_S:g} s reorder "
+                    "window (a lagging pipeline, or a sensor on another clock): skipped",
+                )
+            elif ev.t < newest:
                 self.warn("reordered")
             newest = max(newest, ev.t)
             heapq.heappush(heap, (ev.t, next(order), ev))
