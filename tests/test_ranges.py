@@ -28,30 +28,10 @@ from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.scan import scan_geometry, scan_ranges, scan_rings
 from fuzzyslam.streams.sonar import RingStats
 from fuzzyslam.streams.tum import read_tum
-from fuzzyslam.streams.typestore import typestore
 from fuzzyslam.streams.writer import LogWriter
 
 EXCERPT = Path(__file__).resolve().parents[1] / "data" / "carmen_fr079_excerpt"
-LASER_SCAN = "sensor_msgs/msg/LaserScan"
 TF = "tf2_msgs/msg/TFMessage"
-
-
-def laser_scan(t: float, frame: str, ranges, a_min: float, a_inc: float, rmin=0.05, rmax=40.0):
-    """A sensor_msgs/LaserScan message (rosbags typestore)."""
-    cls = typestore().types[LASER_SCAN]
-    r = np.asarray(ranges, dtype=np.float32)
-    return cls(
-        M.header(t, frame),
-        np.float32(a_min),
-        np.float32(a_min + a_inc * (len(r) - 1)),
-        np.float32(a_inc),
-        np.float32(0.0),
-        np.float32(0.0),
-        np.float32(rmin),
-        np.float32(rmax),
-        r,
-        np.zeros(0, dtype=np.float32),
-    )
 
 
 def tf_static(mounts: dict[str, tuple[float, float, float]]):
@@ -81,11 +61,13 @@ def test_scan_rings_decimate_and_place_every_beam():
     n, a_min, a_inc = 181, -math.pi / 2, math.pi / 180
     msgs = [
         SimpleNamespace(
-            topic="/scan", msg=laser_scan(t, "laser", np.arange(n) * 0.01 + 1, a_min, a_inc)
+            topic="/scan", msg=M.laser_scan(t, "laser", np.arange(n) * 0.01 + 1, a_min, a_inc)
         )
         for t in (1.0, 2.0, 2.0, 1.5)
     ]
-    msgs.append(SimpleNamespace(topic="/scan", msg=laser_scan(3.0, "laser", np.ones(90), 0.0, 0.1)))
+    msgs.append(
+        SimpleNamespace(topic="/scan", msg=M.laser_scan(3.0, "laser", np.ones(90), 0.0, 0.1))
+    )
     geom = scan_geometry(msgs[0].msg, step=4)
     st = RingStats()
     rings = list(scan_rings(msgs, geom, math.radians(4.0), st))
@@ -113,7 +95,7 @@ def test_laser_evidence_of_a_wall_at_a_known_distance_and_angle():
     d, alpha = 3.0, math.radians(20.0)
     c = np.cos(beta - alpha)
     raw = np.where(np.abs(beta - alpha) < math.radians(60.0), d / np.maximum(c, 1e-9), np.inf)
-    msg = SimpleNamespace(topic="/scan", msg=laser_scan(0.0, "laser", raw, a_min, a_inc))
+    msg = SimpleNamespace(topic="/scan", msg=M.laser_scan(0.0, "laser", raw, a_min, a_inc))
     geom = scan_geometry(msg.msg, step=cfg.ranges.scan_step)
     ring = next(scan_rings([msg], geom, math.radians(cfg.ranges.beam_width_deg)))
     grid = Grid((1.0 - 8.05, 2.0 - 8.05), p.resolution, (161, 161))
@@ -163,8 +145,8 @@ def _ring_log(path: Path, sonars: dict[str, str], mounts: dict[str, tuple], scan
             for j, (topic, frame) in enumerate(sonars.items()):
                 w.write(topic, M.RANGE, M.range_msg(t, frame, 1.0 + 0.1 * j, 0.4, 0.15, 6.5), t)
             if scan:
-                msg = laser_scan(t, "laser", np.full(19, 2.0), -math.pi / 2, math.pi / 18)
-                w.write("/scan", LASER_SCAN, msg, t)
+                msg = M.laser_scan(t, "laser", np.full(19, 2.0), -math.pi / 2, math.pi / 18)
+                w.write("/scan", M.LASER_SCAN, msg, t)
 
 
 def test_partial_ring_uses_the_topics_present_and_their_tf_mounts(tmp_path):

@@ -28,10 +28,8 @@ from fuzzyslam.streams.tf import (
     quaternion_matrix,
     static_tree,
 )
-from fuzzyslam.streams.typestore import typestore
 from fuzzyslam.streams.writer import LogWriter
 
-LASER_SCAN = "sensor_msgs/msg/LaserScan"
 PI = math.pi
 
 
@@ -58,23 +56,6 @@ def link(parent, child, x=0.0, y=0.0, z=0.0, roll=0.0, pitch=0.0, yaw=0.0, q=Non
 
 def tf(*links):
     return M.tf_message(list(links))
-
-
-def laser_scan(t: float, frame: str, ranges, a_min: float, a_inc: float):
-    """A sensor_msgs/LaserScan message (rosbags typestore)."""
-    r = np.asarray(ranges, dtype=np.float32)
-    return typestore().types[LASER_SCAN](
-        M.header(t, frame),
-        np.float32(a_min),
-        np.float32(a_min + a_inc * (len(r) - 1)),
-        np.float32(a_inc),
-        np.float32(0.0),
-        np.float32(0.0),
-        np.float32(0.05),
-        np.float32(40.0),
-        r,
-        np.zeros(0, dtype=np.float32),
-    )
 
 
 def wrap(a):
@@ -129,7 +110,7 @@ def test_b_quaternion_matrix_is_normalised_and_refuses_a_zero_quaternion():
 def test_b_beams_of_an_upside_down_laser_run_clockwise():
     """Roll pi: beam a in the laser frame points at -a in the base frame (plus the mount
     yaw); an identity mount keeps the angles."""
-    msg = laser_scan(0.0, "laser", np.ones(13), -PI / 2, PI / 12)
+    msg = M.laser_scan(0.0, "laser", np.ones(13), -PI / 2, PI / 12)
     geom = scan_geometry(msg)
     a = geom.angles
     ident = geom.mounts(Rigid())
@@ -208,7 +189,7 @@ def test_d_open_ranges_refuses_a_cycle_in_one_line(tmp_path: Path):
     log = tmp_path / "cycle.mcap"
     with LogWriter(log) as w:
         w.write("/tf_static", M.TF_MESSAGE, tf(link("laser", "x"), link("x", "laser")), 0.0)
-        w.write("/scan", LASER_SCAN, laser_scan(0.5, "laser", np.ones(5), -0.5, 0.25), 0.5)
+        w.write("/scan", M.LASER_SCAN, M.laser_scan(0.5, "laser", np.ones(5), -0.5, 0.25), 0.5)
     with pytest.raises(InputError) as exc:
         open_ranges(LogReader(log), load_config("quick.yaml"), "scan")
     msg = str(exc.value)
@@ -225,8 +206,8 @@ def _scan_log(path: Path, links, ranges, base: str) -> None:
         for k in range(3):
             t = 0.5 + 0.25 * k
             w.write("/odom", M.ODOMETRY, M.odometry(t, "odom", base, np.zeros(3)), t)
-            msg = laser_scan(t, "laser", ranges, -PI / 2, PI / 18)
-            w.write("/scan", LASER_SCAN, msg, t)
+            msg = M.laser_scan(t, "laser", ranges, -PI / 2, PI / 18)
+            w.write("/scan", M.LASER_SCAN, msg, t)
 
 
 def test_e_upside_down_laser_under_a_chain_matches_a_flat_one(tmp_path: Path):

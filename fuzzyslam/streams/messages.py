@@ -16,6 +16,7 @@ from fuzzyslam.stamps import split_ns
 from fuzzyslam.streams.typestore import msgtype
 
 RANGE = "sensor_msgs/msg/Range"
+LASER_SCAN = "sensor_msgs/msg/LaserScan"
 IMAGE = "sensor_msgs/msg/Image"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 JOINT_STATE = "sensor_msgs/msg/JointState"
@@ -83,6 +84,50 @@ def range_msg(t: float, frame_id: str, r: float, fov: float, rmin: float, rmax: 
         min_range=float(rmin),
         max_range=float(rmax),
         range=float(r),
+    )
+
+
+def laser_scan(
+    t: float,
+    frame_id: str,
+    ranges: np.ndarray,
+    angle_min: float,
+    angle_increment: float,
+    range_min: float = 0.05,
+    range_max: float = 40.0,
+) -> Any:
+    """sensor_msgs/LaserScan of ``ranges`` (N,) from ``angle_min`` by ``angle_increment``
+    (rad), no intensities, no timing fields (float32 as the message holds them).
+
+    Parameters
+    ----------
+    t : float
+        Stamp (s).
+    frame_id : str
+        The laser's frame.
+    ranges : ndarray, shape (N,)
+        Ranges (m); inf and NaN as sensor_msgs/LaserScan defines them.
+    angle_min, angle_increment : float
+        First beam's angle and the step (rad; a negative step lists beams clockwise).
+    range_min, range_max : float
+        The valid range interval (m).
+
+    Returns
+    -------
+    sensor_msgs/msg/LaserScan
+    """
+    r = np.asarray(ranges, dtype=np.float32)
+    return msgtype(LASER_SCAN)(
+        header=header(t, frame_id),
+        angle_min=np.float32(angle_min),
+        angle_max=np.float32(angle_min + angle_increment * (len(r) - 1)),
+        angle_increment=np.float32(angle_increment),
+        time_increment=np.float32(0.0),
+        scan_time=np.float32(0.0),
+        range_min=np.float32(range_min),
+        range_max=np.float32(range_max),
+        ranges=r,
+        intensities=np.zeros(0, dtype=np.float32),
     )
 
 
