@@ -3,9 +3,12 @@ odometry gets a note saying what it costs (slam/inputs.py)."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
 from test_robust_logs import JOINTS, Out, Tiny, cli, keep, rewrite, tiny  # noqa: F401
 
 from fuzzyslam.slam.inputs import SLOW_ODOMETRY_S, odometry_period, slow_odometry_note
+from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.reader import LogMessage, LogReader
 
 
@@ -48,3 +51,48 @@ def test_slow_encoders_are_slow_not_silent(tiny: Tiny, tmp_path) -> None:  # noq
     assert json.loads(out)["warnings"]["odometry_gaps"] == 1
     assert slow_odometry_note(JOINTS, SLOW_ODOMETRY_S) == ""
     assert "Hz" not in cli("run", tiny.log, "-o", tmp_path / "clean", "--config", tiny.config)[2]
+
+
+def test_the_period_is_the_odometrys_own(tiny: Tiny, tmp_path) -> None:  # noqa: F811
+    """The encoders stop after 10 s while the other streams go on (a driver that dies):
+    the period is still the encoders' 0.05 s (the log's span over their count would say
+    0.26 s), and no note is given."""
+
+    def dies(m: LogMessage) -> list[Out]:
+        return [] if m.topic == JOINTS and m.t > 10 else keep(m)
+
+    stop = rewrite(tiny.log, tmp_path / "stop.mcap", dies)
+    assert 0.049 < odometry_period(LogReader(stop), JOINTS) < 0.051
+    code, _, err = cli("run", stop, "-o", tmp_path / "est", "--config", tiny.config)
+    assert code == 0 and "Hz" not in err, err
+
+
+def test_a_range_sensor_on_another_clock_is_lost_and_said(tmp_path) -> None:
+    """The Freiburg excerpt's sonars stamped 20 s ahead of their log time (a sonar board
+    with its own clock): their readings are not used, counted, the first described, and
+    the run's health rule says a stream was lost; the untouched excerpt loses none."""
+    from test_robust_logs import set_stamp
+
+    from fuzzyslam.config import load_config
+    from fuzzyslam.slam.inputs import open_inputs
+    from fuzzyslam.slam.run_results import LateEvents, RunCounts, lost_events
+
+    src = Path(__file__).resolve().parents[1] / "data" / "carmen_fr079_excerpt" / "log.mcap"
+
+    def ahead(m: LogMessage) -> list[Out]:
+        if m.topic.startswith("/sonar/"):
+            set_stamp(m.msg, M.stamp_to_sec(m.msg.header.stamp) + 20.0)
+        return keep(m)
+
+    cfg = load_config("real_building_sonar")
+    counts = RunCounts(**dict.fromkeys(RunCounts.__dataclass_fields__, 100))
+    for log, lost_all in ((src, False), (rewrite(src, tmp_path / "ahead.mcap", ahead), True)):
+        inputs = open_inputs(log, cfg, need_rings=True)
+        rings = [e for e in inputs.events(rings=True) if type(e).__name__ == "RingEvent"]
+        found = lost_events(LateEvents(), counts, inputs.lost, inputs.ring_stats.readings)
+        if lost_all:
+            assert rings == [] and inputs.lost["readings"] == inputs.warnings["clock_mismatch"]
+            assert inputs.lost["readings"] > 1000 and "/sonar/s" in inputs.first_problem
+            assert found is not None and found[0] == "events_lost"
+        else:
+            assert len(rings) > 200 and inputs.lost["readings"] == 0 and found is None

@@ -464,18 +464,56 @@ def test_frames_logged_late_are_put_back_in_stamp_order(tiny: Tiny, tmp_path: Pa
         assert (tmp_path / "est" / name).read_bytes() == (tiny.est / name).read_bytes(), name
 
 
-def test_frames_later_than_the_reorder_window_are_trouble(tiny: Tiny, tmp_path: Path) -> None:
-    """Frames logged 7 s late (beyond the 5 s reorder window): they are lost, counted,
-    and the summary says the filter is in trouble (reason late_events) rather than
-    healthy."""
-    log = rewrite(tiny.log, tmp_path / "late.mcap", lag_frames(7.0))
+def test_frames_on_another_clock_are_not_used_and_said(tiny: Tiny, tmp_path: Path) -> None:
+    """From 15 s on, the camera's frames are logged 7 s after their stamps (a pipeline
+    that stalls, or a camera clock 7 s behind): beyond the 5 s window they cannot be
+    placed, so they are not used, counted (clock_mismatch), the first described, and the
+    summary says the filter is in trouble (events_lost) rather than healthy. All of them
+    so: no usable frame, one line naming the clock."""
+
+    def stall(m: LogMessage) -> list[Out]:
+        late = m.topic == IMAGE and m.t >= 15.0
+        return [(m.topic, m.typename, m.msg, m.t + 7.0)] if late else keep(m)
+
+    log = rewrite(tiny.log, tmp_path / "stall.mcap", stall)
     s = run_json(tiny, log, tmp_path / "est")
-    assert s["counts"]["out_of_order"] > 0.5 * tiny.run["counts"]["frames"]
-    assert s["counts"]["frames"] < 0.5 * tiny.run["counts"]["frames"]
+    lost = s["warnings"]["clock_mismatch"]
+    assert lost > 0.3 * tiny.run["counts"]["frames"]
+    assert s["counts"]["frames"] == tiny.run["counts"]["frames"] - lost
+    assert "another clock" in s["first_warning"] and IMAGE in s["first_warning"]
     health = s["filter_health"]
-    assert health["diverged"] and "late_events" in health["reasons"]
-    assert s["warnings"]["late_messages"] >= s["counts"]["out_of_order"] > 0
-    assert "beyond the 5 s reorder window" in s["first_warning"]
+    assert health["diverged"] and "events_lost" in health["reasons"]
+    assert 14.9 < health["diverged_at"] < 15.1 + 7.0
+    times = load_tum(tmp_path / "est" / "trajectory.tum")[:, 0]
+    assert np.all(np.diff(times) > 0)
+    # every frame 7 s late: nothing to use, one line
+    log = rewrite(tiny.log, tmp_path / "late.mcap", lag_frames(7.0))
+    code, out, err = cli("run", log, "-o", tmp_path / "none", "--config", tiny.config)
+    assert code == 3 and out == "" and not (tmp_path / "none").exists()
+    (line,) = error_lines(err)
+    assert "no usable camera frame" in line and "another clock" in line
+
+
+def test_frames_stamped_before_the_log_starts_keep_the_trajectory_in_order(
+    tiny: Tiny, tmp_path: Path
+) -> None:
+    """Every frame stamped 0.3 s before it was logged (exposure to recording): the first
+    one is stamped before the log's first message, so the run starts there; the
+    trajectory's stamps increase and evaluate reads it."""
+
+    def early(m: LogMessage) -> list[Out]:
+        if m.topic == IMAGE:
+            set_stamp(m.msg, m.t - 0.3)
+        return keep(m)
+
+    log = rewrite(tiny.log, tmp_path / "early.mcap", early)
+    s = run_json(tiny, log, tmp_path / "est")
+    assert s["counts"]["frames"] == tiny.run["counts"]["frames"]
+    assert not s["filter_health"]["diverged"]
+    times = load_tum(tmp_path / "est" / "trajectory.tum")[:, 0]
+    assert times[0] == pytest.approx(-0.3) and np.all(np.diff(times) > 0)
+    code, _, err = cli("evaluate", log, tmp_path / "est", "-o", tmp_path / "ev")
+    assert code == 0, err
 
 
 def test_nan_odometry_is_counted(tiny: Tiny, tmp_path: Path) -> None:

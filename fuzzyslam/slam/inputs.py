@@ -60,14 +60,14 @@ from fuzzyslam.slam.log_setup import (
 from fuzzyslam.slam.odom_gate import REANCHOR, OdomGate, within_speed
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.ranges import RangeSensor, open_ranges
-from fuzzyslam.streams.reader import LogReader
+from fuzzyslam.streams.reader import LogMessage, LogReader
 from fuzzyslam.streams.sonar import RingStats
 from fuzzyslam.streams.tf import TfProblem, compose_to_base, static_tree
 
 CAMERA_FRAME = "ceiling_camera"
 # what reading the events changes that the run reports (with the reader's damage):
 # LogInputs.read_state, which slam/prefetch.py sends back from the child that read them
-READ_STATE = ("warnings", "first_problem", "gap_seconds", "own_covariances", "ring_stats")
+READ_STATE = ("warnings", "first_problem", "gap_seconds", "own_covariances", "ring_stats", "lost")
 ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
 GAP_PERIODS = 3.0  # ... or for this many of its mean periods, whichever is longer
 SLOW_ODOMETRY_S = 0.5  # odometry slower than this (mean period): a note (slam/stage.py)
@@ -96,7 +96,13 @@ class LogInputs:
     ring_stats: RingStats = field(default_factory=RingStats)
     first_problem: str = ""
     gap_seconds: float = 0.0
-    odom_period_s: float = 0.0  # the odometry's mean period (odometry_period)
+    odom_period_s: float = 0.0  # the odometry's period (odometry_period)
+    # header stamp - log time of the odometry's first message: the clock the other
+    # streams are checked against (LogInputs._same_clock)
+    clock_offset: float = 0.0
+    # frames and range readings not used: their stamps cannot be placed (back in time,
+    # another clock): the run's filter_health counts them (slam/run_results.py)
+    lost: dict[str, float] = field(default_factory=lambda: {"frames": 0, "readings": 0})
     odom_gap_s: float = ODOM_GAP_S  # a longer silence is a gap (odometry_gap_s)
     own_covariances: int = 0  # detections that brought their own covariance
     _names: list = field(default_factory=list)
@@ -182,10 +188,15 @@ class LogInputs:
             topic, msg = m.topic, m.msg
             t = M.stamp_to_sec(msg.header.stamp)
             before = last_t[topic]
+            if topic != odom_topic and not self._same_clock(topic, t, m.t):
+                self._lose("frames", m.t)
+                continue
             if t < before:
                 # odometry is cumulative (wheel angles, poses): the next message carries
                 # the motion of a misstamped one, at a stamp in order
                 self.warn("out_of_order", f"{topic}: header stamp {t:.3f} s goes back in time")
+                if topic != odom_topic:
+                    self._lose("frames", m.t)
                 continue
             elif t == before:
                 # a repeated stamp: a duplicated message; odometry is cumulative (wheel
@@ -214,23 +225,16 @@ class LogInputs:
         buffer holds every event until a message stamped ``REORDER_S`` later has been
         read, then releases them in stamp order (equal stamps in read order); an event
         that arrives later than that is released as read and skipped by the runner
-        (``counts.out_of_order``; slam/run_results.py flags a run that loses frames so),
-        counted here too (``warnings.late_messages``, the first one described). Events put
+        (``counts.out_of_order``; slam/run_results.py flags a run that loses frames so);
+        a stream logged more than ``REORDER_S`` from its stamps, against the odometry, is
+        on another clock and never reaches the buffer (:meth:`_same_clock`). Events put
         back in order are counted (``warnings.reordered``).
         """
         heap: list[tuple[float, int, Event]] = []
         order = itertools.count()
         newest = -np.inf
         for ev in events:
-            if ev.t < newest - REORDER_S:
-                lag = newest - ev.t
-                self.warn(
-                    "late_messages",
-                    f"a {type(ev).__name__.lower()} stamped {ev.t:.3f} s was logged after a "
-                    f"message stamped {lag:.3f} s later, beyond the {REORDER_S:g} s reorder "
-                    "window (a lagging pipeline, or a sensor on another clock): skipped",
-                )
-            elif ev.t < newest:
+            if ev.t < newest:
                 self.warn("reordered")
             newest = max(newest, ev.t)
             heapq.heappush(heap, (ev.t, next(order), ev))
@@ -373,8 +377,59 @@ class LogInputs:
     def _ring_events(self, start: float | None = None) -> Iterator[Event]:
         assert self.ranges is not None
         msgs = self.reader.messages(self.ranges.topics, start)  # rings before ``start`` not read
-        for ring in self.ranges.rings(msgs, self.ring_stats):
+        for ring in self.ranges.rings(self._on_clock(msgs), self.ring_stats):
             yield RingEvent(ring.t, ring)
+
+    def _on_clock(self, msgs: Iterator[LogMessage]) -> Iterator[LogMessage]:
+        """The range messages on the odometry's clock (:meth:`_same_clock`); the others
+        counted in ``lost["readings"]``."""
+        for m in msgs:
+            if self._same_clock(m.topic, M.stamp_to_sec(m.msg.header.stamp), m.t):
+                yield m
+            else:
+                self._lose("readings", m.t)
+
+    def _lose(self, kind: str, logged: float) -> None:
+        """Count a frame or a range reading not used (``lost``), and the time of the first
+        on the odometry's clock (``lost["first_at"]``)."""
+        self.lost[kind] += 1
+        self.lost.setdefault("first_at", logged + self.clock_offset)
+
+    def _same_clock(self, topic: str, stamp: float, logged: float) -> bool:
+        """Whether a message of ``topic`` (header ``stamp``, log time ``logged``, s) is on
+        the odometry's clock: its stamp - log time within ``REORDER_S`` of the odometry's.
+
+        A recorder logs every message when it arrives, on one clock, so a sensor's stamp
+        minus its log time is its own latency (negative: stamped before it was logged),
+        a fraction of a second. A stream whose latency differs from the odometry's by more
+        than ``REORDER_S`` is stamped on another clock (a camera's own, a detector
+        stamping with a frame count, a simulator's sim time for one node only): its stamps
+        cannot be placed on the odometry's time line, and used as stamped they would pass
+        over the odometry or fall before it. Such messages are counted
+        (``warnings.clock_mismatch``, the first described) and not used. A log whose
+        streams are all on one other clock (sim time for every node) is consistent and
+        read as usual.
+
+        Parameters
+        ----------
+        topic : str
+            The message's topic.
+        stamp, logged : float
+            Its header stamp and its log time (s).
+
+        Returns
+        -------
+        bool
+        """
+        skew = (stamp - logged) - self.clock_offset
+        if abs(skew) <= REORDER_S:
+            return True
+        self.warn(
+            "clock_mismatch",
+            f"{topic}: stamped {skew:+.3f} s off its log time, against the odometry "
+            f"{self.odom_topic}: another clock? (not used beyond {REORDER_S:g} s)",
+        )
+        return False
 
 
 def open_inputs(
@@ -462,11 +517,38 @@ def open_inputs(
         frames=frames,
         odom_period_s=(period := odometry_period(reader, odom_topic)),
         odom_gap_s=max(ODOM_GAP_S, GAP_PERIODS * period),
+        clock_offset=clock_offset(reader, odom_topic),
     )
 
 
+def clock_offset(reader: LogReader, topic: str) -> float:
+    """Header stamp - log time of the first message on ``topic`` (the odometry): the
+    clock the other streams are checked against (``LogInputs._same_clock``).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    topic : str
+        The odometry topic.
+
+    Returns
+    -------
+    float
+        Seconds (0 without a message).
+    """
+    for m in reader.messages([topic]):
+        return M.stamp_to_sec(m.msg.header.stamp) - m.t
+    return 0.0
+
+
+PERIOD_SAMPLES = 500  # odometry stamps the period is measured on
+
+
 def odometry_period(reader: LogReader, topic: str) -> float:
-    """The odometry's mean period: the log's span over its message count.
+    """The odometry's period: the median step between the header stamps of its first
+    ``PERIOD_SAMPLES`` messages (steps that go back or repeat left out), so that neither
+    a gap nor other streams logged before or after it change it.
 
     The odometry has a gap when silent for longer than ``ODOM_GAP_S`` or ``GAP_PERIODS``
     of this period, whichever is longer (odometry at 1 Hz is slow, not silent); odometry
@@ -484,8 +566,14 @@ def odometry_period(reader: LogReader, topic: str) -> float:
     float
         Seconds (0 with fewer than two messages).
     """
-    n = reader.counts.get(topic, 0)
-    return (reader.end - reader.start) / (n - 1) if n > 1 else 0.0
+    stamps = []
+    for m in reader.messages([topic]):
+        stamps.append(M.stamp_to_sec(m.msg.header.stamp))
+        if len(stamps) >= PERIOD_SAMPLES:
+            break
+    steps = np.diff(np.asarray(stamps, dtype=float))
+    steps = steps[steps > 0]
+    return float(np.median(steps)) if len(steps) else 0.0
 
 
 def slow_odometry_note(topic: str, period: float) -> str:

@@ -49,16 +49,15 @@ class RunCounts:
     relocalisations: int = OMIT  # accepted: the pose had left its covariance
 
 
-LATE_SHARE = 0.05  # more than this share of the frames or odometry too late: trouble
+LOST_SHARE = 0.05  # more than this share of a stream not used: trouble (events_lost)
 
 
 @dataclass
 class LateEvents:
     """Events the runner skipped because they came older than the filter's time: a
     message logged more than ``slam.inputs.REORDER_S`` after others stamped later (a
-    detector pipeline that lags, a sensor on another clock). Each lost frame is a missed
-    correction and each lost odometry increment is lost motion, so a run that loses more
-    than ``LATE_SHARE`` of either is in trouble (reason ``late_events``)."""
+    detector pipeline that lags). Each lost frame is a missed correction and each lost
+    odometry increment is lost motion (:func:`lost_events`)."""
 
     frames: int = 0
     odometry: int = 0
@@ -84,23 +83,43 @@ class LateEvents:
         if self.first_at is None:
             self.first_at = now
 
-    def trouble(self, frames: int, odometry: int) -> tuple[str, float] | None:
-        """``("late_events", time of the first)`` when more than ``LATE_SHARE`` of the
-        frames or of the odometry increments were lost, else None.
 
-        Parameters
-        ----------
-        frames, odometry : int
-            The frames and odometry increments the filter used.
+def lost_events(
+    late: LateEvents, counts: RunCounts, lost: dict[str, float], readings: int
+) -> tuple[str, float] | None:
+    """``("events_lost", time of the first loss)`` when more than ``LOST_SHARE`` of the
+    frames, of the odometry increments or of the range readings were not used, else None.
 
-        Returns
-        -------
-        tuple of (str, float) or None
-        """
-        lost = (self.frames, frames), (self.odometry, odometry)
-        if self.first_at is None or all(n <= LATE_SHARE * (n + used) for n, used in lost):
-            return None
-        return "late_events", self.first_at
+    Lost: frames and odometry the runner skipped as too late (``late``), and frames and
+    range readings the input edge did not use (``lost``, slam/inputs.py: stamped back in
+    time, or on another clock than the odometry's). A run that loses a stream so is
+    estimated from what is left, and says so.
+
+    Parameters
+    ----------
+    late : LateEvents
+        The runner's skipped events.
+    counts : RunCounts
+        The run's counts (frames and odometry increments used).
+    lost : dict
+        ``LogInputs.lost``: ``frames``, ``readings`` and ``first_at`` (s, when any).
+    readings : int
+        Range readings read (``RingStats.readings``).
+
+    Returns
+    -------
+    tuple of (str, float) or None
+    """
+    frames = late.frames + int(lost["frames"])
+    shares = (
+        (frames, counts.frames),
+        (late.odometry, counts.odometry),
+        (int(lost["readings"]), readings),
+    )
+    if all(n <= LOST_SHARE * (n + used) for n, used in shares):
+        return None
+    times = [t for t in (late.first_at, lost.get("first_at")) if t is not None]
+    return "events_lost", min(times)
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -136,7 +155,7 @@ def filter_health(
     lamps: list[LampRecord],
     map_motion: MapMotionMonitor | None = None,
     aids: Sequence[Any] = (),
-    late: tuple[LateEvents, RunCounts] | None = None,
+    lost: tuple[str, float] | None = None,
 ) -> FilterHealth:
     """The filter's health at the end of a run: the guards' and windows' counts; the map
     turned untrustworthy (orphan landmarks, :func:`~fuzzyslam.slam.health.orphan_landmarks`)
@@ -158,8 +177,8 @@ def filter_health(
         The fix plug-ins; one with a ``trouble()`` that answers (reason, time) adds that
         reason (the heading aid's ``position_unresolved``: the position's 99 % ellipse
         wider than the margin of its corridor choice, fixes/heading.py).
-    late : (LateEvents, RunCounts), optional
-        The events skipped as too late and the run's counts (reason ``late_events``).
+    lost : (str, float), optional
+        :func:`lost_events`' answer (reason ``events_lost``).
 
     Returns
     -------
@@ -189,11 +208,8 @@ def filter_health(
         found = trouble() if trouble is not None else None
         if found is not None:
             findings.append(found)
-    if late is not None:
-        skipped, counts = late
-        found = skipped.trouble(counts.frames, counts.odometry)
-        if found is not None:
-            findings.append(found)
+    if lost is not None:
+        findings.append(lost)
     for reason, t in findings:
         reasons.append(reason)
         diverged_at = t if diverged_at is None else min(diverged_at, t)

@@ -8,8 +8,10 @@ from __future__ import annotations
 import contextlib
 import copy
 import importlib
+import itertools
 import os
 import time
+from collections.abc import Iterator
 from dataclasses import replace
 from pathlib import Path
 from typing import Any
@@ -24,13 +26,14 @@ from fuzzyslam.progress import Progress, note
 from fuzzyslam.rundir import OPTIONAL_OUTPUTS
 from fuzzyslam.slam import calibration as cal
 from fuzzyslam.slam import calibration_files
+from fuzzyslam.slam.events import Event
 from fuzzyslam.slam.inputs import open_inputs, slow_odometry_note
 from fuzzyslam.slam.latency import MotionTap, delay_note
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
 from fuzzyslam.slam.outputs import StreamingOutputs, write_outputs, write_summary
 from fuzzyslam.slam.prefetch import input_events
 from fuzzyslam.slam.prefetch import wanted as prefetch_wanted
-from fuzzyslam.slam.run_results import filter_health
+from fuzzyslam.slam.run_results import filter_health, lost_events
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
 from fuzzyslam.slam.summary import RunSummary
 from fuzzyslam.summary import OMIT, as_json
@@ -266,6 +269,29 @@ def run_stage(
     return as_json(once)
 
 
+def start_time(events: Iterator[Event], t0: float) -> tuple[Iterator[Event], float]:
+    """The time of the run's start pose: the log's first log time ``t0``, or the first
+    event's stamp when that is earlier (a sensor stamps its messages before the recorder
+    logs them), so that no trajectory row comes before the start row.
+
+    Parameters
+    ----------
+    events : iterator of Event
+        The run's events, in time order.
+    t0 : float
+        The log's first log time (s).
+
+    Returns
+    -------
+    (iterator of Event, float)
+        The same events (the first one read put back) and the start time (s).
+    """
+    first = next(events, None)
+    if first is None:
+        return iter(()), t0
+    return itertools.chain([first], events), min(t0, first.t)
+
+
 def _tell(summary: RunSummary, cfg: Config | None = None) -> None:
     """The one-line notes on stderr: the filter in trouble, the noise to change."""
     health = summary.filter_health
@@ -410,6 +436,7 @@ def _run_filter(
             t0 = inputs.start
             ring_start = min((a.start_time for a in aids), default=None)
             with input_events(inputs, bool(aids), ring_start, prefetch, aids) as events:
+                events, t0 = start_time(events, t0)
                 tap = MotionTap(events) if inputs.lamp_source == "detections" else None
                 res = runner.run(
                     events if tap is None else iter(tap), lambda t: bar.update_to(t - t0), t0=t0
@@ -431,7 +458,7 @@ def _run_filter(
         res.lamps,
         runner.map_motion,
         aids,
-        (runner.late, res.counts),
+        lost_events(runner.late, res.counts, inputs.lost, inputs.ring_stats.readings),
     )
     if inputs.lamp_source == "detections":
         res.counts = replace(res.counts, detections_own_covariance=inputs.own_covariances)

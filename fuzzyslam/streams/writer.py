@@ -224,7 +224,9 @@ class LogWriter:
 
     def write(self, topic: str, typename: str, msg: Any, t: float) -> None:
         """Write a message (a rosbags message, or its CDR bytes as ``streams/cdr_encode.py``
-        writes them) with log and publish time ``t`` (seconds of log time)."""
+        writes them) with log and publish time ``t`` (seconds of log time; MCAP times
+        are unsigned, so a time before the epoch, e.g. a message stamped before a
+        simulation's t = 0, is logged at 0: its header keeps its stamp)."""
         data = msg if isinstance(msg, bytes) else serialize(msg, typename)
         self.write_cdr(topic, typename, data, t)
 
@@ -233,7 +235,7 @@ class LogWriter:
         cid = self._known.get((topic, typename))
         if cid is None:
             cid = self._known[topic, typename] = self._channel(topic, typename)
-        ns = to_ns(t)
+        ns = max(to_ns(t), 0)
         self._writer.add_message(
             channel_id=cid, log_time=ns, publish_time=ns, data=data, sequence=self._seq[topic]
         )
@@ -256,7 +258,7 @@ class LogWriter:
             seqs.append(self._seq[topic])
             self._seq[topic] += 1
             self.counts[topic] += 1
-        self._writer.add_messages(ids, to_ns(t), datas, seqs)
+        self._writer.add_messages(ids, max(to_ns(t), 0), datas, seqs)
 
     def metadata(self, name: str, data: dict[str, str]) -> None:
         """Add an MCAP metadata record (string to string map)."""
