@@ -582,9 +582,8 @@ def slow_odometry_note(topic: str, period: float) -> str:
     The filter predicts with the odometry it has read, so a measurement between two
     messages is compared with the pose of the message before it, and the motion between
     two messages is taken as one arc (slam/motion.py), which turn-then-drive is not.
-    Both errors grow with the period: the ACES log's odometry cut from 5.4 to 1.1 Hz
-    (measured 2026-12-03) drifts 1.7 m mean instead of 0.9 m when its own poses are
-    joined by arcs, and its pose fixes err 1.0 m mean instead of 0.12 m.
+    Both errors grow with the period: with the ACES log's odometry cut from 5.4 to 1.1 Hz
+    (measured 2026-12-03) its pose fixes err 1.0 m mean instead of 0.12 m.
 
     Parameters
     ----------
