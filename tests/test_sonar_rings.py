@@ -1,6 +1,7 @@
 """Sonar Range messages into rings (streams/sonar.py ``group_rings``): rings stamped
 alike (the simulator, CARMEN) and rings fired in sequence (a Pioneer: one sonar every
-40 ms), with missing sonars, repeated messages and readings out of order."""
+40 ms), with missing sonars, repeated messages and readings out of order; the ring gap
+measured from the log (``firing_gap``, streams/ranges.py)."""
 
 from __future__ import annotations
 
@@ -10,8 +11,12 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
+from fuzzyslam.config import load_config
 from fuzzyslam.streams import messages as M
-from fuzzyslam.streams.sonar import MAX_RING_SPAN_S, RingStats, group_rings
+from fuzzyslam.streams.ranges import open_ranges
+from fuzzyslam.streams.reader import LogReader
+from fuzzyslam.streams.sonar import MAX_RING_SPAN_S, RingStats, firing_gap, group_rings
+from fuzzyslam.streams.writer import LogWriter
 
 COUNT = 8
 TOPICS = {f"/sonar/s{i:02d}": i for i in range(COUNT)}
@@ -64,11 +69,11 @@ def test_rings_stamped_alike_keep_their_stamp_exactly() -> None:
 def test_repeats_gaps_and_out_of_order_readings() -> None:
     """A sonar repeated at its own stamp is a duplicate; a sonar that reads again at a
     new stamp starts the next cycle; a pause longer than the gap starts a ring; a reading
-    stamped more than the gap before the latest is dropped; a cycle is cut at
-    MAX_RING_SPAN_S."""
+    stamped more than MAX_RING_SPAN_S before the latest (too late to be put back in
+    order) is dropped; a cycle is cut at MAX_RING_SPAN_S."""
     msgs = [reading(10.0, 0, 1.0), reading(10.04, 1, 1.1), reading(10.04, 1, 1.1)]  # duplicate
     msgs += [reading(10.08, 0, 1.2)]  # sonar 0 again: a new cycle
-    msgs += [reading(9.9, 2, 1.3)]  # out of order
+    msgs += [reading(10.08 - MAX_RING_SPAN_S - 0.01, 2, 1.3)]  # out of order
     msgs += [reading(10.5, 3, 1.4)]  # after a 0.42 s pause: a new ring
     st = RingStats()
     rings = list(group_rings(msgs, TOPICS, COUNT, stats=st))
@@ -81,3 +86,108 @@ def test_repeats_gaps_and_out_of_order_readings() -> None:
     spans = [int(np.count_nonzero(np.isfinite(r.ranges))) for r in cut]
     assert sum(spans) == 40 and len(cut) == 2
     assert (spans[0] - 1) * 0.04 <= MAX_RING_SPAN_S < spans[0] * 0.04
+
+
+# --- the ring gap measured from the log ---------------------------------------------------
+
+RING16 = {f"/sonar/s{i:02d}": i for i in range(16)}
+
+
+def firing(period: float, jitter: float = 0.0, dead: tuple[int, ...] = ()) -> list:
+    """Five cycles of 16 sonars fired in sequence, one every ``period`` s (+- ``jitter``,
+    uniform), the ``dead`` sonars never reading (a double step where each should be)."""
+    rng = np.random.default_rng(0)
+    t, out = 100.0, []
+    for c in range(5):
+        for i in range(16):
+            t += period + rng.uniform(-jitter, jitter)
+            if i not in dead:
+                out.append(reading(t, i, ranges_of(c, i)))
+    return out
+
+
+def measured_rings(msgs: list) -> tuple[str, float, list, RingStats]:
+    stamps = [M.stamp_to_sec(m.msg.header.stamp) for m in msgs]
+    kind, gap = firing_gap(stamps, 16)
+    st = RingStats()
+    return kind, gap, list(group_rings(msgs, RING16, 16, gap, st)), st
+
+
+@pytest.mark.parametrize(
+    ("period", "jitter", "dead", "size"),
+    [(0.0625, 0.0, (), 16), (0.04, 0.015, (), 16), (0.04, 0.0, (3, 9), 14)],
+    ids=["62.5ms", "jitter", "dead_sonars"],
+)
+def test_measured_gap_keeps_each_sequential_cycle_whole(period, jitter, dead, size) -> None:
+    """16 sonars over 1 s (62.5 ms each), 40 +- 15 ms, or two dead sonars (double steps):
+    the gap measured from the stamps (2.5 x the median step) gives one ring per cycle
+    holding every reading (the fixed 50 ms gap cut these into rings of one to ten)."""
+    kind, gap, rings, st = measured_rings(firing(period, jitter, dead))
+    assert kind == "sequential" and gap < MAX_RING_SPAN_S
+    assert gap == pytest.approx(2.5 * period, rel=0.15)
+    assert len(rings) == 5 and st.sequential == 5 and st.out_of_order == 0
+    assert [int(np.count_nonzero(np.isfinite(r.ranges))) for r in rings] == [size] * 5
+    for c, ring in enumerate(rings):
+        want = [np.nan if i in dead else ranges_of(c, i) for i in range(16)]
+        np.testing.assert_allclose(ring.ranges, want)
+
+
+def test_two_banks_logged_late_are_put_back_in_stamp_order() -> None:
+    """Two drivers fire banks s0-s7 and s8-s15 together every 40 ms; bank B is logged
+    100 ms after its stamp. The reorder buffer puts it back: all 80 readings in 5 rings,
+    none dropped as out of order (the old code dropped 38 of bank B)."""
+    ev = []
+    for c in range(5):
+        for k in range(8):
+            ts = 100.0 + (c * 8 + k) * 0.04
+            ev.append((ts, reading(ts, k, ranges_of(c, k))))
+            ev.append((ts + 0.1, reading(ts, k + 8, ranges_of(c, k + 8))))
+    msgs = [m for _, m in sorted(ev, key=lambda e: e[0])]
+    for gap in (0.05, measured_rings(msgs)[1]):
+        st = RingStats()
+        rings = list(group_rings(msgs, RING16, 16, gap, st))
+        assert st.out_of_order == 0 and st.readings == 80 and st.missing == 0
+        assert len(rings) == 5
+        for c, ring in enumerate(rings):
+            np.testing.assert_allclose(ring.ranges, [ranges_of(c, i) for i in range(16)])
+            assert ring.t == pytest.approx(100.0 + (c * 8 + 3.5) * 0.04)
+
+
+def test_firing_gap_of_rings_stamped_alike_is_a_small_tolerance() -> None:
+    """Whole rings at one stamp (0.2 s apart, or 0.06 s): simultaneous, gap 50 ms or half
+    the ring period; a single stamp: 50 ms."""
+    assert firing_gap([1.0 + 0.2 * (k // 16) for k in range(300)], 16) == ("simultaneous", 0.05)
+    kind, gap = firing_gap([1.0 + 0.06 * (k // 9) for k in range(300)], 9)
+    assert kind == "simultaneous" and gap == pytest.approx(0.03)
+    assert firing_gap([5.0] * 16, 16) == ("simultaneous", 0.05)
+
+
+def _sonar_log(path, stamps: list[tuple[float, int]]) -> None:
+    """A log of 16 sonars under base_link, readings (stamp, sonar) in log order."""
+    links = [
+        M.transform_stamped(0.0, "base_link", f"sonar_{i:02d}", 0.2, 0.0, 0.1, i * math.pi / 8)
+        for i in range(16)
+    ]
+    with LogWriter(path) as w:
+        w.write("/tf_static", M.TF_MESSAGE, M.tf_message(links), 0.0)
+        for t, i in stamps:
+            msg = M.range_msg(t, f"sonar_{i:02d}", 1.0 + 0.01 * i, FOV, 0.1, 5.0)
+            w.write(f"/sonar/s{i:02d}", M.RANGE, msg, t)
+
+
+def test_open_ranges_measures_simultaneous_or_sequential_firing(tmp_path) -> None:
+    """open_ranges reads the sonars' first stamps: rings stamped alike every 0.2 s are
+    simultaneous (gap 50 ms, rings as before); one sonar every 62.5 ms is sequential (gap
+    156 ms) and its RangeSensor groups whole cycles; both in the summary."""
+    cfg = load_config("quick.yaml")
+    alike, seq = tmp_path / "alike.mcap", tmp_path / "seq.mcap"
+    _sonar_log(alike, [(1.0 + 0.2 * c, i) for c in range(5) for i in range(16)])
+    _sonar_log(seq, [(1.0 + 0.0625 * (c * 16 + i), i) for c in range(5) for i in range(16)])
+    for log, kind, gap in ((alike, "simultaneous", 0.05), (seq, "sequential", 0.15625)):
+        sensor = open_ranges(LogReader(log), cfg, "sonar")
+        d = sensor.describe()
+        assert sensor.firing == d["firing"] == kind
+        assert sensor.ring_gap == pytest.approx(gap) and d["ring_gap_s"] == pytest.approx(gap)
+        rings = list(sensor.rings(LogReader(log).messages(sensor.topics), RingStats()))
+        assert len(rings) == 5
+        assert all(np.count_nonzero(np.isfinite(r.ranges)) == 16 for r in rings)

@@ -25,6 +25,7 @@ from fuzzyslam.streams.tf import (
     TfProblem,
     compose_to_base,
     frame_mounts,
+    locate,
     quaternion_matrix,
     static_tree,
 )
@@ -147,15 +148,52 @@ def test_b_a_sonar_tilted_near_vertical_or_a_zero_quaternion_is_refused():
 # --- (c) a chain that does not reach the base -------------------------------------------------
 
 
-def test_c_a_chain_not_reaching_the_base_composes_to_its_root():
-    """robot -> mount -> sonar_0 with base "base_link" absent: the mount in "robot"."""
+def test_c_a_tree_without_the_base_composes_to_its_root_and_names_it():
+    """robot -> mount -> sonar_0 with base "base_link" nowhere in the tree: the mount in
+    "robot", which is reported as standing in for the base."""
     msg = tf(
         link("robot", "mount", 0.2, 0.0, yaw=PI / 2),
         link("mount", "sonar_0", 0.1, 0.0, yaw=0.25),
     )
-    mounts, missing, problems = mounts_of_frames([msg], {"/sonar/s00": "sonar_0"}, "base_link")
+    stand_ins: dict[str, str] = {}
+    mounts, missing, problems = mounts_of_frames(
+        [msg], {"/sonar/s00": "sonar_0"}, "base_link", stand_ins
+    )
     assert not missing and not problems
     assert np.allclose(mounts[0], [0.2, 0.1, PI / 2 + 0.25])
+    assert stand_ins == {"/sonar/s00": "robot"}
+    assert locate(static_tree([msg]), "mount", "base_link")[1] == "robot"
+    assert locate(static_tree([msg]), "robot", "robot")[1] is None
+
+
+@pytest.mark.parametrize(
+    ("links", "base", "root"),
+    [
+        # pan_tilt has no static parent; base_link carries the other sensors
+        ([link("pan_tilt", "laser", 0.1, yaw=PI), link("base_link", "sonar_0", 0.2)],
+         "base_link", "pan_tilt"),
+        # a static odom -> laser by mistake, base_link elsewhere
+        ([link("odom", "laser", 1.0, 2.0, yaw=1.0), link("base_link", "sonar_0", 0.2)],
+         "base_link", "odom"),
+        # base_link under another root
+        ([link("chassis", "laser", 0.1), link("base_footprint", "base_link", 0.1)],
+         "base_link", "chassis"),
+        # the base nowhere in the tree, but the root is a world frame (REP 105)
+        ([link("odom", "laser", 1.0, 2.0, yaw=1.0)], "base_footprint", "odom"),
+        ([link("/map", "laser", 1.0)], "base_link", "map"),
+    ],
+    ids=["pan_tilt", "odom", "other_root", "odom_no_base", "map_no_base"],
+)  # fmt: skip
+def test_c_a_sensor_not_connected_to_the_base_is_refused(links, base, root):
+    """A sensor whose chain ends at a root that is not the base, while the base is in the
+    tree (or the root is a world-fixed frame), cannot be placed: one clear line, never
+    the mount in the root as if it were the base (the old code placed the laser so)."""
+    with pytest.raises(TfProblem) as exc:
+        compose_to_base(static_tree([tf(*links)]), "laser", base)
+    assert str(exc.value) == (
+        f"frame 'laser' is not connected to the base frame {base!r} in /tf_static "
+        f"(its chain ends at {root!r})"
+    )
 
 
 def test_c_a_sibling_branch_is_expressed_in_the_base():
@@ -169,6 +207,30 @@ def test_c_a_sibling_branch_is_expressed_in_the_base():
     c, s = math.cos(0.2), math.sin(0.2)
     assert not problems
     assert np.allclose(mounts[0], [c * 0.2 + s * 0.1, -s * 0.2 + c * 0.1, 0.3])
+
+
+def test_c_open_ranges_refuses_a_disconnected_laser_and_names_a_stand_in_root(tmp_path):
+    """End to end: a laser under pan_tilt while the sonars hang under base_link is one
+    InputError line; a tree base_link -> laser read with the odometry's base_footprint
+    places the laser in base_link and says so in mounts_source."""
+    cfg = load_config("quick.yaml")
+    log = tmp_path / "disc.mcap"
+    _scan_log(log, [link("pan_tilt", "laser", 0.1), link("base_link", "sonar_0")], [1.0] * 5,
+              "base_link")  # fmt: skip
+    with pytest.raises(InputError) as exc:
+        open_ranges(LogReader(log), cfg, "scan", base="base_link")
+    msg = str(exc.value)
+    assert "\n" not in msg and msg.endswith(
+        "/tf_static cannot place /scan (frame 'laser'): frame 'laser' is not connected to "
+        "the base frame 'base_link' in /tf_static (its chain ends at 'pan_tilt')"
+    )
+    other = tmp_path / "bfp.mcap"
+    _scan_log(other, [link("base_link", "laser", 0.1, 0.2, 0.3)], [1.0] * 5, "base_footprint")
+    sensor = open_ranges(LogReader(other), cfg, "scan", base="base_footprint")
+    assert np.allclose(sensor.mounts[:, :2], [0.1, 0.2])
+    assert sensor.describe()["mounts_source"] == (
+        "/tf_static (root 'base_link' taken as the base frame 'base_footprint')"
+    )
 
 
 # --- (d) trees that cannot place a sensor -------------------------------------------------

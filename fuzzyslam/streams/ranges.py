@@ -9,7 +9,9 @@ sensors sit (one home for ``map`` and ``run``):
   mount, or whose mount cannot be composed (two parents, a cycle, a zero quaternion, a
   cone axis near vertical), is an error naming it. Only a log without any /tf_static
   (older simulated logs) falls back to the nominal ``sonar.count`` ring of
-  ``robot.radius``, and says so in ``mounts_source``.
+  ``robot.radius``, and says so in ``mounts_source``. The firing pattern (simultaneous
+  or sequential) and the stamp gap that groups readings into rings are measured on the
+  first ``FIRING_SAMPLE`` readings (:func:`fuzzyslam.streams.sonar.firing_gap`).
 - ``scan``: ``topics.scan`` (sensor_msgs/LaserScan) as a ring of narrow sensors, one per
   kept beam (:mod:`fuzzyslam.streams.scan`), at the laser's /tf_static mount (frame of
   the first message) composed with each beam angle; cone width ``ranges.beam_width_deg``,
@@ -17,7 +19,9 @@ sensors sit (one home for ``map`` and ``run``):
 
 A mount is the sensor frame's transform in the robot's base frame (``base``: the
 odometry's child frame), composed down the whole /tf_static chain with full 3D
-rotations and projected onto the base plane (:mod:`fuzzyslam.streams.tf`).
+rotations and projected onto the base plane (:mod:`fuzzyslam.streams.tf`). A sensor not
+connected to the base is an error; only in a /tf_static that does not name the base at
+all does the root of the sensors' chains stand in for it, said in ``mounts_source``.
 
 ``ranges.source`` (or ``--ranges``): ``auto`` takes the sonar ring when the log has one,
 else the scan.
@@ -33,11 +37,15 @@ import numpy as np
 
 from fuzzyslam.errors import InputError
 from fuzzyslam.robot import sonar_mounts
+from fuzzyslam.streams.messages import stamp_to_sec
 from fuzzyslam.streams.reader import LogMessage, LogReader
 from fuzzyslam.streams.scan import ScanGeometry, scan_geometry, scan_rings
 from fuzzyslam.streams.sonar import (
+    FIRING_SAMPLE,
+    SIMULTANEOUS_GAP_S,
     Ring,
     RingStats,
+    firing_gap,
     group_rings,
     mounts_of_frames,
     present_sonar_topics,
@@ -65,7 +73,9 @@ class RangeParams:
 @dataclass
 class RangeSensor:
     """The chosen range sensor: its topics, the (M, 3) mounts (x, y, yaw) of its M
-    sensors in the robot's base frame, and how its messages become :class:`Ring` s."""
+    sensors in the robot's base frame, and how its messages become :class:`Ring` s
+    (a sonar ring: ``firing`` simultaneous or sequential, and ``ring_gap`` the largest
+    stamp step within a ring, s; :func:`fuzzyslam.streams.sonar.firing_gap`)."""
 
     kind: str
     topics: list[str]
@@ -73,6 +83,8 @@ class RangeSensor:
     mounts_source: str
     geometry: ScanGeometry | None = None
     beam_width: float = 0.0
+    ring_gap: float = SIMULTANEOUS_GAP_S
+    firing: str = ""
 
     def rings(self, messages: Iterable[LogMessage], stats: RingStats) -> Iterator[Ring]:
         """Rings (or scans) of the log's messages on :attr:`topics`, in log order."""
@@ -80,7 +92,7 @@ class RangeSensor:
             assert self.geometry is not None
             return scan_rings(messages, self.geometry, self.beam_width, stats)
         index = {tp: i for i, tp in enumerate(self.topics)}
-        return group_rings(messages, index, len(self.topics), stats=stats)
+        return group_rings(messages, index, len(self.topics), self.ring_gap, stats)
 
     def describe(self) -> dict[str, Any]:
         """For a stage's JSON summary."""
@@ -90,6 +102,9 @@ class RangeSensor:
             "sensors": len(self.mounts),
             "mounts_source": self.mounts_source,
         }
+        if self.kind == "sonar":
+            out["firing"] = self.firing
+            out["ring_gap_s"] = round(self.ring_gap, 6)
         if self.geometry is not None:
             out["beams"] = self.geometry.beams
             out["scan_step"] = self.geometry.step
@@ -113,6 +128,33 @@ def _first_frames(reader: LogReader, topics: list[str]) -> dict[str, str]:
     return {tp: frames[tp] for tp in topics if tp in frames}
 
 
+def _firing(reader: LogReader, topics: list[str]) -> tuple[str, float]:
+    """The sonars' firing pattern and ring gap, from the stamps of their first
+    ``FIRING_SAMPLE`` readings in the log."""
+    stamps = []
+    for m in reader.messages(topics):
+        stamps.append(stamp_to_sec(m.msg.header.stamp))
+        if len(stamps) >= FIRING_SAMPLE:
+            break
+    return firing_gap(stamps, len(topics))
+
+
+def _mounts_source(reader: LogReader, tf_topic: str, stand_ins: dict[str, str], base) -> str:
+    """``tf_topic``, and the root taken as the base frame when /tf_static does not name
+    it (:func:`fuzzyslam.streams.tf.locate`); sensors under different such roots are an
+    InputError (they cannot all be the base)."""
+    roots = sorted(set(stand_ins.values()))
+    if not roots:
+        return tf_topic
+    if len(roots) > 1:
+        raise InputError(
+            reader.path,
+            f"{tf_topic} places the sensors under different roots "
+            f"{', '.join(map(repr, roots))}, none of them the base frame {base!r}",
+        )
+    return f"{tf_topic} (root {roots[0]!r} taken as the base frame {base!r})"
+
+
 def _tf_problem(reader: LogReader, tf_topic: str, problems: dict[str, str], frames) -> None:
     """InputError naming each topic whose /tf_static mount cannot be composed."""
     if problems:
@@ -131,23 +173,29 @@ def _sonar(reader: LogReader, cfg: Any, topics: list[str], base: str) -> RangeSe
                 f"no {cfg.topics.tf_static} to place the sonars {', '.join(topics)} "
                 f"(the nominal ring needs exactly {nominal[0]}..{nominal[-1]})",
             )
+        firing, gap = _firing(reader, topics)
         return RangeSensor(
             "sonar",
             topics,
             sonar_mounts(count, cfg.robot.radius),
             f"nominal {count}-sonar ring (no {cfg.topics.tf_static}"
             + (" message: the log is damaged)" if tf is not None else ")"),
+            ring_gap=gap,
+            firing=firing,
         )
     frames = _first_frames(reader, topics)
     topics = [tp for tp in topics if tp in frames]
     if not topics:
         raise InputError(reader.path, f"no message on the sonar topics {cfg.topics.sonar_prefix}NN")
-    mounts, missing, problems = mounts_of_frames(tf, frames, base)
+    stand_ins: dict[str, str] = {}
+    mounts, missing, problems = mounts_of_frames(tf, frames, base, stand_ins)
     _tf_problem(reader, cfg.topics.tf_static, problems, frames)
     if missing:
         names = ", ".join(f"{tp} (frame {frames[tp]!r})" for tp in missing)
         raise InputError(reader.path, f"no {cfg.topics.tf_static} mount for {names}")
-    return RangeSensor("sonar", topics, mounts, cfg.topics.tf_static)
+    source = _mounts_source(reader, cfg.topics.tf_static, stand_ins, base)
+    firing, gap = _firing(reader, topics)
+    return RangeSensor("sonar", topics, mounts, source, ring_gap=gap, firing=firing)
 
 
 def _scan(reader: LogReader, cfg: Any, base: str) -> RangeSensor:
@@ -161,7 +209,8 @@ def _scan(reader: LogReader, cfg: Any, base: str) -> RangeSensor:
         raise InputError(reader.path, f"{tp}: a scan with no beams or a zero angle increment")
     tf = _tf_messages(reader, cfg.topics.tf_static) or []
     frames = {tp: geom.frame}
-    found, missing, problems = frame_mounts(tf, frames, base)
+    stand_ins: dict[str, str] = {}
+    found, missing, problems = frame_mounts(tf, frames, base, stand_ins)
     if tp in found:
         try:
             beams = geom.mounts(found[tp])
@@ -176,7 +225,7 @@ def _scan(reader: LogReader, cfg: Any, base: str) -> RangeSensor:
         "scan",
         [tp],
         beams,
-        cfg.topics.tf_static,
+        _mounts_source(reader, cfg.topics.tf_static, stand_ins, base),
         geom,
         float(np.deg2rad(rp.beam_width_deg)),
     )

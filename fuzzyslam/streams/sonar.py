@@ -1,13 +1,27 @@
 """Sonar rings from a log: the 16 Range messages of one firing, grouped into an array.
 
-A ring is one firing cycle: consecutive readings (in log order), each stamped within
+A ring is one firing cycle: consecutive readings (in stamp order), each stamped within
 ``gap`` of the one before, in which no sonar reads twice, spanning at most
 ``MAX_RING_SPAN_S``. The simulator (and CARMEN) stamp a whole ring alike; a real ring
-(a Pioneer's) fires its sonars in sequence, one every 40 ms or so, so one cycle spans a
-third of a second or more, and the next cycle starts when the first sonar fires again.
-The ring's time is the mean of its readings' stamps, the time at which placing all of
-them by one robot pose errs least (by at most half the span times the speed: 9 cm for a
-0.36 s cycle at 0.5 m/s); rings whose readings span more than ``gap`` are counted
+(a Pioneer's) fires its sonars in sequence, one every 40 to 60 ms or so, so one cycle
+spans a third of a second or more, and the next cycle starts when the first sonar fires
+again. The gap is measured from the log before grouping (:func:`firing_gap`, on the
+stamps of its first ``FIRING_SAMPLE`` readings, sorted):
+
+- simultaneous firing (readings that share a stamp average more than half the ring):
+  the gap is a small tolerance, ``SIMULTANEOUS_GAP_S`` or half the smallest positive
+  stamp step if that is smaller, so that the next ring's readings never join one that
+  lacks a sonar;
+- sequential firing: the gap is ``SEQUENTIAL_GAP_FACTOR`` (2.5) times the median
+  positive step, which covers a jittery period and the double step of a dead sonar,
+  and at most half of ``MAX_RING_SPAN_S``.
+
+Readings are put back in stamp order first: they are held until one stamped more than
+``MAX_RING_SPAN_S`` later has been read, then released in stamp order (equal stamps in
+log order), so two drivers logging their banks with different delays still make whole
+rings. The ring's time is the mean of its readings' stamps, the time at which placing
+all of them by one robot pose errs least (by at most half the span times the speed: 9 cm
+for a 0.36 s cycle at 0.5 m/s); rings whose readings span more than ``gap`` are counted
 (``sequential``). A sonar missing from a ring reads NaN. Glitches are made explicit and
 counted, never silently used:
 
@@ -18,16 +32,17 @@ counted, never silently used:
 - a reading whose max_range is beyond what an ultrasonic sensor can measure
   (``MAX_PLAUSIBLE_RANGE``) becomes NaN (``invalid`` and ``implausible``);
 - a second reading of the same sonar at the same stamp is dropped (``duplicates``);
-- a reading stamped more than ``gap`` before the latest one is dropped
-  (``out_of_order``);
+- a reading read after one stamped more than ``MAX_RING_SPAN_S`` later (too late to be
+  put back in order) is dropped (``out_of_order``);
 - a field of view that is not finite, not positive or wider than a half-plane
   (``MAX_PLAUSIBLE_FOV``) is replaced by the last valid one (``bad_fov``).
 """
 
 from __future__ import annotations
 
+import heapq
 import math
-from collections.abc import Iterable, Iterator
+from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -39,6 +54,9 @@ from fuzzyslam.streams.tf import TfProblem, frame_mounts, planar_mount
 MAX_PLAUSIBLE_RANGE = 100.0  # m: no ultrasonic ranger reaches this far
 MAX_PLAUSIBLE_FOV = np.pi  # rad: a cone wider than a half-plane is not a sonar beam
 MAX_RING_SPAN_S = 1.0  # s: a firing cycle longer than this is cut (24 sonars at 40 ms)
+SIMULTANEOUS_GAP_S = 0.05  # s: the largest gap within a ring stamped alike
+SEQUENTIAL_GAP_FACTOR = 2.5  # gap / median stamp step of sequential firing
+FIRING_SAMPLE = 300  # readings whose stamps measure the firing pattern
 
 
 @dataclass
@@ -82,15 +100,73 @@ class RingStats:
         }
 
 
+def firing_gap(stamps: Sequence[float], count: int) -> tuple[str, float]:
+    """The firing pattern of a sonar ring and the gap that groups it (module docstring).
+
+    Parameters
+    ----------
+    stamps : sequence of float
+        Stamps (s) of the ring's first readings (about ``FIRING_SAMPLE``), any order.
+    count : int
+        Sonars in the ring.
+
+    Returns
+    -------
+    firing : str
+        ``"simultaneous"`` when readings sharing a stamp average more than half of
+        ``count`` (or no two stamps differ), else ``"sequential"``.
+    gap : float
+        The largest stamp step (s) within one ring, for :func:`group_rings`.
+    """
+    t = np.sort(np.asarray(stamps, dtype=float))
+    t = t[np.isfinite(t)]
+    step = np.diff(t)
+    pos = step[step > 0]
+    if not len(pos):
+        return "simultaneous", SIMULTANEOUS_GAP_S
+    shared = len(t) / (len(pos) + 1)  # readings per distinct stamp
+    if shared > count / 2:
+        return "simultaneous", min(SIMULTANEOUS_GAP_S, 0.5 * float(pos.min()))
+    gap = SEQUENTIAL_GAP_FACTOR * float(np.median(pos))
+    return "sequential", min(gap, 0.5 * MAX_RING_SPAN_S)
+
+
+def _in_stamp_order(
+    messages: Iterable[LogMessage], topic_index: dict[str, int], st: RingStats
+) -> Iterator[tuple[float, int, LogMessage]]:
+    """(stamp, sonar, message) of the sonar readings, put back in stamp order: each held
+    until one stamped more than ``MAX_RING_SPAN_S`` later is read (equal stamps in log
+    order); a reading older than that is too late and counted ``out_of_order``."""
+    held: list[tuple[float, int, int, LogMessage]] = []
+    newest = -math.inf
+    for seq, m in enumerate(messages):
+        i = topic_index.get(m.topic)
+        if i is None:
+            continue
+        t = stamp_to_sec(m.msg.header.stamp)
+        if t < newest - MAX_RING_SPAN_S:
+            st.out_of_order += 1
+            continue
+        newest = max(newest, t)
+        heapq.heappush(held, (t, seq, i, m))
+        while held[0][0] < newest - MAX_RING_SPAN_S:
+            t0, _seq, i0, m0 = heapq.heappop(held)
+            yield t0, i0, m0
+    while held:
+        t0, _seq, i0, m0 = heapq.heappop(held)
+        yield t0, i0, m0
+
+
 def group_rings(
     messages: Iterable[LogMessage],
     topic_index: dict[str, int],
     count: int,
-    gap: float = 0.05,
+    gap: float = SIMULTANEOUS_GAP_S,
     stats: RingStats | None = None,
 ) -> Iterator[Ring]:
     """Group sonar Range messages (in log order) into rings, one per firing cycle.
 
+    The readings are put back in stamp order (a reorder buffer of ``MAX_RING_SPAN_S``).
     A reading starts a new ring when its sonar already read in the current one, when it
     is stamped more than ``gap`` after the reading before it, or more than
     ``MAX_RING_SPAN_S`` after the ring's first (module docstring).
@@ -104,7 +180,8 @@ def group_rings(
     count : int
         Sonars in the ring.
     gap : float
-        Largest stamp step (s) between consecutive readings of one ring.
+        Largest stamp step (s) between consecutive readings of one ring (measured by
+        :func:`firing_gap`).
     stats : RingStats or None
         Counts the glitches (module docstring).
 
@@ -132,14 +209,7 @@ def group_rings(
         t_ring = float(cur_t) + math.fsum(read) / len(read)
         return Ring(t_ring, ranges.copy(), rmax.copy(), fov)
 
-    for m in messages:
-        i = topic_index.get(m.topic)
-        if i is None:
-            continue
-        t = stamp_to_sec(m.msg.header.stamp)
-        if t < last_t - gap:
-            st.out_of_order += 1
-            continue
+    for t, i, m in _in_stamp_order(messages, topic_index, st):
         if cur_t is not None and seen[i] and t - cur_t == offset[i]:
             st.duplicates += 1  # the same sonar twice at one stamp: a repeated message
             continue
@@ -198,7 +268,10 @@ def present_sonar_topics(topics: Iterable[str], prefix: str) -> list[str]:
 
 
 def mounts_of_frames(
-    tf_msgs: Iterable[object], frames: dict[str, str], base: str = "base_link"
+    tf_msgs: Iterable[object],
+    frames: dict[str, str],
+    base: str = "base_link",
+    stand_ins: dict[str, str] | None = None,
 ) -> tuple[np.ndarray, list[str], dict[str, str]]:
     """Planar mounts of the sensors named by ``frames``, composed from /tf_static.
 
@@ -215,6 +288,9 @@ def mounts_of_frames(
         Topic -> the child frame of /tf_static that places it, in ring order.
     base : str
         The robot's base frame (the odometry's child frame).
+    stand_ins : dict of str to str, optional
+        Filled with topic -> the /tf_static root taken as ``base`` (a tree that does not
+        name ``base``; :func:`fuzzyslam.streams.tf.locate`).
 
     Returns
     -------
@@ -228,7 +304,7 @@ def mounts_of_frames(
         Topic -> why its frame cannot be placed (two parents, a cycle, a zero
         quaternion, an axis too close to vertical), one line each.
     """
-    found, missing, problems = frame_mounts(tf_msgs, frames, base)
+    found, missing, problems = frame_mounts(tf_msgs, frames, base, stand_ins)
     rows = np.full((len(frames), 3), np.nan)
     for k, topic in enumerate(frames):
         if topic in found:

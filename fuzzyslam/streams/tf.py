@@ -6,7 +6,9 @@ transform from the robot's base frame (the odometry's child frame, ``base_link``
 default; REP 105) to the sensor's frame, composed down the whole chain
 (``base_footprint -> base_link -> laser_mount -> laser``), with the full 3D rotation of
 every link: a laser mounted upside down (roll = pi) sees its beam at angle ``a`` point
-at ``-a`` in the base frame, which a yaw-only reading would mirror.
+at ``-a`` in the base frame, which a yaw-only reading would mirror. A chain that does
+not reach the base is refused, except in a tree that does not name the base at all,
+whose root then stands in for it (said so by the caller; :func:`compose_to_base`).
 
 The maps and fixes are planar, so a composed mount is projected onto the base plane
 (the x-y plane of the base frame; REP 103: x forward, y left, z up):
@@ -251,13 +253,74 @@ def _up(tree: TfTree, frame: str, base: str | None) -> tuple[Rigid, str]:
     return out, f
 
 
+# names of world-fixed frames (REP 105): never the robot's base, even as a chain's root
+WORLD_FRAMES = frozenset({"odom", "map", "world", "earth"})
+
+
+def _is_world(frame: str) -> bool:
+    return frame.rsplit("/", 1)[-1] in WORLD_FRAMES  # also a namespaced "robot1/odom"
+
+
+def locate(tree: TfTree, frame: str, base: str = "base_link") -> tuple[Rigid, str | None] | None:
+    """The mount of ``frame`` in ``base`` (:func:`compose_to_base`), and the root taken as
+    the base when the tree does not name ``base`` at all.
+
+    Parameters
+    ----------
+    tree : TfTree
+        The static tree (:func:`static_tree`).
+    frame : str
+        The sensor's frame (a leading ``/`` ignored).
+    base : str
+        The robot's base frame (the odometry's child frame).
+
+    Returns
+    -------
+    tuple of (Rigid, str or None) or None
+        The composed transform, and None when it is expressed in ``base`` itself, else
+        the name of the chain's root that stands in for ``base``; None when the tree
+        does not name ``frame``.
+
+    Raises
+    ------
+    TfProblem
+        As :func:`compose_to_base`.
+    """
+    frame, base = _name(frame), _name(base)
+    if frame == base:
+        return Rigid(), None
+    if frame not in tree.frames:
+        return None
+    out, top = _up(tree, frame, base)
+    if top == base:
+        return out, None
+    if base in tree.parents or base in tree.problems:
+        base_in_root, base_top = _up(tree, base, None)
+        if base_top == top:
+            return base_in_root.inverse().compose(out), None
+    if base in tree.frames or _is_world(top):
+        raise TfProblem(
+            f"frame {frame!r} is not connected to the base frame {base!r} in /tf_static "
+            f"(its chain ends at {top!r})"
+        )
+    return out, top
+
+
 def compose_to_base(tree: TfTree, frame: str, base: str = "base_link") -> Rigid | None:
     """The mount of ``frame``: its transform in ``base``, composed up the parent chain.
 
     The chain is followed from ``frame`` up to ``base``. When it does not pass through
-    ``base`` it ends at its root (the topmost frame, with no parent): the mount is then
-    expressed in ``base`` when ``base`` hangs under the same root (a sibling branch:
-    ``base_footprint -> base_link`` and ``base_footprint -> laser``), else in the root.
+    ``base`` it ends at its root (the topmost frame, with no parent):
+
+    - ``base`` hangs under the same root (a sibling branch: ``base_footprint ->
+      base_link`` and ``base_footprint -> laser``): the mount is expressed in ``base``
+      through the root;
+    - ``base`` is elsewhere in the tree (under another root, or a root itself), or the
+      root is a world-fixed frame (``odom``, ``map``, ``world``, ``earth``; REP 105):
+      the sensor is not connected to the robot, :class:`TfProblem`;
+    - the tree does not name ``base`` at all (the odometry's child frame is named
+      differently from the tree's root): the mount is expressed in the root, which
+      stands in for ``base`` (:func:`locate` names it, for the caller to report).
 
     Parameters
     ----------
@@ -277,26 +340,18 @@ def compose_to_base(tree: TfTree, frame: str, base: str = "base_link") -> Rigid 
     Raises
     ------
     TfProblem
-        When the chain passes through a frame with two parents or a bad transform, or
-        runs in a cycle.
+        When the chain passes through a frame with two parents or a bad transform, runs
+        in a cycle, or does not reach the base (above).
     """
-    frame, base = _name(frame), _name(base)
-    if frame == base:
-        return Rigid()
-    if frame not in tree.frames:
-        return None
-    out, top = _up(tree, frame, base)
-    if top == base:
-        return out
-    if base in tree.parents or base in tree.problems:
-        base_in_root, base_top = _up(tree, base, None)
-        if base_top == top:
-            return base_in_root.inverse().compose(out)
-    return out
+    found = locate(tree, frame, base)
+    return None if found is None else found[0]
 
 
 def frame_mounts(
-    messages: Iterable[Any], frames: dict[K, str], base: str = "base_link"
+    messages: Iterable[Any],
+    frames: dict[K, str],
+    base: str = "base_link",
+    stand_ins: dict[K, str] | None = None,
 ) -> tuple[dict[K, Rigid], list[K], dict[K, str]]:
     """The composed mounts of several sensors from one /tf_static.
 
@@ -308,6 +363,9 @@ def frame_mounts(
         Key (a topic) -> the sensor's frame.
     base : str
         The robot's base frame (:func:`compose_to_base`).
+    stand_ins : dict, optional
+        Filled with key -> the root that stands in for ``base`` (a tree that does not
+        name ``base``; :func:`locate`), for the keys placed so.
 
     Returns
     -------
@@ -324,14 +382,16 @@ def frame_mounts(
     problems: dict[K, str] = {}
     for key, frame in frames.items():
         try:
-            m = compose_to_base(tree, frame, base)
+            found = locate(tree, frame, base)
         except TfProblem as e:
             problems[key] = str(e)
             continue
-        if m is None:
+        if found is None:
             missing.append(key)
-        else:
-            mounts[key] = m
+            continue
+        mounts[key] = found[0]
+        if found[1] is not None and stand_ins is not None:
+            stand_ins[key] = found[1]
     return mounts, missing, problems
 
 
