@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from fuzzyslam.se2 import compose, inverse
+from fuzzyslam.se2 import compose, interpolate_poses
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.writer import LogWriter
@@ -49,7 +49,8 @@ def _tf_pairs(out: Path) -> tuple[set[tuple[str, str]], list, list]:
         if m.topic == "/tf":
             for ts in m.msg.transforms:
                 pairs.add((ts.header.frame_id, ts.child_frame_id))
-            tf.append(M.planar_transforms(m.msg))
+            tf.append((M.stamp_to_sec(m.msg.transforms[0].header.stamp),
+                       M.planar_transforms(m.msg)))  # fmt: skip
         else:
             poses.append(M.pose_of(m.msg.pose.pose))
     return pairs, tf, poses
@@ -60,14 +61,14 @@ def test_frames_follow_the_log(tmp_path: Path) -> None:
     """Renamed odometry frames: /tf is map -> wheel_odom -> chassis and composes to
     /slam/pose; with the log's own /tf carrying wheel_odom -> chassis, estimates.mcap
     holds map -> wheel_odom only, and that correction composed with the log's odometry
-    is still the estimate."""
+    (its /tf at the pose's stamp) is the estimate."""
     renamed = tmp_path / "renamed.mcap"
     _rewrite(renamed, "wheel_odom", "chassis", with_tf=False)
     _run(renamed, tmp_path / "a")
     pairs, tf, poses = _tf_pairs(tmp_path / "a")
     assert pairs == {("map", "wheel_odom"), ("wheel_odom", "chassis")}
     k = len(tf) // 2
-    got = compose(tf[k]["wheel_odom"][1], tf[k]["chassis"][1])
+    got = compose(tf[k][1]["wheel_odom"][1], tf[k][1]["chassis"][1])
     assert np.allclose(got, poses[k], atol=1e-9)
 
     own = tmp_path / "own_tf.mcap"
@@ -75,8 +76,22 @@ def test_frames_follow_the_log(tmp_path: Path) -> None:
     _run(own, tmp_path / "b")
     pairs_b, tf_b, poses_b = _tf_pairs(tmp_path / "b")
     assert pairs_b == {("map", "wheel_odom")}
-    # the same correction as without the log's /tf (the filter did not change)
+    # the filter did not change; its correction is against the log's own odom -> chassis
+    # at each pose's stamp (interpolated between the log's /tf stamps; REP 105), not
+    # against the run's dead reckoning, which starts at the first plausible /odom pose
     assert len(tf_b) == len(tf)
-    assert np.allclose(tf_b[k]["wheel_odom"][1], tf[k]["wheel_odom"][1], atol=1e-12)
-    assert np.allclose(compose(tf_b[k]["wheel_odom"][1], inverse(inverse(tf[k]["chassis"][1]))),
-                       poses_b[k], atol=1e-9)  # fmt: skip
+    assert np.array_equal(poses_b, poses)
+    lt, lp = _log_odom(own)
+    stamps = np.array([s for s, _ in tf_b])
+    odom = interpolate_poses(lt, lp, stamps, outside="hold")
+    corr = np.array([m["wheel_odom"][1] for _, m in tf_b])
+    assert np.allclose(compose(corr, odom), poses_b, atol=1e-9)
+
+
+def _log_odom(log: Path) -> tuple[np.ndarray, np.ndarray]:
+    """The log's /tf wheel_odom -> chassis: stamps and poses."""
+    t, p = [], []
+    for m in LogReader(log).messages(["/tf"]):
+        t.append(M.stamp_to_sec(m.msg.transforms[0].header.stamp))
+        p.append(M.planar_transforms(m.msg)["chassis"][1])
+    return np.asarray(t), np.asarray(p)

@@ -158,7 +158,9 @@ def log_odom_to_base(log: Path) -> dict[tuple[int, int], np.ndarray]:
 def _tf_tree(tf_msgs, pose_msgs, odom_to_base: dict) -> None:
     """Every /tf message of the estimates: map -> odom only (the log carries odom ->
     base_link, so it is not written twice), at the stamp of a /slam/pose, composing with
-    the log's odom -> base_link of that stamp to that pose: one tree over both files."""
+    the log's odom -> base_link of that stamp to that pose (the correction is computed
+    against the log's odom -> base_link, not the run's own dead reckoning): one tree
+    over both files."""
     assert len(tf_msgs) == len(pose_msgs) > 100
     for tf, pose in zip(tf_msgs, pose_msgs, strict=True):
         ts = tf.transforms

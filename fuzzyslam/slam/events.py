@@ -10,7 +10,7 @@ Events (built from a log by :mod:`fuzzyslam.slam.inputs`, or by a test):
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING, Any, Protocol
 
@@ -274,9 +274,17 @@ class TfFrames:
     correction) and, unless the log already carries it on /tf, ``odom`` -> ``base`` (the
     dead reckoning). Names follow the log's nav_msgs/Odometry (header.frame_id,
     child_frame_id) so that the sensor log and the estimates open together as one tree
-    (REP 105)."""
+    (REP 105).
+
+    When the log carries odom -> base, ``log_odom`` holds that series (times (N,) in s,
+    increasing; poses (N, 3), the heading unwrapped: continuous): map -> odom is then
+    the estimate composed with the inverse of the log's odom -> base at the estimate's
+    stamp (as AMCL does), so that the two files compose to the estimate whatever the
+    filter's own dead reckoning (another start pose, an odometry delay, another wheel radius)."""
 
     map: str = "map"
     odom: str = "odom"
     base: str = "base_link"
     odom_to_base: bool = True  # False: the log's own /tf has odom -> base
+    # the log's odom -> base (t, poses), when odom_to_base is False (arrays: not compared)
+    log_odom: tuple[np.ndarray, np.ndarray] | None = field(default=None, compare=False, repr=False)

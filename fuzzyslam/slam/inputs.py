@@ -6,7 +6,8 @@ Input streams (topic names from the config's ``topics`` section):
   ``robot.wheel_base``), or ``topics.odom`` pose increments when the log has no
   encoders or ``slam.use_encoders`` is false;
 - lamps: ``topics.image`` mono8 frames + ``topics.camera_info`` (ceiling height from
-  ``camera.ceiling_height``, lens offset from /tf_static ``ceiling_camera`` if present,
+  ``camera.ceiling_height``, the lens offset and image axes from the /tf_static mount of
+  ``ceiling_camera`` if present, composed in 3D (a camera turned or mounted upside down),
   else ``camera.offset``), or ``topics.detections`` PoseArray or vision_msgs
   Detection3DArray (base_link points; the latter's own covariances are used);
   A log with neither has no lamps (``lamp_source`` "none"): the same filter on
@@ -45,7 +46,7 @@ from typing import Any
 
 import numpy as np
 
-from fuzzyslam.camera import CeilingCamera
+from fuzzyslam.camera import IDENTITY_AXES, CeilingCamera, floor_mount
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.robot import WHEEL_NAMES
@@ -477,21 +478,21 @@ def open_inputs(
         if info is None:
             reader.require([tp.camera_info], "the config's topics.camera_info")
             raise InputError(reader.path, f"no message on {tp.camera_info}")
-        offset = tuple(cfg.camera.offset)
-        if reader.has(tp.tf_static):  # the lens in the base frame (streams/tf.py)
+        offset, axes = tuple(cfg.camera.offset), IDENTITY_AXES
+        if reader.has(tp.tf_static):  # the lens and image axes in the base frame
             tree = static_tree(m.msg for m in reader.messages([tp.tf_static]))
             try:
                 mount = compose_to_base(tree, CAMERA_FRAME, frames.base)
+                if mount is not None:
+                    offset, axes = floor_mount(mount)
             except TfProblem as e:
                 raise InputError(
                     reader.path, f"{tp.tf_static} cannot place {CAMERA_FRAME!r}: {e}"
                 ) from None
-            if mount is not None:
-                offset = (float(mount.translation[0]), float(mount.translation[1]))
         problem = camera_info_problem(info)
         if problem:
             raise InputError(reader.path, f"{tp.camera_info}: {problem}")
-        camera = CeilingCamera.from_camera_info(info, cfg.camera.ceiling_height, offset)
+        camera = CeilingCamera.from_camera_info(info, cfg.camera.ceiling_height, offset, axes)
     elif reader.has(tp.detections):
         lamp_topic, lamp_source = tp.detections, "detections"
     else:

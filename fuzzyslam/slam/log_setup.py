@@ -11,6 +11,7 @@ import numpy as np
 
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
+from fuzzyslam.se2 import quaternion_to_yaw
 from fuzzyslam.slam.events import TfFrames
 from fuzzyslam.slam.odom_gate import OdomGate, first_plausible_pose
 from fuzzyslam.streams import messages as M
@@ -91,14 +92,20 @@ def base_frame(reader: LogReader, cfg: Config) -> str:
     tp = cfg.topics
     if (cfg.slam.use_encoders and reader.has(tp.joint_states)) or not reader.has(tp.odom):
         return TfFrames().base
-    return tf_frames(reader, cfg, tp.odom).base
+    return tf_frames(reader, cfg, tp.odom, series=False).base
 
 
-def tf_frames(reader: LogReader, cfg: Config, odom_topic: str | None) -> TfFrames:
+def tf_frames(
+    reader: LogReader, cfg: Config, odom_topic: str | None, *, series: bool = True
+) -> TfFrames:
     """The /tf frames of the estimates (:class:`TfFrames`): the odometry's own frame names
     when it is nav_msgs/Odometry (``odom_topic``; else odom and base_link), and whether
-    the log's /tf already carries odom -> base (looked for in its first messages: a
-    robot's driver, or ``fuzzyslam simulate``), so that it is not written twice.
+    the log's /tf already carries odom -> base (looked for in its first 100 messages: a
+    robot's driver, or ``fuzzyslam simulate``), so that it is not written twice; if it
+    does, its odom -> base series over the whole /tf (``TfFrames.log_odom``: the stamps
+    of the transforms, sorted, one pose per stamp (the last one), non-finite ones
+    dropped, the heading unwrapped; None when none is left), which map -> odom is
+    computed against.
 
     Parameters
     ----------
@@ -108,6 +115,8 @@ def tf_frames(reader: LogReader, cfg: Config, odom_topic: str | None) -> TfFrame
         The config (``topics.tf``).
     odom_topic : str or None
         The nav_msgs/Odometry topic (None: encoders, the default names).
+    series : bool
+        Read the log's odom -> base series (False: the frame names only).
 
     Returns
     -------
@@ -119,15 +128,53 @@ def tf_frames(reader: LogReader, cfg: Config, odom_topic: str | None) -> TfFrame
         odom = str(first.header.frame_id).lstrip("/") if first is not None else ""
         base = str(first.child_frame_id).lstrip("/") if first is not None else ""
         frames = TfFrames(odom=odom or "odom", base=base or "base_link")
-    if reader.has(cfg.topics.tf):
-        for k, m in enumerate(reader.messages([cfg.topics.tf])):
-            for ts in m.msg.transforms:
-                pair = (str(ts.header.frame_id).lstrip("/"), str(ts.child_frame_id).lstrip("/"))
-                if pair == (frames.odom, frames.base):
-                    return TfFrames(frames.map, frames.odom, frames.base, odom_to_base=False)
-            if k >= 100:
+    if not reader.has(cfg.topics.tf):
+        return frames
+    pair = (frames.odom, frames.base)
+    found = False
+    t: list[float] = []
+    xyq: list[tuple[float, ...]] = []  # x, y, qx, qy, qz, qw
+    for k, m in enumerate(reader.messages([cfg.topics.tf])):
+        for ts in m.msg.transforms:
+            if (str(ts.header.frame_id).lstrip("/"), str(ts.child_frame_id).lstrip("/")) != pair:
+                continue
+            found = True
+            if not series:
                 break
-    return frames
+            tr, q = ts.transform.translation, ts.transform.rotation
+            t.append(M.stamp_to_sec(ts.header.stamp))
+            xyq.append((tr.x, tr.y, q.x, q.y, q.z, q.w))
+        if found and not series:
+            break
+        if k >= 100 and not found:
+            break
+    if not found:
+        return frames
+    return TfFrames(
+        frames.map, frames.odom, frames.base, odom_to_base=False, log_odom=_odom_series(t, xyq)
+    )
+
+
+def _odom_series(t: list[float], xyq: list[tuple[float, ...]]):
+    """(t (N,), poses (N, 3)) of transforms (x, y, quaternion): finite ones, sorted by
+    stamp, the last one of each stamp, the heading unwrapped (continuous over the whole
+    series: ``outputs.log_odom_at`` interpolates slices of it); None when none is left."""
+    if not t:
+        return None
+    tt = np.asarray(t, dtype=float)
+    a = np.asarray(xyq, dtype=float).reshape(-1, 6)
+    ok = np.isfinite(tt) & np.all(np.isfinite(a), axis=1)
+    ok &= np.linalg.norm(a[:, 2:], axis=1) > 1e-9
+    tt, a = tt[ok], a[ok]
+    if not len(tt):
+        return None
+    order = np.argsort(tt, kind="stable")
+    tt, a = tt[order], a[order]
+    last = np.append(tt[1:] != tt[:-1], True)  # the last transform of each stamp
+    tt, a = tt[last], a[last]
+    yaw = np.unwrap(np.reshape(quaternion_to_yaw(a[:, 2:]), -1))  # continuous (outputs.py)
+    poses = np.column_stack([a[:, 0], a[:, 1], yaw])
+    return tt, poses
 
 
 def first_odometry_pose(

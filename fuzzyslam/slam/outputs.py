@@ -23,7 +23,7 @@ from fuzzyslam.rundir import (
     UPDATES,
     write_landmarks,
 )
-from fuzzyslam.se2 import compose, inverse
+from fuzzyslam.se2 import compose, interpolate_poses, inverse
 from fuzzyslam.slam.events import SlamResult, TfFrames, UpdateRow
 from fuzzyslam.slam.markers import lamp_markers_cdr
 from fuzzyslam.stamps import TIME_FORMAT, format_time
@@ -68,6 +68,35 @@ def dead_reckoning_at(t: np.ndarray, odo_t: np.ndarray, odo_poses: np.ndarray) -
     return np.asarray(odo_poses, dtype=float).reshape(-1, 3)[np.maximum(idx - 1, 0)]
 
 
+def log_odom_at(t: np.ndarray, log_odom: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
+    """The log's odom -> base at times ``t``: ``se2.interpolate_poses`` of its series
+    (x, y linear in time, the heading the shorter way round); before the series' first
+    stamp and after its last, its first / last pose held (``outside="hold"``).
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Query times (s).
+    log_odom : (ndarray, ndarray)
+        The series: increasing times (K,) and poses (K, 3), the heading continuous
+        (``TfFrames.log_odom``: unwrapped over the whole series, so that a slice of it
+        interpolates to the same floats as the whole, whatever the blocks).
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+    """
+    lt, lp = log_odom
+    t = np.asarray(t, dtype=float).reshape(-1)
+    if not len(t):
+        return np.zeros((0, 3))
+    # the samples around the block's span (one more each side): the same interpolation,
+    # without unwrapping the whole series per block
+    i0 = max(int(np.searchsorted(lt, t.min(), "right")) - 1, 0)
+    i1 = int(np.searchsorted(lt, t.max(), "left")) + 1
+    return interpolate_poses(lt[i0:i1], lp[i0:i1], t, outside="hold")
+
+
 def tf_payloads(
     t: np.ndarray, poses: np.ndarray, odo: np.ndarray, frames: TfFrames | None = None
 ) -> list[bytes]:
@@ -75,6 +104,13 @@ def tf_payloads(
     estimate (+) (-)dead reckoning) and odom -> base_link (the dead reckoning ``odo`` at
     the same times), so that map -> odom -> base_link composes to the estimate; the
     frame names and whether odom -> base is written from ``frames`` (slam/events.py).
+
+    When the log carries odom -> base (``frames.odom_to_base`` False), only map -> odom
+    is written, against the log's odom -> base L(t) (``frames.log_odom``, interpolated by
+    :func:`log_odom_at`; its end poses held outside its time span): estimate (+) (-)L(t),
+    so that it composes with the log's /tf to the estimate (REP 105, as AMCL does); the
+    filter's own dead reckoning may differ from the robot driver's (start pose, odometry
+    delay, wheel radius). Without that series, against ``odo``.
 
     Parameters
     ----------
@@ -95,9 +131,10 @@ def tf_payloads(
     f = frames or TfFrames()
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
     odo = np.asarray(odo, dtype=float).reshape(-1, 3)
-    correction = compose(poses, inverse(odo))
     if not f.odom_to_base:
-        return encode_tf_block(t, [(f.map, f.odom)], [correction])
+        odom = odo if f.log_odom is None else log_odom_at(t, f.log_odom)
+        return encode_tf_block(t, [(f.map, f.odom)], [compose(poses, inverse(odom))])
+    correction = compose(poses, inverse(odo))
     return encode_tf_block(t, [(f.map, f.odom), (f.odom, f.base)], [correction, odo])
 
 
