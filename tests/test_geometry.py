@@ -5,7 +5,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fuzzyslam.polygons import distance_to_polygon, points_in_polygon
+from fuzzyslam.polygons import (
+    distance_to_polygon,
+    edges_contain,
+    edges_within,
+    points_in_polygon,
+    polygon_edges,
+)
 from fuzzyslam.se2 import direction_mod_pi, interpolate_pose, interpolate_poses, wrap_angle
 
 L_SHAPE = np.array([[0, 0], [4, 0], [4, 1], [1, 1], [1, 3], [0, 3]], float)
@@ -72,3 +78,27 @@ def test_references_yaml_round_trip(tmp_path):
     (tmp_path / "bad.yaml").write_text("references: [{id: 1, angle: 0.3}]\n")
     with pytest.raises(InputError, match="region"):
         read_references(tmp_path / "bad.yaml")
+
+
+def test_one_point_polygon_tests_answer_as_the_array_code() -> None:
+    """edges_contain and edges_within (the corridor selection's one-point paths) against
+    points_in_polygon and distance_to_polygon (a second implementation): the same answer
+    for random points around random polygons, on corners and edges too (within is None,
+    'ask the array code', only within 1e-9 of the margin)."""
+    rng = np.random.default_rng(3)
+    for _ in range(60):
+        k = int(rng.integers(3, 9))
+        ang = np.sort(rng.uniform(0, 2 * np.pi, k))
+        poly = np.column_stack([np.cos(ang), np.sin(ang)]) * rng.uniform(0.5, 3, (k, 1))
+        pts = np.vstack([rng.uniform(-4, 4, (200, 2)), poly, (poly + np.roll(poly, 1, 0)) / 2])
+        edges = polygon_edges(poly)
+        inside = points_in_polygon(pts, poly)
+        dist = distance_to_polygon(pts, poly)
+        margin = float(rng.uniform(0.0, 1.0))
+        for (x, y), want_in, d in zip(pts.tolist(), inside, dist, strict=True):
+            assert edges_contain(edges, x, y) == bool(want_in)
+            near = edges_within(edges, x, y, margin)
+            if near is None:
+                assert abs(d - margin) <= 1e-9 * max(d, margin)
+            else:
+                assert near == (d <= margin)

@@ -22,6 +22,7 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 from typing import Any
 
@@ -32,7 +33,7 @@ from fuzzyslam.fileio import atomic_path
 from fuzzyslam.fixes.base import FixAid, FlmAhead
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.summaries import ChangeSummary
-from fuzzyslam.maps.grid import BeliefMap
+from fuzzyslam.maps.grid import BeliefMap, Grid
 from fuzzyslam.se2 import transform_points
 from fuzzyslam.slam.events import FilterView
 from fuzzyslam.stamps import format_time
@@ -117,11 +118,10 @@ def conflict_image(
     -------
     ndarray, shape (h, w)
     """
-    xs, ys = flm.grid.centres()
     m_o = flm.m_o.ravel()
     if cells is None:
         cells = np.arange(m_o.size)
-    world = transform_points(pose, np.stack([xs.ravel()[cells], ys.ravel()[cells]], axis=1))
+    world = transform_points(pose, _centre_points(flm.grid)[cells])
     iy, ix = fgm_grid.cell_of(world)
     inside = fgm_grid.inside(iy, ix)
     m_e = np.zeros(world.shape[0], dtype=np.float32)
@@ -130,6 +130,16 @@ def conflict_image(
     out = np.zeros(m_o.size, dtype=k.dtype)
     out[cells] = k
     return out.reshape(flm.grid.shape)
+
+
+@lru_cache(maxsize=8)
+def _centre_points(grid: Grid) -> np.ndarray:
+    """The grid's cell centres as points (ny nx, 2), row-major (``Grid.centres``; read-only,
+    one table per grid: :func:`conflict_image` gathers its cells' from it every ring)."""
+    xs, ys = grid.centres()
+    out = np.stack([xs.ravel(), ys.ravel()], axis=1)
+    out.flags.writeable = False
+    return out
 
 
 def detect_changes(
@@ -141,6 +151,7 @@ def detect_changes(
     min_conflict: float,
     min_cells: int,
     link: int = 1,
+    free_max: np.floating | None = None,
 ) -> list[Change]:
     """Connected regions of strong conflict between the FLM at ``pose`` and the FGM.
 
@@ -162,6 +173,8 @@ def detect_changes(
         Smallest component (conflicting cells).
     link : int
         Dilation (cells) joining fragments.
+    free_max : numpy float, optional
+        ``free.max(initial=0.0)`` when the caller has it (the detector: once per run).
 
     Returns
     -------
@@ -171,7 +184,9 @@ def detect_changes(
     # bound exceeds the threshold can conflict above it, and only the conflicting cells'
     # K is used below
     m_o = flm.m_o.ravel()
-    cells = np.flatnonzero(m_o * free.max(initial=0.0).astype(m_o.dtype) > min_conflict)
+    if free_max is None:
+        free_max = free.max(initial=0.0)
+    cells = np.flatnonzero(m_o * free_max.astype(m_o.dtype) > min_conflict)
     if cells.size == 0:
         return []
     k = conflict_image(flm, np.asarray(pose, float), fgm_grid, free, cells)
@@ -224,6 +239,7 @@ class ChangeDetector(FlmAhead, FixAid):
         self.grid = fgm.grid
         self.fgm = fgm
         self.free = free_space(fgm, params.change_erode_cells)
+        self.free_max = self.free.max(initial=0.0)  # detect_changes's bound, once
         self.flm_source = flm_source
         self.decisions: list[Change] = []
         self.rings = 0
@@ -260,6 +276,7 @@ class ChangeDetector(FlmAhead, FixAid):
             self.params.change_min_conflict,
             self.params.change_min_cells,
             self.params.change_link_cells,
+            self.free_max,
         )
 
     def summary(self) -> ChangeSummary:

@@ -81,6 +81,38 @@ def cov_inflation(travel: float, corr_distance: float, cap: float) -> float:
     return float(np.clip(1.0 / math.tanh(x), 1.0, cap)) if x < 20 else 1.0
 
 
+def position_sigma_below(cov: np.ndarray, sigma: float) -> bool:
+    """Whether the position's largest standard deviation, sqrt(max(lambda_max(P_xy), 0)),
+    is below ``sigma``, as ``np.linalg.eigvalsh`` answers it.
+
+    lambda_max of the symmetric 2 x 2 (its lower triangle, as eigvalsh reads it) in
+    closed form on Python floats, (a + d) / 2 + sqrt(((a - d) / 2)^2 + b^2): the pose aid
+    asks on every ring, and eigvalsh costs 6-10 us of call overhead. The two agree to
+    ~1e-16 of the matrix's scale, so the answer is the same unless lambda_max lies
+    within 1e-9 of that scale from sigma^2 (or is not finite, or sigma <= 0): eigvalsh
+    itself is then asked.
+
+    Parameters
+    ----------
+    cov : ndarray, shape (3, 3) or (2, 2)
+        The pose covariance (its position block is read).
+    sigma : float
+        The bound (m).
+
+    Returns
+    -------
+    bool
+    """
+    a, b, d = float(cov[0, 0]), float(cov[1, 0]), float(cov[1, 1])
+    h = 0.5 * (a - d)
+    lam = 0.5 * (a + d) + math.sqrt(h * h + b * b)
+    bound = sigma * sigma
+    margin = 1e-9 * (abs(a) + abs(b) + abs(d) + bound)
+    if sigma > 0 and math.isfinite(lam) and abs(lam - bound) > margin:
+        return lam < bound
+    return bool(np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 0.0)) < sigma)
+
+
 POSE_FIELDS = (
     "t", "accepted", "reason", "x", "y", "theta", "sxx", "syy", "stt", "degenerate", "nis",
 )  # fmt: skip
@@ -223,7 +255,7 @@ class PoseFixAid(FlmAhead, FixAid):
         if (self._count - 1) % self.params.pose_every:
             return
         cov = ekf.pose_cov
-        if np.sqrt(max(np.linalg.eigvalsh(cov[:2, :2]).max(), 0.0)) < self.params.pose_map_sigma:
+        if position_sigma_below(cov, self.params.pose_map_sigma):
             # the filter already knows its position better than the map is known: a match
             # would only pull it toward the map's own (correlated) error
             nan3 = np.full(3, np.nan)

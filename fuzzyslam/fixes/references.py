@@ -7,7 +7,14 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from fuzzyslam.polygons import distance_to_polygon, points_in_polygon
+from fuzzyslam.polygons import (
+    Edges,
+    distance_to_polygon,
+    edges_contain,
+    edges_within,
+    points_in_polygon,
+    polygon_edges,
+)
 from fuzzyslam.references import Reference, references_from_dicts
 
 __all__ = [
@@ -34,7 +41,8 @@ def corridors_at(xy: Sequence[float], refs: Sequence[Reference]) -> list[Referen
     -------
     list of Reference
     """
-    return [r for r in refs if r.contains(xy)]
+    x, y = float(xy[0]), float(xy[1])
+    return [r for r in refs if edges_contain(_corners(r.region), x, y)]
 
 
 def corridors_near(xy: Sequence[float], refs: Sequence[Reference], margin: float) -> list:
@@ -63,7 +71,10 @@ def corridors_near(xy: Sequence[float], refs: Sequence[Reference], margin: float
         dx, dy = max(x0 - x, 0.0, x - x1), max(y0 - y, 0.0, y - y1)
         if dx * dx + dy * dy > (margin + 1e-6) ** 2:
             continue
-        if distance_to_polygon(p, r.polygon)[0] <= margin:
+        near = edges_within(_corners(r.polygon), x, y, margin)
+        if near is None:  # within rounding of the margin: the plain distance decides
+            near = bool(distance_to_polygon(p, r.polygon)[0] <= margin)
+        if near:
             out.append(r)
     return out
 
@@ -83,3 +94,19 @@ def _box(poly: np.ndarray) -> tuple[float, float, float, float]:
         _BOXES.clear()
     _BOXES[id(poly)] = (poly, box)
     return box
+
+
+_CORNERS: dict[int, tuple[np.ndarray, Edges]] = {}
+
+
+def _corners(poly: np.ndarray) -> Edges:
+    """The polygon's edges (ax, ay, bx, by) as Python floats, b the next corner (the last
+    joined to the first), cached per array like :func:`_box`."""
+    hit = _CORNERS.get(id(poly))
+    if hit is not None and hit[0] is poly:
+        return hit[1]
+    edges = polygon_edges(poly)
+    if len(_CORNERS) > 256:
+        _CORNERS.clear()
+    _CORNERS[id(poly)] = (poly, edges)
+    return edges

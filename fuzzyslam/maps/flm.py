@@ -272,7 +272,10 @@ class RecentRings:
         self._t.append(float(t))
         self._poses.append(pose)
         self._ranges.append(ranges)
-        self._rmax.append(np.broadcast_to(np.asarray(max_range, dtype=float), ranges.shape))
+        rmax = np.asarray(max_range, dtype=float)  # a ring's own (M,) array: as it is
+        self._rmax.append(
+            rmax if rmax.shape == ranges.shape else np.broadcast_to(rmax, ranges.shape)
+        )
         self.fov = float(fov)
         while (
             len(self._t) > self.count
