@@ -12,8 +12,13 @@ after the log's first message.
 
 from __future__ import annotations
 
+import bisect
 import math
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from typing import TypeVar
+
+T = TypeVar("T")
 
 TIME_FORMAT = "%.9f"
 
@@ -133,3 +138,54 @@ def log_time(value: float | LogTime | None, start: float) -> float | None:
     if value is None:
         return None
     return value.at(start) if isinstance(value, LogTime) else float(value)
+
+
+def in_stamp_order(
+    stamped: Iterable[tuple[float, T]], window: float
+) -> Iterator[tuple[float, T, bool]]:
+    """Items read in log order, put back in the order of their stamps by a bounded
+    reorder buffer: each is held until one stamped more than ``window`` later has been
+    read, then released in stamp order (equal stamps in read order).
+
+    A recorder logs each message when it arrives, so messages of several sources (or of
+    one that lags) come a little out of stamp order; a buffer of ``window`` seconds of
+    stamps puts back every message that lags less than that. The held items are a list
+    sorted by (stamp, read order) read from its head: an item in order (nearly all) is
+    appended, one out of order inserted by bisection.
+
+    Parameters
+    ----------
+    stamped : iterable of (float, item)
+        (stamp s, item) in the order read.
+    window : float
+        The longest lag put back (s).
+
+    Returns
+    -------
+    iterator of (float, item, bool)
+        (stamp, item, late): the items in stamp order; an item stamped more than
+        ``window`` before the newest read so far is yielded at once with ``late`` True
+        (out of order: the caller drops or counts it).
+    """
+    held: list[tuple[float, int, T]] = []
+    head = 0
+    newest = -math.inf
+    for seq, (t, item) in enumerate(stamped):
+        if t < newest - window:
+            yield t, item, True
+            continue
+        entry = (t, seq, item)
+        if t >= newest:
+            newest = t
+            held.append(entry)
+        else:
+            bisect.insort(held, entry, lo=head)
+        due = newest - window
+        while held[head][0] < due:
+            yield held[head][0], held[head][2], False
+            head += 1
+        if head > 1024:  # drop what was released
+            del held[:head]
+            head = 0
+    for t, _seq, item in held[head:]:
+        yield t, item, False

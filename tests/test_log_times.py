@@ -58,3 +58,29 @@ def test_nanoseconds_are_the_floats_own_value_rounded() -> None:
         assert t < 0 or f"{sec}.{nsec:09d}" == format_time(t)
         off = max(off, abs(round(t * 1e9) - exact))
     assert off > 16  # the old product's error at Unix times: the test can tell them apart
+
+
+def test_in_stamp_order_puts_back_what_lags_less_than_the_window() -> None:
+    """Items logged with random lags below the window come out sorted by stamp (ties in
+    read order) and complete; one that lags more is yielded at once, marked late."""
+    import itertools
+
+    import numpy as np
+
+    from fuzzyslam.stamps import in_stamp_order
+
+    rng = np.random.default_rng(5)
+    stamps = np.round(np.sort(rng.uniform(0, 100, 2000)), 1)  # ties included
+    logged = stamps + rng.uniform(0, 2.0, len(stamps))  # lags below the 2.5 s window
+    order = np.argsort(logged, kind="stable")
+    out = list(in_stamp_order(((float(stamps[k]), int(k)) for k in order), 2.5))
+    assert [late for *_, late in out] == [False] * len(stamps)
+    got = [(t, k) for t, k, _ in out]
+    assert sorted(k for _, k in got) == list(range(len(stamps)))
+    assert [t for t, _ in got] == sorted(stamps.tolist())
+    # equal stamps keep their read order
+    pos = {int(k): n for n, k in enumerate(order)}
+    for (t1, k1), (t2, k2) in itertools.pairwise(got):
+        assert t1 < t2 or pos[k1] < pos[k2]
+    late = list(in_stamp_order([(10.0, "a"), (20.0, "b"), (12.0, "c"), (19.0, "d")], 5.0))
+    assert late == [(10.0, "a", False), (12.0, "c", True), (19.0, "d", False), (20.0, "b", False)]

@@ -37,7 +37,6 @@ place (``warnings.reordered``).
 from __future__ import annotations
 
 import heapq
-import itertools
 import math
 import os
 from collections.abc import Callable, Iterator
@@ -59,6 +58,7 @@ from fuzzyslam.slam.log_setup import (
     tf_frames,
 )
 from fuzzyslam.slam.odom_gate import REANCHOR, OdomGate, within_speed
+from fuzzyslam.stamps import in_stamp_order
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.ranges import RangeSensor, open_ranges
 from fuzzyslam.streams.reader import LogMessage, LogReader
@@ -231,18 +231,19 @@ class LogInputs:
         on another clock and never reaches the buffer (:meth:`_same_clock`). Events put
         back in order are counted (``warnings.reordered``).
         """
-        heap: list[tuple[float, int, Event]] = []
-        order = itertools.count()
+        for _t, ev, _late in in_stamp_order(self._count_reordered(events), REORDER_S):
+            yield ev  # a late one too: the runner skips and counts it
+
+    def _count_reordered(self, events: Iterator[Event]) -> Iterator[tuple[float, Event]]:
+        """(stamp, event) of ``events``; those read after a later-stamped one counted
+        (``warnings.reordered``)."""
         newest = -np.inf
         for ev in events:
             if ev.t < newest:
                 self.warn("reordered")
-            newest = max(newest, ev.t)
-            heapq.heappush(heap, (ev.t, next(order), ev))
-            while heap and heap[0][0] <= newest - REORDER_S:
-                yield heapq.heappop(heap)[2]
-        while heap:
-            yield heapq.heappop(heap)[2]
+            else:
+                newest = ev.t
+            yield ev.t, ev
 
     def _odometry(self, t: float, msg, prev):
         if msg.name != self._names:
@@ -384,8 +385,11 @@ class LogInputs:
     def _on_clock(self, msgs: Iterator[LogMessage]) -> Iterator[LogMessage]:
         """The range messages on the odometry's clock (:meth:`_same_clock`); the others
         counted in ``lost["readings"]``."""
+        lo, hi = self.clock_offset - REORDER_S, self.clock_offset + REORDER_S
         for m in msgs:
-            if self._same_clock(m.topic, M.stamp_to_sec(m.msg.header.stamp), m.t):
+            st = m.msg.header.stamp
+            skew = st.sec + st.nanosec * 1e-9 - m.t  # the hot path of _same_clock
+            if lo <= skew <= hi or self._same_clock(m.topic, skew + m.t, m.t):
                 yield m
             else:
                 self._lose("readings", m.t)

@@ -40,13 +40,13 @@ counted, never silently used:
 
 from __future__ import annotations
 
-import heapq
 import math
 from collections.abc import Iterable, Iterator, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
 
+from fuzzyslam.stamps import in_stamp_order
 from fuzzyslam.streams.messages import stamp_to_sec
 from fuzzyslam.streams.reader import LogMessage
 from fuzzyslam.streams.tf import TfProblem, frame_mounts, planar_mount
@@ -134,27 +134,19 @@ def firing_gap(stamps: Sequence[float], count: int) -> tuple[str, float]:
 def _in_stamp_order(
     messages: Iterable[LogMessage], topic_index: dict[str, int], st: RingStats
 ) -> Iterator[tuple[float, int, LogMessage]]:
-    """(stamp, sonar, message) of the sonar readings, put back in stamp order: each held
-    until one stamped more than ``MAX_RING_SPAN_S`` later is read (equal stamps in log
-    order); a reading older than that is too late and counted ``out_of_order``."""
-    held: list[tuple[float, int, int, LogMessage]] = []
-    newest = -math.inf
-    for seq, m in enumerate(messages):
-        i = topic_index.get(m.topic)
-        if i is None:
-            continue
-        t = stamp_to_sec(m.msg.header.stamp)
-        if t < newest - MAX_RING_SPAN_S:
+    """(stamp, sonar, message) of the sonar readings, put back in stamp order
+    (:func:`fuzzyslam.stamps.in_stamp_order`, a window of ``MAX_RING_SPAN_S``); a reading
+    later than that is counted ``out_of_order`` and dropped."""
+    readings = (
+        (stamp_to_sec(m.msg.header.stamp), (i, m))
+        for m in messages
+        if (i := topic_index.get(m.topic)) is not None
+    )
+    for t, (i, m), late in in_stamp_order(readings, MAX_RING_SPAN_S):
+        if late:
             st.out_of_order += 1
-            continue
-        newest = max(newest, t)
-        heapq.heappush(held, (t, seq, i, m))
-        while held[0][0] < newest - MAX_RING_SPAN_S:
-            t0, _seq, i0, m0 = heapq.heappop(held)
-            yield t0, i0, m0
-    while held:
-        t0, _seq, i0, m0 = heapq.heappop(held)
-        yield t0, i0, m0
+        else:
+            yield t, i, m
 
 
 def group_rings(
