@@ -97,7 +97,7 @@ class LogInputs:
     ring_stats: RingStats = field(default_factory=RingStats)
     first_problem: str = ""
     gap_seconds: float = 0.0
-    odom_period_s: float = 0.0  # the odometry's period (odometry_period)
+    odom_period_s: float = 0.0  # the odometry's period (odometry_clock)
     # header stamp - log time of the odometry's first message: the clock the other
     # streams are checked against (LogInputs._same_clock)
     clock_offset: float = 0.0
@@ -505,6 +505,7 @@ def open_inputs(
     mounts = sensor.mounts if sensor is not None else np.zeros((0, 3))
     gate = OdomGate()
     pose = filter_start_pose(reader, cfg, odom_topic, odom_source, start_pose, gate)
+    period, offset = odometry_clock(reader, odom_topic)
     return LogInputs(
         reader,
         cfg,
@@ -520,15 +521,27 @@ def open_inputs(
         ranges=sensor,
         _gate=gate,
         frames=frames,
-        odom_period_s=(period := odometry_period(reader, odom_topic)),
+        odom_period_s=period,
         odom_gap_s=max(ODOM_GAP_S, GAP_PERIODS * period),
-        clock_offset=clock_offset(reader, odom_topic),
+        clock_offset=offset,
     )
 
 
-def clock_offset(reader: LogReader, topic: str) -> float:
-    """Header stamp - log time of the first message on ``topic`` (the odometry): the
-    clock the other streams are checked against (``LogInputs._same_clock``).
+PERIOD_SAMPLES = 500  # odometry messages its period and clock are measured on
+
+
+def odometry_clock(reader: LogReader, topic: str) -> tuple[float, float]:
+    """The odometry's period and clock offset, from its first ``PERIOD_SAMPLES`` messages.
+
+    - the period: the median step between their header stamps (steps that go back or
+      repeat left out), so that neither a gap nor other streams logged before or after
+      it change it. The odometry has a gap when silent for longer than ``ODOM_GAP_S`` or
+      ``GAP_PERIODS`` of this period, whichever is longer (odometry at 1 Hz is slow, not
+      silent); odometry slower than ``SLOW_ODOMETRY_S`` gets a note
+      (:func:`slow_odometry_note`);
+    - the clock offset: the median of their header stamp - log time, the clock the
+      other streams are checked against (``LogInputs._same_clock``); the median, so that
+      a glitched stamp does not set it.
 
     Parameters
     ----------
@@ -539,46 +552,21 @@ def clock_offset(reader: LogReader, topic: str) -> float:
 
     Returns
     -------
-    float
-        Seconds (0 without a message).
+    (float, float)
+        Period and clock offset (s); 0 for what fewer than two (one) messages cannot give.
     """
-    for m in reader.messages([topic]):
-        return M.stamp_to_sec(m.msg.header.stamp) - m.t
-    return 0.0
-
-
-PERIOD_SAMPLES = 500  # odometry stamps the period is measured on
-
-
-def odometry_period(reader: LogReader, topic: str) -> float:
-    """The odometry's period: the median step between the header stamps of its first
-    ``PERIOD_SAMPLES`` messages (steps that go back or repeat left out), so that neither
-    a gap nor other streams logged before or after it change it.
-
-    The odometry has a gap when silent for longer than ``ODOM_GAP_S`` or ``GAP_PERIODS``
-    of this period, whichever is longer (odometry at 1 Hz is slow, not silent); odometry
-    slower than ``SLOW_ODOMETRY_S`` gets a note (:func:`slow_odometry_note`).
-
-    Parameters
-    ----------
-    reader : LogReader
-        The log.
-    topic : str
-        The odometry topic.
-
-    Returns
-    -------
-    float
-        Seconds (0 with fewer than two messages).
-    """
-    stamps = []
+    stamps, logged = [], []
     for m in reader.messages([topic]):
         stamps.append(M.stamp_to_sec(m.msg.header.stamp))
+        logged.append(m.t)
         if len(stamps) >= PERIOD_SAMPLES:
             break
-    steps = np.diff(np.asarray(stamps, dtype=float))
+    t = np.asarray(stamps, dtype=float)
+    steps = np.diff(t)
     steps = steps[steps > 0]
-    return float(np.median(steps)) if len(steps) else 0.0
+    period = float(np.median(steps)) if len(steps) else 0.0
+    offset = float(np.median(t - np.asarray(logged, dtype=float))) if len(t) else 0.0
+    return period, offset
 
 
 def slow_odometry_note(topic: str, period: float) -> str:
@@ -595,7 +583,7 @@ def slow_odometry_note(topic: str, period: float) -> str:
     topic : str
         The odometry topic.
     period : float
-        Its mean period (s), :func:`odometry_period`.
+        Its mean period (s), :func:`odometry_clock`.
 
     Returns
     -------
