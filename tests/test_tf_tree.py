@@ -13,54 +13,35 @@ On a short simulated log (a third of a lap of the quick world), made once per te
 
 from __future__ import annotations
 
-import contextlib
-import io
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
-from conftest import shared_dir
+from test_robust_logs import TINY_YAML, Tiny, tiny  # noqa: F401
+from test_robust_logs import cli as run_cli
 
-from fuzzyslam.cli import main
 from fuzzyslam.rundir import read_landmarks
 from fuzzyslam.se2 import compose, wrap_angle
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.writer import LogWriter
 
-TINY_YAML = """\
-extends: quick.yaml
-name: tiny
-scenario:
-  runs: 1
-  lap_fraction: 0.3
-"""
 IMAGE = "/ceiling_camera/image_raw"
 
 
 def cli(*args) -> str:
     """``fuzzyslam ARGS`` in-process; its stdout (exit code 0 asserted)."""
-    out, err = io.StringIO(), io.StringIO()
-    code = 0
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            main([str(a) for a in args])
-        except SystemExit as exc:
-            code = int(exc.code or 0)
-    assert code == 0, err.getvalue()
-    return out.getvalue()
+    code, out, err = run_cli(*args)
+    assert code == 0, err
+    return out
 
 
 @pytest.fixture(scope="module")
-def log_dir(tmp_path_factory) -> Path:
-    """The tiny simulated log and its config (conftest.shared_dir)."""
-
-    def build(d: Path) -> None:
-        (d / "tiny.yaml").write_text(TINY_YAML, encoding="utf-8")
-        cli("simulate", d / "tiny.yaml", "-o", d / "tiny.mcap")
-
-    return shared_dir(tmp_path_factory, "tf-tree-tiny", build)
+def log_dir(tiny: Tiny) -> Path:  # noqa: F811
+    """The tiny simulated log (tiny.mcap) and its config (tiny.yaml) of
+    test_robust_logs, built once per test run."""
+    return tiny.dir
 
 
 def _sec(stamp) -> float:
