@@ -191,3 +191,26 @@ def test_open_ranges_measures_simultaneous_or_sequential_firing(tmp_path) -> Non
         rings = list(sensor.rings(LogReader(log).messages(sensor.topics), RingStats()))
         assert len(rings) == 5
         assert all(np.count_nonzero(np.isfinite(r.ranges)) == 16 for r in rings)
+
+
+def test_sonars_published_in_a_loop_are_one_firing() -> None:
+    """A driver publishing its 16 readings one by one in a loop, 50 us apart with
+    scheduling hiccups of 1-3 ms, every 0.1 s: one ring per firing (the measured gap is
+    never below SIMULTANEOUS_GAP_S)."""
+    from fuzzyslam.streams.sonar import SIMULTANEOUS_GAP_S, firing_gap
+
+    rng = np.random.default_rng(2)
+    count = 16
+    topics = {f"/sonar/s{i:02d}": i for i in range(count)}
+    msgs, stamps = [], []
+    for c in range(40):
+        t = 10.0 + 0.1 * c
+        for i in range(count):
+            t += 50e-6 + (rng.uniform(1e-3, 3e-3) if rng.random() < 0.1 else 0.0)
+            msgs.append(reading(t, i, 1.0 + 0.01 * i))
+            stamps.append(t)
+    kind, gap = firing_gap(stamps[:300], count)
+    assert gap >= SIMULTANEOUS_GAP_S
+    st = RingStats()
+    rings = list(group_rings(msgs, topics, count, gap, st))
+    assert len(rings) == 40 and st.missing == 0, (kind, gap, len(rings))

@@ -14,7 +14,8 @@ stamps of its first ``FIRING_SAMPLE`` readings, sorted):
   lacks a sonar;
 - sequential firing: the gap is ``SEQUENTIAL_GAP_FACTOR`` (2.5) times the median
   positive step, which covers a jittery period and the double step of a dead sonar,
-  and at most half of ``MAX_RING_SPAN_S``.
+  at least ``SIMULTANEOUS_GAP_S`` (sonars published one by one in a loop, microseconds
+  apart with millisecond hiccups, are one firing) and at most half of ``MAX_RING_SPAN_S``.
 
 Readings are put back in stamp order first: they are held until one stamped more than
 ``MAX_RING_SPAN_S`` later has been read, then released in stamp order (equal stamps in
@@ -128,7 +129,9 @@ def firing_gap(stamps: Sequence[float], count: int) -> tuple[str, float]:
     if shared > count / 2:
         return "simultaneous", min(SIMULTANEOUS_GAP_S, 0.5 * float(pos.min()))
     gap = SEQUENTIAL_GAP_FACTOR * float(np.median(pos))
-    return "sequential", min(gap, 0.5 * MAX_RING_SPAN_S)
+    # never below the simultaneous tolerance: sonars published one by one in a loop,
+    # microseconds apart with scheduling hiccups of milliseconds, are one firing
+    return "sequential", min(max(gap, SIMULTANEOUS_GAP_S), 0.5 * MAX_RING_SPAN_S)
 
 
 def _in_stamp_order(
