@@ -3,8 +3,12 @@ odometry gets a note saying what it costs (slam/inputs.py)."""
 
 from __future__ import annotations
 
+import json
+from dataclasses import replace
 from pathlib import Path
 
+import numpy as np
+import pytest
 from test_robust_logs import JOINTS, Out, Tiny, cli, keep, rewrite, tiny  # noqa: F401
 
 from fuzzyslam.slam.inputs import SLOW_ODOMETRY_S, odometry_clock, slow_odometry_note
@@ -35,8 +39,6 @@ def test_slow_encoders_are_slow_not_silent(tiny: Tiny, tmp_path) -> None:  # noq
     assert odometry_clock(LogReader(tiny.log), JOINTS)[0] < 0.06
     code, out, err = cli("run", log, "-o", tmp_path / "est", "--config", tiny.config)
     assert code == 0, err
-    import json
-
     s = json.loads(out)
     assert s["warnings"].get("odometry_gaps", 0) == 0
     assert s["filter_health"]["odometry_gap_s"] == 0
@@ -63,8 +65,32 @@ def test_the_period_is_the_odometrys_own(tiny: Tiny, tmp_path) -> None:  # noqa:
 
     stop = rewrite(tiny.log, tmp_path / "stop.mcap", dies)
     assert 0.049 < odometry_clock(LogReader(stop), JOINTS)[0] < 0.051
-    code, _, err = cli("run", stop, "-o", tmp_path / "est", "--config", tiny.config)
+    code, out, err = cli("run", stop, "-o", tmp_path / "est", "--config", tiny.config)
     assert code == 0 and "Hz" not in err, err
+    # the frames after it were compared with a stale pose and skipped: most of the run
+    health = json.loads(out)["filter_health"]
+    assert health["diverged"] and "events_lost" in health["reasons"]
+    assert 10.0 < health["diverged_at"] < 12.0
+
+
+def test_a_static_message_logged_at_time_0_does_not_start_the_run(tmp_path) -> None:
+    """The Freiburg excerpt with its /tf_static logged at time 0 (as some converters do):
+    the run starts at its first odometry message, not at 0, and its duration is the
+    excerpt's minute."""
+    src = Path(__file__).resolve().parents[1] / "data" / "carmen_fr079_excerpt" / "log.mcap"
+
+    def at_zero(m: LogMessage) -> list[Out]:
+        return [(m.topic, m.typename, m.msg, 0.0)] if m.topic == "/tf_static" else keep(m)
+
+    log = rewrite(src, tmp_path / "tf0.mcap", at_zero)
+    assert LogReader(log).start == 0.0
+    code, out, err = cli(
+        "run", log, "-o", tmp_path / "est", "--config", "real_building_scan", "--no-prefetch"
+    )
+    assert code == 0, err
+    assert 55.0 < json.loads(out)["log_duration_s"] < 65.0
+    first = np.loadtxt(tmp_path / "est" / "trajectory.tum", ndmin=2)[0, 0]
+    assert first == pytest.approx(LogReader(src).start, abs=1.0)
 
 
 def test_a_range_sensor_on_another_clock_is_lost_and_said(tmp_path) -> None:
@@ -86,6 +112,7 @@ def test_a_range_sensor_on_another_clock_is_lost_and_said(tmp_path) -> None:
 
     cfg = load_config("real_building_sonar")
     counts = RunCounts(**dict.fromkeys(RunCounts.__dataclass_fields__, 100))
+    counts = replace(counts, frames_stale_odometry=0)
     for log, lost_all in ((src, False), (rewrite(src, tmp_path / "ahead.mcap", ahead), True)):
         inputs = open_inputs(log, cfg, need_rings=True)
         rings = [e for e in inputs.events(rings=True) if type(e).__name__ == "RingEvent"]

@@ -37,6 +37,7 @@ place (``warnings.reordered``).
 from __future__ import annotations
 
 import heapq
+import itertools
 import math
 import os
 from collections.abc import Callable, Iterator
@@ -516,7 +517,7 @@ def open_inputs(
         camera,
         mounts,
         pose,
-        reader.start,
+        streams_start(reader, [odom_topic, lamp_topic]),
         reader.end,
         ranges=sensor,
         _gate=gate,
@@ -525,6 +526,27 @@ def open_inputs(
         odom_gap_s=max(ODOM_GAP_S, GAP_PERIODS * period),
         clock_offset=offset,
     )
+
+
+def streams_start(reader: LogReader, topics: list[str]) -> float:
+    """The log time of the first message of the streams the filter reads (odometry,
+    lamps): the run's start, not the log's (a converter may log /tf_static or a
+    CameraInfo at time 0, decades before a Unix-time robot's first message).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    topics : list of str
+        The streams ('' for none).
+
+    Returns
+    -------
+    float
+        Seconds; the log's start when none of them has a message.
+    """
+    firsts = [m.t for tp in topics if tp for m in itertools.islice(reader.messages([tp]), 1)]
+    return min(firsts, default=reader.start)
 
 
 PERIOD_SAMPLES = 500  # odometry messages its period and clock are measured on

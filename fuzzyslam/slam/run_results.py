@@ -62,6 +62,7 @@ class LateEvents:
     frames: int = 0
     odometry: int = 0
     first_at: float | None = None  # the filter's time when the first was skipped (s)
+    stale_at: float | None = None  # the first frame skipped on silent odometry (s)
 
     def add(self, ev: object, now: float) -> None:
         """Count one skipped event.
@@ -90,9 +91,11 @@ def lost_events(
     """``("events_lost", time of the first loss)`` when more than ``LOST_SHARE`` of the
     frames, of the odometry increments or of the range readings were not used, else None.
 
-    Lost: frames and odometry the runner skipped as too late (``late``), and frames and
-    range readings the input edge did not use (``lost``, slam/inputs.py: stamped back in
-    time, or on another clock than the odometry's). A run that loses a stream so is
+    Lost: frames and odometry the runner skipped as too late (``late``), frames it
+    skipped because the odometry had gone silent (``counts.frames_stale_odometry``: a
+    driver that stopped), and frames and range readings the input edge did not use
+    (``lost``, slam/inputs.py: stamped back in time, or on another clock than the
+    odometry's). A run that loses a stream so is
     estimated from what is left, and says so.
 
     Parameters
@@ -110,15 +113,16 @@ def lost_events(
     -------
     tuple of (str, float) or None
     """
-    frames = late.frames + int(lost["frames"])
+    stale = counts.frames_stale_odometry  # read, but skipped: the odometry had gone silent
+    frames = late.frames + int(lost["frames"]) + stale
     shares = (
-        (frames, counts.frames),
+        (frames, counts.frames - stale),
         (late.odometry, counts.odometry),
         (int(lost["readings"]), readings),
     )
     if all(n <= LOST_SHARE * (n + used) for n, used in shares):
         return None
-    times = [t for t in (late.first_at, lost.get("first_at")) if t is not None]
+    times = [t for t in (late.first_at, late.stale_at, lost.get("first_at")) if t is not None]
     return "events_lost", min(times)
 
 

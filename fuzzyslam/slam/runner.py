@@ -235,6 +235,8 @@ class SlamRunner:
             # detections would be compared with, so they could only be misassociated
             # (duplicates). The motion itself is not lost (cumulative odometry).
             self.counts["frames_stale_odometry"] += 1
+            if self.late.stale_at is None:
+                self.late.stale_at = ev.t
             self._record(ev.t)
             return
         z = np.asarray(ev.z, dtype=float).reshape(-1, 2)
