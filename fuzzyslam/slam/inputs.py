@@ -432,8 +432,9 @@ class LogInputs:
             return True
         self.warn(
             "clock_mismatch",
-            f"{topic}: stamped {skew:+.3f} s off its log time, against the odometry "
-            f"{self.odom_topic}: another clock? (not used beyond {REORDER_S:g} s)",
+            f"{topic}: stamps {stamp - logged:+.3f} s from their log times, "
+            f"{self.odom_topic}'s {self.clock_offset:+.3f} s: one of the two is on another "
+            f"clock ({topic} not used beyond {REORDER_S:g} s of difference)",
         )
         return False
 
