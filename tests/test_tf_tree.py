@@ -216,3 +216,27 @@ def test_a_camera_turned_by_pi_sees_the_same_lamps(log_dir, tmp_path) -> None:
     # the same lamps, maybe numbered otherwise (a frame's blobs come in another order)
     d = np.linalg.norm(got[:, None, :] - plain[None, :, :], axis=-1)
     assert d.min(axis=1).max() < 1e-3 and d.min(axis=0).max() < 1e-3
+
+
+def test_map_odom_against_a_driver_that_starts_late(log_dir, tmp_path) -> None:
+    """/tf also carries base_link -> wheel at every step, and the driver's odom ->
+    base_link only from 8 s on (after 300 /tf messages): the pair is still found, so
+    map -> odom is computed against it (wheel radius 2 % off, as above)."""
+    from test_robust_logs import rewrite
+
+    from fuzzyslam.config import load_config
+    from fuzzyslam.streams.cdr_encode import encode_tf_block
+
+    def late_driver(m):
+        if m.topic != "/tf":
+            return [(m.topic, m.typename, m.msg, m.t)]
+        wheel = encode_tf_block(np.array([m.t]), [("base_link", "wheel")], [np.zeros((1, 3))])
+        out = [(m.topic, m.typename, wheel[0], m.t)] * 2
+        return out if m.t < 8.0 else [*out, (m.topic, m.typename, m.msg, m.t)]
+
+    log = rewrite(log_dir / "tiny.mcap", tmp_path / "late.mcap", late_driver)
+    r = load_config(log_dir / "tiny.yaml").robot.wheel_radius
+    cfg = tmp_path / "wheel.yaml"
+    cfg.write_text(TINY_YAML + f"robot:\n  wheel_radius: {1.02 * r!r}\n", encoding="utf-8")
+    cli("run", log, "-o", tmp_path / "est", "--config", cfg)
+    check_tree(log, tmp_path / "est" / "estimates.mcap")

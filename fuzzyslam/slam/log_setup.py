@@ -95,12 +95,15 @@ def base_frame(reader: LogReader, cfg: Config) -> str:
     return tf_frames(reader, cfg, tp.odom, series=False).base
 
 
+TF_SEARCH_S = 30.0  # s of /tf searched for odom -> base (a driver starts within this)
+
+
 def tf_frames(
     reader: LogReader, cfg: Config, odom_topic: str | None, *, series: bool = True
 ) -> TfFrames:
     """The /tf frames of the estimates (:class:`TfFrames`): the odometry's own frame names
     when it is nav_msgs/Odometry (``odom_topic``; else odom and base_link), and whether
-    the log's /tf already carries odom -> base (looked for in its first 100 messages: a
+    the log's /tf already carries odom -> base (looked for in its first ``TF_SEARCH_S``: a
     robot's driver, or ``fuzzyslam simulate``), so that it is not written twice; if it
     does, its odom -> base series over the whole /tf (``TfFrames.log_odom``: the stamps
     of the transforms, sorted, one pose per stamp (the last one), non-finite ones
@@ -134,7 +137,9 @@ def tf_frames(
     found = False
     t: list[float] = []
     xyq: list[tuple[float, ...]] = []  # x, y, qx, qy, qz, qw
-    for k, m in enumerate(reader.messages([cfg.topics.tf])):
+    t_first = None
+    for m in reader.messages([cfg.topics.tf]):
+        t_first = m.t if t_first is None else t_first
         for ts in m.msg.transforms:
             if (str(ts.header.frame_id).lstrip("/"), str(ts.child_frame_id).lstrip("/")) != pair:
                 continue
@@ -146,7 +151,7 @@ def tf_frames(
             xyq.append((tr.x, tr.y, q.x, q.y, q.z, q.w))
         if found and not series:
             break
-        if k >= 100 and not found:
+        if not found and m.t - t_first > TF_SEARCH_S:
             break
     if not found:
         return frames
