@@ -26,6 +26,7 @@ from hypothesis import HealthCheck, example, given, settings
 from hypothesis import strategies as st
 
 from fuzzyslam.cli import main
+from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.reader import MCAP_MAGIC, LogMessage, LogReader
 from fuzzyslam.streams.writer import LogWriter
 
@@ -633,3 +634,34 @@ def test_map_ring_table_keeps_every_reading_exactly(tiny: Tiny, monkeypatch) -> 
     assert np.array_equal(times, [r.t for r in rings])
     assert np.array_equal(ranges.astype(float), [r.ranges for r in rings], equal_nan=True)
     assert np.array_equal(rmax.astype(float), [r.max_range for r in rings], equal_nan=True)
+
+
+def test_a_clock_step_is_followed_and_a_glitched_stamp_skipped(tiny: Tiny, tmp_path: Path) -> None:
+    """Every stamp from 15 s on 10 s back (the robot's clock corrected while the recorder
+    kept its own): the step is followed, said once, and no stream is taken for another
+    clock (the 10 s stamped again are back in time: lost and counted). One odometry
+    message stamped a million seconds off: skipped as a glitch, no odometry gap."""
+
+    def step(m: LogMessage) -> list[Out]:
+        if m.t >= 15.0 and hasattr(m.msg, "header"):
+            set_stamp(m.msg, M.stamp_to_sec(m.msg.header.stamp) - 10.0)
+        return keep(m)
+
+    s = run_json(tiny, rewrite(tiny.log, tmp_path / "step.mcap", step), tmp_path / "step")
+    assert s["warnings"]["clock_steps"] == 1 and "clock_mismatch" not in s["warnings"]
+    assert (
+        "stamps stepped -10.000 s" in s["first_warning"]
+        or "stamped -10.000 s" in s["first_warning"]
+    )
+    glitch = Every(JOINTS, 200)
+
+    def one(m: LogMessage) -> list[Out]:
+        if glitch(m) and glitch.hits == 1:
+            set_stamp(m.msg, m.t + 1e6)
+        return keep(m)
+
+    s = run_json(tiny, rewrite(tiny.log, tmp_path / "glitch.mcap", one), tmp_path / "glitch")
+    assert s["warnings"]["odometry_clock_glitches"] == 1
+    assert "odometry_gaps" not in s["warnings"] and "clock_steps" not in s["warnings"]
+    d = np.subtract(s["final_pose"][:2], tiny.run["final_pose"][:2])
+    assert np.hypot(*d) < 0.05

@@ -77,6 +77,7 @@ SLOW_ODOMETRY_S = 0.5  # odometry slower than this (mean period): a note (slam/s
 # s of stamps a late message may lag the newest one read and still be put in its place
 # (LogInputs._stamp_order): camera and detector pipelines deliver within a second
 REORDER_S = 5.0
+CLOCK_STEP_MESSAGES = 3  # odometry messages in a row off the clock by one amount: a step
 
 
 @dataclass
@@ -102,6 +103,7 @@ class LogInputs:
     # header stamp - log time of the odometry's first message: the clock the other
     # streams are checked against (LogInputs._same_clock)
     clock_offset: float = 0.0
+    _clock_row: tuple[float, int] | None = None  # odometry messages off the clock: offset, n
     # frames and range readings not used: their stamps cannot be placed (back in time,
     # another clock): the run's filter_health counts them (slam/run_results.py)
     lost: dict[str, float] = field(default_factory=lambda: {"frames": 0, "readings": 0})
@@ -190,8 +192,11 @@ class LogInputs:
             topic, msg = m.topic, m.msg
             t = M.stamp_to_sec(msg.header.stamp)
             before = last_t[topic]
-            if topic != odom_topic and not self._same_clock(topic, t, m.t):
-                self._lose("frames", m.t)
+            if topic != odom_topic:
+                if not self._same_clock(topic, t, m.t):
+                    self._lose("frames", m.t)
+                    continue
+            elif not self._odometry_clock(topic, t, m.t):
                 continue
             if t < before:
                 # odometry is cumulative (wheel angles, poses): the next message carries
@@ -386,11 +391,13 @@ class LogInputs:
     def _on_clock(self, msgs: Iterator[LogMessage]) -> Iterator[LogMessage]:
         """The range messages on the odometry's clock (:meth:`_same_clock`); the others
         counted in ``lost["readings"]``."""
-        lo, hi = self.clock_offset - REORDER_S, self.clock_offset + REORDER_S
         for m in msgs:
             st = m.msg.header.stamp
-            skew = st.sec + st.nanosec * 1e-9 - m.t  # the hot path of _same_clock
-            if lo <= skew <= hi or self._same_clock(m.topic, skew + m.t, m.t):
+            # the hot path of _same_clock (the offset read each time: it follows steps)
+            skew = st.sec + st.nanosec * 1e-9 - m.t - self.clock_offset
+            if -REORDER_S <= skew <= REORDER_S or self._same_clock(
+                m.topic, skew + self.clock_offset + m.t, m.t
+            ):
                 yield m
             else:
                 self._lose("readings", m.t)
@@ -400,6 +407,53 @@ class LogInputs:
         on the odometry's clock (``lost["first_at"]``)."""
         self.lost[kind] += 1
         self.lost.setdefault("first_at", logged + self.clock_offset)
+
+    def _odometry_clock(self, topic: str, stamp: float, logged: float) -> bool:
+        """Whether an odometry message is on the odometry's clock (``clock_offset``), and
+        follow the clock when it steps.
+
+        One message whose stamp - log time is more than ``REORDER_S`` off the odometry's
+        is a glitch (a stamp of 0, a corrupted field): skipped and counted
+        (``warnings.odometry_clock_glitches``; odometry is cumulative, the next message
+        carries its motion). ``CLOCK_STEP_MESSAGES`` in a row off by the same amount are
+        the clock stepping (an NTP correction on the robot's computer while the recorder
+        kept its own): the new offset is taken for every stream from the last of them on
+        (``warnings.clock_steps``, the first described); the others of the row were
+        skipped as glitches.
+
+        Parameters
+        ----------
+        topic : str
+            The odometry topic.
+        stamp, logged : float
+            The message's header stamp and log time (s).
+
+        Returns
+        -------
+        bool
+            False for a message to skip.
+        """
+        off = stamp - logged
+        if abs(off - self.clock_offset) <= REORDER_S:
+            self._clock_row = None
+            return True
+        row = self._clock_row
+        same = row is not None and abs(off - row[0]) <= REORDER_S
+        self._clock_row = row = (row[0], row[1] + 1) if same else (off, 1)
+        if row[1] < CLOCK_STEP_MESSAGES:
+            self.warn(
+                "odometry_clock_glitches",
+                f"{topic}: a message stamped {off - self.clock_offset:+.3f} s off the "
+                f"odometry's clock at log time {logged:.3f} s: skipped",
+            )
+            return False
+        self.warn(
+            "clock_steps",
+            f"{topic}: the stamps stepped {off - self.clock_offset:+.3f} s against the log "
+            f"times at log time {logged:.3f} s: the new clock is followed",
+        )
+        self.clock_offset, self._clock_row = off, None
+        return True
 
     def _same_clock(self, topic: str, stamp: float, logged: float) -> bool:
         """Whether a message of ``topic`` (header ``stamp``, log time ``logged``, s) is on
@@ -429,6 +483,9 @@ class LogInputs:
         """
         skew = (stamp - logged) - self.clock_offset
         if abs(skew) <= REORDER_S:
+            return True
+        row = self._clock_row  # the odometry's clock may be stepping to this stream's
+        if row is not None and abs(stamp - logged - row[0]) <= REORDER_S:
             return True
         self.warn(
             "clock_mismatch",
