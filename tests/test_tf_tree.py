@@ -240,3 +240,34 @@ def test_map_odom_against_a_driver_that_starts_late(log_dir, tmp_path) -> None:
     cfg.write_text(TINY_YAML + f"robot:\n  wheel_radius: {1.02 * r!r}\n", encoding="utf-8")
     cli("run", log, "-o", tmp_path / "est", "--config", cfg)
     check_tree(log, tmp_path / "est" / "estimates.mcap")
+
+
+def test_a_tf_on_another_clock_is_not_used(log_dir, tmp_path) -> None:
+    """The log's /tf stamped 1000 s ahead of the odometry: map -> odom cannot be put
+    against it, so estimates.mcap writes its own odom -> base_link (a note says why),
+    and its own tree composes to /slam/pose."""
+    from test_robust_logs import rewrite
+
+    def ahead(m):
+        if m.topic == "/tf":
+            (ts,) = m.msg.transforms
+            ts.header.stamp = M.stamp(_sec(ts.header.stamp) + 1000.0)
+        return [(m.topic, m.typename, m.msg, m.t)]
+
+    log = rewrite(log_dir / "tiny.mcap", tmp_path / "ahead.mcap", ahead)
+    code, _, err = run_cli("run", log, "-o", tmp_path / "est", "--config", log_dir / "tiny.yaml")
+    assert code == 0 and "another clock; estimates.mcap writes its own odom -> base" in err
+    tf, pose = {}, {}
+    for m in LogReader(tmp_path / "est" / "estimates.mcap").messages(["/tf", "/slam/pose"]):
+        key = (m.msg.header.stamp.sec, m.msg.header.stamp.nanosec) if m.topic != "/tf" else None
+        if m.topic == "/tf":
+            pairs = [(x.header.frame_id, x.child_frame_id) for x in m.msg.transforms]
+            assert pairs == [("map", "odom"), ("odom", "base_link")]
+            h = m.msg.transforms[0].header.stamp
+            tf[(h.sec, h.nanosec)] = M.planar_transforms(m.msg)
+        else:
+            pose[key] = M.pose_of(m.msg.pose.pose)
+    assert len(pose) > 100
+    for key, p in pose.items():
+        est = compose(tf[key]["odom"][1], tf[key]["base_link"][1])
+        assert est[:2] == pytest.approx(p[:2], abs=1e-9)

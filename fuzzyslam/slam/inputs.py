@@ -41,7 +41,7 @@ import itertools
 import math
 import os
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any
 
 import numpy as np
@@ -49,6 +49,7 @@ import numpy as np
 from fuzzyslam.camera import IDENTITY_AXES, CeilingCamera, floor_mount
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
+from fuzzyslam.progress import note
 from fuzzyslam.robot import WHEEL_NAMES
 from fuzzyslam.slam.events import Event, Frame, Odom, RingEvent, TfFrames
 from fuzzyslam.slam.latency import delay_odometry
@@ -565,6 +566,15 @@ def open_inputs(
     gate = OdomGate()
     pose = filter_start_pose(reader, cfg, odom_topic, odom_source, start_pose, gate)
     period, offset = odometry_clock(reader, odom_topic)
+    if not frames.odom_to_base and abs(frames.log_odom_offset - offset) > REORDER_S:
+        # the log's odom -> base on another clock than the odometry: map -> odom cannot
+        # be put against it; the run writes its own odom -> base (slam/outputs.py)
+        note(
+            f"{path}: {cfg.topics.tf} odom -> base is stamped {frames.log_odom_offset:+.3f} s "
+            f"from its log times, the odometry {offset:+.3f} s: another clock; estimates.mcap "
+            "writes its own odom -> base"
+        )
+        frames = replace(frames, odom_to_base=True, log_odom=None)
     return LogInputs(
         reader,
         cfg,

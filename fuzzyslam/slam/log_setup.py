@@ -137,6 +137,7 @@ def tf_frames(
     found = False
     t: list[float] = []
     xyq: list[tuple[float, ...]] = []  # x, y, qx, qy, qz, qw
+    logged: list[float] = []  # their messages' log times
     t_first = None
     for m in reader.messages([cfg.topics.tf]):
         t_first = m.t if t_first is None else t_first
@@ -148,6 +149,7 @@ def tf_frames(
                 break
             tr, q = ts.transform.translation, ts.transform.rotation
             t.append(M.stamp_to_sec(ts.header.stamp))
+            logged.append(m.t)
             xyq.append((tr.x, tr.y, q.x, q.y, q.z, q.w))
         if found and not series:
             break
@@ -155,8 +157,14 @@ def tf_frames(
             break
     if not found:
         return frames
+    offset = float(np.median(np.subtract(t, logged))) if t else 0.0
     return TfFrames(
-        frames.map, frames.odom, frames.base, odom_to_base=False, log_odom=_odom_series(t, xyq)
+        frames.map,
+        frames.odom,
+        frames.base,
+        odom_to_base=False,
+        log_odom=_odom_series(t, xyq),
+        log_odom_offset=offset,
     )
 
 
