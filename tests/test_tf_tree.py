@@ -271,3 +271,26 @@ def test_a_tf_on_another_clock_is_not_used(log_dir, tmp_path) -> None:
     for key, p in pose.items():
         est = compose(tf[key]["odom"][1], tf[key]["base_link"][1])
         assert est[:2] == pytest.approx(p[:2], abs=1e-9)
+
+
+def test_a_camera_under_a_root_that_is_not_the_base_is_placed_and_said(log_dir, tmp_path) -> None:
+    """/tf_static hangs everything under 'chassis', a name the odometry never uses: the
+    camera is placed under that root (the same lamps as the plain log) and a note says
+    which frame stood in for base_link."""
+    from test_robust_logs import rewrite
+
+    def rename(m):
+        if m.topic == "/tf_static":
+            for ts in m.msg.transforms:
+                ts.header.frame_id = "chassis"
+        return [(m.topic, m.typename, m.msg, m.t)]
+
+    log = rewrite(log_dir / "tiny.mcap", tmp_path / "chassis.mcap", rename)
+    cfg = log_dir / "tiny.yaml"
+    code, _, err = run_cli("run", log, "-o", tmp_path / "est", "--config", cfg)
+    assert code == 0 and "the camera is placed in 'chassis' instead" in err, err
+    plain = tmp_path / "plain"
+    cli("run", log_dir / "tiny.mcap", "-o", plain, "--config", cfg)
+    assert (tmp_path / "est" / "trajectory.tum").read_bytes() == (
+        plain / "trajectory.tum"
+    ).read_bytes()

@@ -65,7 +65,7 @@ from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.ranges import RangeSensor, open_ranges
 from fuzzyslam.streams.reader import LogMessage, LogReader
 from fuzzyslam.streams.sonar import RingStats
-from fuzzyslam.streams.tf import TfProblem, compose_to_base, static_tree
+from fuzzyslam.streams.tf import TfProblem, locate, static_tree
 
 CAMERA_FRAME = "ceiling_camera"
 # what reading the events changes that the run reports (with the reader's damage):
@@ -546,9 +546,14 @@ def open_inputs(
         if reader.has(tp.tf_static):  # the lens and image axes in the base frame
             tree = static_tree(m.msg for m in reader.messages([tp.tf_static]))
             try:
-                mount = compose_to_base(tree, CAMERA_FRAME, frames.base)
-                if mount is not None:
-                    offset, axes = floor_mount(mount)
+                found = locate(tree, CAMERA_FRAME, frames.base)
+                if found is not None:
+                    offset, axes = floor_mount(found[0])
+                    if found[1] is not None:  # as the range sensors' mounts_source says
+                        note(
+                            f"{path}: {tp.tf_static} does not name the base frame "
+                            f"{frames.base!r}: the camera is placed in {found[1]!r} instead"
+                        )
             except TfProblem as e:
                 raise InputError(
                     reader.path, f"{tp.tf_static} cannot place {CAMERA_FRAME!r}: {e}"
