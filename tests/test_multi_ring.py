@@ -153,3 +153,42 @@ def test_watchdog_memory_and_restart():
         row = decide_heading_fix(float(j), None, [corridor_ref()], ekf.pose, ekf.pose_cov, p)
         assert win.decide(float(j), row, [corridor_ref()], MOUNTS, ekf).reason == "between_fixes"
     assert win.formed == 0 and win.since_fix == 3
+
+
+def test_multi_ring_flm_is_the_fgm_steps_bit_for_bit():
+    """build_flm_rings fuses its rings with its own vectorised steps (flm._fuse_rings) and
+    the evidence with evidence._grouped: the same floats as FgmBuilder.add_rings on the
+    FLM grid (fgm._step, tbm.conjunctive_grouped), on rings along a noisy path (cells
+    seen by several rings, forgetting at work), and a sector cache of zero commonality."""
+    from fuzzyslam.maps.evidence import _grouped
+    from fuzzyslam.maps.fgm import FgmBuilder
+    from fuzzyslam.maps.flm import build_flm_rings, flm_grid
+    from fuzzyslam.maps.tbm import conjunctive_grouped
+    from fuzzyslam.se2 import between
+
+    rng = np.random.default_rng(3)
+    path = [np.zeros(3)]
+    for _ in range(11):
+        path.append(compose(path[-1], STEP + rng.normal(0.0, [0.02, 0.02, 0.03])))
+    path = np.array(path)
+    rings = np.array([ring_at(p).ranges for p in path])
+    rings[rng.random(rings.shape) < 0.1] = np.nan
+    rel = between(path[-1], path)
+    got = build_flm_rings(rel, rings, MAXR, FOV, MOUNTS, MP)
+    assert got.m_c.max() > 0.01  # conflicting rings: the forgetting acts
+    b = FgmBuilder(flm_grid(MP), MP)
+    b.add_rings(rel, rings, MAXR, FOV, MOUNTS)
+    for a, w in zip(
+        (got.m_e, got.m_o, got.m_t, got.m_c),
+        (b.map.m_e, b.map.m_o, b.map.m_t, b.map.m_c),
+        strict=True,
+    ):
+        assert a.dtype == w.dtype and a.tobytes() == w.tobytes()
+    # the grouped combination, with groups of several functions and a zero commonality
+    m_e = rng.random(40) * 0.5
+    m_o = rng.random(40) * 0.5
+    m_e[3], m_o[3] = 0.5, 0.5  # m(Theta) = 0: q(Theta) = 0
+    groups = rng.integers(0, 12, 40)
+    want = conjunctive_grouped((m_e, m_o, 1.0 - m_e - m_o, np.zeros(40)), groups, 12)
+    for a, w in zip(_grouped(m_e, m_o, groups, 12), want, strict=True):
+        assert a.tobytes() == w.tobytes()

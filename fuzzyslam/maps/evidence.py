@@ -28,7 +28,7 @@ import numpy as np
 
 from fuzzyslam.maps.grid import Grid
 from fuzzyslam.maps.params import MapParams
-from fuzzyslam.maps.tbm import Masses, conjunctive_grouped
+from fuzzyslam.maps.tbm import Masses, from_commonality
 from fuzzyslam.se2 import compose
 
 
@@ -72,13 +72,15 @@ def reading_masses(
     m_e, m_o : ndarray, shape (...)
     """
     dr = params.range_tolerance
-    a = np.clip(1.0 - np.abs(phi / half_angle) ** params.angular_exponent, 0.0, None)
+    # (np.maximum / np.minimum: np.clip's values here, no NaN nor -0 in these terms,
+    # without its overhead)
+    a = np.maximum(1.0 - np.abs(phi / half_angle) ** params.angular_exponent, 0.0)
     d = 1.0 / (1.0 + (rho / params.reliability_range) ** 2)
     d_e = 1.0 / (1.0 + (rho / params.empty_reliability_range) ** 2)
     ad = a * d
     u = (rho - r) / dr
-    f_o = np.where(echo, params.k_occupied * np.clip(1.0 - u * u, 0.0, None), 0.0)
-    ramp = np.clip((r - rho) / dr, 0.0, 1.0)
+    f_o = np.where(echo, params.k_occupied * np.maximum(1.0 - u * u, 0.0), 0.0)
+    ramp = np.minimum(np.maximum((r - rho) / dr, 0.0), 1.0)
     f_e_echo = np.where(rho <= params.empty_reach, params.k_empty * ramp, 0.0)
     f_e_none = np.where(rho < params.no_echo_reach, params.no_echo_empty, 0.0)
     f_e = np.where(echo, f_e_echo, f_e_none)
@@ -135,52 +137,62 @@ def cone_cells(
     if n == 0:
         e = np.zeros(0, dtype=np.int64)
         return e, e, e
-    bear = sensors[:, 2:3] + _arc_bearings(float(half_angle))[None, :]
+    # the two arcs' samples (rows: arc, bearing; columns: sector, so that the boxes'
+    # bounds are reductions over rows, much faster than over a short last axis)
+    bear = sensors[:, 2] + _arc_bearings(float(half_angle))[:, None]
     c, s = np.cos(bear), np.sin(bear)
-    ax = np.concatenate([sensors[:, 0:1] + r0[:, None] * c, sensors[:, 0:1] + r1[:, None] * c], 1)
-    ay = np.concatenate([sensors[:, 1:2] + r0[:, None] * s, sensors[:, 1:2] + r1[:, None] * s], 1)
+    radii = np.stack([r0, r1])[:, None, :]
+    ax = (sensors[:, 0] + radii * c).reshape(-1, n)
+    ay = (sensors[:, 1] + radii * s).reshape(-1, n)
     res, (ox, oy) = grid.resolution, grid.origin
     ny, nx = grid.shape
     pad = np.asarray(r1, dtype=float) * (1.0 - np.cos(half_angle / 8.0)) + 1e-9
     # cell ix has its centre at ox + (ix + 0.5) res: centres in [xmin, xmax] are
     # ix in [ceil((xmin - ox) / res - 0.5), floor((xmax - ox) / res - 0.5)]
     # (integer bounds: np.minimum / np.maximum are np.clip's values, without its overhead)
-    ix0 = _bound(np.ceil((ax.min(1) - pad - ox) / res - 0.5).astype(np.int64), 0, nx)
-    ix1 = _bound(np.floor((ax.max(1) + pad - ox) / res - 0.5).astype(np.int64) + 1, 0, nx)
-    iy0 = _bound(np.ceil((ay.min(1) - pad - oy) / res - 0.5).astype(np.int64), 0, ny)
-    iy1 = _bound(np.floor((ay.max(1) + pad - oy) / res - 0.5).astype(np.int64) + 1, 0, ny)
+    ix0 = _bound(np.ceil((ax.min(0) - pad - ox) / res - 0.5).astype(np.int64), 0, nx)
+    ix1 = _bound(np.floor((ax.max(0) + pad - ox) / res - 0.5).astype(np.int64) + 1, 0, nx)
+    iy0 = _bound(np.ceil((ay.min(0) - pad - oy) / res - 0.5).astype(np.int64), 0, ny)
+    iy1 = _bound(np.floor((ay.max(0) + pad - oy) / res - 0.5).astype(np.int64) + 1, 0, ny)
     # rows of each box, then per row the x-interval of the cell centres that can lie in
     # the sector: inside the disc rho <= r1 and between the cone's two edge rays
     wy = np.maximum(iy1 - iy0, 0)
     nrow = int(wy.sum())
     rp = np.repeat(np.arange(n), wy)
-    iy = iy0[rp] + np.arange(nrow) - np.repeat(np.cumsum(wy) - wy, wy)
-    dy = oy + (iy + 0.5) * res - sensors[rp, 1]
-    h2 = (r1[rp] + pad[rp]) ** 2 - dy * dy
+    iy = iy0.take(rp) + np.arange(nrow) - np.repeat(np.cumsum(wy) - wy, wy)
+    dy = oy + (iy + 0.5) * res - sensors[:, 1].take(rp)
+    h2 = (r1 + pad).take(rp) ** 2 - dy * dy
     h = np.sqrt(np.maximum(h2, 0.0))
     lo, hi = -h, np.where(h2 >= 0.0, h, -np.inf)
     eps = 1e-6  # the cone test is exact; the interval only has to contain its cells
-    edges = (1.0, -1.0) if half_angle < np.pi / 2 else ()  # a wider cone is not convex
-    for sign in edges:  # edge rays at axis + w (cells to its right), axis - w (left)
-        b = sensors[rp, 2] + sign * half_angle
-        ux, uy = np.cos(b), np.sin(b)
-        # inside: sign * (ux dy - uy dx) <= 0, i.e. sign * uy dx >= sign * ux dy
+    if half_angle < np.pi / 2:  # (a wider cone is not convex)
+        # edge rays at axis + w (sign 1: cells to its right) and axis - w (sign -1, left),
+        # both at once (rows: sign); inside: sign * (ux dy - uy dx) <= 0, i.e.
+        # sign * uy dx >= sign * ux dy. Each ray bounds lo from below (su > 0) or hi
+        # from above (su < 0), or empties the row (su = 0, sv > eps): max, min and -inf
+        # in either order, the same floats as one ray after the other
+        # (the rays' cosines and sines per sector, then per row: the same floats)
+        sign = np.array([[1.0], [-1.0]])
+        b = sensors[:, 2] + sign * half_angle
+        ux, uy = np.cos(b).take(rp, axis=1), np.sin(b).take(rp, axis=1)
         su, sv = sign * uy, sign * ux * dy
         with np.errstate(divide="ignore", invalid="ignore"):
             bound = sv / su
-        lo = np.where(su > 1e-12, np.maximum(lo, bound - eps), lo)
-        hi = np.where(su < -1e-12, np.minimum(hi, bound + eps), hi)
-        hi = np.where((np.abs(su) <= 1e-12) & (sv > eps), -np.inf, hi)
-    xs = sensors[rp, 0] - ox
+        lo = np.maximum(lo, np.where(su > 1e-12, bound - eps, -np.inf).max(0))
+        cap = np.where(su < -1e-12, bound + eps, np.inf)
+        cap[(np.abs(su) <= 1e-12) & (sv > eps)] = -np.inf
+        hi = np.minimum(hi, cap.min(0))
+    xs = sensors[:, 0].take(rp) - ox
     # whole numbers (finite or infinite: lo, hi and their sums are never NaN) clamped to the
     # row's box, then made integers (np.clip's values)
-    a = _bound(np.ceil((xs + lo) / res - 0.5), ix0[rp], ix1[rp]).astype(np.int64)
-    z = _bound(np.floor((xs + np.maximum(hi, lo - res)) / res - 0.5) + 1, ix0[rp], ix1[rp])
+    box0, box1 = ix0.take(rp), ix1.take(rp)
+    a = _bound(np.ceil((xs + lo) / res - 0.5), box0, box1).astype(np.int64)
+    z = _bound(np.floor((xs + np.maximum(hi, lo - res)) / res - 0.5) + 1, box0, box1)
     count = np.maximum(z.astype(np.int64) - a, 0)
     total = int(count.sum())
     row = np.repeat(np.arange(nrow), count)
     k = np.arange(total) - np.repeat(np.cumsum(count) - count, count)
-    return rp[row], iy[row], a[row] + k
+    return rp.take(row), iy.take(row), a.take(row) + k
 
 
 @dataclass
@@ -323,29 +335,34 @@ def readings_cells(
     lo = np.concatenate([np.zeros(len(r)), (r - dr)[far]])
     hi = np.concatenate([near, (r + dr)[far]])
     pid, iy, ix = cone_cells(grid, sensors[src], lo, hi, half)
-    rid = src[pid]
+    rid = src.take(pid)
     res, (ox, oy) = grid.resolution, grid.origin
-    dx = ox + (ix + 0.5) * res - sensors[rid, 0]
-    dy = oy + (iy + 0.5) * res - sensors[rid, 1]
+    # (gathers by ``take`` and by index arrays: numpy's fancy and boolean indexing give
+    # the same elements, more slowly)
+    dx = ox + (ix + 0.5) * res - sensors[:, 0].take(rid)
+    dy = oy + (iy + 0.5) * res - sensors[:, 1].take(rid)
     # along = rho cos(phi), across = rho sin(phi) in the sensor's frame: the cone test
     # |phi| <= w is across^2 <= tan(w)^2 along^2 with along > 0 (no arctan on every cell)
-    ca, sa = np.cos(sensors[:, 2]), np.sin(sensors[:, 2])
-    along = dx * ca[rid] + dy * sa[rid]
-    across = dy * ca[rid] - dx * sa[rid]
+    ca, sa = np.cos(sensors[:, 2]).take(rid), np.sin(sensors[:, 2]).take(rid)
+    along = dx * ca + dy * sa
+    across = dy * ca - dx * sa
     rho2 = dx * dx + dy * dy
     inside = (
         (along > 0)
         & (across * across <= np.tan(half) ** 2 * along * along)
-        & (rho2 >= lo[pid] ** 2)
-        & (rho2 < hi[pid] ** 2)
+        & (rho2 >= (lo**2).take(pid))
+        & (rho2 < (hi**2).take(pid))
     )
-    rid, iy, ix = rid[inside], iy[inside], ix[inside]
-    rho = np.sqrt(rho2[inside])
-    phi = np.arctan2(across[inside], along[inside])
-    m_e, m_o = reading_masses(rho, phi, r[rid], echo[rid], half, params)
-    keep = (m_e > 0) | (m_o > 0)
-    second = (pid >= len(r))[inside][keep]
-    return rid[keep], (iy * grid.shape[1] + ix)[keep], m_e[keep], m_o[keep], second
+    sel = np.flatnonzero(inside)
+    rid = rid.take(sel)
+    rho = np.sqrt(rho2.take(sel))
+    phi = np.arctan2(across.take(sel), along.take(sel))
+    m_e, m_o = reading_masses(rho, phi, r.take(rid), echo.take(rid), half, params)
+    keep = np.flatnonzero((m_e > 0) | (m_o > 0))
+    sel = sel.take(keep)  # the candidates kept
+    cell = iy.take(sel) * grid.shape[1] + ix.take(sel)
+    second = pid.take(sel) >= len(r)
+    return rid.take(keep), cell, m_e.take(keep), m_o.take(keep), second
 
 
 def combine_cells(
@@ -372,10 +389,34 @@ def combine_cells(
     BatchEvidence
     """
     ukey, inv = np.unique(key, return_inverse=True)
-    zeros = np.zeros_like(m_e)
-    masses = conjunctive_grouped((m_e, m_o, 1.0 - m_e - m_o, zeros), inv, len(ukey))
+    masses = _grouped(m_e, m_o, inv, len(ukey))
     ptr = np.searchsorted(ukey, np.arange(k_rings + 1) * ncell)
     return BatchEvidence(ptr, ukey % ncell, masses, int(key.size), readings)
+
+
+def _grouped(m_e: np.ndarray, m_o: np.ndarray, groups: np.ndarray, ngroups: int) -> Masses:
+    """``conjunctive_grouped((m_e, m_o, 1 - m_e - m_o, 0), groups, ngroups)`` (the
+    readings' simple support functions combined per group), the same operations on the
+    same floats with fewer numpy calls: the commonalities formed in place, and the count
+    of zero commonalities (a product of zero) only when there is one."""
+    n = m_e.size
+    t = 1.0 - m_e - m_o
+    q = np.empty((3, n))
+    np.add(m_e, t, out=q[0])
+    np.add(m_o, t, out=q[1])
+    q[2] = t
+    zero = q <= 0.0
+    some_zero = bool(zero.any())
+    logq = np.log(np.where(zero, 1.0, q) if some_zero else q)
+    # the three commonalities' sums as one bincount over 3 ngroups bins (row k's group g
+    # in bin k ngroups + g: each bin adds the same terms in the same order as its own)
+    bins = (np.asarray(groups).reshape(1, -1) + ngroups * np.arange(3)[:, None]).ravel()
+    s = np.bincount(bins, weights=logq.ravel(), minlength=3 * ngroups).reshape(3, ngroups)
+    out = np.exp(s)
+    if some_zero:
+        nz = np.bincount(bins, weights=zero.ravel().astype(float), minlength=3 * ngroups)
+        out = np.where(nz.reshape(3, ngroups) > 0, 0.0, out)
+    return from_commonality(out[0], out[1], out[2])
 
 
 def ring_evidence(

@@ -38,6 +38,7 @@ from fuzzyslam.maps.hough_accumulator import (  # hough_accumulator re-exported
     hough_accumulator,
 )
 from fuzzyslam.maps.params import MapParams
+from fuzzyslam.maps.tangent import RingReadings, fit_walls
 from fuzzyslam.se2 import direction_mod_pi, wrap_angle_period
 
 
@@ -227,8 +228,8 @@ def dominant_direction(
     WallDirection
     """
     x, y, w = (np.asarray(a, dtype=float).ravel() for a in (x, y, w))
-    keep = w > 0
-    x, y, w = x[keep], y[keep], w[keep]
+    keep = np.flatnonzero(w > 0)
+    x, y, w = x.take(keep), y.take(keep), w.take(keep)
     if len(w) < 3:
         return WallDirection(float("nan"), 0.0, False, [], 0.0, len(w))
     step = params.resolution if rho_step is None else rho_step
@@ -368,8 +369,6 @@ def refine_tangent(wd: WallDirection, readings, params: MapParams) -> WallDirect
     -------
     WallDirection
     """
-    from fuzzyslam.maps.tangent import RingReadings, fit_walls
-
     if len(readings) < 3:  # too few echoes to fit (or an FLM made otherwise): the Hough's
         return wd
     psi0 = wd.angle + np.pi / 2
