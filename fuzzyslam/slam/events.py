@@ -288,4 +288,3 @@ class TfFrames:
     odom_to_base: bool = True  # False: the log's own /tf has odom -> base
     # the log's odom -> base (t, poses), when odom_to_base is False (arrays: not compared)
     log_odom: tuple[np.ndarray, np.ndarray] | None = field(default=None, compare=False, repr=False)
-    log_odom_offset: float = 0.0  # its stamps - log times (median), for the clock check

@@ -41,7 +41,7 @@ import itertools
 import math
 import os
 from collections.abc import Callable, Iterator
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from typing import Any
 
 import numpy as np
@@ -534,7 +534,10 @@ def open_inputs(
         keys = "topics.odom" if not cfg.slam.use_encoders else "topics.joint_states / topics.odom"
         reader.require(looked, f"the config's {keys}")
         raise AssertionError("unreachable")
-    frames = tf_frames(reader, cfg, odom_topic if odom_source == "odom" else None)
+    period, clock = odometry_clock(reader, odom_topic)
+    frames = tf_frames(
+        reader, cfg, odom_topic if odom_source == "odom" else None, clock=(clock, REORDER_S)
+    )
     camera = None
     if reader.has(tp.image):
         lamp_topic, lamp_source = tp.image, "frames"
@@ -570,16 +573,6 @@ def open_inputs(
     mounts = sensor.mounts if sensor is not None else np.zeros((0, 3))
     gate = OdomGate()
     pose = filter_start_pose(reader, cfg, odom_topic, odom_source, start_pose, gate)
-    period, offset = odometry_clock(reader, odom_topic)
-    if not frames.odom_to_base and abs(frames.log_odom_offset - offset) > REORDER_S:
-        # the log's odom -> base on another clock than the odometry: map -> odom cannot
-        # be put against it; the run writes its own odom -> base (slam/outputs.py)
-        note(
-            f"{path}: {cfg.topics.tf} odom -> base is stamped {frames.log_odom_offset:+.3f} s "
-            f"from its log times, the odometry {offset:+.3f} s: another clock; estimates.mcap "
-            "writes its own odom -> base"
-        )
-        frames = replace(frames, odom_to_base=True, log_odom=None)
     return LogInputs(
         reader,
         cfg,
@@ -597,7 +590,7 @@ def open_inputs(
         frames=frames,
         odom_period_s=period,
         odom_gap_s=max(ODOM_GAP_S, GAP_PERIODS * period),
-        clock_offset=offset,
+        clock_offset=clock,
     )
 
 

@@ -11,6 +11,7 @@ import numpy as np
 
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
+from fuzzyslam.progress import note
 from fuzzyslam.se2 import quaternion_to_yaw
 from fuzzyslam.slam.events import TfFrames
 from fuzzyslam.slam.odom_gate import OdomGate, first_plausible_pose
@@ -99,7 +100,12 @@ TF_SEARCH_S = 30.0  # s of /tf searched for odom -> base (a driver starts within
 
 
 def tf_frames(
-    reader: LogReader, cfg: Config, odom_topic: str | None, *, series: bool = True
+    reader: LogReader,
+    cfg: Config,
+    odom_topic: str | None,
+    *,
+    series: bool = True,
+    clock: tuple[float, float] | None = None,
 ) -> TfFrames:
     """The /tf frames of the estimates (:class:`TfFrames`): the odometry's own frame names
     when it is nav_msgs/Odometry (``odom_topic``; else odom and base_link), and whether
@@ -120,6 +126,11 @@ def tf_frames(
         The nav_msgs/Odometry topic (None: encoders, the default names).
     series : bool
         Read the log's odom -> base series (False: the frame names only).
+    clock : (float, float), optional
+        The odometry's stamp - log time (s) and the largest difference (s) another
+        stream may have from it (``slam.inputs.odometry_clock``, ``REORDER_S``): a
+        series on another clock cannot be put against, and is left out (a note says so;
+        the run then writes its own odom -> base).
 
     Returns
     -------
@@ -158,13 +169,15 @@ def tf_frames(
     if not found:
         return frames
     offset = float(np.median(np.subtract(t, logged))) if t else 0.0
+    if clock is not None and abs(offset - clock[0]) > clock[1]:
+        note(
+            f"{reader.path}: {cfg.topics.tf} odom -> base is stamped {offset:+.3f} s from its "
+            f"log times, the odometry {clock[0]:+.3f} s: another clock; estimates.mcap "
+            "writes its own odom -> base"
+        )
+        return frames
     return TfFrames(
-        frames.map,
-        frames.odom,
-        frames.base,
-        odom_to_base=False,
-        log_odom=_odom_series(t, xyq),
-        log_odom_offset=offset,
+        frames.map, frames.odom, frames.base, odom_to_base=False, log_odom=_odom_series(t, xyq)
     )
 
 

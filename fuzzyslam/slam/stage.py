@@ -270,16 +270,17 @@ def run_stage(
 
 
 def start_time(events: Iterator[Event], t0: float) -> tuple[Iterator[Event], float]:
-    """The time of the run's start pose: the log's first log time ``t0``, or the first
-    event's stamp when that is earlier (a sensor stamps its messages before the recorder
-    logs them), so that no trajectory row comes before the start row.
+    """The time of the run's start pose: the first log time of the streams it reads
+    (``LogInputs.start``), or the first event's stamp when that is earlier (a sensor
+    stamps its messages before the recorder logs them), so that no trajectory row comes
+    before the start row.
 
     Parameters
     ----------
     events : iterator of Event
         The run's events, in time order.
     t0 : float
-        The log's first log time (s).
+        The streams' first log time (s).
 
     Returns
     -------
