@@ -80,7 +80,7 @@ def main() -> None:
     scenario = read_scenario(reader)
     world = read_world(reader)
     t_end = scenario.run_end_time(params.freeze_run) if scenario else reader.end
-    times, ranges, rmax, fov, mounts, _ = read_rings(reader, cfg, t_end)
+    times, ranges, rmax, fov, mounts, *_ = read_rings(reader, cfg, t_end)
     t, p = read_tum(tum)
     poses = interpolate_poses(t, p, times, outside="hold")
 

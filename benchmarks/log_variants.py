@@ -2,14 +2,18 @@
 
 Run: python benchmarks/log_variants.py SRC DST [--sonar-sequential DT] [--odometry-every N]
 
-- ``--sonar-sequential DT``: the sonar ring fired in sequence, as a Pioneer's is: sonar k
-  of each ring (k-th in topic order) stamped and logged DT seconds after sonar k-1
-  (simulated and CARMEN logs stamp a whole ring alike).
+- ``--sonar-sequential DT``: the sonar ring stamped as a Pioneer's is: sonar k of each
+  ring (k-th in topic order) stamped and logged DT seconds after sonar k-1 (simulated
+  and CARMEN logs stamp a whole ring alike). The ranges stay those of the original
+  instant, so this is a sonar whose stamps are k * DT late, not a ring fired in
+  sequence from a moving robot: it tests the grouping of readings into rings; the
+  placement of readings fired in sequence is tested on the simulator's
+  (``sonar.firing_gap_s``), where each reading is taken at its stamp.
 - ``--odometry-every N``: odometry at 1/N of its rate (every N-th /odom message kept).
 
 SRC and DST are directories holding ``log.mcap`` (and ``truth.tum``, linked into DST), so
 that ``bench_buildings.py --data`` reads DST's parent as it reads the real logs. The
-README's figures for sequential sonars and slow odometry come from these variants of
+README's figures for restamped sonars and slow odometry come from these variants of
 the CARMEN logs, e.g.::
 
     python benchmarks/log_variants.py ../shared/data/real/carmen-aces /tmp/v/carmen-aces \\

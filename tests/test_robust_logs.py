@@ -627,13 +627,14 @@ def test_map_ring_table_keeps_every_reading_exactly(tiny: Tiny, monkeypatch) -> 
     rings = list(group_rings(reader.messages(topics), index, cfg.sonar.count))
     monkeypatch.setattr(build._RingTable, "block", 5)
     t_end = rings[-3].t  # a window ending inside a block
-    times, ranges, rmax, *_ = build.read_rings_compact(reader, cfg, t_end)
+    times, ranges, rmax, *_, offsets = build.read_rings_compact(reader, cfg, t_end)
     rings = rings[:-2]
     assert ranges.dtype == np.float32 and len(times) == len(rings) > 20
     assert len(rings) % 5 != 0
     assert np.array_equal(times, [r.t for r in rings])
     assert np.array_equal(ranges.astype(float), [r.ranges for r in rings], equal_nan=True)
     assert np.array_equal(rmax.astype(float), [r.max_range for r in rings], equal_nan=True)
+    assert not offsets.any()  # rings stamped alike: every reading at its ring's time
 
 
 def test_a_clock_step_is_followed_and_a_glitched_stamp_skipped(tiny: Tiny, tmp_path: Path) -> None:

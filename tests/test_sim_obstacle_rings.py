@@ -55,7 +55,7 @@ def test_ideal_block_stops_where_the_obstacles_change():
     times = np.arange(0.0, 11.0, 0.25)
     rows, i = [], 0
     while i < len(times):
-        block = _ideal_block(dr, times[i : i + 32], ROOM, mounts, params, tracks)
+        block = _ideal_block(dr, times[i : i + 32, None], ROOM, mounts, params, tracks)
         first = [tr.present(times[i]) for tr in tracks]
         # a block never spans a change of the obstacles present
         assert all([tr.present(s) for tr in tracks] == first for s in times[i : i + len(block)])

@@ -33,10 +33,10 @@ def ranges_of(cycle: int, i: int) -> float:
     return 1.0 + 0.1 * cycle + 0.01 * i
 
 
-def test_sequential_firing_makes_one_ring_per_cycle_at_its_mean_time() -> None:
+def test_sequential_firing_makes_one_ring_per_cycle_at_its_last_stamp() -> None:
     """Eight sonars fired one every 40 ms, cycle after cycle: one ring per cycle holding
-    all eight readings, timed at the mean of their stamps (the old 50 ms window cut each
-    cycle into four rings of two)."""
+    all eight readings (the old 50 ms window cut each cycle into four rings of two),
+    timed at its last reading's stamp, with each reading's stamp as an offset from it."""
     dt, t0 = 0.04, 100.0
     msgs = [
         reading(t0 + (c * COUNT + i) * dt, i, ranges_of(c, i))
@@ -48,7 +48,8 @@ def test_sequential_firing_makes_one_ring_per_cycle_at_its_mean_time() -> None:
     assert len(rings) == 5 and st.rings == 5 and st.sequential == 5 and st.missing == 0
     for c, ring in enumerate(rings):
         stamps = t0 + (c * COUNT + np.arange(COUNT)) * dt
-        assert ring.t == pytest.approx(stamps.mean(), abs=1e-9)
+        assert ring.t == pytest.approx(stamps[-1], abs=1e-9)
+        np.testing.assert_allclose(ring.t + ring.offsets, stamps, rtol=0, atol=1e-9)
         np.testing.assert_allclose(ring.ranges, [ranges_of(c, i) for i in range(COUNT)])
 
 
@@ -62,6 +63,7 @@ def test_rings_stamped_alike_keep_their_stamp_exactly() -> None:
     st = RingStats()
     rings = list(group_rings(msgs, TOPICS, COUNT, stats=st))
     assert [r.t for r in rings] == stamps  # bit for bit
+    assert all(r.offsets is None for r in rings)  # nothing to deskew
     assert st.sequential == 0 and st.missing == 1
     assert math.isnan(rings[1].ranges[0]) and rings[2].ranges[0] == ranges_of(2, 0)
 
@@ -78,7 +80,7 @@ def test_repeats_gaps_and_out_of_order_readings() -> None:
     st = RingStats()
     rings = list(group_rings(msgs, TOPICS, COUNT, stats=st))
     assert st.duplicates == 1 and st.out_of_order == 1
-    assert [round(r.t, 6) for r in rings] == [10.02, 10.08, 10.5]
+    assert [round(r.t, 6) for r in rings] == [10.04, 10.08, 10.5]  # each at its last stamp
     # a slow sequence (one sonar every 40 ms over 40 sonars) is cut at the span limit
     many = {f"/sonar/s{i:02d}": i for i in range(40)}
     slow = [reading(20.0 + 0.04 * i, i, 1.0) for i in range(40)]
@@ -150,7 +152,7 @@ def test_two_banks_logged_late_are_put_back_in_stamp_order() -> None:
         assert len(rings) == 5
         for c, ring in enumerate(rings):
             np.testing.assert_allclose(ring.ranges, [ranges_of(c, i) for i in range(16)])
-            assert ring.t == pytest.approx(100.0 + (c * 8 + 3.5) * 0.04)
+            assert ring.t == pytest.approx(100.0 + (c * 8 + 7) * 0.04)  # the last stamp
 
 
 def test_firing_gap_of_rings_stamped_alike_is_a_small_tolerance() -> None:

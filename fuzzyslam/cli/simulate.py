@@ -43,7 +43,8 @@ def simulate(
       /joint_states              wheel angles (rad), robot rate
       /odom                      dead reckoning from the encoders (odom -> base_link)
       /ground_truth/odom         true pose (map -> base_link)
-      /sonar/s00 .. /sonar/s15   Range, a whole ring per stamp, sonar rate
+      /sonar/s00 .. /sonar/s15   Range, a whole ring per stamp, sonar rate (or one
+                                 sonar every sonar.firing_gap_s, a Pioneer's ring)
       /ceiling_camera/image_raw  mono8 frames, + /ceiling_camera/camera_info
       /tf_static                 base_link -> sonar_NN, ceiling_camera
       /sim/events                JSON of run starts/ends, lamp failures, bumps

@@ -95,7 +95,9 @@ class MultiRingWindow:
             The filter (its dead reckoning, never corrected by the fixes).
         """
         odo = np.asarray(ekf.odometry_pose, dtype=float)
-        self.travelled += self.recent.push(t, odo, ring.ranges, ring.max_range, ring.fov)
+        self.travelled += self.recent.push(
+            t, odo, ring.ranges, ring.max_range, ring.fov, getattr(ring, "mounts", None)
+        )
         self.since_fix += 1
 
     def restart(self, t: float, ring: Any, ekf: FilterView) -> None:
@@ -112,7 +114,10 @@ class MultiRingWindow:
             The filter (its dead reckoning).
         """
         self.recent.clear()
-        self.recent.push(t, ekf.odometry_pose, ring.ranges, ring.max_range, ring.fov)
+        self.recent.push(
+            t, ekf.odometry_pose, ring.ranges, ring.max_range, ring.fov,
+            getattr(ring, "mounts", None),
+        )  # fmt: skip
         self.since_fix = 0
         self.travelled = 0.0
 

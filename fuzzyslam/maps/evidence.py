@@ -238,7 +238,8 @@ def rings_evidence(
 ) -> BatchEvidence:
     """Evidence of K rings at robot poses (K, 3), ranges (K, M), in ``grid``'s frame.
 
-    Sensor i of ring k sits at compose(poses[k], mounts[i]). NaN ranges (missing,
+    Sensor i of ring k sits at compose(poses[k], mounts[i]) (or mounts[k, i]: each ring
+    its own, deskewed, :func:`fuzzyslam.streams.sonar.deskewed_mounts`). NaN ranges (missing,
     invalid) are skipped. Each reading's mass function (:func:`reading_masses`) is
     evaluated on the cells of its cone; readings of one ring that reach a same cell
     (overlapping cones) are combined with the conjunctive rule
@@ -257,8 +258,8 @@ def rings_evidence(
         The maximum ranges.
     fov : float
         The cone's full angle (rad).
-    mounts : ndarray, shape (M, 3)
-        The sensors' poses on the robot.
+    mounts : ndarray, shape (M, 3) or (K, M, 3)
+        The sensors' poses on the robot (the same for every ring, or each ring's).
     params : MapParams
         The sonar model's constants.
 
@@ -268,8 +269,10 @@ def rings_evidence(
     """
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
     k_rings = len(poses)
-    mounts = np.asarray(mounts, dtype=float).reshape(-1, 3)
-    m = len(mounts)
+    mounts = np.asarray(mounts, dtype=float)
+    per_ring = mounts.ndim == 3
+    mounts = mounts.reshape(k_rings, -1, 3) if per_ring else mounts.reshape(-1, 3)
+    m = mounts.shape[-2]
     ranges = np.asarray(ranges, dtype=float).reshape(k_rings, -1)
     if ranges.shape[1] != m:
         raise ValueError(f"{ranges.shape[1]} ranges per ring but {m} sonar mounts")
@@ -278,7 +281,7 @@ def rings_evidence(
     echo_all = ok & (~np.isfinite(rmax) | (ranges < rmax - 1e-6))
     half = 0.5 * float(fov)
     ring_of, sensor_of = np.nonzero(ok)
-    sensors = compose(poses[ring_of], mounts[sensor_of])
+    sensors = compose(poses[ring_of], mounts[ring_of, sensor_of] if per_ring else mounts[sensor_of])
     rid, cell, m_e, m_o, _ = readings_cells(grid, sensors, ranges[ok], echo_all[ok], half, params)
     ncell = grid.shape[0] * grid.shape[1]
     return combine_cells(ring_of[rid] * ncell + cell, m_e, m_o, k_rings, ncell, int(ok.sum()))

@@ -448,8 +448,9 @@ def write_all(
         Their maximum ranges.
     fov : float
         The cone's full angle (rad).
-    mounts : ndarray, shape (M, 3)
-        The sensors' poses on the robot.
+    mounts : ndarray, shape (M, 3) or (N, M, 3)
+        The sensors' poses on the robot (each ring's, deskewed, for sonars fired in
+        sequence).
     params : MapParams
         The ``fgm:`` section.
 
@@ -461,6 +462,6 @@ def write_all(
     fig_fgm(outdir / "fgm.png", fgm, poses, refs, world, lm)
     fig_conflict(outdir / "conflict.png", fgm)
     k = pick_flm_ring(poses, refs)
-    flm = build_flm(ranges[k], rmax[k], fov, mounts, params)
+    flm = build_flm(ranges[k], rmax[k], fov, mounts if mounts.ndim == 2 else mounts[k], params)
     fig_hough(outdir / "hough.png", fgm, refs, flm, flm_wall_direction(flm, params), params)
     return ["fgm.png", "conflict.png", "hough.png"]

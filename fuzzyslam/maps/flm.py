@@ -193,8 +193,9 @@ def build_flm_rings(
         The maximum ranges.
     fov : float
         The cone's full angle (rad).
-    mounts : ndarray, shape (M, 3)
-        The sonars' poses in base_link.
+    mounts : ndarray, shape (M, 3) or (K, M, 3)
+        The sonars' poses in base_link (each ring's, deskewed, for sonars fired in
+        sequence).
     params : MapParams, optional
         The ``fgm:`` section.
 
@@ -275,6 +276,7 @@ class RecentRings:
         self._poses: list[np.ndarray] = []
         self._ranges: list[np.ndarray] = []
         self._rmax: list[np.ndarray] = []
+        self._mounts: list[np.ndarray | None] = []  # a ring's own (deskewed) mounts
         self.fov = 0.0
 
     def __len__(self) -> int:
@@ -287,6 +289,7 @@ class RecentRings:
         ranges: np.ndarray,
         max_range: np.ndarray | float,
         fov: float,
+        mounts: np.ndarray | None = None,
     ) -> float:
         """Keep a ring (the oldest dropped beyond ``count`` rings or ``window`` s; a ring back in
 
@@ -304,6 +307,8 @@ class RecentRings:
             The maximum ranges.
         fov : float
             The cone's full angle (rad).
+        mounts : ndarray, shape (M, 3), optional
+            The ring's own (deskewed) mounts; None: those given to :meth:`flm`.
 
         Returns
         -------
@@ -323,13 +328,14 @@ class RecentRings:
         self._rmax.append(
             rmax if rmax.shape == ranges.shape else np.broadcast_to(rmax, ranges.shape)
         )
+        self._mounts.append(mounts)
         self.fov = float(fov)
         while (
             len(self._t) > self.count
             or self._t[-1] - self._t[0] > self.window
             or (self.distance > 0 and self._s[-1] - self._s[0] > self.distance)
         ):
-            for buf in (self._s, self._t, self._poses, self._ranges, self._rmax):
+            for buf in (self._s, self._t, self._poses, self._ranges, self._rmax, self._mounts):
                 buf.pop(0)
         return step
 
@@ -340,7 +346,7 @@ class RecentRings:
 
     def clear(self) -> None:
         """Forget every ring."""
-        for buf in (self._s, self._t, self._poses, self._ranges, self._rmax):
+        for buf in (self._s, self._t, self._poses, self._ranges, self._rmax, self._mounts):
             buf.clear()
 
     def flm(self, mounts: np.ndarray, params: MapParams | None = None) -> LocalMap:
@@ -349,7 +355,7 @@ class RecentRings:
         Parameters
         ----------
         mounts : ndarray, shape (M, 3)
-            The sonars' poses in base_link.
+            The sonars' poses in base_link (for the rings pushed without their own).
         params : MapParams, optional
             The ``fgm:`` section.
 
@@ -361,6 +367,8 @@ class RecentRings:
             raise ValueError("no rings pushed")
         poses = np.array(self._poses)
         rel = between(poses[-1], poses)
+        if any(m is not None for m in self._mounts):  # deskewed rings: each its mounts
+            mounts = np.stack([mounts if m is None else m for m in self._mounts])
         return build_flm_rings(
             rel, np.array(self._ranges), np.array(self._rmax), self.fov, mounts, params
         )

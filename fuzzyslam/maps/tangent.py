@@ -81,8 +81,8 @@ def readings_in_frame(
         The maximum ranges (readings at or beyond them are not echoes).
     fov : float
         The cone's full angle (rad).
-    mounts : ndarray, shape (M, 3)
-        The sensors' poses on the robot.
+    mounts : ndarray, shape (M, 3) or (K, M, 3)
+        The sensors' poses on the robot (the same for every ring, or each ring's).
 
     Returns
     -------
@@ -90,12 +90,15 @@ def readings_in_frame(
         The N echoes: sensor poses (N, 3), ranges (N,).
     """
     poses = np.asarray(poses, dtype=float).reshape(-1, 3)
-    mounts = np.asarray(mounts, dtype=float).reshape(-1, 3)
-    ranges = np.asarray(ranges, dtype=float).reshape(len(poses), len(mounts))
+    mounts = np.asarray(mounts, dtype=float)
+    per_ring = mounts.ndim == 3
+    mounts = mounts.reshape(len(poses), -1, 3) if per_ring else mounts.reshape(-1, 3)
+    ranges = np.asarray(ranges, dtype=float).reshape(len(poses), mounts.shape[-2])
     rmax = np.broadcast_to(np.asarray(max_range, dtype=float), ranges.shape)
     ok = np.isfinite(ranges) & (ranges > 0) & (~np.isfinite(rmax) | (ranges < rmax - 1e-6))
     k, i = np.nonzero(ok)
-    return RingReadings(compose(poses[k], mounts[i]), ranges[ok], 0.5 * float(fov))
+    at = mounts[k, i] if per_ring else mounts[i]
+    return RingReadings(compose(poses[k], at), ranges[ok], 0.5 * float(fov))
 
 
 @dataclass

@@ -71,6 +71,10 @@ class SonarParams:
     max_bounces: int = field(default=2, metadata={"min": 0, "max": 5})
     crosstalk_prob: float = field(default=0.01, metadata={"min": 0.0, "max": 1.0})
     mount_height: float = field(default=0.5, metadata={"min": 0.0, "max": 5.0})
+    # time between consecutive sonars of a ring (s): 0, the whole ring at once; a Pioneer's
+    # ring fires its sonars one after another, about 40 ms apart. Each reading is taken
+    # from the robot's pose at its own firing time and stamped with it
+    firing_gap_s: float = field(default=0.0, metadata={"min": 0.0, "max": 0.5})
 
 
 @dataclass

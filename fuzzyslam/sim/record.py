@@ -67,6 +67,45 @@ def sensor_times(rate_hz: float, duration: float) -> np.ndarray:
     return np.arange(n) / rate_hz
 
 
+def sonar_firings(params, duration: float, source: str = "config") -> np.ndarray:
+    """Firing times (K, M) of the sonars: ring k's sonar j fires at k / rate + j * gap
+    (``sonar.firing_gap_s``; 0: the whole ring at once), the rings whose last sonar fires
+    after the drive left out.
+
+    Parameters
+    ----------
+    params : SonarParams
+        The ring (count, rate, firing gap).
+    duration : float
+        The drive's duration (s).
+    source : str
+        The config's name (for the error message).
+
+    Returns
+    -------
+    ndarray, shape (K, M)
+
+    Raises
+    ------
+    ConfigError
+        When a ring's sonars would still fire as the next ring starts.
+    """
+    from fuzzyslam.errors import ConfigError
+
+    span = params.firing_gap_s * (params.count - 1)
+    if span * params.rate_hz >= 1.0:
+        raise ConfigError(
+            source,
+            f"sonar.firing_gap_s {params.firing_gap_s} s: a ring of {params.count} sonars "
+            f"would fire for {span:.3f} s, longer than its period 1 / sonar.rate_hz = "
+            f"{1.0 / params.rate_hz:.3f} s",
+        )
+    fire = sensor_times(params.rate_hz, duration)[:, None] + params.firing_gap_s * np.arange(
+        params.count
+    )
+    return fire[fire[:, -1] <= duration + 1e-9]
+
+
 def world_markers(world: World, lamp_z: float) -> object:
     """/sim/world MarkerArray: walls as one LINE_LIST, lamps as CYLINDERs.
 
@@ -126,15 +165,16 @@ def static_transforms(cfg, mounts: np.ndarray) -> object:
     return M.tf_message(tfs)
 
 
-def schedule(plan: Plan, sonar_rate: float, camera_rate: float) -> list[tuple[float, int, int]]:
+def schedule(plan: Plan, sonar: np.ndarray, camera_rate: float) -> list[tuple[float, int, int]]:
     """(t, kind, index) of everything to write, in log-time order.
 
     Parameters
     ----------
     plan : Plan
         The simulation's plan.
-    sonar_rate : float
-        Sonar rings per second.
+    sonar : ndarray, shape (K,) or (K * M,)
+        The sonar messages' times: one per ring (fired at once), or one per reading
+        (fired in sequence: ring k's sonar j has index k * M + j).
     camera_rate : float
         Frames per second.
 
@@ -145,7 +185,7 @@ def schedule(plan: Plan, sonar_rate: float, camera_rate: float) -> list[tuple[fl
     T = plan.drive.duration
     parts = [
         (plan.drive.t, ROBOT),
-        (sensor_times(sonar_rate, T), SONAR),
+        (sonar, SONAR),
         (sensor_times(camera_rate, T), CAMERA),
         (np.array([e.t for e in plan.events]), EVENT),
     ]
@@ -217,23 +257,30 @@ def robot_payloads(plan: Plan, block: int = 1024) -> Iterator[tuple[bytes, bytes
 RING_BLOCK = 32  # sonar rings traced together
 
 
-def _ideal_block(dr, times: np.ndarray, walls, mounts, params, obstacles=()) -> np.ndarray:
-    """Ideal ranges (K', M) of the first K' <= K rings at ``times`` from the true drive:
-    the rings that meet the same obstacles as the first (boxes reflect like walls, people
-    are discs; ``sim.obstacles``), so that they share the walls and their numbers of people.
+def _ideal_block(dr, fire: np.ndarray, walls, mounts, params, obstacles=()) -> np.ndarray:
+    """Ideal ranges (K', M) of the first K' <= K rings fired at ``fire`` (K, M) from the
+    true drive: the rings that meet the same obstacles as the first (boxes reflect like
+    walls, people are discs; ``sim.obstacles``, placed at the ring's first firing), so that
+    they share the walls and their numbers of people. Each sonar is traced from the
+    robot's pose at its own firing time (one pose per ring when the ring fires at once).
     """
+    times = fire[:, 0]
     if obstacles:
         there = [tr.present(times[0]) for tr in obstacles]
         k = next((j for j, t in enumerate(times.tolist())
                   if [tr.present(t) for tr in obstacles] != there), len(times))  # fmt: skip
-        times = times[:k]
-    poses = np.array([interpolate_pose(dr.t, dr.pose, t) for t in times.tolist()])
+        times, fire = times[:k], fire[:k]
     discs = None
     if obstacles:
         walls = np.vstack([walls, box_segments(obstacles, times[0])])
         people = np.stack([discs_at(obstacles, t) for t in times.tolist()])
         discs = people if people.shape[1] else None
-    return simsonar.ideal_ranges_many(walls, poses.reshape(-1, 3), mounts, params, discs)
+    if params.firing_gap_s == 0.0:
+        poses = np.array([interpolate_pose(dr.t, dr.pose, t) for t in times.tolist()])
+        return simsonar.ideal_ranges_many(walls, poses.reshape(-1, 3), mounts, params, discs)
+    poses = np.array([interpolate_pose(dr.t, dr.pose, t) for t in fire.ravel().tolist()])
+    return simsonar.ideal_ranges_many(walls, poses.reshape((*fire.shape, 3)), mounts, params,
+                                      discs)  # fmt: skip
 
 
 def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tuple[dict, Plan]:
@@ -281,20 +328,22 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
     frames = [sonar_frame(i) for i in range(cfg.sonar.count)]
     st = Stats()
     lit = np.ones(len(lamps), dtype=bool)
-    ring_t, i0, ideal = sensor_times(cfg.sonar.rate_hz, dr.duration), 0, np.zeros((0, 0))
+    fire = sonar_firings(cfg.sonar, dr.duration, source)  # (K, M)
+    sequential = cfg.sonar.firing_gap_s > 0.0  # one message per reading, at its time
+    m_sonars, i0, ideal, r = cfg.sonar.count, 0, np.zeros((0, 0)), np.zeros(0)
     with LogWriter(out) as w, Progress(dr.duration, "simulate") as bar:
         w.json_metadata(WORLD_KEY, world.to_dict())
         w.json_metadata(SCENARIO_KEY, scenario.to_dict())
         if plan.obstacles:
-            ring_times = sensor_times(cfg.sonar.rate_hz, dr.duration)
-            w.json_metadata(OBSTACLES_KEY, obstacles_record(plan.obstacles, ring_times))
+            w.json_metadata(OBSTACLES_KEY, obstacles_record(plan.obstacles, fire[:, 0]))
         w.write(topics.tf_static, M.TF_MESSAGE, static_transforms(cfg, mounts), 0.0)
         lamp_z = cfg.camera.mount_height + cfg.camera.ceiling_height
         w.write(topics.world_markers, M.MARKER_ARRAY, world_markers(world, lamp_z), 0.0)
         info = M.camera_info(0.0, CAMERA_FRAME, cam.width, cam.height_px, cam.f, cam.cx, cam.cy)
         info_cdr = serialize(info, M.CAMERA_INFO)
         w.write_cdr(topics.camera_info, M.CAMERA_INFO, info_cdr, 0.0)
-        for t, kind, i in schedule(plan, cfg.sonar.rate_hz, cfg.camera.rate_hz):
+        sonar_t = fire.ravel() if sequential else fire[:, 0]
+        for t, kind, i in schedule(plan, sonar_t, cfg.camera.rate_hz):
             if kind == EVENT:
                 ev = plan.events[i]
                 w.write(topics.events, M.STRING, M.json_msg(asdict(ev)), t)
@@ -303,17 +352,21 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
                 w.write_cdr_at(robot_topics, robot_types, next(robot), t)
                 bar.update_to(t)
             elif kind == SONAR:
-                # the ideal ranges of up to RING_BLOCK rings at a time (the same floats as
-                # ring by ring: simsonar.ideal_ranges_many)
-                if not i0 <= i < i0 + len(ideal):
-                    i0, ideal = i, _ideal_block(dr, ring_t[i : i + RING_BLOCK], walls, mounts,
-                                                cfg.sonar, plan.obstacles)  # fmt: skip
-                r = simsonar.measure(ideal[i - i0], cfg.sonar, rngs["sonar"])
-                st.rings += 1
-                st.no_echo += int(np.sum(r >= cfg.sonar.max_range))
-                cdrs = E.encode_ranges(t, frames, r, fov, cfg.sonar.min_range,
+                ring, j = divmod(i, m_sonars) if sequential else (i, 0)
+                if j == 0:  # a ring's first sonar: the ring's readings drawn
+                    # the ideal ranges of up to RING_BLOCK rings at a time (the same
+                    # floats as ring by ring: simsonar.ideal_ranges_many)
+                    if not i0 <= ring < i0 + len(ideal):
+                        i0, ideal = ring, _ideal_block(dr, fire[ring : ring + RING_BLOCK],
+                                                       walls, mounts, cfg.sonar,
+                                                       plan.obstacles)  # fmt: skip
+                    r = simsonar.measure(ideal[ring - i0], cfg.sonar, rngs["sonar"])
+                    st.rings += 1
+                    st.no_echo += int(np.sum(r >= cfg.sonar.max_range))
+                k = slice(j, j + 1) if sequential else slice(None)
+                cdrs = E.encode_ranges(t, frames[k], r[k], fov, cfg.sonar.min_range,
                                        cfg.sonar.max_range)  # fmt: skip
-                w.write_cdr_at(sonar_topics, sonar_types, cdrs, t)
+                w.write_cdr_at(sonar_topics[k], sonar_types[k], cdrs, t)
             else:
                 pose = interpolate_pose(dr.t, dr.pose, t)
                 rel = inverse_transform_points(pose, lamps[lit])

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import numpy as np
 
+from fuzzyslam.se2 import compose
 from fuzzyslam.sim.obstacles import ray_circle_hits
 from fuzzyslam.sim.params import SonarParams
 
@@ -262,8 +263,9 @@ def ideal_ranges_many(
     ----------
     walls : ndarray, shape (S, 4)
         Wall segments.
-    poses : ndarray, shape (K, 3)
-        The robot's world poses.
+    poses : ndarray, shape (K, 3) or (K, M, 3)
+        The robot's world poses: one per ring, or, for sonars fired in sequence, one per
+        sonar as it fires (``poses[k, j]``).
     mounts : ndarray, shape (M, 3)
         The sensors' poses on the robot.
     params : SonarParams
@@ -276,7 +278,11 @@ def ideal_ranges_many(
     ndarray, shape (K, M)
         Ranges (m); inf: no echo.
     """
-    sensors = np.concatenate([sensor_poses(p, mounts) for p in poses])
+    k, m = len(poses), len(mounts)
+    if poses.ndim == 3:  # sonar j of ring k at poses[k, j]
+        sensors = compose(poses.reshape(-1, 3), np.tile(mounts, (k, 1)))
+    else:
+        sensors = np.concatenate([sensor_poses(p, mounts) for p in poses])
     if discs is not None:
-        discs = np.repeat(np.asarray(discs, dtype=float), len(mounts), axis=0)
-    return ideal_ranges(walls, sensors, params, discs).reshape(len(poses), len(mounts))
+        discs = np.repeat(np.asarray(discs, dtype=float), m, axis=0)
+    return ideal_ranges(walls, sensors, params, discs).reshape(k, m)

@@ -51,6 +51,7 @@ from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.progress import note
 from fuzzyslam.robot import WHEEL_NAMES
+from fuzzyslam.slam.deskew import deskewed
 from fuzzyslam.slam.events import Event, Frame, Odom, RingEvent, TfFrames
 from fuzzyslam.slam.latency import delay_odometry
 from fuzzyslam.slam.log_setup import (
@@ -180,7 +181,10 @@ class LogInputs:
             main = delay_odometry(main, delay)  # stamps lead the motion (slam/latency.py)
         if not rings:
             return main
-        return heapq.merge(main, self._ring_events(ring_start), key=lambda e: e.t)
+        merged = heapq.merge(main, self._ring_events(ring_start), key=lambda e: e.t)
+        if self.ranges is not None and self.ranges.firing == "sequential":
+            return deskewed(merged, self.mounts)  # each reading at its stamp (slam/deskew.py)
+        return merged
 
     def _main_events(self) -> Iterator[Event]:
         odo = self._odometry if self.odom_source == "encoders" else self._odom_pose

@@ -58,6 +58,7 @@ from typing import TYPE_CHECKING, Any
 from fuzzyslam.cpus import usable_cpus
 from fuzzyslam.forked import TO_PARENT, fork_child, pickled_error, raise_child_error, reap
 from fuzzyslam.slam.events import Event, RingEvent
+from fuzzyslam.streams.sonar import ring_mounts
 
 if TYPE_CHECKING:  # multiprocessing loaded only for a child (16 ms of start-up)
     from multiprocessing.connection import Connection
@@ -264,7 +265,7 @@ def _ahead(ahead: list, ev: RingEvent, mounts) -> tuple | None:
         value = None
         if fn is not None and ev.t >= start:
             try:
-                value = fn(ev.ring, mounts)
+                value = fn(ev.ring, ring_mounts(ev.ring, mounts))
             except Exception:
                 value = None
         out.append(value)

@@ -48,6 +48,7 @@ from fuzzyslam.slam.params import SlamParams
 from fuzzyslam.slam.relocalise import Relocaliser
 from fuzzyslam.slam.run_results import LateEvents, RunCounts, slam_result
 from fuzzyslam.slam.start_anchor import StartAnchor
+from fuzzyslam.streams.sonar import ring_mounts
 
 CALIB_PERIOD_S = 1.0  # calibration.csv: a row at most this often (s)
 # the upper triangle of the pose covariance, row by row (a trajectory row's covariance)
@@ -360,7 +361,7 @@ class SlamRunner:
             if ev.t >= aid.start_time:
                 if ahead is not None and ahead[k] is not None:  # computed in slam/prefetch.py
                     aid.take_ahead(ev.ring, ahead[k])
-                aid.on_ring(ev.t, ev.ring, self.mounts, self.ekf)
+                aid.on_ring(ev.t, ev.ring, ring_mounts(ev.ring, self.mounts), self.ekf)
                 self.counts["aid_calls"] += 1
         for idx, res in self.ekf.robot_updates:
             self.anchor.updated(res.accepted)  # the rewind would not be exact

@@ -20,9 +20,13 @@ stamps of its first ``FIRING_SAMPLE`` readings, sorted):
 Readings are put back in stamp order first: they are held until one stamped more than
 ``MAX_RING_SPAN_S`` later has been read, then released in stamp order (equal stamps in
 log order), so two drivers logging their banks with different delays still make whole
-rings. The ring's time is the mean of its readings' stamps, the time at which placing
-all of them by one robot pose errs least (by at most half the span times the speed: 9 cm
-for a 0.36 s cycle at 0.5 m/s); rings whose readings span more than ``gap`` are counted
+rings. A ring whose readings share one stamp is at that stamp. A ring whose stamps differ
+is at its last reading's stamp, and says how much earlier each reading was taken
+(``Ring.offsets``): the robot moves within a cycle (0.3 m and 18 deg in a 0.6 s cycle at
+0.5 m/s and 30 deg/s), so each reading is placed by the robot's pose at its own stamp
+(:func:`deskewed_mounts`): by the trajectory in the map stage, by the odometry in a run
+(:mod:`fuzzyslam.slam.deskew`; the last stamp, so that the odometry up to every reading
+is known when the ring is). Rings whose readings span more than ``gap`` are counted
 (``sequential``). A sonar missing from a ring reads NaN. Glitches are made explicit and
 counted, never silently used:
 
@@ -62,12 +66,78 @@ FIRING_SAMPLE = 300  # readings whose stamps measure the firing pattern
 
 @dataclass
 class Ring:
-    """One sonar ring: time (s), ranges (count,) with NaN for missing/invalid, max ranges."""
+    """One sonar ring: time (s), ranges (count,) with NaN for missing/invalid, max ranges,
+    the cone's full angle (rad); ``offsets`` (count,): each reading's stamp minus ``t``
+    (s, <= 0; NaN where none), or None for a ring stamped alike; ``mounts`` (count, 3):
+    the sensors' poses in the robot's frame at ``t`` with the motion since each reading
+    taken out (:func:`deskewed_mounts`), or None: the sensor's own mounts."""
 
     t: float
     ranges: np.ndarray
     max_range: np.ndarray
     fov: float
+    offsets: np.ndarray | None = None
+    mounts: np.ndarray | None = None
+
+
+def ring_mounts(ring: Ring, mounts: np.ndarray) -> np.ndarray:
+    """The mounts that place ``ring``'s readings in the robot's frame at its time: its
+    deskewed ones, else the sensor's.
+
+    Parameters
+    ----------
+    ring : Ring
+        A ring (or a laser scan's, which has no mounts of its own).
+    mounts : ndarray, shape (M, 3)
+        The sensor's mounts.
+
+    Returns
+    -------
+    ndarray, shape (M, 3)
+    """
+    own = getattr(ring, "mounts", None)  # a scan's ring has none
+    return mounts if own is None else own
+
+
+def deskewed_mounts(
+    mounts: np.ndarray, offsets: np.ndarray, t: float, times: np.ndarray, poses: np.ndarray
+) -> np.ndarray:
+    """The sensors' poses in the robot's frame at ring time ``t`` when reading j was taken
+    at ``t + offsets[j]`` from a moving robot: ``(-)P(t) (+) P(t + o_j) (+) m_j``, with P
+    the robot's path (``poses`` at ``times``, interpolated linearly, held beyond its
+    ends: :func:`fuzzyslam.se2.interpolate_poses`). The readings then sit where they were
+    measured, as a scan deskewed from odometry (Thrun, Burgard and Fox, *Probabilistic
+    Robotics*, 2005, sec. 6.3, the robot's motion during a scan).
+
+    Parameters
+    ----------
+    mounts : ndarray, shape (M, 3)
+        The sensors' poses on the robot.
+    offsets : ndarray, shape (M,) or (K, M)
+        Each reading's stamp minus its ring's (s; NaN: no reading, mount kept).
+    t : float or ndarray, shape (K,)
+        The rings' times (s).
+    times : ndarray, shape (N,)
+        Increasing times of the path (s).
+    poses : ndarray, shape (N, 3)
+        The robot's poses at ``times`` (any fixed frame: odometry or map).
+
+    Returns
+    -------
+    ndarray, shape (M, 3) or (K, M, 3)
+        The deskewed mounts of each ring.
+    """
+    from fuzzyslam.se2 import between, compose, interpolate_poses
+
+    off = np.asarray(offsets, dtype=float)
+    ts = np.asarray(t, dtype=float).reshape(-1, 1)  # (K, 1)
+    off2 = off.reshape(len(ts), -1)
+    at = np.where(np.isfinite(off2), ts + off2, ts)  # a missing reading: at the ring's time
+    ref = interpolate_poses(times, poses, ts[:, 0], outside="hold")  # (K, 3)
+    rel = between(np.repeat(ref, off2.shape[1], axis=0),
+                  interpolate_poses(times, poses, at.ravel(), outside="hold"))  # fmt: skip
+    m = np.broadcast_to(np.asarray(mounts, dtype=float), (*off2.shape, 3)).reshape(-1, 3)
+    return compose(rel, m).reshape((*off.shape, 3))
 
 
 @dataclass
@@ -183,8 +253,9 @@ def group_rings(
     Returns
     -------
     iterator of Ring
-        Time (mean stamp of the readings, s), ranges (count,) and max ranges (count,)
-        with NaN for missing or invalid readings, and the field of view.
+        Time (the last reading's stamp, s), ranges (count,) and max ranges (count,)
+        with NaN for missing or invalid readings, the field of view and, for readings
+        stamped apart, each one's offset from the ring's time.
     """
     st = stats if stats is not None else RingStats()
     cur_t: float | None = None  # the ring's first stamp
@@ -199,10 +270,13 @@ def group_rings(
         st.rings += 1
         st.missing += int(count - np.count_nonzero(seen))
         read = offset[seen]
-        st.sequential += bool(read.max() - read.min() > gap)
-        # cur_t + mean offset: exactly cur_t for a ring stamped alike
-        t_ring = float(cur_t) + math.fsum(read) / len(read)
-        return Ring(t_ring, ranges.copy(), rmax.copy(), fov)
+        last = float(read.max())
+        st.sequential += bool(last - read.min() > gap)
+        if last == read.min():  # stamped alike: the ring is at its stamp
+            return Ring(float(cur_t) + last, ranges.copy(), rmax.copy(), fov)
+        # at its last reading, each reading's stamp relative to it (module docstring)
+        return Ring(float(cur_t) + last, ranges.copy(), rmax.copy(), fov,
+                    np.where(seen, offset - last, np.nan))  # fmt: skip
 
     for t, i, m in _in_stamp_order(messages, topic_index, st):
         if cur_t is not None and seen[i] and t - cur_t == offset[i]:

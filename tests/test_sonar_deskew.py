@@ -1,0 +1,234 @@
+"""Sonar rings fired in sequence, deskewed (streams/sonar.py ``deskewed_mounts``,
+slam/deskew.py): the geometry against closed forms, the odometry trail against the
+filter's preintegration, and a simulated log whose sonars fire 40 ms apart, read by the
+run's inputs, against the simulator's true poses."""
+
+from __future__ import annotations
+
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from fuzzyslam.config import load_config
+from fuzzyslam.se2 import between, compose, interpolate_poses
+from fuzzyslam.slam.deskew import OdometryTrail, deskewed
+from fuzzyslam.slam.events import Odom, RingEvent
+from fuzzyslam.slam.motion import Preintegrator
+from fuzzyslam.streams.reader import LogReader
+from fuzzyslam.streams.sonar import Ring, deskewed_mounts, ring_mounts
+
+MOUNTS = np.array([[0.2, 0.0, 0.0], [0.0, 0.2, math.pi / 2], [-0.2, 0.0, math.pi]])
+
+
+def test_deskew_of_a_robot_turning_in_place_rotates_each_mount_back() -> None:
+    """A robot turning in place at w rad/s: reading j, taken o_j s before the ring's time
+    (o_j <= 0), sits in the ring's frame at the mount turned by w o_j about the centre."""
+    w, t0 = 0.5, 10.0
+    times = np.linspace(9.0, 11.0, 201)
+    path = np.column_stack([np.zeros_like(times), np.zeros_like(times), w * (times - t0)])
+    off = np.array([-0.4, -0.2, 0.0])
+    got = deskewed_mounts(MOUNTS, off, t0, times, path)
+    want = np.array([compose([0.0, 0.0, w * o], m) for o, m in zip(off, MOUNTS, strict=True)])
+    np.testing.assert_allclose(got, want, atol=1e-12)
+
+
+def test_deskew_of_a_robot_driving_straight_shifts_each_mount_back() -> None:
+    """Driving straight at v m/s along its heading (any heading): reading j sits v o_j
+    behind its mount along the robot's x axis; a missing reading (NaN) keeps its mount;
+    several rings at once give each ring's row."""
+    v, heading = 0.5, 0.7
+    times = np.linspace(0.0, 20.0, 401)
+    path = np.column_stack(
+        [v * times * math.cos(heading), v * times * math.sin(heading), np.full_like(times, heading)]
+    )
+    off = np.array([[-0.6, np.nan, 0.0], [-0.3, -0.1, 0.0]])
+    got = deskewed_mounts(MOUNTS, off, np.array([5.0, 12.0]), times, path)
+    zero = np.zeros(off.shape)
+    want = MOUNTS + np.stack([np.nan_to_num(off) * v, zero, zero], axis=-1)
+    np.testing.assert_allclose(got, want, atol=1e-12)
+
+
+def test_odometry_trail_is_the_filters_preintegration() -> None:
+    """The trail's dead reckoning (midpoint steps) from any of its poses to its last is
+    the filter's preintegrated motion (slam/motion.py) of the same increments; it keeps
+    only the last TRAIL_S seconds."""
+    rng = np.random.default_rng(3)
+    trail, pre = OdometryTrail(), Preintegrator((0.01, 0.0, 0.01, 0.0))
+    steps = [(0.05 * k, float(d), float(r)) for k, (d, r) in enumerate(
+        zip(rng.uniform(0, 0.03, 80), rng.uniform(-0.05, 0.05, 80), strict=True))]  # fmt: skip
+    for k, (t, d, r) in enumerate(steps):
+        trail.add(t, d, r)
+        if k >= 60:
+            pre.add(d, r)
+    first = trail.t.index(steps[59][0])
+    got = between(np.array(trail.poses[first]), np.array(trail.poses[-1]))
+    np.testing.assert_allclose(got, [pre.dx, pre.dy, pre.dth], atol=1e-12)
+    assert trail.t[-1] - trail.t[0] <= 2.0 and len(trail.t) < len(steps)
+
+
+def test_deskewed_stage_gives_rings_their_mounts_and_leaves_the_rest() -> None:
+    """``deskewed``: a ring with offsets gets mounts from the odometry before it (a turn
+    in place at 1 rad/s: reading j turned back by its offset); a ring stamped alike
+    keeps none (``ring_mounts`` then gives the sensor's)."""
+    events = [Odom(0.01 * k, 0.0, 0.01) for k in range(1, 101)]  # 1 rad/s for 1 s
+    seq = Ring(1.0, np.ones(3), np.full(3, 5.0), 0.4, np.array([-0.5, -0.25, 0.0]))
+    alike = Ring(1.0, np.ones(3), np.full(3, 5.0), 0.4)
+    out = list(deskewed(iter([*events, RingEvent(1.0, seq), RingEvent(1.0, alike)]), MOUNTS))
+    assert len(out) == 102 and out[:100] == events
+    want = np.array([compose([0.0, 0.0, o], m) for o, m in zip(seq.offsets, MOUNTS, strict=True)])
+    # the midpoint steps' chord puts the centre off by d^2 / 8 per step: micrometres
+    np.testing.assert_allclose(out[100].ring.mounts, want, atol=1e-5)
+    assert out[101].ring.mounts is None and ring_mounts(out[101].ring, MOUNTS) is MOUNTS
+
+
+@pytest.fixture(scope="module")
+def sequential_log(tmp_path_factory) -> Path:
+    """13.9 s of the quick world (one corner turned), sonar rings at 1.5 Hz whose 16
+    sonars fire 40 ms apart (a 0.6 s cycle), each reading from the true pose at its own
+    firing time."""
+    from test_robust_logs import cli
+
+    d = tmp_path_factory.mktemp("seq")
+    cfg = d / "seq.yaml"
+    cfg.write_text(
+        "extends: quick.yaml\nname: seq\nscenario:\n  runs: 1\n  lap_fraction: 0.1\n"
+        "sonar:\n  rate_hz: 1.5\n  firing_gap_s: 0.04\n",
+        encoding="utf-8",
+    )
+    code, _, err = cli("simulate", cfg, "-o", d / "seq.mcap", "--truth-tum", d / "truth.tum")
+    assert code == 0, err
+    return d
+
+
+def test_simulated_sequential_sonars_are_stamped_at_their_firing(sequential_log: Path) -> None:
+    """The simulator's sequential ring: sonar j stamped (and logged) 40 ms after sonar
+    j - 1; the run's inputs measure the firing as sequential and make one ring per cycle
+    at its last stamp, offsets -0.6 .. 0 s."""
+    from fuzzyslam.slam.inputs import open_inputs
+
+    cfg = load_config(str(sequential_log / "seq.yaml"))
+    inputs = open_inputs(sequential_log / "seq.mcap", cfg, need_rings=True)
+    assert inputs.ranges.firing == "sequential"
+    rings = [ev.ring for ev in inputs.events(rings=True) if type(ev) is RingEvent]
+    assert len(rings) >= 15
+    for ring in rings:
+        np.testing.assert_allclose(ring.offsets, -0.04 * np.arange(15, -1, -1), atol=1e-6)
+
+
+def test_deskewed_rings_sit_where_their_sonars_fired(sequential_log: Path) -> None:
+    """Each reading of each ring, placed by its deskewed mount from the true pose at the
+    last odometry stamp up to the ring's time (the filter's pose when it takes the
+    ring), is where its sonar was when it fired (the true pose at its own stamp with its
+    mount): within 5 mm and 1 deg (dead reckoning over 0.6 s; a reading fired after
+    the last odometry stamp is compared at that stamp, as the odometry cannot know more);
+    placed by the plain mounts it is off by up to the robot's motion in a cycle."""
+    from fuzzyslam.slam.inputs import open_inputs
+
+    cfg = load_config(str(sequential_log / "seq.yaml"))
+    log = sequential_log / "seq.mcap"
+    reader = LogReader(log)
+    truth = [(m.t, m.msg.pose.pose) for m in reader.messages(["/ground_truth/odom"])]
+    tt = np.array([t for t, _ in truth])
+    tp = np.array([[p.position.x, p.position.y, 2 * math.atan2(p.orientation.z, p.orientation.w)]
+                   for _, p in truth])  # fmt: skip
+    odo = np.array([m.t for m in reader.messages(["/joint_states"])])
+    inputs = open_inputs(log, cfg, need_rings=True)
+    mounts = inputs.mounts
+    err_d, err_p = [], []
+    for ev in inputs.events(rings=True):
+        if type(ev) is not RingEvent:
+            continue
+        ring = ev.ring
+        last_odometry = odo[np.searchsorted(odo, ring.t, side="right") - 1]
+        at_ring = interpolate_poses(tt, tp, [last_odometry])[0]
+        fired = interpolate_poses(tt, tp, np.clip(ring.t + ring.offsets, odo[1], last_odometry))
+        want = compose(fired, mounts)
+        for own, errs in ((ring.mounts, err_d), (mounts, err_p)):
+            got = compose(np.broadcast_to(at_ring, mounts.shape), own)
+            d = got - want
+            turn = np.abs(np.angle(np.exp(1j * d[:, 2])))
+            errs.append([np.hypot(d[:, 0], d[:, 1]).max(), turn.max()])
+    err_d, err_p = np.array(err_d), np.array(err_p)
+    assert err_d[:, 0].max() < 0.005 and np.rad2deg(err_d[:, 1].max()) < 1.0
+    # the robot's motion in a cycle: decimetres, and degrees in the corner
+    assert err_p[:, 0].max() > 0.1 and np.rad2deg(err_p[:, 1].max()) > 2.0
+
+
+def test_map_places_each_reading_by_the_trajectory_at_its_stamp(
+    sequential_log: Path, tmp_path: Path, monkeypatch
+) -> None:
+    """The map stage with the true trajectory: every reading it fuses sits where its
+    sonar was when it fired (the trajectory at the reading's own stamp with its mount),
+    to a micrometre; the ring at its last stamp with the plain mounts would be off by
+    up to the robot's motion in a cycle."""
+    from fuzzyslam.maps import build
+    from fuzzyslam.maps.fgm import FgmBuilder
+    from fuzzyslam.streams.tum import read_tum
+
+    placed = []
+    real = FgmBuilder.add_rings
+
+    def add_rings(self, poses, ranges, max_range, fov, mounts):
+        placed.append((poses.copy(), np.asarray(mounts).copy()))
+        return real(self, poses, ranges, max_range, fov, mounts)
+
+    monkeypatch.setattr(FgmBuilder, "add_rings", add_rings)
+    cfg = load_config(str(sequential_log / "seq.yaml"))
+    log, truth = sequential_log / "seq.mcap", sequential_log / "truth.tum"
+    summary = build.build_map(log, truth, tmp_path / "fgm", cfg, build.MapOptions(figures=False))
+    assert summary["range_sensor"]["firing"] == "sequential"
+    times, *_, offsets = build.read_rings_compact(LogReader(log), cfg, np.inf)
+    poses = np.concatenate([p for p, _ in placed])
+    mounts = np.concatenate([m for _, m in placed])
+    assert mounts.shape == (len(times), 16, 3)
+    sensor = build.open_ranges(LogReader(log), cfg, None)
+    t_tr, p_tr = read_tum(truth)
+    fired = interpolate_poses(t_tr, p_tr, (times[:, None] + offsets).ravel(), outside="hold")
+    want = compose(fired, np.tile(sensor.mounts, (len(times), 1)))
+    got = compose(np.repeat(poses, 16, axis=0), mounts.reshape(-1, 3))
+    d = got - want
+    assert np.abs(d[:, :2]).max() < 1e-5 and np.abs(np.angle(np.exp(1j * d[:, 2]))).max() < 1e-5
+    plain = compose(np.repeat(poses, 16, axis=0), np.tile(sensor.mounts, (len(times), 1)))
+    assert np.hypot(*(plain - want)[:, :2].T).max() > 0.1
+
+
+@pytest.mark.slow
+def test_heading_fixes_on_sequential_rings_are_the_same_with_prefetch(
+    sequential_log: Path, tmp_path: Path, monkeypatch
+) -> None:
+    """The rings are deskewed where the events are made, so a run whose events come from
+    the child process (``--prefetch``) writes the same files as the one-process run;
+    the heading aid gets every ring with its own mounts."""
+    from test_robust_logs import cli
+
+    from fuzzyslam.fixes.heading import HeadingFixAid
+    from fuzzyslam.slam import stage
+
+    monkeypatch.setattr(stage, "prefetch_wanted", lambda requested: requested)
+    cfg, log = sequential_log / "seq.yaml", sequential_log / "seq.mcap"
+    code, _, err = cli("run", log, "--config", cfg, "-o", tmp_path / "ab")
+    assert code == 0, err
+    code, _, err = cli("map", log, "--config", cfg, "--trajectory", tmp_path / "ab" /
+                       "trajectory.tum", "-o", tmp_path / "fgm")  # fmt: skip
+    assert code == 0, err
+    seen = []
+    real = HeadingFixAid.on_ring
+    monkeypatch.setattr(
+        HeadingFixAid,
+        "on_ring",
+        lambda self, t, ring, mounts, ekf: (
+            seen.append(ring.mounts is not None) or real(self, t, ring, mounts, ekf)
+        ),
+    )
+    outs = {}
+    for mode in ("prefetch", "no-prefetch"):
+        outs[mode] = tmp_path / mode
+        code, _, err = cli("run", log, "--config", cfg, "--map", tmp_path / "fgm", "--fix",
+                           "heading", "--fix-from", "0", "-o", outs[mode], f"--{mode}")  # fmt: skip
+        assert code == 0, err
+    assert seen and all(seen)
+    for name in ("trajectory.tum", "heading_fixes.csv", "updates.csv", "covariance.csv"):
+        a, b = ((outs[m] / name).read_bytes() for m in outs)
+        assert a == b, name
