@@ -316,9 +316,9 @@ def test_decimation_keeps_the_same_beams_whichever_way_they_are_listed():
 
     n, inc = 20, math.radians(5.0)
     ccw = SimpleNamespace(header=SimpleNamespace(frame_id="laser"), angle_min=-0.8,
-                          angle_increment=inc, ranges=[1.0] * n)  # fmt: skip
+                          angle_increment=inc, ranges=[1.0] * n, time_increment=0.0)  # fmt: skip
     cw = SimpleNamespace(header=SimpleNamespace(frame_id="laser"), angle_min=-0.8 + (n - 1) * inc,
-                         angle_increment=-inc, ranges=[1.0] * n)  # fmt: skip
+                         angle_increment=-inc, ranges=[1.0] * n, time_increment=0.0)  # fmt: skip
     a = np.sort(scan_geometry(ccw, step=4).angles)
     b = np.sort(scan_geometry(cw, step=4).angles)
     assert len(a) == len(b) == 5 and np.allclose(a, b) and a[0] == pytest.approx(-0.8)

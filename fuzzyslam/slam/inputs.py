@@ -182,7 +182,7 @@ class LogInputs:
         if not rings:
             return main
         merged = heapq.merge(main, self._ring_events(ring_start), key=lambda e: e.t)
-        if self.ranges is not None and self.ranges.firing == "sequential":
+        if self.ranges is not None and self.ranges.stamped_apart:
             return deskewed(merged, self.mounts)  # each reading at its stamp (slam/deskew.py)
         return merged
 

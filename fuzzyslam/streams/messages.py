@@ -95,9 +95,11 @@ def laser_scan(
     angle_increment: float,
     range_min: float = 0.05,
     range_max: float = 40.0,
+    time_increment: float = 0.0,
 ) -> Any:
     """sensor_msgs/LaserScan of ``ranges`` (N,) from ``angle_min`` by ``angle_increment``
-    (rad), no intensities, no timing fields (float32 as the message holds them).
+    (rad), beam k taken ``k * time_increment`` s after the stamp, no intensities (float32
+    as the message holds them).
 
     Parameters
     ----------
@@ -111,6 +113,8 @@ def laser_scan(
         First beam's angle and the step (rad; a negative step lists beams clockwise).
     range_min, range_max : float
         The valid range interval (m).
+    time_increment : float
+        Time between beams (s; 0: the scan at once); ``scan_time`` is N times it.
 
     Returns
     -------
@@ -122,8 +126,8 @@ def laser_scan(
         angle_min=np.float32(angle_min),
         angle_max=np.float32(angle_min + angle_increment * (len(r) - 1)),
         angle_increment=np.float32(angle_increment),
-        time_increment=np.float32(0.0),
-        scan_time=np.float32(0.0),
+        time_increment=np.float32(time_increment),
+        scan_time=np.float32(time_increment * len(r)),
         range_min=np.float32(range_min),
         range_max=np.float32(range_max),
         ranges=r,

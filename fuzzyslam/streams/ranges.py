@@ -86,6 +86,15 @@ class RangeSensor:
     ring_gap: float = SIMULTANEOUS_GAP_S
     firing: str = ""
 
+    @property
+    def stamped_apart(self) -> bool:
+        """Whether its readings are taken at different times (sonars fired in sequence, a
+        laser's beams ``time_increment`` apart): a run deskews its rings by the odometry
+        (:mod:`fuzzyslam.slam.deskew`)."""
+        if self.kind == "scan":
+            return self.geometry is not None and self.geometry.time_increment > 0
+        return self.firing == "sequential"
+
     def rings(self, messages: Iterable[LogMessage], stats: RingStats) -> Iterator[Ring]:
         """Rings (or scans) of the log's messages on :attr:`topics`, in log order."""
         if self.kind == "scan":
@@ -107,6 +116,7 @@ class RangeSensor:
             out["ring_gap_s"] = round(self.ring_gap, 6)
         if self.geometry is not None:
             out["beams"] = self.geometry.beams
+            out["time_increment_s"] = self.geometry.time_increment
             out["scan_step"] = self.geometry.step
             out["beam_width_deg"] = float(np.rad2deg(self.beam_width))
         return out

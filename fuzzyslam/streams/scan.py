@@ -21,6 +21,14 @@ Ranges are read as the message defines them (sensor_msgs/LaserScan; REP 117):
   first one's, or with a non-positive or non-finite range_max, is dropped (``bad_scans``);
 - a scan stamped before the previous one is dropped (``out_of_order``), a repeated stamp
   too (``duplicates``).
+
+A scan's beams are not taken at once: the header stamp is the first beam's time and beam
+k is taken ``k * time_increment`` later (sensor_msgs/LaserScan). A laser that takes 25 to
+100 ms per scan (a Hokuyo's 100 ms: 6 deg of a turn at 60 deg/s) is read like a sonar
+ring fired in sequence: the scan's ring is at its last beam's time, with each kept beam's
+offset from it (``Ring.offsets``), and each beam is placed by the robot's pose at its own
+time (:func:`fuzzyslam.streams.sonar.deskewed_mounts`). A ``time_increment`` of 0 (or not
+a positive number) gives the whole scan the stamp.
 """
 
 from __future__ import annotations
@@ -46,6 +54,7 @@ class ScanGeometry:
     angle_increment: float
     beams: int
     step: int
+    time_increment: float = 0.0  # s between beams (the first message's; 0: at once)
 
     @property
     def kept(self) -> np.ndarray:
@@ -108,7 +117,14 @@ def scan_geometry(msg, step: int = 1) -> ScanGeometry:
         float(msg.angle_increment),
         len(msg.ranges),
         int(step),
+        _time_increment(msg),
     )
+
+
+def _time_increment(msg) -> float:
+    """The message's time between beams (s), 0 when not a positive finite number."""
+    ti = float(msg.time_increment)
+    return ti if np.isfinite(ti) and ti > 0 else 0.0
 
 
 def scan_ranges(raw: np.ndarray, range_min: float, range_max: float) -> tuple[np.ndarray, int, int]:
@@ -131,10 +147,13 @@ def scan_rings(
     stats: RingStats | None = None,
 ) -> Iterator[Ring]:
     """LaserScan messages (log order) as :class:`Ring` s of the kept beams: ranges (M,),
-    max ranges (M,), ``fov`` = the beam width (rad). Glitches counted in ``stats``."""
+    max ranges (M,), ``fov`` = the beam width (rad); a scan whose beams are taken
+    ``time_increment`` apart at its last kept beam's time with their offsets (module
+    docstring). Glitches counted in ``stats``."""
     st = stats if stats is not None else RingStats()
     st.extra.setdefault("bad_scans", 0)
     kept = geometry.kept
+    after = kept - kept[-1]  # each kept beam's place before the last, in beams
     last_t = -np.inf
     for m in messages:
         msg = m.msg
@@ -156,4 +175,9 @@ def scan_rings(
         st.readings += len(kept)
         st.invalid += invalid
         st.no_echo += no_echo
-        yield Ring(t, ranges, np.full(len(kept), hi), float(beam_width))
+        ti = _time_increment(msg)
+        if ti > 0 and len(kept) > 1:
+            last = float(kept[-1]) * ti
+            yield Ring(t + last, ranges, np.full(len(kept), hi), float(beam_width), after * ti)
+        else:
+            yield Ring(t, ranges, np.full(len(kept), hi), float(beam_width))
