@@ -13,6 +13,7 @@ On a short simulated log (a third of a lap of the quick world), made once per te
 
 from __future__ import annotations
 
+import json
 import math
 from pathlib import Path
 
@@ -294,3 +295,9 @@ def test_a_camera_under_a_root_that_is_not_the_base_is_placed_and_said(log_dir, 
     assert (tmp_path / "est" / "trajectory.tum").read_bytes() == (
         plain / "trajectory.tum"
     ).read_bytes()
+    # opened twice (a first pass estimates the detection noise): the note once
+    code, out, err = run_cli(
+        "run", log, "-o", tmp_path / "adapted", "--config", cfg, "--adapt-noise"
+    )
+    assert code == 0 and err.count("the camera is placed in 'chassis' instead") == 1, err
+    assert "noise_adapted" in json.loads(out)  # two passes (too short a log to estimate)

@@ -49,7 +49,6 @@ import numpy as np
 from fuzzyslam.camera import IDENTITY_AXES, CeilingCamera, floor_mount
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
-from fuzzyslam.progress import note
 from fuzzyslam.robot import WHEEL_NAMES
 from fuzzyslam.slam.deskew import deskewed
 from fuzzyslam.slam.events import Event, Frame, Odom, RingEvent, TfFrames
@@ -119,6 +118,9 @@ class LogInputs:
     ranges: RangeSensor | None = None
     _gate: OdomGate = field(default_factory=OdomGate)
     frames: TfFrames = field(default_factory=TfFrames)
+    # what opening the log found worth a line on stderr, said once by the stage (a run
+    # with --adapt-noise opens the log twice)
+    notes: list[str] = field(default_factory=list)
 
     def warn(self, key: str, problem: str = "") -> None:
         """Count a glitch of kind ``key`` (the summary's ``warnings``).
@@ -539,8 +541,13 @@ def open_inputs(
         reader.require(looked, f"the config's {keys}")
         raise AssertionError("unreachable")
     period, clock = odometry_clock(reader, odom_topic)
+    notes: list[str] = []
     frames = tf_frames(
-        reader, cfg, odom_topic if odom_source == "odom" else None, clock=(clock, REORDER_S)
+        reader,
+        cfg,
+        odom_topic if odom_source == "odom" else None,
+        clock=(clock, REORDER_S),
+        notes=notes,
     )
     camera = None
     if reader.has(tp.image):
@@ -557,7 +564,7 @@ def open_inputs(
                 if found is not None:
                     offset, axes = floor_mount(found[0])
                     if found[1] is not None:  # as the range sensors' mounts_source says
-                        note(
+                        notes.append(
                             f"{path}: {tp.tf_static} does not name the base frame "
                             f"{frames.base!r}: the camera is placed in {found[1]!r} instead"
                         )
@@ -595,6 +602,7 @@ def open_inputs(
         odom_period_s=period,
         odom_gap_s=max(ODOM_GAP_S, GAP_PERIODS * period),
         clock_offset=clock,
+        notes=notes,
     )
 
 

@@ -106,6 +106,7 @@ def tf_frames(
     *,
     series: bool = True,
     clock: tuple[float, float] | None = None,
+    notes: list[str] | None = None,
 ) -> TfFrames:
     """The /tf frames of the estimates (:class:`TfFrames`): the odometry's own frame names
     when it is nav_msgs/Odometry (``odom_topic``; else odom and base_link), and whether
@@ -131,6 +132,8 @@ def tf_frames(
         stream may have from it (``slam.inputs.odometry_clock``, ``REORDER_S``): a
         series on another clock cannot be put against, and is left out (a note says so;
         the run then writes its own odom -> base).
+    notes : list of str, optional
+        Where that note goes (for the caller to say once); None: to stderr now.
 
     Returns
     -------
@@ -170,11 +173,15 @@ def tf_frames(
         return frames
     offset = float(np.median(np.subtract(t, logged))) if t else 0.0
     if clock is not None and abs(offset - clock[0]) > clock[1]:
-        note(
+        line = (
             f"{reader.path}: {cfg.topics.tf} odom -> base is stamped {offset:+.3f} s from its "
             f"log times, the odometry {clock[0]:+.3f} s: another clock; estimates.mcap "
             "writes its own odom -> base"
         )
+        if notes is None:
+            note(line)
+        else:
+            notes.append(line)
         return frames
     return TfFrames(
         frames.map, frames.odom, frames.base, odom_to_base=False, log_odom=_odom_series(t, xyq)

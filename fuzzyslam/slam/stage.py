@@ -261,7 +261,10 @@ def run_stage(
             ):
                 if est[key] is not None:  # None: not measurable (slam.noise)
                     setattr(cfg.slam, key, float(est[key]))
-        summary = _run_once(log, outdir, cfg, [], True, ranges, start_pose, calibration, prefetch)
+        # the second pass says what it finds in the log (once), its summary told below
+        summary = _run_once(
+            log, outdir, cfg, [], False, ranges, start_pose, calibration, prefetch, tell=False
+        )
         summary = replace(summary, noise_adapted=est)
         _tell(summary)
         return as_json(summary)
@@ -333,11 +336,17 @@ def _run_once(
     start_pose: tuple[float, float, float] | None = None,
     calibration: str | os.PathLike | None = None,
     prefetch: bool = False,
+    tell: bool = True,
 ) -> RunSummary:
+    """One run of the filter over the log into ``outdir``; ``_quiet``: no notes on
+    stderr (a first pass), ``tell``: the summary's own notes after it (``_tell``)."""
     aids = list(aids or [])
     wall0 = time.perf_counter()
     check_outputs([log], [outdir])
     inputs = open_inputs(log, cfg, bool(aids), ranges, start_pose)
+    if not _quiet:
+        for line in inputs.notes:  # said once, also when the log is opened twice
+            note(line)
     if inputs.lamp_source == "none" and not aids and not _quiet:
         unread = sorted(t for t, ty in inputs.reader.topics.items() if ty in LAMP_TYPES)
         note(
@@ -379,7 +388,7 @@ def _run_once(
             drawing.result()
         summary = make_summary(res, inputs, time.perf_counter() - wall0, aids, streamed)
         write_summary(tmp, as_json(summary))
-    if not _quiet:
+    if tell and not _quiet:
         _tell(summary, cfg)
     return summary
 
