@@ -71,17 +71,20 @@ def test_odometry_trail_is_the_filters_preintegration() -> None:
 
 def test_deskewed_stage_gives_rings_their_mounts_and_leaves_the_rest() -> None:
     """``deskewed``: a ring with offsets gets mounts from the odometry before it (a turn
-    in place at 1 rad/s: reading j turned back by its offset); a ring stamped alike
-    keeps none (``ring_mounts`` then gives the sensor's)."""
+    in place at 1 rad/s: reading j turned back by its offset); a ring stamped alike (one
+    reading) gets the sensor's own, so that a multi-ring window never lends it another
+    ring's; odometry stamped back in time is left out of the trail, as the filter skips
+    it."""
     events = [Odom(0.01 * k, 0.0, 0.01) for k in range(1, 101)]  # 1 rad/s for 1 s
+    events[60:60] = [Odom(0.2, 1.0, 1.0)] * 5  # stamped back in time: skipped
     seq = Ring(1.0, np.ones(3), np.full(3, 5.0), 0.4, np.array([-0.5, -0.25, 0.0]))
     alike = Ring(1.0, np.ones(3), np.full(3, 5.0), 0.4)
     out = list(deskewed(iter([*events, RingEvent(1.0, seq), RingEvent(1.0, alike)]), MOUNTS))
-    assert len(out) == 102 and out[:100] == events
+    assert len(out) == 107 and out[:105] == events
     want = np.array([compose([0.0, 0.0, o], m) for o, m in zip(seq.offsets, MOUNTS, strict=True)])
     # the midpoint steps' chord puts the centre off by d^2 / 8 per step: micrometres
-    np.testing.assert_allclose(out[100].ring.mounts, want, atol=1e-5)
-    assert out[101].ring.mounts is None and ring_mounts(out[101].ring, MOUNTS) is MOUNTS
+    np.testing.assert_allclose(out[105].ring.mounts, want, atol=1e-5)
+    assert out[106].ring.mounts is MOUNTS and ring_mounts(alike, MOUNTS) is MOUNTS
 
 
 @pytest.fixture(scope="module")
@@ -298,3 +301,19 @@ def test_laser_beams_taken_apart_are_deskewed_by_the_odometry(tmp_path: Path) ->
             miss.append(np.abs(np.abs(ends).max(axis=1) - half).max())
     assert len(miss_d) >= 25
     assert max(miss_d) < 1e-3 and min(miss_p) > 0.05
+
+
+def test_simulate_refuses_a_ring_longer_than_a_firing_cycle_is_read(tmp_path: Path) -> None:
+    """16 sonars 0.1 s apart fire over 1.5 s: longer than a ring is read as (1 s), so the
+    log could not be read back as whole rings; refused in one line naming the key, and
+    no file is written. 40 ms apart at 1.5 Hz is accepted (the fixture above)."""
+    from test_robust_logs import cli
+
+    cfg = tmp_path / "slow.yaml"
+    cfg.write_text(
+        "extends: quick.yaml\nname: slow\nsonar:\n  rate_hz: 0.5\n  firing_gap_s: 0.1\n",
+        encoding="utf-8",
+    )
+    code, _, err = cli("simulate", cfg, "-o", tmp_path / "slow.mcap")
+    assert code != 0 and "sonar.firing_gap_s 0.1 s" in err and len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "slow.mcap").exists()

@@ -347,7 +347,7 @@ def build_map(
     if not ok.all():
         times, ranges, rmax, offsets = times[ok], ranges[ok], rmax[ok], offsets[ok]
     poses = interpolate_poses(t_traj, p_traj, times, outside="hold")
-    if np.any(np.nan_to_num(offsets)):  # sonars fired in sequence: each reading at its stamp
+    if sensor.stamped_apart:  # as a run deskews: each reading at its stamp (slam/deskew.py)
         mounts = deskewed_mounts(mounts, offsets.astype(float), times, t_traj, p_traj)
     try:
         builder = FgmBuilder.for_path(poses[:, :2], params)

@@ -162,8 +162,9 @@ def box_segments(tracks, t: float) -> np.ndarray:
     return np.concatenate([np.hstack([p, np.roll(p, -1, axis=0)]) for p in polys])
 
 
-def discs_at(tracks, t: float) -> np.ndarray:
-    """Circles (J, 3) x y radius of the people present at t.
+def discs_at(tracks, t: float, present_at: float | None = None) -> np.ndarray:
+    """Circles (J, 3) x y radius of the people present at t (or at ``present_at``: the
+    people of a ring's first firing, where they are as a later sonar of it fires).
 
     Parameters
     ----------
@@ -171,12 +172,15 @@ def discs_at(tracks, t: float) -> np.ndarray:
         :func:`plan_tracks`.
     t : float
         Log time (s).
+    present_at : float, optional
+        The time whose people are taken (default ``t``).
 
     Returns
     -------
     ndarray, shape (J, 3)
     """
-    rows = [[*tr.position(t), tr.radius] for tr in tracks if tr.kind == "disc" and tr.present(t)]
+    at = t if present_at is None else present_at
+    rows = [[*tr.position(t), tr.radius] for tr in tracks if tr.kind == "disc" and tr.present(at)]
     return np.asarray(rows, dtype=float).reshape(-1, 3)
 
 

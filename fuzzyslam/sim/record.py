@@ -88,17 +88,20 @@ def sonar_firings(params, duration: float, source: str = "config") -> np.ndarray
     Raises
     ------
     ConfigError
-        When a ring's sonars would still fire as the next ring starts.
+        When a ring's sonars would still fire as the next ring starts, or over more than
+        a ring is read as (``streams.sonar.MAX_RING_SPAN_S``).
     """
     from fuzzyslam.errors import ConfigError
+    from fuzzyslam.streams.sonar import MAX_RING_SPAN_S
 
     span = params.firing_gap_s * (params.count - 1)
-    if span * params.rate_hz >= 1.0:
+    if span * params.rate_hz >= 1.0 or span >= MAX_RING_SPAN_S:
         raise ConfigError(
             source,
             f"sonar.firing_gap_s {params.firing_gap_s} s: a ring of {params.count} sonars "
             f"would fire for {span:.3f} s, longer than its period 1 / sonar.rate_hz = "
-            f"{1.0 / params.rate_hz:.3f} s",
+            f"{1.0 / params.rate_hz:.3f} s or than a firing cycle is read as one ring "
+            f"({MAX_RING_SPAN_S} s)",
         )
     fire = sensor_times(params.rate_hz, duration)[:, None] + params.firing_gap_s * np.arange(
         params.count
@@ -260,9 +263,10 @@ RING_BLOCK = 32  # sonar rings traced together
 def _ideal_block(dr, fire: np.ndarray, walls, mounts, params, obstacles=()) -> np.ndarray:
     """Ideal ranges (K', M) of the first K' <= K rings fired at ``fire`` (K, M) from the
     true drive: the rings that meet the same obstacles as the first (boxes reflect like
-    walls, people are discs; ``sim.obstacles``, placed at the ring's first firing), so that
-    they share the walls and their numbers of people. Each sonar is traced from the
-    robot's pose at its own firing time (one pose per ring when the ring fires at once).
+    walls, people are discs; ``sim.obstacles``, those present at the ring's first
+    firing), so that they share the walls and their numbers of people. Each sonar is
+    traced from the robot's pose, and the people where they are, at its own firing time
+    (one time per ring when the ring fires at once).
     """
     times = fire[:, 0]
     if obstacles:
@@ -273,8 +277,13 @@ def _ideal_block(dr, fire: np.ndarray, walls, mounts, params, obstacles=()) -> n
     discs = None
     if obstacles:
         walls = np.vstack([walls, box_segments(obstacles, times[0])])
-        people = np.stack([discs_at(obstacles, t) for t in times.tolist()])
-        discs = people if people.shape[1] else None
+        if params.firing_gap_s == 0.0:
+            people = np.stack([discs_at(obstacles, t) for t in times.tolist()])
+        else:  # (K, M, J, 3): each sonar's people where they are as it fires
+            people = np.stack([
+                np.stack([discs_at(obstacles, t, row[0]) for t in row]) for row in fire.tolist()
+            ])  # fmt: skip
+        discs = people if people.shape[-2] else None
     if params.firing_gap_s == 0.0:
         poses = np.array([interpolate_pose(dr.t, dr.pose, t) for t in times.tolist()])
         return simsonar.ideal_ranges_many(walls, poses.reshape(-1, 3), mounts, params, discs)
@@ -335,7 +344,8 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
         w.json_metadata(WORLD_KEY, world.to_dict())
         w.json_metadata(SCENARIO_KEY, scenario.to_dict())
         if plan.obstacles:
-            w.json_metadata(OBSTACLES_KEY, obstacles_record(plan.obstacles, fire[:, 0]))
+            # the tracks at the rings' times as a run sees them (the last sonar's firing)
+            w.json_metadata(OBSTACLES_KEY, obstacles_record(plan.obstacles, fire[:, -1]))
         w.write(topics.tf_static, M.TF_MESSAGE, static_transforms(cfg, mounts), 0.0)
         lamp_z = cfg.camera.mount_height + cfg.camera.ceiling_height
         w.write(topics.world_markers, M.MARKER_ARRAY, world_markers(world, lamp_z), 0.0)

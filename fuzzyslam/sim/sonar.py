@@ -270,8 +270,9 @@ def ideal_ranges_many(
         The sensors' poses on the robot.
     params : SonarParams
         The sonar model.
-    discs : ndarray, shape (K, J, 3), optional
-        The people (x, y, radius) each ring sees (the same J for every ring).
+    discs : ndarray, shape (K, J, 3) or (K, M, J, 3), optional
+        The people (x, y, radius) each ring sees (the same J for every ring), or each
+        sonar of it as it fires.
 
     Returns
     -------
@@ -284,5 +285,10 @@ def ideal_ranges_many(
     else:
         sensors = np.concatenate([sensor_poses(p, mounts) for p in poses])
     if discs is not None:
-        discs = np.repeat(np.asarray(discs, dtype=float), m, axis=0)
+        discs = np.asarray(discs, dtype=float)
+        discs = (
+            discs.reshape(k * m, *discs.shape[2:])
+            if discs.ndim == 4
+            else np.repeat(discs, m, axis=0)
+        )
     return ideal_ranges(walls, sensors, params, discs).reshape(k, m)

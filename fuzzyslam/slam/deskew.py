@@ -59,10 +59,12 @@ class OdometryTrail:
         d_rot : float
             Rotation (rad).
         """
+        if self.t and t < self.t[-1]:
+            return  # back in time: the filter skips it too (slam/runner.py)
         x, y, th = self._pose
         h = th + 0.5 * d_rot
         self._pose = (x + d_trans * math.cos(h), y + d_trans * math.sin(h), th + d_rot)
-        if self.t and t <= self.t[-1]:  # a repeated stamp: the later pose
+        if self.t and t == self.t[-1]:  # a repeated stamp: the later pose
             self.poses[-1] = self._pose
             return
         self.t.append(t)
@@ -103,7 +105,9 @@ class OdometryTrail:
 
 def deskewed(events: Iterator[Event], mounts: np.ndarray) -> Iterator[Event]:
     """``events`` (in stamp order) with each ring that has reading offsets given the
-    mounts that deskew it (``Ring.mounts``, module docstring); other events as they are.
+    mounts that deskew it (``Ring.mounts``, module docstring), and each ring without
+    (one reading, or one stamp) the sensor's own, so that a multi-ring window never takes
+    another ring's for it; other events as they are.
 
     Parameters
     ----------
@@ -121,6 +125,7 @@ def deskewed(events: Iterator[Event], mounts: np.ndarray) -> Iterator[Event]:
         kind = type(ev)
         if kind is Odom:
             trail.add(ev.t, ev.d_trans, ev.d_rot)
-        elif kind is RingEvent and ev.ring.offsets is not None:
-            ev.ring.mounts = trail.mounts(ev.t, ev.ring.offsets, mounts)
+        elif kind is RingEvent:
+            off = ev.ring.offsets
+            ev.ring.mounts = mounts if off is None else trail.mounts(ev.t, off, mounts)
         yield ev
