@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from test_robust_logs import JOINTS, Out, Tiny, cli, keep, rewrite, tiny  # noqa: F401
 
-from fuzzyslam.slam.inputs import SLOW_ODOMETRY_S, odometry_clock, slow_odometry_note
+from fuzzyslam.slam.log_setup import SLOW_ODOMETRY_S, odometry_clock, slow_odometry_note
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.reader import LogMessage, LogReader
 

@@ -37,7 +37,6 @@ place (``warnings.reordered``).
 from __future__ import annotations
 
 import heapq
-import itertools
 import math
 import os
 from collections.abc import Callable, Iterator
@@ -54,9 +53,13 @@ from fuzzyslam.slam.deskew import deskewed
 from fuzzyslam.slam.events import Event, Frame, Odom, RingEvent, TfFrames
 from fuzzyslam.slam.latency import delay_odometry
 from fuzzyslam.slam.log_setup import (
+    GAP_PERIODS,
+    ODOM_GAP_S,
     camera_info_problem,
     filter_start_pose,
     first_message,
+    odometry_clock,
+    streams_start,
     tf_frames,
 )
 from fuzzyslam.slam.odom_gate import REANCHOR, OdomGate, within_speed
@@ -71,10 +74,6 @@ CAMERA_FRAME = "ceiling_camera"
 # what reading the events changes that the run reports (with the reader's damage):
 # LogInputs.read_state, which slam/prefetch.py sends back from the child that read them
 READ_STATE = ("warnings", "first_problem", "gap_seconds", "own_covariances", "ring_stats", "lost")
-ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
-GAP_PERIODS = 3.0  # ... or for this many of its mean periods, whichever is longer
-SLOW_ODOMETRY_S = 0.5  # odometry slower than this (mean period): a note (slam/stage.py)
-# (CARMEN logs at 4.6 and 5.4 Hz localise as well as faster ones; ACES cut to 1.1 Hz not)
 # s of stamps a late message may lag the newest one read and still be put in its place
 # (LogInputs._stamp_order): camera and detector pipelines deliver within a second
 REORDER_S = 5.0
@@ -603,97 +602,4 @@ def open_inputs(
         odom_gap_s=max(ODOM_GAP_S, GAP_PERIODS * period),
         clock_offset=clock,
         notes=notes,
-    )
-
-
-def streams_start(reader: LogReader, topics: list[str]) -> float:
-    """The log time of the first message of the streams the filter reads (odometry,
-    lamps): the run's start, not the log's (a converter may log /tf_static or a
-    CameraInfo at time 0, decades before a Unix-time robot's first message).
-
-    Parameters
-    ----------
-    reader : LogReader
-        The log.
-    topics : list of str
-        The streams ('' for none).
-
-    Returns
-    -------
-    float
-        Seconds; the log's start when none of them has a message.
-    """
-    firsts = [m.t for tp in topics if tp for m in itertools.islice(reader.messages([tp]), 1)]
-    return min(firsts, default=reader.start)
-
-
-PERIOD_SAMPLES = 500  # odometry messages its period and clock are measured on
-
-
-def odometry_clock(reader: LogReader, topic: str) -> tuple[float, float]:
-    """The odometry's period and clock offset, from its first ``PERIOD_SAMPLES`` messages.
-
-    - the period: the median step between their header stamps (steps that go back or
-      repeat left out), so that neither a gap nor other streams logged before or after
-      it change it. The odometry has a gap when silent for longer than ``ODOM_GAP_S`` or
-      ``GAP_PERIODS`` of this period, whichever is longer (odometry at 1 Hz is slow, not
-      silent); odometry slower than ``SLOW_ODOMETRY_S`` gets a note
-      (:func:`slow_odometry_note`);
-    - the clock offset: the median of their header stamp - log time, the clock the
-      other streams are checked against (``LogInputs._same_clock``); the median, so that
-      a glitched stamp does not set it.
-
-    Parameters
-    ----------
-    reader : LogReader
-        The log.
-    topic : str
-        The odometry topic.
-
-    Returns
-    -------
-    (float, float)
-        Period and clock offset (s); 0 for what fewer than two (one) messages cannot give.
-    """
-    stamps, logged = [], []
-    for m in reader.messages([topic]):
-        stamps.append(M.stamp_to_sec(m.msg.header.stamp))
-        logged.append(m.t)
-        if len(stamps) >= PERIOD_SAMPLES:
-            break
-    t = np.asarray(stamps, dtype=float)
-    steps = np.diff(t)
-    steps = steps[steps > 0]
-    period = float(np.median(steps)) if len(steps) else 0.0
-    offset = float(np.median(t - np.asarray(logged, dtype=float))) if len(t) else 0.0
-    return period, offset
-
-
-def slow_odometry_note(topic: str, period: float) -> str:
-    """The one-line note for odometry slower than ``SLOW_ODOMETRY_S``, else ''.
-
-    The filter predicts with the odometry it has read, so a measurement between two
-    messages is compared with the pose of the message before it, and the motion between
-    two messages is taken as one arc (slam/motion.py), which turn-then-drive is not.
-    Both errors grow with the period: with the ACES log's odometry cut from 5.4 to 1.1 Hz
-    (measured 2026-12-03) its pose fixes err 1.0 m mean instead of 0.12 m.
-
-    Parameters
-    ----------
-    topic : str
-        The odometry topic.
-    period : float
-        Its mean period (s), :func:`odometry_clock`.
-
-    Returns
-    -------
-    str
-    """
-    if period <= SLOW_ODOMETRY_S:
-        return ""
-    return (
-        f"odometry on {topic} comes at {1.0 / period:.1f} Hz: measurements between its "
-        f"messages are compared with the pose of the message before, and each increment "
-        f"is taken as one arc; below about {1.0 / SLOW_ODOMETRY_S:.0f} Hz expect fixes and "
-        f"landmarks to degrade (record odometry faster if you can)"
     )

@@ -27,8 +27,9 @@ from fuzzyslam.rundir import OPTIONAL_OUTPUTS
 from fuzzyslam.slam import calibration as cal
 from fuzzyslam.slam import calibration_files
 from fuzzyslam.slam.events import Event
-from fuzzyslam.slam.inputs import open_inputs, slow_odometry_note
+from fuzzyslam.slam.inputs import open_inputs
 from fuzzyslam.slam.latency import MotionTap, delay_note
+from fuzzyslam.slam.log_setup import slow_odometry_note
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
 from fuzzyslam.slam.outputs import StreamingOutputs, write_outputs, write_summary
 from fuzzyslam.slam.prefetch import input_events
