@@ -180,8 +180,9 @@ class FixAid:
 
     def figures(self, outdir: Path) -> list[tuple[Callable[..., None], tuple]]:
         """The aid's figures as calls ``fn(*args)`` that write them into ``outdir`` (none
-        here): the run makes them after :meth:`write`, in its figure process where it
-        has one (``fuzzyslam.forked.ChildCalls``).
+        here): the run makes them before :meth:`write` (they must not read its files),
+        in its figure process where it has one (``fuzzyslam.forked.ChildCalls``), while
+        it writes the other outputs.
 
         Parameters
         ----------

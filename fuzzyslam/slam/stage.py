@@ -372,14 +372,17 @@ def _run_once(
         StreamingOutputs(tmp, cfg, inputs.start_pose, inputs.frames) as streamed,
     ):
         res = _run_filter(inputs, cfg, aids, streamed, model, prefetch)
-        drawings = []  # drawn by the figure process while the other outputs are written
+        # the figures first: the figure process draws them while this one writes the
+        # aids' files, their messages and the run's outputs (none of which they read)
+        drawings = []
         for aid in aids:
-            aid.write(tmp)
             for fn, args in aid.figures(tmp) if hasattr(aid, "figures") else ():
                 if drawer is not None:
                     drawings.append(drawer.submit(fn, *args))
                 else:
                     fn(*args)
+        for aid in aids:
+            aid.write(tmp)
         extra = [  # the aids' messages for estimates.mcap (/map stamped at the log's start)
             m for aid in aids if hasattr(aid, "messages")
             for m in aid.messages(cfg.topics, inputs.start)
