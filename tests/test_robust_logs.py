@@ -666,3 +666,52 @@ def test_a_clock_step_is_followed_and_a_glitched_stamp_skipped(tiny: Tiny, tmp_p
     assert "odometry_gaps" not in s["warnings"] and "clock_steps" not in s["warnings"]
     d = np.subtract(s["final_pose"][:2], tiny.run["final_pose"][:2])
     assert np.hypot(*d) < 0.05
+
+
+def test_stamps_from_zero_in_a_unix_time_log_give_increasing_tum_rows(
+    tiny: Tiny, tmp_path: Path
+) -> None:
+    """A log recorded in Unix time whose header stamps start at 0 (a simulator's clock on
+    a wall-clock recorder): the run's start row is on the stamps' clock, so odometry.tum
+    and trajectory.tum stamps increase strictly (``evaluate`` reads them) and start at the
+    first odometry stamp, not at the first increment's."""
+    from fuzzyslam.streams.tum import read_tum
+
+    unix = 1.6e9
+
+    def shift(m: LogMessage) -> list[Out]:
+        return [(m.topic, m.typename, m.msg, m.t + unix)]
+
+    log = rewrite(tiny.log, tmp_path / "unix.mcap", shift)
+    code, _, err = cli("run", log, "-o", tmp_path / "est", "--config", tiny.config)
+    assert code == 0, err
+    for name in ("odometry.tum", "trajectory.tum"):
+        t, _ = read_tum(tmp_path / "est" / name)  # strictly increasing, or an error
+        assert 0.0 <= t[0] < 0.06 and np.all(np.diff(t) > 0), name
+    code, _, err = cli("evaluate", tiny.log, tmp_path / "est", "-o",
+                       tmp_path / "eval")  # fmt: skip
+    assert code == 0, err
+
+
+def test_frames_before_the_odometry_starts_are_not_used(tiny: Tiny, tmp_path: Path) -> None:
+    """The odometry's first 5 s not logged (a driver started late): the camera frames
+    stamped more than odometry_stale_s before its first message were taken where the
+    robot's pose is unknown; they are counted and not used (before, they were fused as
+    if the robot stood at the start pose), and the trajectory starts with the first
+    frame that can be placed."""
+    import json
+
+    def late_odometry(m: LogMessage) -> list[Out]:
+        return [] if m.topic == JOINTS and m.t < 5.0 else keep(m)
+
+    log = rewrite(tiny.log, tmp_path / "late.mcap", late_odometry)
+    first_odometry = next(m.t for m in LogReader(log).messages([JOINTS]))
+    frames_before = sum(m.t < first_odometry - 1.0 for m in LogReader(log).messages([IMAGE]))
+    code, out, err = cli("run", log, "-o", tmp_path / "est", "--config", tiny.config)
+    assert code == 0, err
+    s = json.loads(out)
+    assert frames_before > 5
+    assert s["warnings"]["frames_before_odometry"] == frames_before
+    assert s["counts"]["frames"] == tiny.run["counts"]["frames"] - frames_before
+    t = load_tum(tmp_path / "est" / "trajectory.tum")[:, 0]
+    assert first_odometry - 1.0 <= t[0] < first_odometry

@@ -22,7 +22,9 @@ confirmed by the glitch gate (slam/odom_gate.py) when the odometry is nav_msgs/O
 skipped and counted (``odometry_jumps``).
 
 Glitches are counted in ``warnings`` (never silently used): frames of another
-encoding or of another size than the CameraInfo's, NaN odometry, odometry increments
+encoding or of another size than the CameraInfo's, frames stamped more than
+``slam.odometry_stale_s`` before the odometry's first message (``frames_before_odometry``:
+where the robot was is unknown; also counted as lost frames), NaN odometry, odometry increments
 faster than the robot can move (``implausible_odometry``: wheel speeds over
 ``SPEED_MARGIN`` (slam/odom_gate.py) times ``robot.max_speed`` plus the turn at
 ``robot.max_turn_rate``), header stamps out of order, joint states without the wheel
@@ -103,6 +105,7 @@ class LogInputs:
     # header stamp - log time of the odometry's first message: the clock the other
     # streams are checked against (LogInputs._same_clock)
     clock_offset: float = 0.0
+    odom_first: float = -np.inf  # the odometry's first stamp (odometry_clock)
     _clock_row: tuple[float, int] | None = None  # odometry messages off the clock: offset, n
     # frames and range readings not used: their stamps cannot be placed (back in time,
     # another clock): the run's filter_health counts them (slam/run_results.py)
@@ -194,12 +197,24 @@ class LogInputs:
         prev = None
         topics = [self.odom_topic, self.lamp_topic] if self.lamp_topic else [self.odom_topic]
         odom_topic = self.odom_topic
+        # a frame stamped longer than odometry_stale_s before the odometry's first message
+        # was taken where the robot's pose is unknown (not the start pose: it may have
+        # been moving); compared with the start pose it would map its lamps wrongly
+        unplaced = self.odom_first - self.cfg.slam.odometry_stale_s
         for m in self.reader.messages(topics):
             topic, msg = m.topic, m.msg
             t = M.stamp_to_sec(msg.header.stamp)
             before = last_t[topic]
             if topic != odom_topic:
                 if not self._same_clock(topic, t, m.t):
+                    self._lose("frames", m.t)
+                    continue
+                if t < unplaced:
+                    self.warn(
+                        "frames_before_odometry",
+                        f"{topic}: a frame stamped {t:.3f} s, before the odometry's first "
+                        f"message ({self.odom_first:.3f} s): not used",
+                    )
                     self._lose("frames", m.t)
                     continue
             elif not self._odometry_clock(topic, t, m.t):
@@ -539,7 +554,7 @@ def open_inputs(
         keys = "topics.odom" if not cfg.slam.use_encoders else "topics.joint_states / topics.odom"
         reader.require(looked, f"the config's {keys}")
         raise AssertionError("unreachable")
-    period, clock = odometry_clock(reader, odom_topic)
+    period, clock, odom_first = odometry_clock(reader, odom_topic)
     notes: list[str] = []
     frames = tf_frames(
         reader,
@@ -593,7 +608,12 @@ def open_inputs(
         camera,
         mounts,
         pose,
-        streams_start(reader, [odom_topic, lamp_topic]),
+        # no earlier than the first frame that can be placed (_main_events): the start
+        # row is not put where the robot's pose is unknown
+        max(
+            streams_start(reader, [odom_topic, lamp_topic]),
+            odom_first - cfg.slam.odometry_stale_s - clock,
+        ),
         reader.end,
         ranges=sensor,
         _gate=gate,
@@ -601,5 +621,6 @@ def open_inputs(
         odom_period_s=period,
         odom_gap_s=max(ODOM_GAP_S, GAP_PERIODS * period),
         clock_offset=clock,
+        odom_first=odom_first,
         notes=notes,
     )

@@ -317,8 +317,9 @@ def streams_start(reader: LogReader, topics: list[str]) -> float:
     return min(firsts, default=reader.start)
 
 
-def odometry_clock(reader: LogReader, topic: str) -> tuple[float, float]:
-    """The odometry's period and clock offset, from its first ``PERIOD_SAMPLES`` messages.
+def odometry_clock(reader: LogReader, topic: str) -> tuple[float, float, float]:
+    """The odometry's period, clock offset and first stamp, from its first
+    ``PERIOD_SAMPLES`` messages.
 
     - the period: the median step between their header stamps (steps that go back or
       repeat left out), so that neither a gap nor other streams logged before or after
@@ -328,7 +329,9 @@ def odometry_clock(reader: LogReader, topic: str) -> tuple[float, float]:
       (:func:`slow_odometry_note`);
     - the clock offset: the median of their header stamp - log time, the clock the
       other streams are checked against (``LogInputs._same_clock``); the median, so that
-      a glitched stamp does not set it.
+      a glitched stamp does not set it;
+    - the first stamp: the earliest of them (a detection stamped well before it cannot
+      be placed: ``LogInputs._main_events``).
 
     Parameters
     ----------
@@ -339,8 +342,9 @@ def odometry_clock(reader: LogReader, topic: str) -> tuple[float, float]:
 
     Returns
     -------
-    (float, float)
-        Period and clock offset (s); 0 for what fewer than two (one) messages cannot give.
+    (float, float, float)
+        Period, clock offset and first stamp (s); 0 for the period and offset that fewer
+        than two (one) messages cannot give, -inf for the stamp of no message.
     """
     stamps, logged = [], []
     for m in reader.messages([topic]):
@@ -353,7 +357,7 @@ def odometry_clock(reader: LogReader, topic: str) -> tuple[float, float]:
     steps = steps[steps > 0]
     period = float(np.median(steps)) if len(steps) else 0.0
     offset = float(np.median(t - np.asarray(logged, dtype=float))) if len(t) else 0.0
-    return period, offset
+    return period, offset, float(t.min()) if len(t) else -np.inf
 
 
 def slow_odometry_note(topic: str, period: float) -> str:

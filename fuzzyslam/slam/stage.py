@@ -275,16 +275,17 @@ def run_stage(
 
 def start_time(events: Iterator[Event], t0: float) -> tuple[Iterator[Event], float]:
     """The time of the run's start pose: the first log time of the streams it reads
-    (``LogInputs.start``), or the first event's stamp when that is earlier (a sensor
-    stamps its messages before the recorder logs them), so that no trajectory row comes
-    before the start row.
+    (``LogInputs.start``) put on the stamps' clock (``LogInputs.clock_offset``: a log
+    whose stamps start at 0 while it was logged in Unix time), or the first event's stamp
+    when that is earlier (a sensor stamps its messages before the recorder logs them),
+    so that no trajectory row comes before the start row.
 
     Parameters
     ----------
     events : iterator of Event
         The run's events, in time order.
     t0 : float
-        The streams' first log time (s).
+        The streams' first log time on the stamps' clock (s).
 
     Returns
     -------
@@ -385,7 +386,7 @@ def _run_once(
             aid.write(tmp)
         extra = [  # the aids' messages for estimates.mcap (/map stamped at the log's start)
             m for aid in aids if hasattr(aid, "messages")
-            for m in aid.messages(cfg.topics, inputs.start)
+            for m in aid.messages(cfg.topics, inputs.start + inputs.clock_offset)
         ]  # fmt: skip
         write_outputs(tmp, streamed, res, extra)
         for drawing in drawings:
@@ -447,7 +448,7 @@ def _run_filter(
         cv2.setNumThreads(1)
     try:
         with Progress(max(inputs.end - inputs.start, 1e-6), "run: EKF-SLAM") as bar:
-            t0 = inputs.start
+            t0 = inputs.start + inputs.clock_offset  # on the stamps' clock, as the events
             ring_start = min((a.start_time for a in aids), default=None)
             with input_events(inputs, bool(aids), ring_start, prefetch, aids) as events:
                 events, t0 = start_time(events, t0)
