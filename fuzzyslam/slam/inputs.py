@@ -70,7 +70,7 @@ from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.ranges import RangeSensor, open_ranges
 from fuzzyslam.streams.reader import LogMessage, LogReader
 from fuzzyslam.streams.sonar import RingStats
-from fuzzyslam.streams.tf import TfProblem, locate, static_tree
+from fuzzyslam.streams.tf import Rigid, TfProblem, locate, static_tree
 
 CAMERA_FRAME = "ceiling_camera"
 # what reading the events changes that the run reports (with the reader's damage):
@@ -106,6 +106,8 @@ class LogInputs:
     # streams are checked against (LogInputs._same_clock)
     clock_offset: float = 0.0
     odom_first: float = -np.inf  # the odometry's first stamp (odometry_clock)
+    # the detections' frame in the base frame (/tf_static), None when they are in it
+    detection_mount: Rigid | None = None
     _clock_row: tuple[float, int] | None = None  # odometry messages off the clock: offset, n
     # frames and range readings not used: their stamps cannot be placed (back in time,
     # another clock): the run's filter_health counts them (slam/run_results.py)
@@ -390,8 +392,19 @@ class LogInputs:
     def _pose_array(self, t: float, msg) -> Frame | None:
         """Detections (PoseArray or vision_msgs/Detection3DArray): each with the message's
         own x, y covariance where it carries a valid one, else the configured range and
-        bearing model (``SlamParams.detection_cov``)."""
-        z, own = M.detections_of(msg)
+        bearing model (``SlamParams.detection_cov``); in a frame other than the base, put
+        in the base frame by its /tf_static mount (``detection_mount``, in 3D: p' = R p +
+        t, C' = R C R^T, their x, y parts)."""
+        mount = self.detection_mount
+        if mount is None:
+            z, own = M.detections_of(msg)
+        else:
+            z3, own3 = M.detections_of(msg, dims=3)
+            r = mount.rotation
+            z = (z3 @ r.T + mount.translation)[:, :2]
+            own = (r @ own3 @ r.T)[:, :2, :2]
+            bad = ~(np.linalg.det(own) > 0) | ~(own[:, 0, 0] > 0)  # NaN, or degenerate
+            own[bad] = np.nan
         ok = np.all(np.isfinite(z), axis=1)
         if not np.all(ok):
             self.warn("nan_detections", f"NaN detection at t={t:.3f} s")
@@ -563,7 +576,7 @@ def open_inputs(
         clock=(clock, REORDER_S),
         notes=notes,
     )
-    camera = None
+    camera, detection_mount = None, None
     if reader.has(tp.image):
         lamp_topic, lamp_source = tp.image, "frames"
         info = first_message(reader, tp.camera_info) if reader.has(tp.camera_info) else None
@@ -592,6 +605,7 @@ def open_inputs(
         camera = CeilingCamera.from_camera_info(info, cfg.camera.ceiling_height, offset, axes)
     elif reader.has(tp.detections):
         lamp_topic, lamp_source = tp.detections, "detections"
+        detection_mount = _detection_mount(reader, cfg, frames.base, notes)
     else:
         lamp_topic, lamp_source = "", "none"  # odometry alone (and the aids' fixes)
     sensor = open_ranges(reader, cfg, ranges, base=frames.base) if need_rings else None
@@ -622,5 +636,71 @@ def open_inputs(
         odom_gap_s=max(ODOM_GAP_S, GAP_PERIODS * period),
         clock_offset=clock,
         odom_first=odom_first,
+        detection_mount=detection_mount,
         notes=notes,
     )
+
+
+# REP 120: base_footprint is base_link projected on the floor, the same planar frame
+BASE_ALIASES = ("base_link", "base_footprint")
+
+
+def _detection_mount(reader: LogReader, cfg: Config, base: str, notes: list[str]) -> Rigid | None:
+    """The mount in ``base`` of the frame the detections are stamped in (the first
+    message's ``header.frame_id``), composed from /tf_static (:func:`locate`); None when
+    they are in ``base`` (or name no frame, or name ``base_link``/``base_footprint`` when
+    the other is the base and /tf_static does not tell them apart: REP 120, one planar
+    frame).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    cfg : Config
+        Its topics (``detections``, ``tf_static``).
+    base : str
+        The robot's base frame (the odometry's child frame).
+    notes : list of str
+        Gets a line when a /tf_static root stands in for an unnamed base frame.
+
+    Returns
+    -------
+    Rigid or None
+
+    Raises
+    ------
+    InputError
+        When the detections' frame cannot be placed on the base frame: one line naming it.
+    """
+    tp = cfg.topics
+    first = first_message(reader, tp.detections)
+    frame = str(first.header.frame_id).lstrip("/") if first is not None else ""
+    if not frame or frame == base:
+        return None
+    tree = (
+        static_tree(m.msg for m in reader.messages([tp.tf_static]))
+        if reader.has(tp.tf_static)
+        else None
+    )
+    try:
+        found = locate(tree, frame, base) if tree is not None else None
+    except TfProblem as e:
+        raise InputError(
+            reader.path, f"{tp.tf_static} cannot place the detections' frame {frame!r}: {e}"
+        ) from None
+    if found is None and frame in BASE_ALIASES and base in BASE_ALIASES:
+        return None
+    if found is None:
+        raise InputError(
+            reader.path,
+            f"{tp.detections}: detections in frame {frame!r}, which {tp.tf_static} does not "
+            f"place on the base frame {base!r} (publish {base} -> {frame} on "
+            f"{tp.tf_static}, or stamp the detections in {base!r})",
+        )
+    mount, stand_in = found
+    if stand_in is not None:
+        notes.append(
+            f"{reader.path}: {tp.tf_static} does not name the base frame {base!r}: the "
+            f"detections' frame {frame!r} is placed in {stand_in!r} instead"
+        )
+    return mount

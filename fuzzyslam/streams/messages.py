@@ -265,33 +265,45 @@ def detection3d_array(
     return msgtype(DETECTION3D_ARRAY)(header=header(t, frame_id), detections=dets)
 
 
-def detections_of(msg: Any) -> tuple[np.ndarray, np.ndarray]:
+def detections_of(msg: Any, dims: int = 2) -> tuple[np.ndarray, np.ndarray]:
     """Landmark detections of a PoseArray or a vision_msgs/Detection3DArray.
+
+    Parameters
+    ----------
+    msg : geometry_msgs/PoseArray or vision_msgs/Detection3DArray
+        The message.
+    dims : {2, 3}
+        The x, y (2) or x, y, z (3) of each detection and the block of its covariance.
 
     Returns
     -------
-    points : (N, 2) x, y in the message's frame
-    covs : (N, 2, 2) the x, y block of each detection's covariance; NaN where the message
+    points : ndarray, shape (N, dims)
+        In the message's frame.
+    covs : ndarray, shape (N, dims, dims)
+        The x, y (, z) block of each detection's covariance; NaN where the message
         carries none (a PoseArray; a Detection3D whose covariance is all zeros, ROS's
-        "unknown", or not a finite symmetric positive definite block).
+        "unknown", or whose x, y block is not finite, symmetric and positive definite).
     """
     if not hasattr(msg, "detections"):
-        pts = points_of_pose_array(msg)
-        return pts, np.full((len(pts), 2, 2), np.nan)
-    pts = np.full((len(msg.detections), 2), np.nan)
-    covs = np.full((len(msg.detections), 2, 2), np.nan)
+        poses = msg.poses
+        pts = np.array([[p.position.x, p.position.y, p.position.z] for p in poses], dtype=float)
+        pts = pts.reshape(-1, 3)[:, :dims]
+        return pts, np.full((len(pts), dims, dims), np.nan)
+    pts = np.full((len(msg.detections), dims), np.nan)
+    covs = np.full((len(msg.detections), dims, dims), np.nan)
     for k, d in enumerate(msg.detections):
         if d.results:
             best = max(d.results, key=lambda h: h.hypothesis.score)
             p, c = best.pose.pose.position, np.asarray(best.pose.covariance, dtype=float)
-            pts[k] = (p.x, p.y)
+            pts[k] = (p.x, p.y, p.z)[:dims]
             if c.size == 36:
                 c2 = c.reshape(6, 6)[:2, :2]
                 ok = np.all(np.isfinite(c2)) and c2[0, 1] == c2[1, 0]
                 if ok and c2[0, 0] > 0 and np.linalg.det(c2) > 0:
-                    covs[k] = c2
+                    covs[k] = c.reshape(6, 6)[:dims, :dims]
         else:
-            pts[k] = (d.bbox.center.position.x, d.bbox.center.position.y)
+            center = d.bbox.center.position
+            pts[k] = (center.x, center.y, center.z)[:dims]
     return pts, covs
 
 

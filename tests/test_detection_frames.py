@@ -1,0 +1,101 @@
+"""Landmark detections stamped in a frame other than the robot's base (a detector that
+publishes in its camera's frame, or in the camera's optical frame): put in the base frame
+by their /tf_static mount (slam/inputs.py ``_detection_mount``), in 3D. Checked on the
+committed MRCLAM excerpt (data/real/mrclam6_excerpt), its detections moved into the other
+frame: the run is the original's to rounding; a frame /tf_static does not place is one
+line naming it."""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_robust_logs import Out, cli, rewrite
+from test_tf_mounts import link, quat, quaternion_matrix, tf
+
+from fuzzyslam.streams import messages as M
+from fuzzyslam.streams.reader import LogMessage
+
+EXCERPT = Path(__file__).resolve().parents[1] / "data" / "real" / "mrclam6_excerpt"
+DETECTIONS = "/landmark_detections"
+
+
+def moved(frame: str, rotation: np.ndarray, translation: np.ndarray, static):
+    """A ``rewrite`` fault: each detection p (base frame, z = 0) written as R^T (p - t) in
+    ``frame`` (whose mount in the base frame is (R, t)), and /tf_static ``static`` first."""
+    done = []
+
+    def fault(m: LogMessage) -> list[Out]:
+        out = []
+        if not done and static is not None:
+            done.append(1)
+            out.append(("/tf_static", M.TF_MESSAGE, static, m.t))
+        if m.topic == DETECTIONS:
+            for p in m.msg.poses:
+                v = rotation.T @ (np.array([p.position.x, p.position.y, 0.0]) - translation)
+                p.position.x, p.position.y, p.position.z = map(float, v)
+            m.msg.header.frame_id = frame
+        out.append((m.topic, m.typename, m.msg, m.t))
+        return out
+
+    return fault
+
+
+@pytest.fixture(scope="module")
+def plain(tmp_path_factory) -> Path:
+    out = tmp_path_factory.mktemp("plain") / "est"
+    code, _, err = cli("run", EXCERPT / "log.mcap", "--config", "real_detections", "-o", out)
+    assert code == 0, err
+    return out
+
+
+@pytest.mark.parametrize(
+    ("chain", "mount"),
+    [
+        # a camera 0.1 m ahead, 0.05 m left, turned 90 deg
+        ([("base_link", "camera_link", 0.1, 0.05, 0.3, 0.0, 0.0, math.pi / 2)], "camera_link"),
+        # and its optical frame (REP 103: z forward, x right, y down)
+        (
+            [
+                ("base_link", "camera_link", 0.1, 0.05, 0.3, 0.0, 0.0, math.pi / 2),
+                ("camera_link", "camera_optical", 0.0, 0.0, 0.0, -math.pi / 2, 0.0, -math.pi / 2),
+            ],
+            "camera_optical",
+        ),
+    ],
+    ids=["camera_link", "optical"],
+)
+def test_detections_in_a_mounted_frame_give_the_same_run(
+    plain: Path, tmp_path: Path, chain, mount: str
+) -> None:
+    """The detections written in the camera's frame with its /tf_static chain: the same
+    trajectory as in base_link, to 1e-9 m (the mount composed in 3D and applied)."""
+    r, t = np.eye(3), np.zeros(3)
+    for _parent, _child, x, y, z, roll, pitch, yaw in chain:  # compose down the chain
+        step = quaternion_matrix(quat(roll, pitch, yaw))
+        t, r = t + r @ np.array([x, y, z]), r @ step
+    static = tf(*(link(p, c, x, y, z, ro, pi, ya) for p, c, x, y, z, ro, pi, ya in chain))
+    log = rewrite(EXCERPT / "log.mcap", tmp_path / "moved.mcap", moved(mount, r, t, static))
+    code, out, err = cli("run", log, "--config", "real_detections", "-o", tmp_path / "est")
+    assert code == 0, err
+    got = np.loadtxt(tmp_path / "est" / "trajectory.tum")
+    want = np.loadtxt(plain / "trajectory.tum")
+    assert got.shape == want.shape
+    assert np.abs(got[:, 1:3] - want[:, 1:3]).max() < 1e-6
+    assert json.loads(out)["counts"]["detections"] > 100
+
+
+def test_detections_in_a_frame_tf_static_does_not_place_are_refused(tmp_path: Path) -> None:
+    """Detections in 'camera_link' with no /tf_static: one line naming the frame and what
+    to publish (before, they were used as if in base_link)."""
+    log = rewrite(
+        EXCERPT / "log.mcap",
+        tmp_path / "unplaced.mcap",
+        moved("camera_link", np.eye(3), np.zeros(3), None),
+    )
+    code, _, err = cli("run", log, "--config", "real_detections", "-o", tmp_path / "est")
+    assert code == 3 and "'camera_link'" in err and "/tf_static" in err
+    assert len(err.strip().splitlines()) == 1 and not (tmp_path / "est").exists()
