@@ -715,3 +715,28 @@ def test_frames_before_the_odometry_starts_are_not_used(tiny: Tiny, tmp_path: Pa
     assert s["counts"]["frames"] == tiny.run["counts"]["frames"] - frames_before
     t = load_tum(tmp_path / "est" / "trajectory.tum")[:, 0]
     assert first_odometry - 1.0 <= t[0] < first_odometry
+
+
+def test_a_ros2_bag_folder_is_read_and_a_split_bag_is_said(tiny: Tiny, tmp_path: Path) -> None:
+    """The folder ``ros2 bag record -s mcap`` writes (metadata.yaml and NAME_0.mcap) is
+    read as its one MCAP file; a bag split into two files, or a folder without one, is
+    one line saying what to do (before: "log is not a regular file")."""
+    import shutil
+
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n", encoding="utf-8")
+    shutil.copy(tiny.log, bag / "bag_0.mcap")
+    code, _, err = cli("run", bag, "-o", tmp_path / "est", "--config", tiny.config)
+    assert code == 0, err
+    assert (tmp_path / "est" / "trajectory.tum").read_bytes() == (
+        tiny.est / "trajectory.tum"
+    ).read_bytes()
+    shutil.copy(tiny.log, bag / "bag_1.mcap")
+    code, _, err = cli("run", bag, "-o", tmp_path / "est2", "--config", tiny.config)
+    assert code == 3 and "split into 2 files" in err and "mcap merge" in err
+    assert len(err.strip().splitlines()) == 1
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    code, _, err = cli("run", empty, "-o", tmp_path / "est3", "--config", tiny.config)
+    assert code == 3 and "no .mcap file" in err

@@ -18,6 +18,7 @@ from __future__ import annotations
 import json
 import os
 from collections.abc import Callable, Iterable, Iterator
+from pathlib import Path
 from typing import Any, NamedTuple
 
 from mcap.records import Attachment, Channel, Message, Metadata, Schema
@@ -72,8 +73,45 @@ def _last_stamp(
     return t_last, at
 
 
+def bag_file(path: str | os.PathLike) -> Path:
+    """The MCAP file of a log given as a file, or as the folder ``ros2 bag record -s
+    mcap`` writes (``metadata.yaml`` and ``NAME_0.mcap``) when it holds one.
+
+    Parameters
+    ----------
+    path : path
+        A file, or a folder.
+
+    Returns
+    -------
+    Path
+        ``path`` itself when it is not a folder.
+
+    Raises
+    ------
+    InputError
+        A folder with no ``.mcap`` file, or with several (a bag split by size or
+        duration: one line saying how to merge them).
+    """
+    p = Path(path)
+    if not p.is_dir():
+        return p
+    files = sorted(p.glob("*.mcap"))
+    if len(files) == 1:
+        return files[0]
+    if not files:
+        raise InputError(p, "log is a folder with no .mcap file (a bag recorded as MCAP?)")
+    raise InputError(
+        p,
+        f"log is a bag split into {len(files)} files ({files[0].name} ... "
+        f"{files[-1].name}): merge them into one first (mcap merge {p}/*.mcap -o "
+        "merged.mcap) and pass that",
+    )
+
+
 class LogReader:
-    """Read a ROS 2 MCAP recording.
+    """Read a ROS 2 MCAP recording (a file, or a ros2 bag folder holding one:
+    :func:`bag_file`).
 
     Attributes after opening: ``path``, ``size`` (bytes), ``topics`` (topic -> type
     name), ``counts`` (topic -> message count), ``start``/``end`` (log times of the
@@ -82,7 +120,7 @@ class LogReader:
     """
 
     def __init__(self, path: str | os.PathLike) -> None:
-        self.path = check_input_file(path, "log")
+        self.path = check_input_file(bag_file(path), "log")
         self.size = self.path.stat().st_size
         with open(self.path, "rb") as f:
             head = f.read(len(MCAP_MAGIC))
