@@ -416,3 +416,27 @@ def test_odometry_speed_bound():
     assert not within_speed(0.1, 0.5 * span * 1.001, 0.0, 0.5, 1.0)
     assert not within_speed(0.1, 0.0, -1.0 * span * 1.001, 0.5, 1.0)
     assert within_speed(-1.0, 0.5 * SPEED_MARGIN * SLACK_S, 0.0, 0.5, 1.0)  # dt < 0: slack only
+
+
+def test_nis_windows_out_of_bounds_too_often_mean_divergence() -> None:
+    """Windows out of the chi-square band now and then, never three in a row: a rate
+    a consistent filter (alpha = 1e-3 per window) gives with probability below 1e-6 is
+    divergence (``nis_rate``); one window out of 36, as a real MRCLAM run has, is not.
+    The binomial tail is checked against its closed form for k = 1 and k = n."""
+    from fuzzyslam.slam.health import DivergenceMonitor, binomial_tail
+
+    assert binomial_tail(1, 36, 1e-3) == pytest.approx(1 - (1 - 1e-3) ** 36, rel=1e-12)
+    assert binomial_tail(5, 5, 0.1) == pytest.approx(1e-5, rel=1e-12)
+
+    def run(bad_windows: set[int], windows: int = 36) -> DivergenceMonitor:
+        mon = DivergenceMonitor(window=10)
+        for w in range(windows):
+            nis = 20.0 if w in bad_windows else 2.0  # 10 updates of 2 dof: chi2(20)
+            for k in range(10):
+                mon.observe(w + 0.1 * k, nis, 2)
+        return mon
+
+    assert not run({7}).diverged
+    alternate = run({3, 6, 9, 12, 15, 18, 21})  # 7 out of bounds, never two in a row
+    assert alternate.diverged and alternate.reasons == ["nis_rate"]
+    assert alternate.diverged_at == pytest.approx(9.9)  # the third of 10: tail 1.2e-7

@@ -16,7 +16,11 @@
   detections fail the gate and become new lamps instead), so a second test watches the
   association rate: a window of detections, made while lamps are mapped, of which
   fewer than ``min_association`` were associated is out of bounds too. ``patience``
-  consecutive out-of-bounds windows of either test mean divergence.
+  consecutive out-of-bounds windows of either test mean divergence; so do NIS windows
+  out of bounds more often than a consistent filter's rate ``alpha`` allows, consecutive
+  or not (the binomial tail P(K >= k | n windows, alpha) below ``RATE_LEVEL``: a filter
+  whose updates mislead it now and then, e.g. detections with x and y swapped: 7 of 28
+  windows out of bounds, never three in a row).
 - :func:`orphan_landmarks`: a third, map-level test [ours]. An overconfident filter does
   not recognise its own landmarks when it comes back to them: their detections fail the
   gate and found new landmarks, which are in turn abandoned at the next visit. A map
@@ -181,6 +185,29 @@ def repair_covariance(p: np.ndarray, floor: float = 1e-12) -> tuple[np.ndarray, 
     return 0.5 * (out + out.T), True
 
 
+RATE_LEVEL = 1e-6  # binomial tail below which out-of-bounds NIS windows are too many
+
+
+def binomial_tail(k: int, n: int, p: float) -> float:
+    """P(K >= k) for K ~ Binomial(n, p), summed term by term (exact to rounding; no
+    scipy in a run's start-up).
+
+    Parameters
+    ----------
+    k, n : int
+        Successes and trials.
+    p : float
+        The success probability.
+
+    Returns
+    -------
+    float
+    """
+    if k <= 0:
+        return 1.0
+    return math.fsum(math.comb(n, i) * p**i * (1.0 - p) ** (n - i) for i in range(k, n + 1))
+
+
 @dataclass
 class _Windows:
     """Consecutive windows of one test: counts, the current streak, the spans out of bounds."""
@@ -256,6 +283,14 @@ class DivergenceMonitor:
             self.worst_ratio = max(self.worst_ratio, ratio)
             self._streak(t, self.nis.close(self._t0, t, ratio > 1.0), "nis")
             self._sum, self._dof, self._n = 0.0, 0, 0
+            w = self.nis
+            if (
+                ratio > 1.0
+                and "nis_rate" not in self.reasons
+                and binomial_tail(w.out_of_bounds, w.windows, self.alpha) < RATE_LEVEL
+            ):
+                self.diverged_at = t if self.diverged_at is None else self.diverged_at
+                self.reasons.append("nis_rate")
 
     def observe_frame(self, t: float, detections: int, associated: int) -> None:
         """One frame's detections and how many were associated with mapped lamps.
