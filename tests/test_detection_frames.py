@@ -17,7 +17,7 @@ from test_robust_logs import Out, cli, rewrite
 from test_tf_mounts import link, quat, quaternion_matrix, tf
 
 from fuzzyslam.streams import messages as M
-from fuzzyslam.streams.reader import LogMessage
+from fuzzyslam.streams.reader import LogMessage, LogReader
 
 EXCERPT = Path(__file__).resolve().parents[1] / "data" / "real" / "mrclam6_excerpt"
 DETECTIONS = "/landmark_detections"
@@ -99,3 +99,50 @@ def test_detections_in_a_frame_tf_static_does_not_place_are_refused(tmp_path: Pa
     code, _, err = cli("run", log, "--config", "real_detections", "-o", tmp_path / "est")
     assert code == 3 and "'camera_link'" in err and "/tf_static" in err
     assert len(err.strip().splitlines()) == 1 and not (tmp_path / "est").exists()
+
+
+def test_odometry_with_its_twist_alone_is_integrated(plain: Path, tmp_path: Path) -> None:
+    """An Odometry stream whose pose stays at zero while its twist carries the motion (a
+    driver that fills only the velocities; this excerpt's twist is the robot's logged
+    speeds): the twist is integrated and said once on stderr (before: the robot held
+    still for the whole log, and the summary was healthy). Its dead reckoning is the
+    trapezoid rule on the twist with the midpoint motion model, integrated here again
+    (to the file's micrometre); it stays within 0.5 m of the log's own pose over the 150 s (their
+    conversion integrated the speeds another way)."""
+
+    def twist_only(m: LogMessage) -> list[Out]:
+        if m.topic == "/odom":
+            p = m.msg.pose.pose
+            p.position.x = p.position.y = 0.0
+            p.orientation.x = p.orientation.y = p.orientation.z = 0.0
+            p.orientation.w = 1.0
+        return [(m.topic, m.typename, m.msg, m.t)]
+
+    log = rewrite(EXCERPT / "log.mcap", tmp_path / "twist.mcap", twist_only)
+    code, out, err = cli("run", log, "--config", "real_detections", "-o", tmp_path / "est")
+    assert code == 0, err
+    assert err.count("the twist is integrated") == 1
+    assert json.loads(out)["odometry_source"] == "odom twist (/odom)"
+    got = np.loadtxt(tmp_path / "est" / "odometry.tum")
+    want = np.loadtxt(plain / "odometry.tum")
+    assert got.shape == want.shape and np.abs(got[:, 0] - want[:, 0]).max() == 0
+    gap = np.hypot(*(got[:, 1:3] - want[:, 1:3] - (got[0, 1:3] - want[0, 1:3])).T)
+    assert 0 < gap.max() < 0.5
+    # the same twist integrated here: trapezoid speeds, midpoint steps
+    msgs = list(LogReader(log).messages(["/odom"]))
+    t = np.array([m.msg.header.stamp.sec + 1e-9 * m.msg.header.stamp.nanosec for m in msgs])
+    vw = np.array([(m.msg.twist.twist.linear.x, m.msg.twist.twist.angular.z) for m in msgs])
+    d = 0.5 * (vw[1:] + vw[:-1]) * np.diff(t)[:, None]
+    q = got[0, 4:8]
+    th = 2 * math.atan2(q[2], q[3]) + np.concatenate([[0.0], np.cumsum(d[:, 1])])
+    mid = th[:-1] + 0.5 * d[:, 1]
+    xy = got[0, 1:3] + np.concatenate(
+        [[[0.0, 0.0]], np.cumsum(d[:, :1] * np.column_stack([np.cos(mid), np.sin(mid)]), 0)]
+    )
+    # each row: the dead reckoning up to the last odometry stamp, the stamps moved by the
+    # preset's odometry latency (slam.odometry_delay_s); TUM: 9 decimals, x y 6
+    from fuzzyslam.config import load_config
+
+    delay = load_config("real_detections").slam.odometry_delay_s
+    at = np.maximum(np.searchsorted(t + delay, got[:, 0] + 1e-6, side="right") - 1, 0)
+    assert np.abs(xy[at] - got[:, 1:3]).max() < 2e-6

@@ -63,6 +63,7 @@ from fuzzyslam.slam.log_setup import (
     odometry_clock,
     streams_start,
     tf_frames,
+    twist_only,
 )
 from fuzzyslam.slam.odom_gate import REANCHOR, OdomGate, within_speed
 from fuzzyslam.stamps import in_stamp_order
@@ -106,6 +107,8 @@ class LogInputs:
     # streams are checked against (LogInputs._same_clock)
     clock_offset: float = 0.0
     odom_first: float = -np.inf  # the odometry's first stamp (odometry_clock)
+    # Odometry whose pose never changes while its twist does: the twist integrated
+    odom_twist: bool = False
     # the detections' frame in the base frame (/tf_static), None when they are in it
     detection_mount: Rigid | None = None
     _clock_row: tuple[float, int] | None = None  # odometry messages off the clock: offset, n
@@ -194,6 +197,8 @@ class LogInputs:
 
     def _main_events(self) -> Iterator[Event]:
         odo = self._odometry if self.odom_source == "encoders" else self._odom_pose
+        if self.odom_twist:
+            odo = self._odom_twist
         lamp = self._frame if self.lamp_source == "frames" else self._pose_array
         last_t = {self.odom_topic: -np.inf, self.lamp_topic: -np.inf}
         prev = None
@@ -352,6 +357,25 @@ class LogInputs:
             return self._reject(t, prev, (pose, t))
         self._rejected_in_row = 0
         return Odom(t, d_trans, d_rot), (pose, t)
+
+    def _odom_twist(self, t: float, msg, prev):
+        """An Odometry twist (forward speed v, turn rate w in the base frame, REP 105) as
+        the increment since the previous message, by the trapezoid rule:
+        d_trans = (v_prev + v) dt / 2, d_rot = (w_prev + w) dt / 2 (``odom_twist``: a
+        driver that fills only the twist)."""
+        tw = msg.twist.twist
+        cur = (float(tw.linear.x), float(tw.angular.z), t)
+        if not (math.isfinite(cur[0]) and math.isfinite(cur[1])):
+            self.warn("nan_odometry", f"NaN odometry twist at t={t:.3f} s")
+            return None, prev
+        if prev is None:
+            return None, cur
+        dt = t - prev[2]
+        d_trans, d_rot = 0.5 * (prev[0] + cur[0]) * dt, 0.5 * (prev[1] + cur[1]) * dt
+        if not self._plausible(dt, d_trans, d_rot):
+            return self._reject(t, prev, cur)
+        self._rejected_in_row = 0
+        return Odom(t, d_trans, d_rot), cur
 
     def _measurement_cov(self, m: int, sigma: float) -> np.ndarray:
         """(m, 2, 2) covariances sigma^2 I of m detections (the last block kept: the
@@ -569,6 +593,12 @@ def open_inputs(
         raise AssertionError("unreachable")
     period, clock, odom_first = odometry_clock(reader, odom_topic)
     notes: list[str] = []
+    twist = odom_source == "odom" and twist_only(reader, odom_topic)
+    if twist:
+        notes.append(
+            f"{path}: {odom_topic}'s pose does not change while its twist does: the "
+            "twist is integrated (a driver that fills only the velocities)"
+        )
     frames = tf_frames(
         reader,
         cfg,
@@ -637,6 +667,7 @@ def open_inputs(
         clock_offset=clock,
         odom_first=odom_first,
         detection_mount=detection_mount,
+        odom_twist=twist,
         notes=notes,
     )
 

@@ -388,3 +388,38 @@ def slow_odometry_note(topic: str, period: float) -> str:
         f"is taken as one arc; below about {1.0 / SLOW_ODOMETRY_S:.0f} Hz expect fixes and "
         f"landmarks to degrade (record odometry faster if you can)"
     )
+
+
+TWIST_SAMPLES = 200  # Odometry messages whose poses tell a twist-only driver
+
+
+def twist_only(reader: LogReader, topic: str) -> bool:
+    """Whether a nav_msgs/Odometry stream carries its motion in the twist alone: its
+    first ``TWIST_SAMPLES`` messages all hold one pose while some twist is not zero (a
+    driver that fills only the velocities; its pose read as motion would hold the robot
+    still).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    topic : str
+        The Odometry topic.
+
+    Returns
+    -------
+    bool
+    """
+    first, moving = None, False
+    for k, m in enumerate(reader.messages([topic])):
+        if k >= TWIST_SAMPLES:
+            break
+        p, q = m.msg.pose.pose.position, m.msg.pose.pose.orientation
+        pose = (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
+        if first is None:
+            first = pose
+        elif pose != first:
+            return False
+        tw = m.msg.twist.twist
+        moving = moving or abs(tw.linear.x) > 1e-6 or abs(tw.angular.z) > 1e-6
+    return moving

@@ -43,6 +43,9 @@ from fuzzyslam.summary import OMIT, as_json
 LAMP_TYPES = ("geometry_msgs/msg/PoseArray", "sensor_msgs/msg/Image")
 
 
+TWIST = ("", " twist")  # an Odometry whose twist alone is read (LogInputs.odom_twist)
+
+
 def make_summary(
     res: SlamResult, inputs, wall: float, aids: list, streamed: StreamingOutputs
 ) -> RunSummary:
@@ -69,7 +72,7 @@ def make_summary(
     est = res.noise_estimate
     return RunSummary(
         log=str(inputs.reader.path),
-        odometry_source=f"{inputs.odom_source} ({inputs.odom_topic})",
+        odometry_source=f"{inputs.odom_source}{TWIST[inputs.odom_twist]} ({inputs.odom_topic})",
         lamp_source=f"{inputs.lamp_source} ({inputs.lamp_topic})",
         start_pose=[float(v) for v in inputs.start_pose],
         log_duration_s=round(duration, 3),
