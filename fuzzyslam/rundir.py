@@ -29,9 +29,13 @@ HEADING_FIXES = "heading_fixes.csv"
 POSE_FIXES = "pose_fixes.csv"
 CHANGES = "changes.csv"
 # files a run writes only with some options: an old one would be mixed with a new run
-# files a run writes only with some options: an old one would be mixed with a new run
 OPTIONAL_OUTPUTS = (
-    HEADING_FIXES, POSE_FIXES, CHANGES, "changes.png", "calibration.csv", "calibration.yaml"
+    HEADING_FIXES,
+    POSE_FIXES,
+    CHANGES,
+    "changes.png",
+    "calibration.csv",
+    "calibration.yaml",
 )
 
 
@@ -61,14 +65,20 @@ def write_landmarks(path: str | os.PathLike, lamps: Iterable[Any]) -> None:
     Path(path).write_text(yaml.safe_dump(landmarks_dict(lamps), sort_keys=False), encoding="utf-8")
 
 
-def read_landmarks(path: str | os.PathLike) -> tuple[np.ndarray, list[int]]:
+def read_landmarks(path: str | os.PathLike, truth: bool = False) -> tuple[np.ndarray, list[int]]:
     """The lamps of a landmarks.yaml (this module's, or a real log's true landmarks:
     ``{landmarks: [{id, x, y}, ...]}``, ``id`` defaulting to the position in the list).
+
+    A run's landmarks.yaml may hold no lamp (a lamp-less run: ``landmarks: []``); a file of
+    true landmarks (``truth``) must be a mapping with a non-empty ``landmarks`` list, else
+    it is a bad input (a TUM file, a bare list, another YAML given by mistake).
 
     Parameters
     ----------
     path : path
         The YAML file.
+    truth : bool
+        The file is the truth's (``evaluate --landmarks-truth``): at least one landmark.
 
     Returns
     -------
@@ -77,16 +87,28 @@ def read_landmarks(path: str | os.PathLike) -> tuple[np.ndarray, list[int]]:
     ids : list of int
         Their ids.
     """
-    p = check_input_file(path, "landmarks")
+    what = "landmarks truth" if truth else "landmarks"
+    p = check_input_file(path, what)
     try:
         data = yaml.safe_load(p.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
-        raise InputError(p, f"cannot read landmarks YAML: {str(exc).splitlines()[0]}") from None
+        raise InputError(p, f"cannot read {what} YAML: {str(exc).splitlines()[0]}") from None
+    if truth and not (isinstance(data, dict) and "landmarks" in data):
+        held = {dict: "a mapping without it", list: "a bare list", str: "plain text",
+                type(None): "nothing"}  # fmt: skip
+        raise InputError(
+            p,
+            "not a landmarks truth file: no 'landmarks' list (the YAML holds "
+            f"{held.get(type(data), 'a ' + type(data).__name__)}; expected "
+            "'landmarks: [{id, x, y}, ...]')",
+        )
     lms = (data or {}).get("landmarks") if isinstance(data, dict) else None
     if lms is None:
         lms = []
     if not isinstance(lms, list):
         raise InputError(p, "'landmarks' must be a list")
+    if truth and not lms:
+        raise InputError(p, "the landmarks truth holds no landmark ('landmarks' is empty)")
     try:
         xy = np.array([[float(d["x"]), float(d["y"])] for d in lms], dtype=float).reshape(-1, 2)
         ids = [int(d.get("id", i)) for i, d in enumerate(lms)]

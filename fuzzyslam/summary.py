@@ -10,6 +10,7 @@ such a tree into the JSON object every file and stdout carry (``summary_text``).
 from __future__ import annotations
 
 import json
+import math
 from dataclasses import fields, is_dataclass
 from typing import Any
 
@@ -111,8 +112,35 @@ def jsonable(obj: Any) -> Any:
     return str(obj)
 
 
+def strict(obj: Any) -> Any:
+    """A JSON tree (:func:`as_json`'s) that strict JSON can hold: NaN and infinities as
+    None (null, as metrics.json writes them), numpy scalars and arrays as Python numbers
+    and lists, tuples as lists; other leaves unchanged.
+
+    Parameters
+    ----------
+    obj : Any
+        dicts, lists, tuples and leaves.
+
+    Returns
+    -------
+    Any
+        The same tree with every float finite or None.
+    """
+    if isinstance(obj, dict):
+        return {k: strict(v) for k, v in obj.items()}
+    if isinstance(obj, list | tuple):
+        return [strict(v) for v in obj]
+    if isinstance(obj, float):
+        return obj if math.isfinite(obj) else None
+    if type(obj).__module__ == "numpy" and hasattr(obj, "tolist"):
+        return strict(obj.tolist())  # a numpy scalar (a Python number) or array (a list)
+    return obj
+
+
 def summary_text(summary: dict[str, Any]) -> str:
-    """The summary as the CLI prints it: indented JSON, keys sorted.
+    """The summary as the CLI prints it: indented strict JSON (non-finite numbers as
+    null), keys sorted.
 
     Parameters
     ----------
@@ -124,4 +152,6 @@ def summary_text(summary: dict[str, Any]) -> str:
     str
         The JSON text (no final newline).
     """
-    return json.dumps(as_json(summary), indent=2, sort_keys=True, default=jsonable)
+    return json.dumps(
+        strict(as_json(summary)), indent=2, sort_keys=True, default=jsonable, allow_nan=False
+    )

@@ -324,6 +324,10 @@ def run_evaluate(
     estimate's compared stamps and written in the estimate's frame (moved by the inverse
     of the alignment, if any), so that ``evo_ape tum truth.tum trajectory.tum`` gives
     the overall ``ape_m.raw`` and, with ``-a``, ``ape_m.aligned``.
+
+    On stderr, as every command: the work's progress once the inputs are read
+    (:class:`fuzzyslam.progress.Progress`, off with FUZZYSLAM_NO_PROGRESS) and, at the
+    end, each warning of metrics.json as a one-line note (:func:`warning_notes`).
     """
     from fuzzyslam.evaluation import figures, report
 
@@ -337,42 +341,79 @@ def run_evaluate(
     # a compared estimate gives a row of the side-by-side table and a curve: its
     # trajectory and lamps only
     others = [read_estimate(c, lab, full=False) for lab, c in labelled]
-    truth = read_truth(truth_path)
-    if landmarks_truth is not None:
-        truth.landmarks, _ = R.read_landmarks(Path(landmarks_truth))
+    true_lamps = None
+    if landmarks_truth is not None:  # before the truth: a log's truth takes longer to read
+        true_lamps, _ = R.read_landmarks(Path(landmarks_truth), truth=True)
         align = True
-    try:
-        ev = evaluate(truth, est, params, align=align)
-    except SpanError as exc:
-        raise InputError(estimate_path, str(exc)) from None
-    evs = [(est, ev)]
-    for path, other in zip(compare, others, strict=True):
+    truth = read_truth(truth_path)
+    if true_lamps is not None:
+        truth.landmarks = true_lamps
+    # every input read: the work, with its start and end on stderr as the other commands'
+    # (progress.Progress: one step per evaluation, the change metrics, figures and files)
+    with Progress(len(others) + 4, "evaluate: metrics, figures and report") as bar:
         try:
-            evs.append((other, evaluate(truth, other, params, align=align)))
+            ev = evaluate(truth, est, params, align=align)
         except SpanError as exc:
-            raise InputError(path, str(exc)) from None
-    if others:
-        ev = replace(ev, typed=replace(ev.typed, comparison=[comparison_row(e, v) for e, v in evs]))
-    from fuzzyslam.evaluation.changes import change_metrics
-
-    changes = change_metrics(truth_path, estimate_path, truth.t, truth.poses[:, :2])
-    if changes is not None:  # --fix pose on a log with obstacles (issue 8)
-        ev = replace(ev, typed=replace(ev.typed, change_detection=changes))
-    with OutputDir(outdir, owns=("fig4_lamps.png", "consistency.png", "compare.png")) as tmp:
-        figs = figures.draw_all(tmp, truth, est, ev, fgm)
+            raise InputError(estimate_path, str(exc)) from None
+        bar.update_to(1)
+        evs = [(est, ev)]
+        for path, other in zip(compare, others, strict=True):
+            try:
+                evs.append((other, evaluate(truth, other, params, align=align)))
+            except SpanError as exc:
+                raise InputError(path, str(exc)) from None
+            bar.update_to(len(evs))
         if others:
-            figures.fig_compare(tmp / "compare.png", truth, [(e.label, v) for e, v in evs])
-            figs["compare"] = "compare.png"
-        # the truth as compared, at the estimate's stamps (evo pairs the two files exactly)
-        # and in the frame of trajectory.tum (the alignment undone): `evo_ape tum truth.tum
-        # trajectory.tum` = the overall ape_m.raw, with -a = ape_m.aligned
-        (tmp / "truth.tum").write_text(
-            format_tum(ev.assoc.t, ev.truth_in_estimate_frame), encoding="utf-8"
-        )
-        report.write_metrics(tmp / "metrics.json", ev.metrics)
-        report.write_report(tmp / "report.md", ev.metrics, figs)
-        files = sorted(x.name for x in tmp.iterdir())
+            rows = [comparison_row(e, v) for e, v in evs]
+            ev = replace(ev, typed=replace(ev.typed, comparison=rows))
+        from fuzzyslam.evaluation.changes import change_metrics
+
+        changes = change_metrics(truth_path, estimate_path, truth.t, truth.poses[:, :2])
+        if changes is not None:  # --fix pose on a log with obstacles (issue 8)
+            ev = replace(ev, typed=replace(ev.typed, change_detection=changes))
+        bar.update_to(len(evs) + 1)
+        with OutputDir(outdir, owns=("fig4_lamps.png", "consistency.png", "compare.png")) as tmp:
+            figs = figures.draw_all(tmp, truth, est, ev, fgm)
+            if others:
+                figures.fig_compare(tmp / "compare.png", truth, [(e.label, v) for e, v in evs])
+                figs["compare"] = "compare.png"
+            bar.update_to(len(evs) + 2)
+            # the truth as compared, at the estimate's stamps (evo pairs the two files
+            # exactly) and in the frame of trajectory.tum (the alignment undone): `evo_ape
+            # tum truth.tum trajectory.tum` = the overall ape_m.raw, with -a = ape_m.aligned
+            (tmp / "truth.tum").write_text(
+                format_tum(ev.assoc.t, ev.truth_in_estimate_frame), encoding="utf-8"
+            )
+            report.write_metrics(tmp / "metrics.json", ev.metrics)
+            report.write_report(tmp / "report.md", ev.metrics, figs)
+            files = sorted(x.name for x in tmp.iterdir())
+    for line in warning_notes(evs):
+        note(line)
     return EvaluateResult(ev, Path(outdir), files)
+
+
+def warning_notes(evs: Sequence[tuple[Estimate, Evaluation]]) -> list[str]:
+    """The evaluations' warnings (metrics.json ``warnings``) as one-line notes for stderr:
+    the main estimate's as they are, a compared estimate's that the main one has not
+    (those of the truth are everyone's) after its label.
+
+    Parameters
+    ----------
+    evs : sequence of (Estimate, Evaluation)
+        The main estimate first, then the compared ones.
+
+    Returns
+    -------
+    list of str
+        One line each (no prefix: :func:`fuzzyslam.progress.note` adds it).
+    """
+    if not evs:
+        return []
+    main = list(evs[0][1].typed.warnings)
+    out = [f"warning: {w}" for w in main]
+    for est, ev in evs[1:]:
+        out += [f"warning: {est.label}: {w}" for w in ev.typed.warnings if w not in main]
+    return [" ".join(line.split()) for line in out]
 
 
 def comparison_row(est: Estimate, ev: Evaluation) -> ComparisonRow:

@@ -356,14 +356,35 @@ def log_floor(*values: Array) -> float:
 
 
 def running_mean(v: Array, frac: float = 0.02) -> Array:
-    """Centred moving average over max(5, frac * n) samples (NaNs ignored)."""
-    v = np.asarray(v, dtype=float)
-    w = max(5, int(frac * v.size))
+    """Centred moving average over w = max(5, frac * n) samples (NaNs ignored), one value
+    per sample: sample i averages the finite values of ``v[i - w + 1 + (w - 1) // 2 : i +
+    (w - 1) // 2 + 1]`` (numpy's ``convolve(mode="same")`` window) that exist, so that a
+    series shorter than the window (n < w, even n = 0 or 1) keeps its length.
+
+    Parameters
+    ----------
+    v : array_like, shape (n,)
+        The series.
+    frac : float
+        The window as a fraction of the samples (at least 5 samples).
+
+    Returns
+    -------
+    ndarray, shape (n,)
+        The averages; NaN where the window holds no finite value.
+    """
+    v = np.asarray(v, dtype=float).ravel()
+    n = v.size
+    w = max(5, int(frac * n))
     ok = np.isfinite(v)
-    k = np.ones(w)
-    num = np.convolve(np.where(ok, v, 0.0), k, mode="same")
-    den = np.convolve(ok.astype(float), k, mode="same")
-    return np.where(den > 0, num / np.maximum(den, 1.0), np.nan)
+    # prefix sums of the finite values and of their count: a window's sum is a difference
+    num = np.concatenate([[0.0], np.cumsum(np.where(ok, v, 0.0))])
+    den = np.concatenate([[0], np.cumsum(ok)])
+    i = np.arange(n)
+    lo = np.clip(i - (w - 1 - (w - 1) // 2), 0, n)
+    hi = np.clip(i + (w - 1) // 2 + 1, 0, n)
+    cnt = den[hi] - den[lo]
+    return np.where(cnt > 0, (num[hi] - num[lo]) / np.maximum(cnt, 1), np.nan)
 
 
 def fig_consistency(path: Path, truth: Truth, est: Estimate, ev: Evaluation) -> bool:
