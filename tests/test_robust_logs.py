@@ -732,6 +732,8 @@ def test_a_ros2_bag_folder_is_read_and_a_split_bag_is_said(tiny: Tiny, tmp_path:
     assert (tmp_path / "est" / "trajectory.tum").read_bytes() == (
         tiny.est / "trajectory.tum"
     ).read_bytes()
+    code, _, err = cli("evaluate", bag, tmp_path / "est", "-o", tmp_path / "eval")  # the truth
+    assert code == 0, err
     shutil.copy(tiny.log, bag / "bag_1.mcap")
     code, _, err = cli("run", bag, "-o", tmp_path / "est2", "--config", tiny.config)
     assert code == 3 and "split into 2 files" in err and "mcap merge" in err

@@ -46,13 +46,15 @@ KIND_RUNDIR = "rundir"
 
 
 def detect_kind(path: str | os.PathLike) -> str:
-    """``mcap`` (magic bytes), ``rundir`` (a directory) or ``tum`` (text whose first data line
-    has 8 numeric columns); anything else is an InputError."""
+    """``mcap`` (magic bytes, or a ros2 bag folder: ``metadata.yaml`` and ``.mcap`` files,
+    :func:`fuzzyslam.streams.reader.bag_file`), ``rundir`` (another directory) or ``tum``
+    (text whose first data line has 8 numeric columns); anything else is an InputError."""
     p = Path(path)
     if not p.exists():
         raise InputError(p, "does not exist")
     if p.is_dir():
-        return KIND_RUNDIR
+        bag = (p / "metadata.yaml").is_file() and any(p.glob("*.mcap"))
+        return KIND_MCAP if bag else KIND_RUNDIR
     check_input_file(p)
     with open(p, "rb") as f:
         head = f.read(4096)
