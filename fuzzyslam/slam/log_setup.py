@@ -24,8 +24,8 @@ from fuzzyslam.streams.logmeta import read_scenario
 from fuzzyslam.streams.reader import LogReader
 
 ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
-GAP_PERIODS = 3.0  # ... or for this many of its mean periods, whichever is longer
-SLOW_ODOMETRY_S = 0.5  # odometry slower than this (mean period): a note (slam/stage.py)
+GAP_PERIODS = 3.0  # ... or for this many of its periods (the median step), whichever is longer
+SLOW_ODOMETRY_S = 0.5  # odometry slower than this (its median step): a note (slam/stage.py)
 # (CARMEN logs at 4.6 and 5.4 Hz localise as well as faster ones; ACES cut to 1.1 Hz not)
 PERIOD_SAMPLES = 500  # odometry messages its period and clock are measured on
 
@@ -374,7 +374,7 @@ def slow_odometry_note(topic: str, period: float) -> str:
     topic : str
         The odometry topic.
     period : float
-        Its mean period (s), :func:`odometry_clock`.
+        Its period, the median step (s), :func:`odometry_clock`.
 
     Returns
     -------
