@@ -97,12 +97,17 @@ def test_divergence_monitor_consistent_and_overconfident() -> None:
 
 
 def test_divergence_needs_consecutive_windows() -> None:
+    """Two bad windows, one good, ...: never three in a row, so the streak test (``nis``)
+    does not fire; but 8 of 12 windows out of bounds is far more than a consistent
+    filter's 0.1 % per window: the rate test (``nis_rate``) does, at the third bad one
+    (tail 3e-7 after 4 windows)."""
     mon = DivergenceMonitor(window=10, alpha=1e-3, patience=3)
     for w in range(12):
         big = w % 3 != 2  # two bad windows, one good, ...
         for k in range(10):
             mon.observe(w * 10 + k, 40.0 if big else 2.0, 2)
-    assert mon.out_of_bounds == 8 and not mon.diverged
+    assert mon.out_of_bounds == 8 and mon.reasons == ["nis_rate"]
+    assert mon.diverged_at == 39
 
 
 # -- the filter's guards -------------------------------------------------------------------

@@ -129,7 +129,7 @@ class LogInputs:
     # with --adapt-noise opens the log twice)
     notes: list[str] = field(default_factory=list)
 
-    def warn(self, key: str, problem: str = "") -> None:
+    def warn(self, key: str, problem: str = "", count: int = 1) -> None:
         """Count a glitch of kind ``key`` (the summary's ``warnings``).
 
         Parameters
@@ -138,8 +138,10 @@ class LogInputs:
             The glitch's kind.
         problem : str
             One line on it, kept as ``first_problem`` if it is the first.
+        count : int
+            How many (a message's non-finite detections).
         """
-        self.warnings[key] = self.warnings.get(key, 0) + 1
+        self.warnings[key] = self.warnings.get(key, 0) + count
         if problem and not self.first_problem:
             self.first_problem = problem
 
@@ -431,7 +433,8 @@ class LogInputs:
             own[bad] = np.nan
         ok = np.all(np.isfinite(z), axis=1)
         if not np.all(ok):
-            self.warn("nan_detections", f"NaN detection at t={t:.3f} s")
+            bad = int(np.count_nonzero(~ok))  # detections, not messages
+            self.warn("nan_detections", f"{bad} non-finite detection(s) at t={t:.3f} s", bad)
             z, own = z[ok], own[ok]
         cov = self.cfg.slam.detection_cov(z)
         has = np.all(np.isfinite(own), axis=(1, 2))
