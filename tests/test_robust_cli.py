@@ -78,7 +78,7 @@ def test_missing_config_and_missing_log(tmp_path: Path, tiny_log) -> None:
         f"fuzzyslam: error: {tmp_path / 'nope.mcap'}: log does not exist"
     ]
     code, _, stderr = cli("run", tmp_path, "-o", tmp_path / "est")
-    assert code == 3 and "not a regular file" in stderr and len(error_lines(stderr)) == 1
+    assert code == 3 and "folder with no .mcap file" in stderr and len(error_lines(stderr)) == 1
     code, _, stderr = cli(
         "map", tiny_log[1], "--trajectory", tmp_path / "none.tum", "-o", tmp_path / "fgm"
     )
