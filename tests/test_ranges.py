@@ -57,7 +57,9 @@ def test_scan_ranges_follow_the_message_definition():
 
 
 def test_scan_rings_decimate_and_place_every_beam():
-    """Every step-th beam, at laser mount + beam angle; bad geometry and stamps dropped."""
+    """Every step-th beam, at laser mount + beam angle; a scan with no beam within the
+    first one's field of view (its beams from 2 rad on, the first's up to pi/2) and bad
+    stamps dropped."""
     n, a_min, a_inc = 181, -math.pi / 2, math.pi / 180
     msgs = [
         SimpleNamespace(
@@ -66,7 +68,7 @@ def test_scan_rings_decimate_and_place_every_beam():
         for t in (1.0, 2.0, 2.0, 1.5)
     ]
     msgs.append(
-        SimpleNamespace(topic="/scan", msg=M.laser_scan(3.0, "laser", np.ones(90), 0.0, 0.1))
+        SimpleNamespace(topic="/scan", msg=M.laser_scan(3.0, "laser", np.ones(90), 2.0, 0.01))
     )
     geom = scan_geometry(msgs[0].msg, step=4)
     st = RingStats()

@@ -1,11 +1,17 @@
 """Sonar Range messages into rings (streams/sonar.py ``group_rings``): rings stamped
 alike (the simulator, CARMEN) and rings fired in sequence (a Pioneer: one sonar every
 40 ms), with missing sonars, repeated messages and readings out of order; the ring gap
-measured from the log (``firing_gap``, streams/ranges.py)."""
+measured from the log (``firing_gap``, streams/ranges.py); readings without a valid field
+of view read with the configured cone, and a map whose evidence touched no cell refused."""
 
 from __future__ import annotations
 
+import contextlib
+import io
+import json
 import math
+from dataclasses import replace
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
@@ -216,3 +222,110 @@ def test_sonars_published_in_a_loop_are_one_firing() -> None:
     st = RingStats()
     rings = list(group_rings(msgs, topics, count, gap, st))
     assert len(rings) == 40 and st.missing == 0, (kind, gap, len(rings))
+
+
+# --- an invalid field of view: the configured cone ----------------------------------------
+
+
+def test_rings_before_a_valid_field_of_view_take_the_configured_cone() -> None:
+    """Range messages saying ``field_of_view: 0`` (or NaN): their rings take the cone
+    given (the config's ``sonar.fov_deg``; DEFAULT_CONE when none), each reading counted
+    ``bad_fov``; once a valid one is read, the last valid one."""
+    from fuzzyslam.streams.sonar import DEFAULT_CONE
+
+    cone = math.radians(30.0)
+
+    def ring(c: int, fov: float) -> list:
+        msgs = [reading(1.0 + c, i, ranges_of(c, i)) for i in range(COUNT)]
+        for m in msgs:
+            m.msg.field_of_view = fov
+        return msgs
+
+    zero = [m for c in range(3) for m in ring(c, 0.0 if c % 2 else math.nan)]
+    st = RingStats()
+    rings = list(group_rings(zero, TOPICS, COUNT, stats=st, cone=cone))
+    assert [r.fov for r in rings] == [cone] * 3 and st.bad_fov == st.readings == 3 * COUNT
+    assert [r.fov for r in group_rings(zero, TOPICS, COUNT)] == [DEFAULT_CONE] * 3
+    later = zero + ring(3, math.radians(20.0)) + ring(4, 0.0)
+    fovs = [r.fov for r in group_rings(later, TOPICS, COUNT, cone=cone)]
+    assert fovs[:3] == [cone] * 3
+    assert fovs[3:] == pytest.approx([math.radians(20.0)] * 2)  # float32 in the message
+
+
+EXCERPT = Path(__file__).resolve().parents[1] / "data" / "carmen_fr079_excerpt"
+
+
+def _cli(*args) -> tuple[int, str, str]:
+    """``fuzzyslam ARGS`` in-process: (exit code, stdout, stderr)."""
+    from fuzzyslam.cli import main
+
+    out, err = io.StringIO(), io.StringIO()
+    code = 0
+    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
+        try:
+            main([str(a) for a in args])
+        except SystemExit as exc:
+            code = int(exc.code or 0)
+    return code, out.getvalue(), err.getvalue()
+
+
+def _excerpt_with(dst: Path, change) -> Path:
+    """The real excerpt (9 sonars cut from its scans) with ``change(msg)`` applied to
+    every Range message."""
+    reader = LogReader(EXCERPT / "log.mcap")
+    with LogWriter(dst) as w:
+        for name in sorted(reader.metadata):
+            w.metadata(name, reader.metadata[name])
+        for m in reader.messages():
+            if m.typename == M.RANGE:
+                change(m.msg)
+            w.write(m.topic, m.typename, m.msg, m.t)
+    return dst
+
+
+def _sonar_map(log: Path, out: Path) -> tuple[int, str, str]:
+    return _cli(
+        "map", log, "--trajectory", EXCERPT / "truth.tum", "--config", "real_building_sonar",
+        "--ranges", "sonar", "--no-figures", "-o", out,
+    )  # fmt: skip
+
+
+def test_open_ranges_takes_the_sonar_cone_from_the_config() -> None:
+    """RangeSensor.cone is the config's ``sonar.fov_deg``."""
+    cfg = load_config("real_building_sonar")
+    cfg = replace(cfg, sonar=replace(cfg.sonar, fov_deg=33.0))
+    sensor = open_ranges(LogReader(EXCERPT / "log.mcap"), cfg, "sonar")
+    assert sensor.cone == pytest.approx(math.radians(33.0))
+
+
+def test_sonars_without_a_field_of_view_map_with_the_configured_cone(tmp_path: Path) -> None:
+    """Every Range message with ``field_of_view: 0``: the map stage reads them with the
+    config's 25-degree cone (the excerpt's own), so it builds the clean log's map (to the
+    float32 rounding of the cone), every reading counted ``bad_fov`` and the references finite."""
+    zero = _excerpt_with(tmp_path / "fov0.mcap", lambda msg: setattr(msg, "field_of_view", 0.0))
+    code, out, err = _sonar_map(zero, tmp_path / "fgm0")
+    assert code == 0, err
+    s = json.loads(out)
+    assert s["sonar_stats"]["bad_fov"] == s["sonar_stats"]["readings"] > 0
+    assert s["cells_touched"] > 0 and s["references"]
+    assert all(math.isfinite(r["angle_deg"]) for r in s["references"])
+    code, _, err = _sonar_map(EXCERPT / "log.mcap", tmp_path / "fgm")
+    assert code == 0, err
+    for k in ("m_e", "m_o", "m_t", "m_c"):
+        with (
+            np.load(tmp_path / "fgm0" / "fgm.npz") as a,
+            np.load(tmp_path / "fgm" / "fgm.npz") as b,
+        ):
+            # the message's float32 cone against the config's float64 one
+            np.testing.assert_allclose(a[k], b[k], atol=1e-5)
+
+
+def test_a_map_whose_evidence_touched_no_cell_is_refused(tmp_path: Path) -> None:
+    """Every sonar reading invalid (NaN): the map stage writes nothing and exits 3 with
+    one line naming the log and why."""
+    bad = _excerpt_with(tmp_path / "nan.mcap", lambda msg: setattr(msg, "range", math.nan))
+    code, out, err = _sonar_map(bad, tmp_path / "fgm")
+    lines = [ln for ln in err.splitlines() if ln.strip()]
+    assert code == 3 and out == "" and len(lines) == 1, err
+    assert str(bad) in lines[0] and "no map written" in lines[0] and "no map cell" in lines[0]
+    assert not (tmp_path / "fgm").exists()

@@ -182,8 +182,9 @@ class _RingTable:
 
 
 def read_rings(reader: LogReader, cfg: Config, t_end: float, ranges: str | None = None):
-    """(times (N,), ranges (N, M), max ranges (N, M), fov, mounts (M, 3), stats, offsets
-    (N, M): each reading's stamp minus its ring's, s; 0 for rings stamped alike).
+    """(times (N,), ranges (N, M), max ranges (N, M), fov, mounts (M, 3), or (N, M, 3)
+    when some ring has its own (a laser scan of another geometry), stats, offsets (N, M):
+    each reading's stamp minus its ring's, s; 0 for rings stamped alike).
 
     Parameters
     ----------
@@ -226,14 +227,20 @@ def read_rings_compact(
     mounts = sensor.mounts
     stats = RingStats()
     table, fov = _RingTable(len(mounts)), 0.0
-    for ring in sensor.rings(reader.messages(sensor.topics), stats):
+    own: dict[int, np.ndarray] = {}  # ring -> its own mounts (a scan of another geometry)
+    for k, ring in enumerate(sensor.rings(reader.messages(sensor.topics), stats)):
         if ring.t > t_end + 1e-9:
             break
         table.append(ring.t, ring.ranges, ring.max_range, getattr(ring, "offsets", None))
+        if getattr(ring, "mounts", None) is not None:
+            own[k] = ring.mounts
         fov = ring.fov
     times, rr, rmax, offsets = table.arrays()
     if not len(times):
         raise InputError(reader.path, f"no {sensor.kind} readings in the window [0, {t_end:.2f}] s")
+    if own:  # each ring's mounts (N, M, 3): the sensor's, or the ring's own
+        mounts = np.repeat(np.asarray(mounts, dtype=float)[None], len(times), axis=0)
+        mounts[list(own)] = np.stack(list(own.values()))
     return times, rr, rmax, fov, mounts, stats, offsets
 
 
@@ -327,6 +334,7 @@ def build_map(
     t_traj, p_traj, tum_dropped = read_tum(traj_path, sort=opts.sort, report=True)
     t_end, how = freeze_time(reader, cfg, opts)
     sensor = open_ranges(reader, cfg, opts.ranges, base=base_frame(reader, cfg))
+    what = "laser scans" if sensor.kind == "scan" else "sonar rings"
     times, ranges, rmax, fov, mounts, stats, offsets = read_rings_compact(
         reader, cfg, t_end, sensor=sensor
     )
@@ -338,14 +346,16 @@ def build_map(
         if not opts.skip_uncovered:
             raise InputError(
                 traj_path,
-                f"trajectory ({t_traj[0]:.2f}-{t_traj[-1]:.2f} s) does not cover sonar rings "
+                f"trajectory ({t_traj[0]:.2f}-{t_traj[-1]:.2f} s) does not cover {what} "
                 f"at {desc}{' ...' if len(gaps) > 3 else ''} ({int((~ok).sum())} rings); "
                 "pass --skip-uncovered to skip them",
             )
         if ok.sum() == 0:
-            raise InputError(traj_path, f"trajectory covers none of the sonar rings ({desc})")
+            raise InputError(traj_path, f"trajectory covers none of the {what} ({desc})")
     if not ok.all():
         times, ranges, rmax, offsets = times[ok], ranges[ok], rmax[ok], offsets[ok]
+        if mounts.ndim == 3:
+            mounts = mounts[ok]
     poses = interpolate_poses(t_traj, p_traj, times, outside="hold")
     if sensor.stamped_apart:  # as a run deskews: each reading at its stamp (slam/deskew.py)
         mounts = deskewed_mounts(mounts, offsets.astype(float), times, t_traj, p_traj)
@@ -355,7 +365,7 @@ def build_map(
         raise InputError(traj_path, str(exc)) from None
     t_build = time.perf_counter()
     batch = 64
-    with Progress(len(times), "map: fusing sonar rings") as bar:
+    with Progress(len(times), f"map: fusing {what}") as bar:
         for k in range(0, len(times), batch):  # batches of rings, in time order
             sl = slice(k, k + batch)
             r, m = ranges[sl].astype(float), rmax[sl].astype(float)  # exact (float32)
@@ -363,6 +373,19 @@ def build_map(
             bar.update_to(min(k + batch, len(times)))
     build_s = time.perf_counter() - t_build
     fgm = builder.freeze(t_end)
+    touched = int((fgm.m_t < 1.0).sum())
+    if touched == 0:  # an empty map: no references, nothing to localise against
+        why = (
+            f"{stats.extra.get('bad_scans', 0)} scans refused"
+            if sensor.kind == "scan"
+            else f"{stats.bad_fov} with no valid field of view"
+        )
+        raise InputError(
+            log_path,
+            f"no map written: the {len(times)} {what} put evidence in no map cell "
+            f"({stats.readings} readings: {stats.invalid} invalid, {stats.no_echo} no echo; "
+            f"{why})",
+        )
     refs = extract_references(fgm, poses[:, :2], params)
     world = read_world(reader)
     world_dict = world.to_dict() if world is not None else None
@@ -398,7 +421,7 @@ def build_map(
         range_sensor=sensor.describe(),
         trajectory_repeats_dropped=tum_dropped,
         cell_updates=builder.cell_updates,
-        cells_touched=int((fgm.m_t < 1.0).sum()),
+        cells_touched=touched,
         freeze_time=t_end,
         freeze_rule=how,
         references=[

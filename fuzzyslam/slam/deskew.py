@@ -105,9 +105,10 @@ class OdometryTrail:
 
 def deskewed(events: Iterator[Event], mounts: np.ndarray) -> Iterator[Event]:
     """``events`` (in stamp order) with each ring that has reading offsets given the
-    mounts that deskew it (``Ring.mounts``, module docstring), and each ring without
-    (one reading, or one stamp) the sensor's own, so that a multi-ring window never takes
-    another ring's for it; other events as they are.
+    mounts that deskew it (``Ring.mounts``, module docstring; from the ring's own mounts
+    when it has them, a laser scan of another geometry), and each ring without offsets
+    (one reading, or one stamp) the sensor's own (or its own), so that a multi-ring
+    window never takes another ring's for it; other events as they are.
 
     Parameters
     ----------
@@ -126,6 +127,7 @@ def deskewed(events: Iterator[Event], mounts: np.ndarray) -> Iterator[Event]:
         if kind is Odom:
             trail.add(ev.t, ev.d_trans, ev.d_rot)
         elif kind is RingEvent:
-            off = ev.ring.offsets
-            ev.ring.mounts = mounts if off is None else trail.mounts(ev.t, off, mounts)
+            off, own = ev.ring.offsets, ev.ring.mounts  # own: a scan of another geometry
+            base = mounts if own is None else own
+            ev.ring.mounts = base if off is None else trail.mounts(ev.t, off, base)
         yield ev

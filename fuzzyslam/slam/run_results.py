@@ -18,6 +18,7 @@ from fuzzyslam.slam.ekf import EkfSlam
 from fuzzyslam.slam.events import LampRecord, MemorySink, RowSink, SlamResult
 from fuzzyslam.slam.health import DivergenceMonitor, orphan_landmarks
 from fuzzyslam.slam.map_motion import MapMotionMonitor
+from fuzzyslam.streams.sonar import RingStats
 from fuzzyslam.summary import OMIT
 
 
@@ -86,17 +87,23 @@ class LateEvents:
 
 
 def lost_events(
-    late: LateEvents, counts: RunCounts, lost: dict[str, float], readings: int
+    late: LateEvents,
+    counts: RunCounts,
+    lost: dict[str, float],
+    readings: int,
+    stats: RingStats | None = None,
 ) -> tuple[str, float] | None:
     """``("events_lost", time of the first loss)`` when more than ``LOST_SHARE`` of the
-    frames, of the odometry increments or of the range readings were not used, else None.
+    frames, of the odometry increments, of the range readings or of the laser scans were
+    not used, else None.
 
     Lost: frames and odometry the runner skipped as too late (``late``), frames it
     skipped because the odometry had gone silent (``counts.frames_stale_odometry``: a
-    driver that stopped), and frames and range readings the input edge did not use
+    driver that stopped), frames and range readings the input edge did not use
     (``lost``, slam/inputs.py: stamped back in time, or on another clock than the
-    odometry's). A run that loses a stream so is
-    estimated from what is left, and says so.
+    odometry's), and laser scans the range sensor refused (``stats``: the extra count
+    ``bad_scans`` against the scans read, :func:`fuzzyslam.streams.scan.scan_rings`).
+    A run that loses a stream so is estimated from what is left, and says so.
 
     Parameters
     ----------
@@ -108,6 +115,9 @@ def lost_events(
         ``LogInputs.lost``: ``frames``, ``readings`` and ``first_at`` (s, when any).
     readings : int
         Range readings read (``RingStats.readings``).
+    stats : RingStats, optional
+        The range sensor's counts: its refused scans (``extra["bad_scans"]``, the first
+        at ``first_refused_at``) against its rings.
 
     Returns
     -------
@@ -115,14 +125,19 @@ def lost_events(
     """
     stale = counts.frames_stale_odometry  # read, but skipped: the odometry had gone silent
     frames = late.frames + int(lost["frames"]) + stale
+    refused = int(stats.extra.get("bad_scans", 0)) if stats is not None else 0
     shares = (
         (frames, counts.frames - stale),
         (late.odometry, counts.odometry),
         (int(lost["readings"]), readings),
+        (refused, stats.rings if stats is not None else 0),
     )
     if all(n <= LOST_SHARE * (n + used) for n, used in shares):
         return None
-    times = [t for t in (late.first_at, late.stale_at, lost.get("first_at")) if t is not None]
+    first = stats.first_refused_at if refused and stats is not None else None
+    times = [
+        t for t in (late.first_at, late.stale_at, lost.get("first_at"), first) if t is not None
+    ]
     return "events_lost", min(times)
 
 

@@ -476,7 +476,9 @@ def _run_filter(
         res.lamps,
         runner.map_motion,
         aids,
-        lost_events(runner.late, res.counts, inputs.lost, inputs.ring_stats.readings),
+        lost_events(
+            runner.late, res.counts, inputs.lost, inputs.ring_stats.readings, inputs.ring_stats
+        ),
     )
     if inputs.lamp_source == "detections":
         res.counts = replace(res.counts, detections_own_covariance=inputs.own_covariances)

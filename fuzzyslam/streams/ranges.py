@@ -11,11 +11,15 @@ sensors sit (one home for ``map`` and ``run``):
   (older simulated logs) falls back to the nominal ``sonar.count`` ring of
   ``robot.radius``, and says so in ``mounts_source``. The firing pattern (simultaneous
   or sequential) and the stamp gap that groups readings into rings are measured on the
-  first ``FIRING_SAMPLE`` readings (:func:`fuzzyslam.streams.sonar.firing_gap`).
+  first ``FIRING_SAMPLE`` readings (:func:`fuzzyslam.streams.sonar.firing_gap`). Rings
+  read before any Range message with a valid field of view take the config's sonar cone
+  ``sonar.fov_deg`` (``RangeSensor.cone``).
 - ``scan``: ``topics.scan`` (sensor_msgs/LaserScan) as a ring of narrow sensors, one per
   kept beam (:mod:`fuzzyslam.streams.scan`), at the laser's /tf_static mount (frame of
   the first message) composed with each beam angle; cone width ``ranges.beam_width_deg``,
-  every ``ranges.scan_step``-th beam kept.
+  every ``ranges.scan_step``-th beam kept. A scan of another beam count or angles is read
+  onto the first scan's kept beams, placed by the same laser mount (``RangeSensor.laser``;
+  :func:`fuzzyslam.streams.scan.scan_rings`).
 
 A mount is the sensor frame's transform in the robot's base frame (``base``: the
 odometry's child frame), composed down the whole /tf_static chain with full 3D
@@ -50,7 +54,7 @@ from fuzzyslam.streams.sonar import (
     mounts_of_frames,
     present_sonar_topics,
 )
-from fuzzyslam.streams.tf import TfProblem, frame_mounts
+from fuzzyslam.streams.tf import Rigid, TfProblem, frame_mounts
 
 SOURCES = ("auto", "sonar", "scan")
 
@@ -74,8 +78,10 @@ class RangeParams:
 class RangeSensor:
     """The chosen range sensor: its topics, the (M, 3) mounts (x, y, yaw) of its M
     sensors in the robot's base frame, and how its messages become :class:`Ring` s
-    (a sonar ring: ``firing`` simultaneous or sequential, and ``ring_gap`` the largest
-    stamp step within a ring, s; :func:`fuzzyslam.streams.sonar.firing_gap`)."""
+    (a sonar ring: ``firing`` simultaneous or sequential, ``ring_gap`` the largest
+    stamp step within a ring, s, :func:`fuzzyslam.streams.sonar.firing_gap`, and
+    ``cone`` the field of view (rad) until a Range message gives a valid one; a laser:
+    ``laser`` its mount, which places the beams of a scan of another geometry)."""
 
     kind: str
     topics: list[str]
@@ -85,6 +91,8 @@ class RangeSensor:
     beam_width: float = 0.0
     ring_gap: float = SIMULTANEOUS_GAP_S
     firing: str = ""
+    cone: float | None = None
+    laser: Rigid | None = None
 
     @property
     def stamped_apart(self) -> bool:
@@ -99,9 +107,9 @@ class RangeSensor:
         """Rings (or scans) of the log's messages on :attr:`topics`, in log order."""
         if self.kind == "scan":
             assert self.geometry is not None
-            return scan_rings(messages, self.geometry, self.beam_width, stats)
+            return scan_rings(messages, self.geometry, self.beam_width, stats, self.laser)
         index = {tp: i for i, tp in enumerate(self.topics)}
-        return group_rings(messages, index, len(self.topics), self.ring_gap, stats)
+        return group_rings(messages, index, len(self.topics), self.ring_gap, stats, self.cone)
 
     def describe(self) -> dict[str, Any]:
         """For a stage's JSON summary."""
@@ -192,6 +200,7 @@ def _sonar(reader: LogReader, cfg: Any, topics: list[str], base: str) -> RangeSe
             + (" message: the log is damaged)" if tf is not None else ")"),
             ring_gap=gap,
             firing=firing,
+            cone=_cone(cfg),
         )
     frames = _first_frames(reader, topics)
     topics = [tp for tp in topics if tp in frames]
@@ -205,7 +214,14 @@ def _sonar(reader: LogReader, cfg: Any, topics: list[str], base: str) -> RangeSe
         raise InputError(reader.path, f"no {cfg.topics.tf_static} mount for {names}")
     source = _mounts_source(reader, cfg.topics.tf_static, stand_ins, base)
     firing, gap = _firing(reader, topics)
-    return RangeSensor("sonar", topics, mounts, source, ring_gap=gap, firing=firing)
+    return RangeSensor(
+        "sonar", topics, mounts, source, ring_gap=gap, firing=firing, cone=_cone(cfg)
+    )
+
+
+def _cone(cfg: Any) -> float:
+    """The configured sonar cone (rad): ``sonar.fov_deg``."""
+    return float(np.deg2rad(cfg.sonar.fov_deg))
 
 
 def _scan(reader: LogReader, cfg: Any, base: str) -> RangeSensor:
@@ -238,6 +254,7 @@ def _scan(reader: LogReader, cfg: Any, base: str) -> RangeSensor:
         _mounts_source(reader, cfg.topics.tf_static, stand_ins, base),
         geom,
         float(np.deg2rad(rp.beam_width_deg)),
+        laser=found[tp],
     )
 
 

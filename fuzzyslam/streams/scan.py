@@ -17,8 +17,20 @@ Ranges are read as the message defines them (sensor_msgs/LaserScan; REP 117):
   the "no echo" reading of :mod:`fuzzyslam.streams.sonar` (``no_echo``);
 - ``-inf`` (too close), NaN (erroneous) and finite ranges below range_min or above
   range_max are invalid: NaN, skipped by the evidence (``invalid``);
-- a message whose geometry (angle_min, angle_increment, beam count) differs from the
-  first one's, or with a non-positive or non-finite range_max, is dropped (``bad_scans``);
+- a message with as many beams as the first one, its angle_min within ``ANGLE_TOL`` of
+  the first one's and its angle_increment's difference summed over the scan within
+  ``ANGLE_TOL`` too, has the first one's geometry (float32 fields that jitter);
+- a message whose beam count or angles truly differ (an RPLidar's 180 / 179 beams) is
+  read onto the first message's kept beams, so that every ring has the same M sensors:
+  each kept beam takes the message's beam nearest to it in angle, when that beam is
+  less than half the kept beams' spacing away (so no beam serves two), and reads NaN
+  (``missing``) where the message does not cover it; each beam is placed at its own
+  angle (``Ring.mounts``, from the laser's mount: :func:`fuzzyslam.streams.tf.beam_mounts`)
+  unless all of them lie within ``ANGLE_TOL`` of the kept beams' (``resampled_scans``);
+- a message with a non-positive or non-finite range_max, no beams, a zero or non-finite
+  angle_increment, or no beam near any kept beam is refused (``bad_scans``): counted, the
+  first one's stamp kept (``RingStats.first_refused_at``: a run counts them into its
+  lost events), and more than ``FEW_REFUSED`` said in one line on stderr;
 - a scan stamped before the previous one is dropped (``out_of_order``), a repeated stamp
   too (``duplicates``).
 
@@ -39,10 +51,24 @@ from dataclasses import dataclass
 import numpy as np
 from numpy.typing import ArrayLike
 
+from fuzzyslam.progress import note
 from fuzzyslam.streams.messages import stamp_to_sec
 from fuzzyslam.streams.reader import LogMessage
 from fuzzyslam.streams.sonar import Ring, RingStats
-from fuzzyslam.streams.tf import Rigid, beam_mounts
+from fuzzyslam.streams.tf import Rigid, TfProblem, beam_mounts
+
+ANGLE_TOL = 1e-4  # rad: angles this close are one geometry (float32 jitter is ~1e-7 rad)
+FEW_REFUSED = 3  # more scans refused than this: a line on stderr
+
+
+@dataclass(frozen=True)
+class Resampled:
+    """A scan read onto a geometry's kept beams (:meth:`ScanGeometry.resample`)."""
+
+    index: np.ndarray  # (M,) int: the scan's beam for each kept beam (valid where ``ok``)
+    ok: np.ndarray  # (M,) bool: the kept beam has a scan beam near it
+    angles: np.ndarray  # (M,) the beams' angles in the laser frame (rad; kept ones if not ok)
+    moved: bool  # some beam lies more than ANGLE_TOL off its kept beam's angle
 
 
 @dataclass(frozen=True)
@@ -99,12 +125,55 @@ class ScanGeometry:
         return beam_mounts(laser, self.angles)
 
     def matches(self, msg) -> bool:
-        """Whether a LaserScan message has this geometry (float32 fields compared exactly)."""
-        return (
-            len(msg.ranges) == self.beams
-            and float(msg.angle_min) == self.angle_min
-            and float(msg.angle_increment) == self.angle_increment
-        )
+        """Whether a LaserScan message has this geometry: as many beams, angle_min within
+        ``ANGLE_TOL``, and its angle_increment's difference, summed over the scan, within
+        ``ANGLE_TOL`` too (float32 fields that jitter).
+
+        Parameters
+        ----------
+        msg : sensor_msgs/LaserScan
+            The message.
+
+        Returns
+        -------
+        bool
+        """
+        n = len(msg.ranges)
+        d_min = abs(float(msg.angle_min) - self.angle_min)
+        d_inc = abs(float(msg.angle_increment) - self.angle_increment)
+        # NaN fields compare False: not this geometry
+        return n == self.beams and d_min <= ANGLE_TOL and d_inc * max(n - 1, 1) <= ANGLE_TOL
+
+    def resample(self, msg) -> Resampled | None:
+        """A LaserScan message of another geometry read onto this one's kept beams (module
+        docstring): for each kept beam the message's beam nearest in angle, when less than
+        half the kept beams' spacing away.
+
+        Parameters
+        ----------
+        msg : sensor_msgs/LaserScan
+            The message (any beam count, angle_min and angle_increment, either sign).
+
+        Returns
+        -------
+        Resampled or None
+            None when the message has no beams, a zero or non-finite angle, or no beam
+            near any kept beam.
+        """
+        n = len(msg.ranges)
+        a0, inc = float(msg.angle_min), float(msg.angle_increment)
+        if n == 0 or not (np.isfinite(a0) and np.isfinite(inc) and inc != 0):
+            return None
+        want = self.angles
+        index = np.clip(np.rint((want - a0) / inc), 0, n - 1).astype(np.intp)
+        got = a0 + index * inc
+        off = np.abs(got - want)
+        # < half the spacing: a scan beam is that near to one kept beam at most
+        ok = off < 0.5 * abs(self.angle_increment) * self.step
+        if not ok.any():
+            return None
+        moved = bool((off[ok] > ANGLE_TOL).any())
+        return Resampled(index, ok, np.where(ok, got, want), moved)
 
 
 def scan_geometry(msg, step: int = 1) -> ScanGeometry:
@@ -145,39 +214,104 @@ def scan_rings(
     geometry: ScanGeometry,
     beam_width: float,
     stats: RingStats | None = None,
+    laser: Rigid | ArrayLike | None = None,
 ) -> Iterator[Ring]:
-    """LaserScan messages (log order) as :class:`Ring` s of the kept beams: ranges (M,),
-    max ranges (M,), ``fov`` = the beam width (rad); a scan whose beams are taken
-    ``time_increment`` apart at its last kept beam's time with their offsets (module
-    docstring). Glitches counted in ``stats``."""
+    """LaserScan messages (log order) as :class:`Ring` s of the geometry's kept beams.
+
+    A scan of another geometry is read onto the kept beams (:meth:`ScanGeometry.resample`,
+    with its own mounts when its beams' angles differ); one that cannot be read is refused
+    (module docstring). Glitches are counted in ``stats``; more than ``FEW_REFUSED``
+    refused scans are said in one line on stderr when the messages are done with.
+
+    Parameters
+    ----------
+    messages : iterable of LogMessage
+        sensor_msgs/LaserScan messages in log order.
+    geometry : ScanGeometry
+        The first message's geometry: the rings' M kept beams.
+    beam_width : float
+        The cone of one beam (rad): each ring's ``fov``.
+    stats : RingStats, optional
+        Counts (``bad_scans``, ``resampled_scans`` among the extras).
+    laser : Rigid or array_like, shape (3,), optional
+        The laser's mount in the base frame (as :meth:`ScanGeometry.mounts`), which
+        places the beams of a scan of another geometry; default the base frame itself.
+
+    Returns
+    -------
+    iterator of Ring
+        Ranges (M,), max ranges (M,), ``fov`` the beam width; a scan whose beams are taken
+        ``time_increment`` apart at its last kept beam's time with their offsets.
+    """
     st = stats if stats is not None else RingStats()
     st.extra.setdefault("bad_scans", 0)
+    st.extra.setdefault("resampled_scans", 0)
+    if laser is None:
+        laser = Rigid()
+    elif not isinstance(laser, Rigid):
+        x, y, yaw = np.asarray(laser, dtype=float).reshape(3)
+        laser = Rigid.planar(x, y, yaw)
     kept = geometry.kept
     after = kept - kept[-1]  # each kept beam's place before the last, in beams
     last_t = -np.inf
-    for m in messages:
-        msg = m.msg
-        t = stamp_to_sec(msg.header.stamp)
-        if t < last_t:
-            st.out_of_order += 1
-            continue
-        if t == last_t:
-            st.duplicates += 1
-            continue
-        hi, lo = float(msg.range_max), float(msg.range_min)
-        if not geometry.matches(msg) or not (np.isfinite(hi) and hi > 0):
-            st.extra["bad_scans"] += 1
-            continue
-        last_t = t
-        raw = np.asarray(msg.ranges, dtype=np.float32)[kept]
-        ranges, invalid, no_echo = scan_ranges(raw, lo, hi)
-        st.rings += 1
-        st.readings += len(kept)
-        st.invalid += invalid
-        st.no_echo += no_echo
-        ti = _time_increment(msg)
-        if ti > 0 and len(kept) > 1:
-            last = float(kept[-1]) * ti
-            yield Ring(t + last, ranges, np.full(len(kept), hi), float(beam_width), after * ti)
-        else:
-            yield Ring(t, ranges, np.full(len(kept), hi), float(beam_width))
+    refused, topic = 0, "the laser scans"
+    try:
+        for m in messages:
+            msg = m.msg
+            t = stamp_to_sec(msg.header.stamp)
+            if t < last_t:
+                st.out_of_order += 1
+                continue
+            if t == last_t:
+                st.duplicates += 1
+                continue
+            hi, lo = float(msg.range_max), float(msg.range_min)
+            usable = np.isfinite(hi) and hi > 0
+            same = usable and geometry.matches(msg)
+            other = None if same or not usable else geometry.resample(msg)
+            own = None
+            if other is not None and other.moved:
+                try:
+                    own = beam_mounts(laser, other.angles)
+                except TfProblem:  # a beam of a tilted laser too near vertical
+                    other = None
+            if not same and other is None:
+                st.extra["bad_scans"] += 1
+                if st.first_refused_at is None:
+                    st.first_refused_at = t
+                refused += 1
+                topic = getattr(m, "topic", topic)
+                continue
+            last_t = t
+            raw = np.asarray(msg.ranges, dtype=np.float32)
+            ti = _time_increment(msg)
+            if same:
+                ranges, invalid, no_echo = scan_ranges(raw[kept], lo, hi)
+                read, last = len(kept), int(kept[-1])
+                offsets = after * ti
+            else:
+                assert other is not None
+                ok = other.ok
+                ranges = np.full(len(kept), np.nan)
+                ranges[ok], invalid, no_echo = scan_ranges(raw[other.index[ok]], lo, hi)
+                read = int(np.count_nonzero(ok))
+                last = int(other.index[ok].max())  # the last beam taken (beam k at k * ti)
+                offsets = np.where(ok, (other.index - last) * ti, np.nan)
+                st.missing += len(kept) - read
+                st.extra["resampled_scans"] += 1
+            st.rings += 1
+            st.readings += read
+            st.invalid += invalid
+            st.no_echo += no_echo
+            rmax = np.full(len(kept), hi)
+            if ti > 0 and read > 1:
+                yield Ring(t + last * ti, ranges, rmax, float(beam_width), offsets, own)
+            else:
+                yield Ring(t, ranges, rmax, float(beam_width), mounts=own)
+    finally:
+        if refused > FEW_REFUSED:
+            note(
+                f"{topic}: {refused} laser scans refused (a range_max that is not a positive "
+                "number, or no beam within the first scan's field of view); counted in "
+                "bad_scans and not used"
+            )

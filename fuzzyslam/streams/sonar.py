@@ -40,7 +40,9 @@ counted, never silently used:
 - a reading read after one stamped more than ``MAX_RING_SPAN_S`` later (too late to be
   put back in order) is dropped (``out_of_order``);
 - a field of view that is not finite, not positive or wider than a half-plane
-  (``MAX_PLAUSIBLE_FOV``) is replaced by the last valid one (``bad_fov``).
+  (``MAX_PLAUSIBLE_FOV``) is replaced by the last valid one, and until one is seen by the
+  configured cone (``sonar.fov_deg``: ``group_rings``' ``cone``) (``bad_fov``): a log
+  whose Range messages all say ``field_of_view: 0`` is read with the configured cone.
 """
 
 from __future__ import annotations
@@ -51,6 +53,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from fuzzyslam.sim.params import SonarParams
 from fuzzyslam.stamps import in_stamp_order
 from fuzzyslam.streams.messages import stamp_to_sec
 from fuzzyslam.streams.reader import LogMessage
@@ -62,6 +65,7 @@ MAX_RING_SPAN_S = 1.0  # s: a firing cycle longer than this is cut (24 sonars at
 SIMULTANEOUS_GAP_S = 0.05  # s: the largest gap within a ring stamped alike
 SEQUENTIAL_GAP_FACTOR = 2.5  # gap / median stamp step of sequential firing
 FIRING_SAMPLE = 300  # readings whose stamps measure the firing pattern
+DEFAULT_CONE = math.radians(SonarParams().fov_deg)  # rad: the config's default sonar cone
 
 
 @dataclass
@@ -70,7 +74,9 @@ class Ring:
     the cone's full angle (rad); ``offsets`` (count,): each reading's stamp minus ``t``
     (s, <= 0; NaN where none), or None for a ring stamped alike; ``mounts`` (count, 3):
     the sensors' poses in the robot's frame at ``t`` with the motion since each reading
-    taken out (:func:`deskewed_mounts`), or None: the sensor's own mounts."""
+    taken out (:func:`deskewed_mounts`), or a laser scan's beams placed at their own
+    angles (a scan of another geometry: :func:`fuzzyslam.streams.scan.scan_rings`), or
+    None: the sensor's own mounts."""
 
     t: float
     ranges: np.ndarray
@@ -82,12 +88,12 @@ class Ring:
 
 def ring_mounts(ring: Ring, mounts: np.ndarray) -> np.ndarray:
     """The mounts that place ``ring``'s readings in the robot's frame at its time: its
-    deskewed ones, else the sensor's.
+    own (deskewed, or a laser scan's of another geometry), else the sensor's.
 
     Parameters
     ----------
     ring : Ring
-        A ring (or a laser scan's, which has no mounts of its own).
+        A ring (or a laser scan's: its own mounts only when its geometry differs).
     mounts : ndarray, shape (M, 3)
         The sensor's mounts.
 
@@ -153,6 +159,8 @@ class RingStats:
     bad_fov: int = 0
     implausible: int = 0
     sequential: int = 0  # rings whose readings' stamps span more than the gap
+    # the stamp (s) of the first scan refused (``extra["bad_scans"]``; not in as_dict)
+    first_refused_at: float | None = None
 
     def as_dict(self) -> dict[str, int]:
         """The counts, for a stage's JSON summary."""
@@ -228,6 +236,7 @@ def group_rings(
     count: int,
     gap: float = SIMULTANEOUS_GAP_S,
     stats: RingStats | None = None,
+    cone: float | None = None,
 ) -> Iterator[Ring]:
     """Group sonar Range messages (in log order) into rings, one per firing cycle.
 
@@ -249,6 +258,9 @@ def group_rings(
         :func:`firing_gap`).
     stats : RingStats or None
         Counts the glitches (module docstring).
+    cone : float or None
+        The field of view (rad) of the rings read before any reading with a valid one:
+        the config's ``sonar.fov_deg`` (None: ``DEFAULT_CONE``, its default).
 
     Returns
     -------
@@ -263,7 +275,7 @@ def group_rings(
     rmax = np.full(count, np.nan)
     seen = np.zeros(count, dtype=bool)
     offset = np.zeros(count)  # each reading's stamp - cur_t
-    fov = 0.0
+    fov = DEFAULT_CONE if cone is None else float(cone)  # until a valid one is read
     last_t = -np.inf
 
     def flush() -> Ring:
