@@ -89,16 +89,25 @@ def test_detections_in_a_mounted_frame_give_the_same_run(
 
 
 def test_detections_in_a_frame_tf_static_does_not_place_are_refused(tmp_path: Path) -> None:
-    """Detections in 'camera_link' with no /tf_static: one line naming the frame and what
-    to publish (before, they were used as if in base_link)."""
+    """Detections in 'camera_link' with a /tf_static that places only a laser: one line
+    naming the frame and what to publish (before, they were used as if in base_link);
+    with no /tf_static at all they are taken as in the base frame, and a note says so."""
+    static = tf(link("base_link", "laser", 0.1, 0.0, 0.2))
     log = rewrite(
         EXCERPT / "log.mcap",
         tmp_path / "unplaced.mcap",
-        moved("camera_link", np.eye(3), np.zeros(3), None),
+        moved("camera_link", np.eye(3), np.zeros(3), static),
     )
     code, _, err = cli("run", log, "--config", "real_detections", "-o", tmp_path / "est")
     assert code == 3 and "'camera_link'" in err and "/tf_static" in err
     assert len(err.strip().splitlines()) == 1 and not (tmp_path / "est").exists()
+    bare = rewrite(
+        EXCERPT / "log.mcap",
+        tmp_path / "bare.mcap",
+        moved("camera_link", np.eye(3), np.zeros(3), None),
+    )
+    code, _, err = cli("run", bare, "--config", "real_detections", "-o", tmp_path / "bare")
+    assert code == 0 and "no /tf_static: the detections' frame 'camera_link'" in err
 
 
 def test_odometry_with_its_twist_alone_is_integrated(plain: Path, tmp_path: Path) -> None:

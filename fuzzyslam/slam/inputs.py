@@ -684,7 +684,7 @@ def _detection_mount(reader: LogReader, cfg: Config, base: str, notes: list[str]
     message's ``header.frame_id``), composed from /tf_static (:func:`locate`); None when
     they are in ``base`` (or name no frame, or name ``base_link``/``base_footprint`` when
     the other is the base and /tf_static does not tell them apart: REP 120, one planar
-    frame).
+    frame, or the log has no /tf_static at all: taken as the base, with a note).
 
     Parameters
     ----------
@@ -723,6 +723,12 @@ def _detection_mount(reader: LogReader, cfg: Config, base: str, notes: list[str]
             reader.path, f"{tp.tf_static} cannot place the detections' frame {frame!r}: {e}"
         ) from None
     if found is None and frame in BASE_ALIASES and base in BASE_ALIASES:
+        return None
+    if tree is None:  # as the sonars without /tf_static: the robot's own frame, said
+        notes.append(
+            f"{reader.path}: no {tp.tf_static}: the detections' frame {frame!r} is taken as "
+            f"the base frame {base!r}"
+        )
         return None
     if found is None:
         raise InputError(
