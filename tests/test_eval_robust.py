@@ -4,17 +4,14 @@ truth without landmarks, and its progress and warnings on stderr."""
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+from test_eval_cli import _cli
 
-from fuzzyslam.cli import main
 from fuzzyslam.evaluation.core import Estimate, Truth, Updates, evaluate
 from fuzzyslam.evaluation.figures import fig_consistency, running_mean
 from fuzzyslam.evaluation.params import EvalParams
@@ -120,24 +117,6 @@ def test_summary_text_is_strict_json_with_null_for_non_finite() -> None:
 
 
 # --- a small run directory, evaluated by the CLI --------------------------------------
-
-
-@dataclass
-class CliResult:
-    returncode: int
-    stdout: str
-    stderr: str
-
-
-def _cli(*args: object) -> CliResult:
-    out, err = io.StringIO(), io.StringIO()
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            main([str(a) for a in args])
-            code = 0
-        except SystemExit as exc:
-            code = int(exc.code or 0)
-    return CliResult(code, out.getvalue(), err.getvalue())
 
 
 def _case(root: Path, cov_scale: float = 1.0) -> tuple[Path, Path]:

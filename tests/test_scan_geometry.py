@@ -10,8 +10,6 @@ The map-stage tests rewrite the real excerpt (data/carmen_fr079_excerpt: 360 bea
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import math
 from pathlib import Path
@@ -19,8 +17,8 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from test_robust_logs import cli, rewrite
 
-from fuzzyslam.cli import main
 from fuzzyslam.config import load_config
 from fuzzyslam.maps import build
 from fuzzyslam.se2 import compose
@@ -30,7 +28,6 @@ from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.scan import ANGLE_TOL, FEW_REFUSED, scan_geometry, scan_rings
 from fuzzyslam.streams.sonar import RingStats
 from fuzzyslam.streams.tf import Rigid
-from fuzzyslam.streams.writer import LogWriter
 
 EXCERPT = Path(__file__).resolve().parents[1] / "data" / "carmen_fr079_excerpt"
 N, A_MIN, A_INC = 181, -math.pi / 2, math.radians(1.0)
@@ -201,32 +198,18 @@ def test_refused_scans_are_counted_said_and_lost(capsys) -> None:
 # --- the map stage on the real excerpt ---------------------------------------------------
 
 
-def cli(*args) -> tuple[int, str, str]:
-    """``fuzzyslam ARGS`` in-process: (exit code, stdout, stderr)."""
-    out, err = io.StringIO(), io.StringIO()
-    code = 0
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            main([str(a) for a in args])
-        except SystemExit as exc:
-            code = int(exc.code or 0)
-    return code, out.getvalue(), err.getvalue()
-
-
 def rewrite_scans(dst: Path, change) -> Path:
     """The excerpt with each /scan message replaced by ``change(k, msg)``."""
-    reader = LogReader(EXCERPT / "log.mcap")
-    k = 0
-    with LogWriter(dst) as w:
-        for name in sorted(reader.metadata):
-            w.metadata(name, reader.metadata[name])
-        for m in reader.messages():
-            msg = m.msg
-            if m.topic == "/scan":
-                msg = change(k, msg)
-                k += 1
-            w.write(m.topic, m.typename, msg, m.t)
-    return dst
+    count = [0]
+
+    def fault(m):
+        msg = m.msg
+        if m.topic == "/scan":
+            msg = change(count[0], msg)
+            count[0] += 1
+        return [(m.topic, m.typename, msg, m.t)]
+
+    return rewrite(EXCERPT / "log.mcap", dst, fault)
 
 
 def rescan(msg, ranges, a_min):

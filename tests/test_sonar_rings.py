@@ -6,8 +6,6 @@ of view read with the configured cone, and a map whose evidence touched no cell 
 
 from __future__ import annotations
 
-import contextlib
-import io
 import json
 import math
 from dataclasses import replace
@@ -16,6 +14,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from test_robust_logs import cli, rewrite
 
 from fuzzyslam.config import load_config
 from fuzzyslam.streams import messages as M
@@ -255,36 +254,20 @@ def test_rings_before_a_valid_field_of_view_take_the_configured_cone() -> None:
 EXCERPT = Path(__file__).resolve().parents[1] / "data" / "carmen_fr079_excerpt"
 
 
-def _cli(*args) -> tuple[int, str, str]:
-    """``fuzzyslam ARGS`` in-process: (exit code, stdout, stderr)."""
-    from fuzzyslam.cli import main
-
-    out, err = io.StringIO(), io.StringIO()
-    code = 0
-    with contextlib.redirect_stdout(out), contextlib.redirect_stderr(err):
-        try:
-            main([str(a) for a in args])
-        except SystemExit as exc:
-            code = int(exc.code or 0)
-    return code, out.getvalue(), err.getvalue()
-
-
 def _excerpt_with(dst: Path, change) -> Path:
     """The real excerpt (9 sonars cut from its scans) with ``change(msg)`` applied to
     every Range message."""
-    reader = LogReader(EXCERPT / "log.mcap")
-    with LogWriter(dst) as w:
-        for name in sorted(reader.metadata):
-            w.metadata(name, reader.metadata[name])
-        for m in reader.messages():
-            if m.typename == M.RANGE:
-                change(m.msg)
-            w.write(m.topic, m.typename, m.msg, m.t)
-    return dst
+
+    def fault(m):
+        if m.typename == M.RANGE:
+            change(m.msg)
+        return [(m.topic, m.typename, m.msg, m.t)]
+
+    return rewrite(EXCERPT / "log.mcap", dst, fault)
 
 
 def _sonar_map(log: Path, out: Path) -> tuple[int, str, str]:
-    return _cli(
+    return cli(
         "map", log, "--trajectory", EXCERPT / "truth.tum", "--config", "real_building_sonar",
         "--ranges", "sonar", "--no-figures", "-o", out,
     )  # fmt: skip
