@@ -1,6 +1,6 @@
 """Landmark detections stamped in a frame other than the robot's base (a detector that
 publishes in its camera's frame, or in the camera's optical frame): put in the base frame
-by their /tf_static mount (slam/inputs.py ``_detection_mount``), in 3D. Checked on the
+by their /tf_static mount (slam/log_setup.py ``detection_mount_of``), in 3D. Checked on the
 committed MRCLAM excerpt (data/real/mrclam6_excerpt), its detections moved into the other
 frame: the run is the original's to rounding; a frame /tf_static does not place is one
 line naming it."""

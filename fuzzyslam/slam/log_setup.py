@@ -22,6 +22,7 @@ from fuzzyslam.slam.odom_gate import OdomGate, first_plausible_pose
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.logmeta import read_scenario
 from fuzzyslam.streams.reader import LogReader
+from fuzzyslam.streams.tf import Rigid, TfProblem, locate, static_tree
 
 ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
 GAP_PERIODS = 3.0  # ... or for this many of its periods (the median step), whichever is longer
@@ -423,3 +424,74 @@ def twist_only(reader: LogReader, topic: str) -> bool:
         tw = m.msg.twist.twist
         moving = moving or abs(tw.linear.x) > 1e-6 or abs(tw.angular.z) > 1e-6
     return moving
+
+
+# REP 120: base_footprint is base_link projected on the floor, the same planar frame
+BASE_ALIASES = ("base_link", "base_footprint")
+
+
+def detection_mount_of(reader: LogReader, cfg: Config, base: str, notes: list[str]) -> Rigid | None:
+    """The mount in ``base`` of the frame the detections are stamped in (the first
+    message's ``header.frame_id``), composed from /tf_static (:func:`locate`); None when
+    they are in ``base`` (or name no frame, or name ``base_link``/``base_footprint`` when
+    the other is the base and /tf_static does not tell them apart: REP 120, one planar
+    frame, or the log has no /tf_static at all: taken as the base, with a note).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    cfg : Config
+        Its topics (``detections``, ``tf_static``).
+    base : str
+        The robot's base frame (the odometry's child frame).
+    notes : list of str
+        Gets a line when a /tf_static root stands in for an unnamed base frame.
+
+    Returns
+    -------
+    Rigid or None
+
+    Raises
+    ------
+    InputError
+        When the detections' frame cannot be placed on the base frame: one line naming it.
+    """
+    tp = cfg.topics
+    first = first_message(reader, tp.detections)
+    frame = str(first.header.frame_id).lstrip("/") if first is not None else ""
+    if not frame or frame == base:
+        return None
+    tree = (
+        static_tree(m.msg for m in reader.messages([tp.tf_static]))
+        if reader.has(tp.tf_static)
+        else None
+    )
+    try:
+        found = locate(tree, frame, base) if tree is not None else None
+    except TfProblem as e:
+        raise InputError(
+            reader.path, f"{tp.tf_static} cannot place the detections' frame {frame!r}: {e}"
+        ) from None
+    if found is None and frame in BASE_ALIASES and base in BASE_ALIASES:
+        return None
+    if tree is None:  # as the sonars without /tf_static: the robot's own frame, said
+        notes.append(
+            f"{reader.path}: no {tp.tf_static}: the detections' frame {frame!r} is taken as "
+            f"the base frame {base!r}"
+        )
+        return None
+    if found is None:
+        raise InputError(
+            reader.path,
+            f"{tp.detections}: detections in frame {frame!r}, which {tp.tf_static} does not "
+            f"place on the base frame {base!r} (publish {base} -> {frame} on "
+            f"{tp.tf_static}, or stamp the detections in {base!r})",
+        )
+    mount, stand_in = found
+    if stand_in is not None:
+        notes.append(
+            f"{reader.path}: {tp.tf_static} does not name the base frame {base!r}: the "
+            f"detections' frame {frame!r} is placed in {stand_in!r} instead"
+        )
+    return mount
