@@ -1,7 +1,8 @@
 """What a log says before its events: the camera's calibration checked, the /tf frame
 names of the estimates, the filter's start pose (the rules in
-:mod:`fuzzyslam.slam.inputs`' docstring), the streams' start, and the odometry's period
-and clock (:func:`odometry_clock`; the other streams are checked against its clock as
+:mod:`fuzzyslam.slam.inputs`' docstring), the streams' start, the detections' mount
+(:func:`detection_mount_of`), whether an Odometry carries its motion in its twist alone
+(:func:`twist_only`), and the odometry's period and clock (:func:`odometry_clock`; the other streams are checked against its clock as
 they are read, ``LogInputs._same_clock``). Used by
 :func:`fuzzyslam.slam.inputs.open_inputs`.
 """
