@@ -440,3 +440,22 @@ def test_nis_windows_out_of_bounds_too_often_mean_divergence() -> None:
     alternate = run({3, 6, 9, 12, 15, 18, 21})  # 7 out of bounds, never two in a row
     assert alternate.diverged and alternate.reasons == ["nis_rate"]
     assert alternate.diverged_at == pytest.approx(9.9)  # the third of 10: tail 1.2e-7
+
+
+def test_binomial_tail_of_a_long_run_neither_overflows_nor_drifts() -> None:
+    """A run of 50 000 NIS windows (2.5 million updates): the tail is finite (the sum of
+    binomial coefficients overflowed a float from n = 1030) and equals the complement of
+    the lower sum computed by the pmf's recurrence (a second implementation); k > n gives
+    0, k = 0 gives 1."""
+    import math
+
+    from fuzzyslam.slam.health import binomial_tail
+
+    n, p = 50_000, 1e-3
+    pmf = [(1.0 - p) ** n]  # the pmf by its recurrence: pmf(i + 1) = pmf(i) (n - i) p / ((i + 1) q)
+    for i in range(59):
+        pmf.append(pmf[-1] * (n - i) / (i + 1) * p / (1.0 - p))
+    lower = math.fsum(pmf)
+    assert binomial_tail(60, n, p) == pytest.approx(1.0 - lower, rel=1e-6)
+    assert 0.0 < binomial_tail(200, n, p) < 1e-40
+    assert binomial_tail(n + 1, n, p) == 0.0 and binomial_tail(0, n, p) == 1.0

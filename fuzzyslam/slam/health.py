@@ -189,8 +189,9 @@ RATE_LEVEL = 1e-6  # binomial tail below which out-of-bounds NIS windows are too
 
 
 def binomial_tail(k: int, n: int, p: float) -> float:
-    """P(K >= k) for K ~ Binomial(n, p), summed term by term (exact to rounding; no
-    scipy in a run's start-up).
+    """P(K >= k) for K ~ Binomial(n, p), summed term by term in log space (lgamma: no
+    overflow for any n), from k up until the terms, decreasing past the mean, no longer
+    change the sum (no scipy in a run's start-up).
 
     Parameters
     ----------
@@ -205,7 +206,16 @@ def binomial_tail(k: int, n: int, p: float) -> float:
     """
     if k <= 0:
         return 1.0
-    return math.fsum(math.comb(n, i) * p**i * (1.0 - p) ** (n - i) for i in range(k, n + 1))
+    if k > n:
+        return 0.0
+    lp, lq, ln = math.log(p), math.log1p(-p), math.lgamma(n + 1)
+    terms: list[float] = []
+    for i in range(k, n + 1):
+        term = math.exp(ln - math.lgamma(i + 1) - math.lgamma(n - i + 1) + i * lp + (n - i) * lq)
+        terms.append(term)
+        if i > n * p and term <= 1e-17 * terms[0]:
+            break  # past the mean the terms fall geometrically: the rest is below rounding
+    return min(math.fsum(terms), 1.0)
 
 
 @dataclass
