@@ -141,7 +141,11 @@ def test_odometry_with_its_twist_alone_is_integrated(plain: Path, tmp_path: Path
     msgs = list(LogReader(log).messages(["/odom"]))
     t = np.array([m.msg.header.stamp.sec + 1e-9 * m.msg.header.stamp.nanosec for m in msgs])
     vw = np.array([(m.msg.twist.twist.linear.x, m.msg.twist.twist.angular.z) for m in msgs])
-    d = 0.5 * (vw[1:] + vw[:-1]) * np.diff(t)[:, None]
+    dt = np.diff(t)
+    period = np.median(dt[dt > 0])
+    dt = np.where(dt > max(1.0, 3 * period), period, dt)  # a gap: one period (counted)
+    assert json.loads(out)["warnings"].get("odometry_twist_gaps", 0) == np.sum(dt != np.diff(t))
+    d = 0.5 * (vw[1:] + vw[:-1]) * dt[:, None]
     q = got[0, 4:8]
     th = 2 * math.atan2(q[2], q[3]) + np.concatenate([[0.0], np.cumsum(d[:, 1])])
     mid = th[:-1] + 0.5 * d[:, 1]
@@ -155,3 +159,47 @@ def test_odometry_with_its_twist_alone_is_integrated(plain: Path, tmp_path: Path
     delay = load_config("real_detections").slam.odometry_delay_s
     at = np.maximum(np.searchsorted(t + delay, got[:, 0] + 1e-6, side="right") - 1, 0)
     assert np.abs(xy[at] - got[:, 1:3]).max() < 2e-6
+
+
+def _twist_only(idle_until: float = -np.inf, silent: tuple[float, float] | None = None):
+    """A ``rewrite`` fault: /odom with its pose held at zero (its twist kept), its twist
+    zero before ``idle_until`` (log time), and no message within ``silent``."""
+
+    def fault(m: LogMessage) -> list[Out]:
+        if m.topic == "/odom":
+            if silent is not None and silent[0] <= m.t - 1248444188.0 <= silent[1]:
+                return []
+            p = m.msg.pose.pose
+            p.position.x = p.position.y = 0.0
+            p.orientation.x = p.orientation.y = p.orientation.z = 0.0
+            p.orientation.w = 1.0
+            if m.t < idle_until:
+                m.msg.twist.twist.linear.x = m.msg.twist.twist.angular.z = 0.0
+        return [(m.topic, m.typename, m.msg, m.t)]
+
+    return fault
+
+
+def test_twist_only_odometry_after_an_idle_start_and_over_a_gap(tmp_path: Path) -> None:
+    """A robot that waits 40 s (640 messages of zero twist) before it drives is still
+    read from its twist; a 15 s silence of the twist-only odometry is not bridged with
+    the end speeds (which invented 4.4 m): one period at most, counted."""
+    start = next(m.t for m in LogReader(EXCERPT / "log.mcap").messages(["/odom"]))
+    idle = rewrite(EXCERPT / "log.mcap", tmp_path / "idle.mcap", _twist_only(start + 40.0))
+    code, out, err = cli("run", idle, "--config", "real_detections", "-o", tmp_path / "idle")
+    assert code == 0, err
+    assert json.loads(out)["odometry_source"] == "odom twist (/odom)"
+    gap = rewrite(
+        EXCERPT / "log.mcap", tmp_path / "gap.mcap", _twist_only(silent=(start - 1248444188.0 + 5,
+                                                                       start - 1248444188.0 + 20))
+    )  # fmt: skip
+    code, out, err = cli("run", gap, "--config", "real_detections", "-o", tmp_path / "gap")
+    assert code == 0, err
+    gaps = json.loads(out)["warnings"]["odometry_twist_gaps"]
+    whole = rewrite(EXCERPT / "log.mcap", tmp_path / "whole.mcap", _twist_only())
+    code, out, err = cli("run", whole, "--config", "real_detections", "-o", tmp_path / "whole")
+    assert code == 0, err
+    assert gaps == json.loads(out)["warnings"].get("odometry_twist_gaps", 0) + 1
+    odo = np.loadtxt(tmp_path / "gap" / "odometry.tum")
+    steps = np.hypot(*np.diff(odo[:, 1:3], axis=0).T)
+    assert steps.max() < 0.1  # no row jumps across the gap

@@ -374,6 +374,13 @@ class LogInputs:
         if prev is None:
             return None, cur
         dt = t - prev[2]
+        if dt > self.odom_gap_s:
+            # over a gap the speeds in between are unknown: one period at the end speeds,
+            # not the whole silence (motion over it is lost, as the gap warning says)
+            self.warn(
+                "odometry_twist_gaps", f"{self.odom_topic}: motion over a {dt:.2f} s gap unknown"
+            )
+            dt = self.odom_period_s
         d_trans, d_rot = 0.5 * (prev[0] + cur[0]) * dt, 0.5 * (prev[1] + cur[1]) * dt
         if not self._plausible(dt, d_trans, d_rot):
             return self._reject(t, prev, cur)
@@ -427,6 +434,9 @@ class LogInputs:
             z, own = M.detections_of(msg)
         else:
             z3, own3 = M.detections_of(msg, dims=3)
+            # a covariance without z terms (zeros or NaN there): its x, y block is rotated
+            xy_ok = np.all(np.isfinite(own3[:, :2, :2]), axis=(1, 2))
+            own3 = np.where(np.isfinite(own3) | ~xy_ok[:, None, None], own3, 0.0)
             r = mount.rotation
             z = (z3 @ r.T + mount.translation)[:, :2]
             own = (r @ own3 @ r.T)[:, :2, :2]
@@ -451,18 +461,23 @@ class LogInputs:
             yield RingEvent(ring.t, ring)
 
     def _on_clock(self, msgs: Iterator[LogMessage]) -> Iterator[LogMessage]:
-        """The range messages on the odometry's clock (:meth:`_same_clock`); the others
-        counted in ``lost["readings"]``."""
+        """The range messages on the odometry's clock (:meth:`_same_clock`) and stamped
+        no earlier than a frame can be placed (``frames_before_odometry``: where the robot
+        was before its odometry starts is unknown); the others counted in
+        ``lost["readings"]`` (the early ones in ``warnings.readings_before_odometry``)."""
+        unplaced = self.odom_first - self.cfg.slam.odometry_stale_s
         for m in msgs:
             st = m.msg.header.stamp
+            stamp = st.sec + st.nanosec * 1e-9
             # the hot path of _same_clock (the offset read each time: it follows steps)
-            skew = st.sec + st.nanosec * 1e-9 - m.t - self.clock_offset
-            if -REORDER_S <= skew <= REORDER_S or self._same_clock(
-                m.topic, skew + self.clock_offset + m.t, m.t
-            ):
-                yield m
-            else:
+            skew = stamp - m.t - self.clock_offset
+            if not (-REORDER_S <= skew <= REORDER_S or self._same_clock(m.topic, stamp, m.t)):
                 self._lose("readings", m.t)
+            elif stamp < unplaced:
+                self.warn("readings_before_odometry")
+                self._lose("readings", m.t)
+            else:
+                yield m
 
     def _lose(self, kind: str, logged: float) -> None:
         """Count a frame or a range reading not used (``lost``), and the time of the first

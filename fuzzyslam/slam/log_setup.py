@@ -2,9 +2,9 @@
 names of the estimates, the filter's start pose (the rules in
 :mod:`fuzzyslam.slam.inputs`' docstring), the streams' start, the detections' mount
 (:func:`detection_mount_of`), whether an Odometry carries its motion in its twist alone
-(:func:`twist_only`), and the odometry's period and clock (:func:`odometry_clock`; the other streams are checked against its clock as
-they are read, ``LogInputs._same_clock``). Used by
-:func:`fuzzyslam.slam.inputs.open_inputs`.
+(:func:`twist_only`), and the odometry's period and clock (:func:`odometry_clock`; the
+other streams are checked against its clock as they are read,
+``LogInputs._same_clock``). Used by :func:`fuzzyslam.slam.inputs.open_inputs`.
 """
 
 from __future__ import annotations
@@ -392,14 +392,16 @@ def slow_odometry_note(topic: str, period: float) -> str:
     )
 
 
-TWIST_SAMPLES = 200  # Odometry messages whose poses tell a twist-only driver
+TWIST_AFTER = 20  # messages with a twist and an unchanged pose: a twist-only driver
+TWIST_LIMIT = 20_000  # messages read at most (a robot idle that long: the pose is read)
 
 
 def twist_only(reader: LogReader, topic: str) -> bool:
     """Whether a nav_msgs/Odometry stream carries its motion in the twist alone: its
-    first ``TWIST_SAMPLES`` messages all hold one pose while some twist is not zero (a
-    driver that fills only the velocities; its pose read as motion would hold the robot
-    still).
+    pose stays the first one's through ``TWIST_AFTER`` messages after its twist first
+    says the robot moves (a driver that fills only the velocities; its pose read as
+    motion would hold the robot still). A robot that waits before it drives is read
+    until it does (at most ``TWIST_LIMIT`` messages).
 
     Parameters
     ----------
@@ -412,9 +414,9 @@ def twist_only(reader: LogReader, topic: str) -> bool:
     -------
     bool
     """
-    first, moving = None, False
+    first, moved_at = None, None
     for k, m in enumerate(reader.messages([topic])):
-        if k >= TWIST_SAMPLES:
+        if k >= TWIST_LIMIT:
             break
         p, q = m.msg.pose.pose.position, m.msg.pose.pose.orientation
         pose = (p.x, p.y, p.z, q.x, q.y, q.z, q.w)
@@ -423,8 +425,11 @@ def twist_only(reader: LogReader, topic: str) -> bool:
         elif pose != first:
             return False
         tw = m.msg.twist.twist
-        moving = moving or abs(tw.linear.x) > 1e-6 or abs(tw.angular.z) > 1e-6
-    return moving
+        if moved_at is None and (abs(tw.linear.x) > 1e-6 or abs(tw.angular.z) > 1e-6):
+            moved_at = k
+        if moved_at is not None and k - moved_at >= TWIST_AFTER:
+            return True
+    return False
 
 
 # REP 120: base_footprint is base_link projected on the floor, the same planar frame
