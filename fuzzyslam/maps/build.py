@@ -357,8 +357,15 @@ def build_map(
         if mounts.ndim == 3:
             mounts = mounts[ok]
     poses = interpolate_poses(t_traj, p_traj, times, outside="hold")
-    if sensor.stamped_apart:  # as a run deskews: each reading at its stamp (slam/deskew.py)
-        mounts = deskewed_mounts(mounts, offsets.astype(float), times, t_traj, p_traj)
+
+    def placed(sl: slice) -> np.ndarray:
+        """The mounts of rings ``sl``: deskewed when a run deskews them (each reading at
+        its stamp, slam/deskew.py), a batch at a time (memory: a long laser log's)."""
+        m = mounts if mounts.ndim == 2 else mounts[sl]
+        if not sensor.stamped_apart:
+            return m
+        return deskewed_mounts(m, offsets[sl].astype(float), times[sl], t_traj, p_traj)
+
     try:
         builder = FgmBuilder.for_path(poses[:, :2], params)
     except ValueError as exc:  # a path too long for a map (or not finite)
@@ -369,7 +376,7 @@ def build_map(
         for k in range(0, len(times), batch):  # batches of rings, in time order
             sl = slice(k, k + batch)
             r, m = ranges[sl].astype(float), rmax[sl].astype(float)  # exact (float32)
-            builder.add_rings(poses[sl], r, m, fov, mounts if mounts.ndim == 2 else mounts[sl])
+            builder.add_rings(poses[sl], r, m, fov, placed(sl))
             bar.update_to(min(k + batch, len(times)))
     build_s = time.perf_counter() - t_build
     fgm = builder.freeze(t_end)
@@ -451,6 +458,8 @@ def build_map(
         if opts.figures:
             from fuzzyslam.maps import figures
 
+            k_flm = figures.pick_flm_ring(poses, refs)  # write_all picks the same
+            m_flm = placed(slice(k_flm, k_flm + 1))  # its mounts: the sensor's, or its own
             figures.write_all(
                 tmp,
                 fgm,
@@ -462,7 +471,7 @@ def build_map(
                 ranges.astype(float),
                 rmax.astype(float),
                 fov,
-                mounts,
+                m_flm[0] if m_flm.ndim == 3 else m_flm,
                 params,
             )
         out = as_json(replace(summary, wall_seconds=time.perf_counter() - wall0))
