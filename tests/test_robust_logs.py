@@ -715,6 +715,14 @@ def test_frames_before_the_odometry_starts_are_not_used(tiny: Tiny, tmp_path: Pa
     assert s["counts"]["frames"] == tiny.run["counts"]["frames"] - frames_before
     t = load_tum(tmp_path / "est" / "trajectory.tum")[:, 0]
     assert first_odometry - 1.0 <= t[0] < first_odometry
+    # with the map's fixes: the sonar readings of that time are left out too
+    code, out, err = cli("run", log, "-o", tmp_path / "fix", "--config", tiny.config, "--map",
+                         tiny.dir / "fgm", "--fix", "heading", "--fix-from", "0")  # fmt: skip
+    assert code == 0, err
+    s = json.loads(out)
+    assert s["warnings"]["readings_before_odometry"] > 16  # a whole ring at least
+    t = load_tum(tmp_path / "fix" / "trajectory.tum")[:, 0]
+    assert first_odometry - 1.0 <= t[0] < first_odometry
 
 
 def test_a_ros2_bag_folder_is_read_and_a_split_bag_is_said(tiny: Tiny, tmp_path: Path) -> None:
@@ -742,3 +750,18 @@ def test_a_ros2_bag_folder_is_read_and_a_split_bag_is_said(tiny: Tiny, tmp_path:
     empty.mkdir()
     code, _, err = cli("run", empty, "-o", tmp_path / "est3", "--config", tiny.config)
     assert code == 3 and "no .mcap file" in err
+
+
+def test_a_run_folder_is_not_taken_for_a_bag(tiny: Tiny, tmp_path: Path) -> None:
+    """A run's output folder (its trajectory.tum, its estimates.mcap) given as the log is
+    one line saying so, not read as a bag of its estimates; a bag folder without
+    metadata.yaml is a bag for ``evaluate`` too."""
+    import shutil
+
+    code, _, err = cli("run", tiny.est, "-o", tmp_path / "est", "--config", tiny.config)
+    assert code == 3 and "run's output folder" in err and len(err.strip().splitlines()) == 1
+    bag = tmp_path / "bag"
+    bag.mkdir()
+    shutil.copy(tiny.log, bag / "bag_0.mcap")
+    code, _, err = cli("evaluate", bag, tiny.est, "-o", tmp_path / "eval")
+    assert code == 0, err

@@ -41,20 +41,19 @@ from fuzzyslam.streams.tum import format_tum, read_tum, read_tum_planar
 from fuzzyslam.summary import OMIT
 
 KIND_MCAP = "mcap"
+RUN_MARKS = ("trajectory.tum", "summary.json", "estimates.mcap")  # a run's, not a bag's
 KIND_TUM = "tum"
 KIND_RUNDIR = "rundir"
 
 
 def detect_kind(path: str | os.PathLike) -> str:
-    """``mcap`` (magic bytes, or a ros2 bag folder: ``metadata.yaml`` and ``.mcap`` files,
-    :func:`fuzzyslam.streams.reader.bag_file`), ``rundir`` (another directory) or ``tum``
-    (text whose first data line has 8 numeric columns); anything else is an InputError."""
+    """``mcap`` (magic bytes), ``rundir`` (a directory) or ``tum`` (text whose first data line
+    has 8 numeric columns); anything else is an InputError."""
     p = Path(path)
     if not p.exists():
         raise InputError(p, "does not exist")
     if p.is_dir():
-        bag = (p / "metadata.yaml").is_file() and any(p.glob("*.mcap"))
-        return KIND_MCAP if bag else KIND_RUNDIR
+        return KIND_RUNDIR
     check_input_file(p)
     with open(p, "rb") as f:
         head = f.read(4096)
@@ -104,6 +103,9 @@ def read_truth(path: str | os.PathLike, progress: bool = True) -> Truth:
     Truth
     """
     kind = detect_kind(path)
+    p = Path(path)
+    if kind == KIND_RUNDIR and not any((p / f).exists() for f in RUN_MARKS):
+        kind = KIND_MCAP if any(p.glob("*.mcap")) else kind  # a ros2 bag folder (bag_file)
     if kind == KIND_TUM:
         t, poses, planar = read_tum_planar(path)
         if not planar:

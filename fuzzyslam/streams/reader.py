@@ -91,11 +91,13 @@ def bag_file(path: str | os.PathLike) -> Path:
     ------
     InputError
         A folder with no ``.mcap`` file, or with several (a bag split by size or
-        duration: one line saying how to merge them).
+        duration: one line saying how to merge them), or a run's output folder.
     """
     p = Path(path)
     if not p.is_dir():
         return p
+    if (p / "estimates.mcap").exists() or (p / "trajectory.tum").exists():
+        raise InputError(p, "log is a run's output folder (its estimates), not a log")
     files = sorted(p.glob("*.mcap"))
     if len(files) == 1:
         return files[0]
