@@ -209,8 +209,11 @@ def aids_for_map(fm: FrozenMap, mode: str, cfg: Any, start_time: float | None = 
     if mode == "heading":
         if not fm.references:
             raise InputError("references.yaml", "no corridor references: heading fixes need some")
+        from fuzzyslam.fixes.off_map import OffMapWatch
+
         aid = heading_aid()
         aid.viewer_map = (fm.fgm, refs)  # the map used, in estimates.mcap (one aid shows it)
+        aid.off_map = OffMapWatch(fm.fgm)  # heading fixes alone: is the position lost?
         return [aid]
     # the pose match and change detection (their kernels, the figure) load for pose fixes only
     from fuzzyslam.fixes.changes import ChangeDetector

@@ -108,6 +108,7 @@ from fuzzyslam.fixes.heading_measure import (  # the paper's measurement; re-exp
     select_corridor,
 )
 from fuzzyslam.fixes.multi_ring import MultiRingWindow
+from fuzzyslam.fixes.off_map import OffMapWatch
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.references import Reference
 from fuzzyslam.fixes.summaries import HeadingSummary
@@ -153,6 +154,9 @@ class HeadingFixAid(FixAid):
         # the robot's position uncertainty against the corridor choice (``trouble``)
         self.position_sigma_max = 0.0
         self.position_unresolved_at: float | None = None
+        # the estimate against the frozen map's free space (fixes/off_map.py; ``trouble``),
+        # given by fixes/aids.py when the map is at hand
+        self.off_map: OffMapWatch | None = None
         self._last_ok_xy: np.ndarray | None = None  # position at the last accepted fix
         # the last formed fix disagreed with the prediction (NIS above suspect_chi2, or
         # gated): ``run`` then creates no new lamp (it would be a duplicate)
@@ -229,7 +233,7 @@ class HeadingFixAid(FixAid):
             window.push(t, ring, ekf)
         pose = ekf.pose
         x0, y0 = float(pose[0]), float(pose[1])
-        self._watch_position(t, ekf.pose_cov)
+        self._watch_position(t, ekf.pose_cov, x0, y0)
         odo_heading = float(ekf.odometry_pose[2])
         period = math.pi / 2 if self.params.right_angles else math.pi
         cands, why = select_corridor(pose[:2], self.refs, period, self.params.junction_margin)
@@ -308,7 +312,9 @@ class HeadingFixAid(FixAid):
         self.decisions.append(replace(d, x=x0, y=y0))
         self._watch_position(t, ekf.pose_cov)  # a recovery inflates it
 
-    def _watch_position(self, t: float, cov: np.ndarray) -> None:
+    def _watch_position(
+        self, t: float, cov: np.ndarray, x: float | None = None, y: float | None = None
+    ) -> None:
         """Track the position's largest standard deviation, and the first ring at which
         its 99 % ellipse's semi-major axis, sqrt(chi2_2(0.99) lambda_max(P_xy)), exceeds
         ``junction_margin`` (``trouble``); asked before and after the ring's fix.
@@ -330,8 +336,12 @@ class HeadingFixAid(FixAid):
             The ring's log time (s).
         cov : ndarray, shape (3, 3)
             The robot's covariance.
+        x, y : float, optional
+            The estimated position, for the off-map watch (``off_map``).
         """
         lam = self._track_position_sigma(cov)
+        if self.off_map is not None and x is not None and y is not None:
+            self.off_map.observe(t, x, y, lam)
         margin = self.params.junction_margin
         if (
             self.position_unresolved_at is None
@@ -351,15 +361,19 @@ class HeadingFixAid(FixAid):
     def trouble(self) -> tuple[str, float] | None:
         """The aid's finding for the run's ``filter_health`` (slam/run_results.py):
         ("position_unresolved", the time) once the position's 99 % ellipse outgrew
-        ``junction_margin`` (``_watch_position``), else None.
+        ``junction_margin`` (``_watch_position``), else ("pose_off_map", the time) once
+        most rings of a minute put the estimate farther from the map's free space than
+        its uncertainty allows (fixes/off_map.py), else None.
 
         Returns
         -------
         (str, float) or None
         """
-        if self.position_unresolved_at is None:
-            return None
-        return "position_unresolved", self.position_unresolved_at
+        if self.position_unresolved_at is not None:
+            return "position_unresolved", self.position_unresolved_at
+        if self.off_map is not None and self.off_map.found_at is not None:
+            return "pose_off_map", self.off_map.found_at
+        return None
 
     def _agrees(self, d: HeadingDecision) -> bool:
         """A formed fix within the gate whose NIS is at most ``suspect_chi2``."""

@@ -169,7 +169,9 @@ class ScanLineHeadingAid(HeadingFixAid):
         p = self.params
         pose = np.asarray(ekf.pose, dtype=float)
         cov = np.asarray(ekf.pose_cov, dtype=float)
-        self._track_position_sigma(cov)
+        lam = self._track_position_sigma(cov)
+        if self.off_map is not None:  # the estimate against the map's free space
+            self.off_map.observe(t, float(pose[0]), float(pose[1]), lam)
         predicted = float(pose[2])
         odo = float(ekf.odometry_pose[2])
         x0, y0 = float(pose[0]), float(pose[1])
