@@ -203,3 +203,36 @@ def test_twist_only_odometry_after_an_idle_start_and_over_a_gap(tmp_path: Path) 
     odo = np.loadtxt(tmp_path / "gap" / "odometry.tum")
     steps = np.hypot(*np.diff(odo[:, 1:3], axis=0).T)
     assert steps.max() < 0.1  # no row jumps across the gap
+
+
+def test_own_covariances_are_rotated_into_the_base_frame(tmp_path: Path) -> None:
+    """Detection3DArray detections in a camera turned 90 deg (yaw), each with its own x, y
+    covariance diag(a, b) and no z terms (zeros, ROS's unknown): in the base frame the
+    point is turned and the covariance is diag(b, a) (R C R^T); the same in base_link
+    keeps diag(a, b)."""
+    from fuzzyslam.config import load_config
+    from fuzzyslam.slam.events import Frame
+    from fuzzyslam.slam.inputs import open_inputs
+    from fuzzyslam.streams.writer import LogWriter
+
+    cov = np.diag([0.04, 0.01])
+    frames = {}
+    for frame in ("base_link", "camera_link"):
+        log = tmp_path / f"{frame}.mcap"
+        with LogWriter(log) as w:
+            mount = link("base_link", "camera_link", 0.1, 0.0, 0.3, yaw=math.pi / 2)
+            w.write("/tf_static", M.TF_MESSAGE, tf(mount), 0.0)
+            for k in range(20):
+                t = 0.1 * k
+                w.write("/odom", M.ODOMETRY, M.odometry(t, "odom", "base_link", np.zeros(3)), t)
+                if k % 5 == 2:
+                    det = M.detection3d_array(t, frame, np.array([[2.0, 1.0]]), cov[None])
+                    w.write(DETECTIONS, M.DETECTION3D_ARRAY, det, t)
+        inputs = open_inputs(log, load_config("real_detections"))
+        frames[frame] = [ev for ev in inputs.events() if type(ev) is Frame]
+    plain, turned = frames["base_link"], frames["camera_link"]
+    assert len(plain) == len(turned) == 4
+    np.testing.assert_allclose(plain[0].z, [[2.0, 1.0]], atol=1e-12)
+    np.testing.assert_allclose(plain[0].cov[0], cov, atol=1e-12)
+    np.testing.assert_allclose(turned[0].z, [[0.1 - 1.0, 2.0]], atol=1e-12)  # R(90) p + t
+    np.testing.assert_allclose(turned[0].cov[0], np.diag([0.01, 0.04]), atol=1e-12)
