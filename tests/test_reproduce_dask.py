@@ -169,10 +169,17 @@ def test_stale_temporary_outputs_are_removed(tmp_path):
 
 
 def test_sweep_logs_bad_arguments_are_one_line(tmp_path):
-    """--logs with --seeds, or a glob matching nothing: one line, exit 3, nothing written."""
+    """--logs with --seeds, a glob matching nothing, or a ros2 bag folder split in two
+    files: one line, exit 3, nothing written."""
     (tmp_path / "a.mcap").write_bytes(b"")
+    bag = tmp_path / "bags" / "split"
+    bag.mkdir(parents=True)
+    (bag / "metadata.yaml").write_text("rosbag2_bagfile_information: {}\n", encoding="utf-8")
+    for name in ("split_0.mcap", "split_1.mcap"):
+        (bag / name).write_bytes(b"")
     for extra, why in ((["--seeds", "2", "--logs", tmp_path / "*.mcap"], "not both"),
-                       (["--logs", tmp_path / "none" / "*.mcap"], "matches no file")):  # fmt: skip
+                       (["--logs", tmp_path / "none" / "*.mcap"], "matches no file"),
+                       (["--logs", tmp_path / "bags" / "*"], "split into 2 files")):  # fmt: skip
         p = cli("sweep", "sample.yaml", "--set", "robot.wheel_noise=0.01", *extra,
                 "-o", tmp_path / "sw")  # fmt: skip
         lines = [ln for ln in p.stderr.splitlines() if ln.startswith("fuzzyslam:")]

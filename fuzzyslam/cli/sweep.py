@@ -66,7 +66,13 @@ def sweep_command(config: str, sets: tuple[str, ...], seeds: int | None,
     if logs_glob is not None:
         if seeds is not None:
             raise InputError(logs_glob, "give --seeds or --logs, not both")
-        logs = sorted(p for p in glob.glob(logs_glob, recursive=True) if Path(p).is_file())
+        from fuzzyslam.streams.reader import bag_file
+
+        # files, and ros2 bag folders as their MCAP file (a split bag: one line)
+        found = [Path(p) for p in glob.glob(logs_glob, recursive=True)]
+        logs = sorted(
+            str(bag_file(p)) for p in found if p.is_file() or (p / "metadata.yaml").is_file()
+        )
         if not logs:
             raise InputError(logs_glob, "--logs matches no file")
     emit(sweep(config, parsed, list(range(seeds or 3)), outdir, jobs, scheduler, logs,
