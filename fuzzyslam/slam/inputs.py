@@ -61,6 +61,7 @@ from fuzzyslam.slam.log_setup import (
     detection_mount_of,
     filter_start_pose,
     first_message,
+    mount_in_base,
     odometry_clock,
     streams_start,
     tf_frames,
@@ -72,7 +73,7 @@ from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.ranges import RangeSensor, open_ranges
 from fuzzyslam.streams.reader import LogMessage, LogReader
 from fuzzyslam.streams.sonar import RingStats
-from fuzzyslam.streams.tf import Rigid, TfProblem, locate, static_tree
+from fuzzyslam.streams.tf import Rigid, static_tree
 
 CAMERA_FRAME = "ceiling_camera"
 # what reading the events changes that the run reports (with the reader's damage):
@@ -129,6 +130,14 @@ class LogInputs:
     # what opening the log found worth a line on stderr, said once by the stage (a run
     # with --adapt-noise opens the log twice)
     notes: list[str] = field(default_factory=list)
+
+    @property
+    def placeable_from(self) -> float:
+        """The earliest stamp (s) a frame or range reading can be placed at:
+        ``slam.odometry_stale_s`` before the odometry's first message. One taken earlier
+        was taken where the robot's pose is unknown (not the start pose: it may have been
+        moving); compared with the start pose it would map its lamps wrongly."""
+        return self.odom_first - self.cfg.slam.odometry_stale_s
 
     def warn(self, key: str, problem: str = "", count: int = 1) -> None:
         """Count a glitch of kind ``key`` (the summary's ``warnings``).
@@ -207,10 +216,7 @@ class LogInputs:
         prev = None
         topics = [self.odom_topic, self.lamp_topic] if self.lamp_topic else [self.odom_topic]
         odom_topic = self.odom_topic
-        # a frame stamped longer than odometry_stale_s before the odometry's first message
-        # was taken where the robot's pose is unknown (not the start pose: it may have
-        # been moving); compared with the start pose it would map its lamps wrongly
-        unplaced = self.odom_first - self.cfg.slam.odometry_stale_s
+        unplaced = self.placeable_from
         for m in self.reader.messages(topics):
             topic, msg = m.topic, m.msg
             t = M.stamp_to_sec(msg.header.stamp)
@@ -304,15 +310,18 @@ class LogInputs:
         if prev is None:
             return None, cur
         d_trans, d_rot = self._wheel_odometry(cur[0] - prev[0], cur[1] - prev[1])
-        if not self._plausible(t - prev[2], d_trans, d_rot):
+        return self._increment(t, t - prev[2], d_trans, d_rot, prev, cur)
+
+    def _increment(self, t: float, dt: float, d_trans: float, d_rot: float, prev, cur):
+        """The increment ending at ``t`` (over ``dt`` s) as an Odom event and ``cur`` as the
+        next reference, when the robot can move so fast (slam/odom_gate.py
+        ``within_speed`` with robot.max_speed, robot.max_turn_rate); else
+        :meth:`_reject`."""
+        r = self.cfg.robot
+        if not within_speed(dt, d_trans, d_rot, r.max_speed, r.max_turn_rate):
             return self._reject(t, prev, cur)
         self._rejected_in_row = 0
         return Odom(t, d_trans, d_rot), cur
-
-    def _plausible(self, dt: float, d_trans: float, d_rot: float) -> bool:
-        """slam/odom_gate.py ``within_speed`` with robot.max_speed, robot.max_turn_rate."""
-        r = self.cfg.robot
-        return within_speed(dt, d_trans, d_rot, r.max_speed, r.max_turn_rate)
 
     def _reject(self, t: float, prev, cur):
         """Count an implausible increment and drop it (the previous reading stays the
@@ -356,10 +365,7 @@ class LogInputs:
         rx = c * dx + s * dy
         d_trans = math.copysign(math.hypot(dx, dy), rx)
         d_rot = math.remainder(yaw - pth, math.tau)
-        if not self._plausible(t - pt, d_trans, d_rot):
-            return self._reject(t, prev, (pose, t))
-        self._rejected_in_row = 0
-        return Odom(t, d_trans, d_rot), (pose, t)
+        return self._increment(t, t - pt, d_trans, d_rot, prev, (pose, t))
 
     def _odom_twist(self, t: float, msg, prev):
         """An Odometry twist (forward speed v, turn rate w in the base frame, REP 105) as
@@ -382,10 +388,7 @@ class LogInputs:
             )
             dt = self.odom_period_s
         d_trans, d_rot = 0.5 * (prev[0] + cur[0]) * dt, 0.5 * (prev[1] + cur[1]) * dt
-        if not self._plausible(dt, d_trans, d_rot):
-            return self._reject(t, prev, cur)
-        self._rejected_in_row = 0
-        return Odom(t, d_trans, d_rot), cur
+        return self._increment(t, dt, d_trans, d_rot, prev, cur)
 
     def _measurement_cov(self, m: int, sigma: float) -> np.ndarray:
         """(m, 2, 2) covariances sigma^2 I of m detections (the last block kept: the
@@ -465,7 +468,7 @@ class LogInputs:
         no earlier than a frame can be placed (``frames_before_odometry``: where the robot
         was before its odometry starts is unknown); the others counted in
         ``lost["readings"]`` (the early ones in ``warnings.readings_before_odometry``)."""
-        unplaced = self.odom_first - self.cfg.slam.odometry_stale_s
+        unplaced = self.placeable_from
         for m in msgs:
             st = m.msg.header.stamp
             stamp = st.sec + st.nanosec * 1e-9
@@ -635,19 +638,9 @@ def open_inputs(
         offset, axes = tuple(cfg.camera.offset), IDENTITY_AXES
         if reader.has(tp.tf_static):  # the lens and image axes in the base frame
             tree = static_tree(m.msg for m in reader.messages([tp.tf_static]))
-            try:
-                found = locate(tree, CAMERA_FRAME, frames.base)
-                if found is not None:
-                    offset, axes = floor_mount(found[0])
-                    if found[1] is not None:  # as the range sensors' mounts_source says
-                        notes.append(
-                            f"{path}: {tp.tf_static} does not name the base frame "
-                            f"{frames.base!r}: the camera is placed in {found[1]!r} instead"
-                        )
-            except TfProblem as e:
-                raise InputError(
-                    reader.path, f"{tp.tf_static} cannot place {CAMERA_FRAME!r}: {e}"
-                ) from None
+            mount = mount_in_base(reader, cfg, tree, CAMERA_FRAME, frames.base, "the camera", notes)
+            if mount is not None:
+                offset, axes = floor_mount(mount)
         problem = camera_info_problem(info)
         if problem:
             raise InputError(reader.path, f"{tp.camera_info}: {problem}")
@@ -661,7 +654,7 @@ def open_inputs(
     mounts = sensor.mounts if sensor is not None else np.zeros((0, 3))
     gate = OdomGate()
     pose = filter_start_pose(reader, cfg, odom_topic, odom_source, start_pose, gate)
-    return LogInputs(
+    inputs = LogInputs(
         reader,
         cfg,
         odom_topic,
@@ -671,12 +664,7 @@ def open_inputs(
         camera,
         mounts,
         pose,
-        # no earlier than the first frame that can be placed (_main_events): the start
-        # row is not put where the robot's pose is unknown
-        max(
-            streams_start(reader, [odom_topic, lamp_topic]),
-            odom_first - cfg.slam.odometry_stale_s - clock,
-        ),
+        streams_start(reader, [odom_topic, lamp_topic]),
         reader.end,
         ranges=sensor,
         _gate=gate,
@@ -689,3 +677,6 @@ def open_inputs(
         odom_twist=twist,
         notes=notes,
     )
+    # the run starts no earlier than the first frame that can be placed (a log time)
+    inputs.start = max(inputs.start, inputs.placeable_from - clock)
+    return inputs

@@ -16,7 +16,6 @@ import numpy as np
 
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
-from fuzzyslam.progress import note
 from fuzzyslam.se2 import quaternion_to_yaw
 from fuzzyslam.slam.events import TfFrames
 from fuzzyslam.slam.odom_gate import OdomGate, first_plausible_pose
@@ -145,7 +144,8 @@ def tf_frames(
         series on another clock cannot be put against, and is left out (a note says so;
         the run then writes its own odom -> base).
     notes : list of str, optional
-        Where that note goes (for the caller to say once); None: to stderr now.
+        Gets that note (for the caller to say once: a run with --adapt-noise opens the
+        log twice).
 
     Returns
     -------
@@ -190,9 +190,7 @@ def tf_frames(
             f"log times, the odometry {clock[0]:+.3f} s: another clock; estimates.mcap "
             "writes its own odom -> base"
         )
-        if notes is None:
-            note(line)
-        else:
+        if notes is not None:
             notes.append(line)
         return frames
     return TfFrames(
@@ -432,6 +430,55 @@ def twist_only(reader: LogReader, topic: str) -> bool:
     return False
 
 
+def mount_in_base(
+    reader: LogReader, cfg: Config, tree, frame: str, base: str, what: str, notes: list[str]
+) -> Rigid | None:
+    """The mount of ``frame`` in ``base`` from the static tree (:func:`locate`), None when
+    the tree does not name the frame; a root standing in for a base frame the tree never
+    names gets a line in ``notes``.
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log (named in the error).
+    cfg : Config
+        Its topics (``tf_static``, named in the lines).
+    tree : TfTree
+        Its /tf_static tree (:func:`static_tree`).
+    frame : str
+        The sensor's frame.
+    base : str
+        The robot's base frame.
+    what : str
+        The sensor, for the lines ("the camera").
+    notes : list of str
+        Gets the stand-in line.
+
+    Returns
+    -------
+    Rigid or None
+
+    Raises
+    ------
+    InputError
+        A frame the tree cannot place (another root, a cycle, two parents): one line.
+    """
+    tf_static = cfg.topics.tf_static
+    try:
+        found = locate(tree, frame, base)
+    except TfProblem as e:
+        raise InputError(reader.path, f"{tf_static} cannot place {what}: {e}") from None
+    if found is None:
+        return None
+    mount, stand_in = found
+    if stand_in is not None:  # as the range sensors' mounts_source says
+        notes.append(
+            f"{reader.path}: {tf_static} does not name the base frame {base!r}: {what} is "
+            f"placed in {stand_in!r} instead"
+        )
+    return mount
+
+
 # REP 120: base_footprint is base_link projected on the floor, the same planar frame
 BASE_ALIASES = ("base_link", "base_footprint")
 
@@ -473,31 +520,18 @@ def detection_mount_of(reader: LogReader, cfg: Config, base: str, notes: list[st
         if reader.has(tp.tf_static)
         else None
     )
-    try:
-        found = locate(tree, frame, base) if tree is not None else None
-    except TfProblem as e:
-        raise InputError(
-            reader.path, f"{tp.tf_static} cannot place the detections' frame {frame!r}: {e}"
-        ) from None
-    if found is None and frame in BASE_ALIASES and base in BASE_ALIASES:
-        return None
+    what = f"the detections' frame {frame!r}"
+    mount = mount_in_base(reader, cfg, tree, frame, base, what, notes) if tree is not None else None
+    if mount is not None or (frame in BASE_ALIASES and base in BASE_ALIASES):
+        return mount
     if tree is None:  # as the sonars without /tf_static: the robot's own frame, said
         notes.append(
-            f"{reader.path}: no {tp.tf_static}: the detections' frame {frame!r} is taken as "
-            f"the base frame {base!r}"
+            f"{reader.path}: no {tp.tf_static}: {what} is taken as the base frame {base!r}"
         )
         return None
-    if found is None:
-        raise InputError(
-            reader.path,
-            f"{tp.detections}: detections in frame {frame!r}, which {tp.tf_static} does not "
-            f"place on the base frame {base!r} (publish {base} -> {frame} on "
-            f"{tp.tf_static}, or stamp the detections in {base!r})",
-        )
-    mount, stand_in = found
-    if stand_in is not None:
-        notes.append(
-            f"{reader.path}: {tp.tf_static} does not name the base frame {base!r}: the "
-            f"detections' frame {frame!r} is placed in {stand_in!r} instead"
-        )
-    return mount
+    raise InputError(
+        reader.path,
+        f"{tp.detections}: detections in frame {frame!r}, which {tp.tf_static} does not "
+        f"place on the base frame {base!r} (publish {base} -> {frame} on "
+        f"{tp.tf_static}, or stamp the detections in {base!r})",
+    )
