@@ -156,14 +156,15 @@ def test_watchdog_memory_and_restart():
 
 
 def test_multi_ring_flm_is_the_fgm_steps_bit_for_bit():
-    """build_flm_rings fuses its rings with its own vectorised steps (flm._fuse_rings) and
-    the evidence with evidence._grouped: the same floats as FgmBuilder.add_rings on the
-    FLM grid (fgm._step, tbm.conjunctive_grouped), on rings along a noisy path (cells
-    seen by several rings, forgetting at work), and a sector cache of zero commonality."""
-    from fuzzyslam.maps.evidence import _grouped
+    """build_flm_rings fuses its rings with its own vectorised steps (flm._fuse_rings):
+    the same floats as FgmBuilder.add_rings on the FLM grid (fgm._step), on rings along a
+    noisy path (cells seen by several rings, forgetting at work); and the grouped
+    combination of the readings (tbm.conjunctive_grouped, whose zero-commonality count is
+    made only when one is there) with a zero commonality, against folding the mass-form
+    rule group by group."""
     from fuzzyslam.maps.fgm import FgmBuilder
     from fuzzyslam.maps.flm import build_flm_rings, flm_grid
-    from fuzzyslam.maps.tbm import conjunctive_grouped
+    from fuzzyslam.maps.tbm import conjunctive, conjunctive_grouped
     from fuzzyslam.se2 import between
 
     rng = np.random.default_rng(3)
@@ -189,6 +190,11 @@ def test_multi_ring_flm_is_the_fgm_steps_bit_for_bit():
     m_o = rng.random(40) * 0.5
     m_e[3], m_o[3] = 0.5, 0.5  # m(Theta) = 0: q(Theta) = 0
     groups = rng.integers(0, 12, 40)
-    want = conjunctive_grouped((m_e, m_o, 1.0 - m_e - m_o, np.zeros(40)), groups, 12)
-    for a, w in zip(_grouped(m_e, m_o, groups, 12), want, strict=True):
-        assert a.tobytes() == w.tobytes()
+    m = (m_e, m_o, 1.0 - m_e - m_o, np.zeros(40))
+    got = conjunctive_grouped(m, groups, 12)
+    for k in range(12):
+        acc = (np.zeros(1), np.zeros(1), np.ones(1), np.zeros(1))
+        for i in np.flatnonzero(groups == k):
+            acc = conjunctive(acc, tuple(x[i : i + 1] for x in m))
+        np.testing.assert_allclose([x[k] for x in got], [x[0] for x in acc], atol=1e-12)
+    assert got[2][groups[3]] == 0.0  # the zero commonality's group: m(Theta) = 0

@@ -28,7 +28,7 @@ import numpy as np
 
 from fuzzyslam.maps.grid import Grid
 from fuzzyslam.maps.params import MapParams
-from fuzzyslam.maps.tbm import Masses, from_commonality
+from fuzzyslam.maps.tbm import Masses, conjunctive_grouped
 from fuzzyslam.se2 import compose
 
 
@@ -392,34 +392,9 @@ def combine_cells(
     BatchEvidence
     """
     ukey, inv = np.unique(key, return_inverse=True)
-    masses = _grouped(m_e, m_o, inv, len(ukey))
+    masses = conjunctive_grouped((m_e, m_o, 1.0 - m_e - m_o, np.zeros_like(m_e)), inv, len(ukey))
     ptr = np.searchsorted(ukey, np.arange(k_rings + 1) * ncell)
     return BatchEvidence(ptr, ukey % ncell, masses, int(key.size), readings)
-
-
-def _grouped(m_e: np.ndarray, m_o: np.ndarray, groups: np.ndarray, ngroups: int) -> Masses:
-    """``conjunctive_grouped((m_e, m_o, 1 - m_e - m_o, 0), groups, ngroups)`` (the
-    readings' simple support functions combined per group), the same operations on the
-    same floats with fewer numpy calls: the commonalities formed in place, and the count
-    of zero commonalities (a product of zero) only when there is one."""
-    n = m_e.size
-    t = 1.0 - m_e - m_o
-    q = np.empty((3, n))
-    np.add(m_e, t, out=q[0])
-    np.add(m_o, t, out=q[1])
-    q[2] = t
-    zero = q <= 0.0
-    some_zero = bool(zero.any())
-    logq = np.log(np.where(zero, 1.0, q) if some_zero else q)
-    # the three commonalities' sums as one bincount over 3 ngroups bins (row k's group g
-    # in bin k ngroups + g: each bin adds the same terms in the same order as its own)
-    bins = (np.asarray(groups).reshape(1, -1) + ngroups * np.arange(3)[:, None]).ravel()
-    s = np.bincount(bins, weights=logq.ravel(), minlength=3 * ngroups).reshape(3, ngroups)
-    out = np.exp(s)
-    if some_zero:
-        nz = np.bincount(bins, weights=zero.ravel().astype(float), minlength=3 * ngroups)
-        out = np.where(nz.reshape(3, ngroups) > 0, 0.0, out)
-    return from_commonality(out[0], out[1], out[2])
 
 
 def ring_evidence(

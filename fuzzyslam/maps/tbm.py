@@ -140,7 +140,8 @@ def conjunctive_grouped(m: Masses, groups: np.ndarray, ngroups: int) -> Masses:
     eq. 3.3), so the combination of n functions per group is a product, computed as an
     exponentiated sum of logarithms with ``np.bincount`` (no loop over cells). Equivalent
     to folding :func:`conjunctive` over each group in any order (commutativity and
-    associativity). Commonalities of zero are handled by counting them separately.
+    associativity). Commonalities of zero are handled by counting them separately (only
+    when there is one: readings' simple support functions rarely have one).
 
     Parameters
     ----------
@@ -158,13 +159,16 @@ def conjunctive_grouped(m: Masses, groups: np.ndarray, ngroups: int) -> Masses:
     """
     q = np.array(commonality(m), dtype=float)  # (3, N): q(E), q(O), q(Theta)
     zero = q <= 0.0
-    logq = np.log(np.where(zero, 1.0, q))
+    some_zero = bool(zero.any())
+    logq = np.log(np.where(zero, 1.0, q) if some_zero else q)
     # the three commonalities' sums as one bincount over 3 ngroups bins (row k's group g
     # in bin k ngroups + g: each bin adds the same terms in the same order as its own)
     bins = (np.asarray(groups).reshape(1, -1) + ngroups * np.arange(3)[:, None]).ravel()
     s = np.bincount(bins, weights=logq.ravel(), minlength=3 * ngroups).reshape(3, ngroups)
-    nz = np.bincount(bins, weights=zero.ravel().astype(float), minlength=3 * ngroups)
-    out = np.where(nz.reshape(3, ngroups) > 0, 0.0, np.exp(s))
+    out = np.exp(s)
+    if some_zero:
+        nz = np.bincount(bins, weights=zero.ravel().astype(float), minlength=3 * ngroups)
+        out = np.where(nz.reshape(3, ngroups) > 0, 0.0, out)
     return from_commonality(out[0], out[1], out[2])
 
 
