@@ -231,8 +231,8 @@ def read_rings_compact(
     for k, ring in enumerate(sensor.rings(reader.messages(sensor.topics), stats)):
         if ring.t > t_end + 1e-9:
             break
-        table.append(ring.t, ring.ranges, ring.max_range, getattr(ring, "offsets", None))
-        if getattr(ring, "mounts", None) is not None:
+        table.append(ring.t, ring.ranges, ring.max_range, ring.offsets)
+        if ring.mounts is not None:
             own[k] = ring.mounts
         fov = ring.fov
     times, rr, rmax, offsets = table.arrays()

@@ -93,7 +93,7 @@ def ring_mounts(ring: Ring, mounts: np.ndarray) -> np.ndarray:
     Parameters
     ----------
     ring : Ring
-        A ring (or a laser scan's: its own mounts only when its geometry differs).
+        A ring (a laser scan's has its own mounts only when its geometry differs).
     mounts : ndarray, shape (M, 3)
         The sensor's mounts.
 
@@ -101,7 +101,7 @@ def ring_mounts(ring: Ring, mounts: np.ndarray) -> np.ndarray:
     -------
     ndarray, shape (M, 3)
     """
-    own = getattr(ring, "mounts", None)  # a scan's ring has none
+    own = getattr(ring, "mounts", None)  # an aid's duck-typed ring may have none
     return mounts if own is None else own
 
 
