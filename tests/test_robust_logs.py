@@ -362,7 +362,8 @@ def map_json(tiny: Tiny, log: Path, out: Path) -> dict:
 
 def test_sonar_glitches_are_counted_never_used(tiny: Tiny, tmp_path: Path) -> None:
     """NaN, infinite, negative and far out-of-range echoes and repeated messages: the
-    map counts each exactly (invalid, no_echo, duplicates) and its masses stay valid."""
+    map counts each exactly (invalid, no_echo, duplicates) and its masses stay valid.
+    +inf is REP 117's "nothing detected": no echo, as a range beyond max_range."""
     echo = Every(SONAR, 6, lambda m: 0 < m.msg.range < m.msg.max_range)
     dup = Every(SONAR, 40)
     bad = [math.nan, math.inf, -1.0, 1e6]
@@ -377,13 +378,31 @@ def test_sonar_glitches_are_counted_never_used(tiny: Tiny, tmp_path: Path) -> No
     log = rewrite(tiny.log, tmp_path / "sonar.mcap", fault)
     s = map_json(tiny, log, tmp_path / "fgm")["sonar_stats"]
     clean = tiny.map["sonar_stats"]
-    n_big = sum(k == 1e6 for k in kinds)
+    n_big = sum(k in (1e6, math.inf) for k in kinds)
     assert echo.hits > 20 and dup.hits > 10
     assert s["invalid"] == clean["invalid"] + len(kinds) - n_big
     assert s["no_echo"] == clean["no_echo"] + n_big
     assert s["duplicates"] == clean["duplicates"] + dup.hits
     assert s["readings"] == clean["readings"]
     assert s["rings"] == clean["rings"] and s["missing"] == clean["missing"]
+
+
+def test_a_rep117_sonar_log_maps_as_its_max_range_twin(tiny: Tiny, tmp_path: Path) -> None:
+    """Every no-echo reading (range at max_range, as the simulator writes them) published
+    as +inf, as a REP 117 driver does: the same sonar statistics and the same map, cell
+    for cell (it once read +inf as invalid: 40 % of the readings lost)."""
+
+    def fault(m: LogMessage) -> list[Out]:
+        if m.topic.startswith(SONAR) and m.msg.range >= m.msg.max_range:
+            m.msg.range = math.inf
+        return keep(m)
+
+    log = rewrite(tiny.log, tmp_path / "inf.mcap", fault)
+    s = map_json(tiny, log, tmp_path / "fgm")["sonar_stats"]
+    assert s == tiny.map["sonar_stats"] and s["no_echo"] > 100
+    with np.load(tmp_path / "fgm" / "fgm.npz") as a, np.load(tiny.dir / "fgm" / "fgm.npz") as b:
+        for k in ("m_e", "m_o", "m_t", "m_c"):
+            np.testing.assert_array_equal(a[k], b[k])
 
 
 def test_frame_glitches_are_counted_and_skipped(tiny: Tiny, tmp_path: Path) -> None:

@@ -312,3 +312,18 @@ def test_a_map_whose_evidence_touched_no_cell_is_refused(tmp_path: Path) -> None
     assert code == 3 and out == "" and len(lines) == 1, err
     assert str(bad) in lines[0] and "no map written" in lines[0] and "no map cell" in lines[0]
     assert not (tmp_path / "fgm").exists()
+
+
+# --- REP 117: +inf nothing detected, -inf closer than min_range ------------------------------
+
+
+def test_rep117_infinities_read_as_no_echo_and_invalid() -> None:
+    """+inf (REP 117: nothing detected) is no echo, read as max_range like a range at or
+    beyond it; -inf (an object closer than min_range) is invalid, as NaN is."""
+    msgs = [reading(1.0, i, ranges_of(0, i)) for i in range(COUNT)]
+    msgs[1].msg.range, msgs[2].msg.range, msgs[3].msg.range = math.inf, -math.inf, math.nan
+    st = RingStats()
+    (ring,) = group_rings(msgs, TOPICS, COUNT, stats=st, cone=FOV)
+    assert st.no_echo == 1 and st.invalid == 2
+    assert ring.ranges[1] == ring.max_range[1] == pytest.approx(5.0)
+    assert np.isnan(ring.ranges[2]) and np.isnan(ring.ranges[3])

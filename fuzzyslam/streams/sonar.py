@@ -30,8 +30,11 @@ is known when the ring is). Rings whose readings span more than ``gap`` are coun
 (``sequential``). A sonar missing from a ring reads NaN. Glitches are made explicit and
 counted, never silently used:
 
-- NaN, infinite or negative ranges become NaN (``invalid``);
-- ranges at or beyond max_range are "no echo" and stay as max_range (``no_echo``);
+- NaN, negative ranges and -inf (REP 117: an object closer than min_range) become NaN
+  (``invalid``);
+- ranges at or beyond max_range are "no echo" and stay as max_range (``no_echo``); so is
+  +inf, REP 117's "nothing detected" (a driver may publish either; ``simulate`` writes
+  max_range);
 - ranges below min_range become NaN (``invalid``);
 - a reading whose max_range is not a positive finite number becomes NaN (``invalid``);
 - a reading whose max_range is beyond what an ultrasonic sensor can measure
@@ -322,11 +325,11 @@ def group_rings(
             st.invalid += 1  # no usable max range: the reading cannot be interpreted
             rmax[i] = np.nan
             ranges[i] = np.nan
-        elif not math.isfinite(r) or r < 0 or r < lo:
+        elif math.isnan(r) or r < 0 or r < lo:  # -inf: closer than min_range (REP 117)
             st.invalid += 1
             rmax[i] = hi
             ranges[i] = np.nan
-        elif r >= hi:
+        elif r >= hi:  # +inf included: REP 117's nothing detected
             st.no_echo += 1
             rmax[i] = hi
             ranges[i] = hi
