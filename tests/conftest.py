@@ -9,6 +9,9 @@ import shutil
 from pathlib import Path
 
 import pytest
+from rosbags.interfaces import QosDurability, QosReliability
+
+from fuzzyslam.streams.topics import Topics
 
 os.environ.setdefault("FUZZYSLAM_NO_PROGRESS", "1")
 os.environ.setdefault("MPLBACKEND", "Agg")
@@ -59,3 +62,20 @@ def pytest_collection_modifyitems(items: list[pytest.Item]) -> None:
     """Run the tests of :data:`FIRST` first, in that order; the rest keep theirs."""
     rank = {name: k for k, name in enumerate(FIRST)}
     items.sort(key=lambda item: rank.get(item.path.name, len(FIRST)))  # a stable sort
+
+
+def assert_offered_qos(connections) -> None:
+    """Every channel carries the QoS its publisher offered, as rosbag2 records it (the
+    MCAP ros2 profile's ``offered_qos_profiles``, parsed here by rosbags): the latched
+    topics (/tf_static, the map layers, the simulated world) transient local, so that
+    ``ros2 bag play`` offers them to tf2's static listener and RViz's map display, which
+    ask for it; every other topic volatile. Both reliable."""
+    latched = Topics().latched()
+    seen = set()
+    for conn in connections:
+        (qos,) = conn.ext.offered_qos_profiles
+        want = QosDurability.TRANSIENT_LOCAL if conn.topic in latched else QosDurability.VOLATILE
+        assert qos.durability == want, conn.topic
+        assert qos.reliability == QosReliability.RELIABLE, conn.topic
+        seen.add(conn.topic in latched)
+    assert seen, "no channel"

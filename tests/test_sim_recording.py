@@ -11,6 +11,7 @@ from pathlib import Path
 import cv2
 import numpy as np
 import pytest
+from conftest import assert_offered_qos
 from mcap.reader import make_reader
 from mcap.records import Chunk, Message, Metadata
 from mcap.stream_reader import StreamReader
@@ -67,6 +68,7 @@ def tiny(tmp_path_factory):
 def test_every_message_decodes_with_rosbags(tiny):
     n = 0
     with AnyReader([tiny["mcap"]]) as reader:
+        assert_offered_qos(reader.connections)  # /tf_static latched, the sensors not
         for conn, _t, raw in reader.messages():
             msg = reader.deserialize(raw, conn.msgtype)
             assert msg is not None

@@ -16,7 +16,7 @@ import pytest
 import test_fixes_sim
 import yaml
 from click.testing import CliRunner
-from conftest import shared_dir
+from conftest import assert_offered_qos, shared_dir
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from rosbags.highlevel import AnyReader
@@ -51,6 +51,7 @@ def decode_both(path: Path) -> dict[str, list]:
             out.setdefault(channel.topic, []).append(decoded)
     counts: dict[str, int] = {}
     with AnyReader([Path(path)]) as r:
+        assert_offered_qos(r.connections)
         for conn, _t, raw in r.messages():
             assert r.deserialize(raw, conn.msgtype) is not None
             counts[conn.topic] = counts.get(conn.topic, 0) + 1

@@ -290,7 +290,7 @@ def _write_viewer_log(path: Path, fgm, refs: list[Reference], t: float, cfg: Con
     from fuzzyslam.streams.writer import LogWriter
 
     ref_rows = [(r.id, r.name, r.angle, r.region) for r in refs]
-    with LogWriter(path) as w:
+    with LogWriter(path, latched=cfg.topics.latched()) as w:
         for topic, typename, msg, tm in fgm_messages(fgm, ref_rows, t, cfg.topics):
             w.write(topic, typename, msg, tm)
 
@@ -473,6 +473,7 @@ def build_map(
                 fov,
                 m_flm[0] if m_flm.ndim == 3 else m_flm,
                 params,
+                log=str(log_path),
             )
         out = as_json(replace(summary, wall_seconds=time.perf_counter() - wall0))
         (tmp / "summary.json").write_text(

@@ -340,7 +340,7 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
     fire = sonar_firings(cfg.sonar, dr.duration, source)  # (K, M)
     sequential = cfg.sonar.firing_gap_s > 0.0  # one message per reading, at its time
     m_sonars, i0, ideal, r = cfg.sonar.count, 0, np.zeros((0, 0)), np.zeros(0)
-    with LogWriter(out) as w, Progress(dr.duration, "simulate") as bar:
+    with LogWriter(out, latched=topics.latched()) as w, Progress(dr.duration, "simulate") as bar:
         w.json_metadata(WORLD_KEY, world.to_dict())
         w.json_metadata(SCENARIO_KEY, scenario.to_dict())
         if plan.obstacles:

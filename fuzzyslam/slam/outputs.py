@@ -212,7 +212,7 @@ class StreamingOutputs:
             self._files.append(self._cov)
             self._upd = text(UPDATES)
             self._files.append(self._upd)
-            self._mcap = LogWriter(self.tmp / ESTIMATES).__enter__()
+            self._mcap = LogWriter(self.tmp / ESTIMATES, latched=self.topics.latched()).__enter__()
         except BaseException:
             self._close()
             raise

@@ -30,6 +30,14 @@ class Topics:
     heading_fixes: str = "/slam/heading_fixes"
     pose_fixes: str = "/slam/pose_fixes"
 
+    def latched(self) -> frozenset[str]:
+        """The topics published once and kept for late subscribers (transient local
+        QoS, as ``/tf_static`` and nav2's ``/map`` are): the static transforms, the map
+        layers and the simulated world."""
+        return frozenset(
+            (self.tf_static, self.map, self.map_conflict, self.map_references, self.world_markers)
+        )
+
     def sonar(self, i: int) -> str:
         """Topic of sonar ``i`` (``/sonar/s00`` .. ``/sonar/s15``)."""
         return f"{self.sonar_prefix}{i:02d}"

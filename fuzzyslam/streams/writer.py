@@ -14,6 +14,7 @@ import os
 import struct
 import sys
 import zlib
+from collections.abc import Collection
 from pathlib import Path
 from typing import Any
 
@@ -25,6 +26,7 @@ from mcap.writer import CompressionType, IndexType, Writer
 from fuzzyslam import __version__
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.stamps import to_ns
+from fuzzyslam.streams.topics import Topics
 from fuzzyslam.streams.typestore import msgdef, normalise_typename, serialize
 
 _MESSAGE_HEAD = struct.Struct("<BQHIQQ")  # opcode, record length, channel, sequence, 2 times
@@ -171,16 +173,57 @@ class _LeanWriter(Writer):
                 self._finalize()
 
 
+# QoS durability and reliability as rosbag2 records them (rmw's enum values)
+_RELIABLE, _TRANSIENT_LOCAL, _VOLATILE = 1, 1, 2
+_INFINITE = "{sec: 2147483647, nsec: 4294967295}"  # rosbag2's record of an unset duration
+
+
+def offered_qos(latched: bool) -> str:
+    """The ``offered_qos_profiles`` channel metadata of the MCAP ros2 profile: the QoS of
+    the topic's one publisher as rosbag2 records it (YAML, rmw's enum values, read by
+    every ROS 2 release), which ``ros2 bag play`` offers again. A latched topic
+    (``/tf_static``, a map) is reliable and transient local, so that a listener that
+    joins later (tf2's static listener, RViz's map display, which ask for transient
+    local) still gets it; the others reliable and volatile, ROS 2's default.
+
+    Parameters
+    ----------
+    latched : bool
+        The topic is published once and kept for late subscribers.
+
+    Returns
+    -------
+    str
+        A YAML list of one profile.
+    """
+    durability = _TRANSIENT_LOCAL if latched else _VOLATILE
+    return (
+        f"- history: 3\n  depth: 0\n  reliability: {_RELIABLE}\n  durability: {durability}\n"
+        f"  deadline: {_INFINITE}\n  lifespan: {_INFINITE}\n  liveliness: 1\n"
+        f"  liveliness_lease_duration: {_INFINITE}\n  avoid_ros_namespace_conventions: false"
+    )
+
+
 class LogWriter:
     """Write ROS 2 messages to one MCAP file.
 
-    >>> with LogWriter("out.mcap") as w:          # doctest: +SKIP
+    Every channel carries the QoS its publisher offered (:func:`offered_qos`): the
+    ``latched`` topics (default ``Topics().latched()``, the default names) transient
+    local, the others volatile.
+
+    >>> with LogWriter("out.mcap", latched={"/tf_static"}) as w:   # doctest: +SKIP
     ...     w.write("/sonar/s00", "sensor_msgs/msg/Range", msg, t)
     """
 
-    def __init__(self, path: str | os.PathLike, chunk_size: int = 1024 * 1024) -> None:
+    def __init__(
+        self,
+        path: str | os.PathLike,
+        chunk_size: int = 1024 * 1024,
+        latched: Collection[str] | None = None,
+    ) -> None:
         self.path = Path(path)
         self.chunk_size = chunk_size
+        self.latched = Topics().latched() if latched is None else frozenset(latched)
         self._stack = contextlib.ExitStack()
         self._schemas: dict[str, int] = {}
         self._channels: dict[str, tuple[int, str]] = {}
@@ -215,7 +258,10 @@ class LogWriter:
                 name=typename, encoding="ros2msg", data=msgdef(typename).encode()
             )
         cid = self._writer.register_channel(
-            topic=topic, message_encoding="cdr", schema_id=self._schemas[typename]
+            topic=topic,
+            message_encoding="cdr",
+            schema_id=self._schemas[typename],
+            metadata={"offered_qos_profiles": offered_qos(topic in self.latched)},
         )
         self._channels[topic] = (cid, typename)
         self._seq[topic] = 0
