@@ -90,7 +90,8 @@ def test_fgm_messages_decode_and_match_nav2(tmp_path) -> None:
     poly = np.array([[-3.0, 2.0], [0.0, 2.0], [0.0, 3.0], [-3.0, 3.0]])
     topics = load_config("quick").topics
     with LogWriter(tmp_path / "fgm.mcap") as w:
-        for topic, typename, msg, t in fgm_messages(bm, [(0, "c0", 0.1, poly)], 5.0, topics):
+        refs = [(0, "c0", 0.1, poly), (1, "c1", np.deg2rad(-4.62), poly)]
+        for topic, typename, msg, t in fgm_messages(bm, refs, 5.0, topics):
             w.write(topic, typename, msg, t)
     msgs = decode_both(tmp_path / "fgm.mcap")
     assert sorted(msgs) == ["/map", "/map_conflict", "/map_references"]
@@ -110,7 +111,7 @@ def test_fgm_messages_decode_and_match_nav2(tmp_path) -> None:
     assert np.all(occ[:5] == -1) and np.all(pgm[-5:] == mapio.PGM_UNKNOWN)
     assert np.all(occupancy_values(bm)[5:][pgm[::-1][5:] == mapio.PGM_OCCUPIED] >= 65)
     texts = [m.text for m in msgs["/map_references"][0].markers if m.type == 9]
-    assert texts == ["c0 5.73 deg"]
+    assert texts == ["c0 5.73 deg", "c1 175.38 deg"]  # a line's direction, in [0, 180)
 
 
 # -- end to end: simulate | run | map | run --map --fix ----------------------------------
@@ -218,6 +219,13 @@ def test_run_with_a_map_shows_map_and_fixes(chain) -> None:
         accepted = sum(r["accepted"] == "1" for r in rows)
         green = sum(m.markers[0].color.g > 0.6 for m in fixes)
         assert green == accepted > 0
+        # the corridor labels are fgm.mcap's: each angle in [0, 180) deg as references.yaml
+        # says it (the run once printed the reloaded -4.62 for 175.38)
+        assert _labels(msgs) == _labels(decode_both(chain / "fgm" / "fgm.mcap"))
+
+
+def _labels(msgs: dict) -> list[str]:
+    return [m.text for m in msgs["/map_references"][0].markers if m.type == 9]
 
 
 def csv_rows(path: Path):
@@ -238,8 +246,8 @@ def test_map_writes_fgm_mcap(chain) -> None:
         assert (info.width, info.height) == (pgm.shape[1], pgm.shape[0])
         assert [info.origin.position.x, info.origin.position.y] == pytest.approx(nav2["origin"][:2])
     refs = yaml.safe_load((chain / "fgm" / "references.yaml").read_text())["references"]
-    labels = [m for m in msgs["/map_references"][0].markers if m.type == 9]
-    assert len(labels) == len(refs) > 0
+    want = [f"{r['name']} {r['angle_deg'] % 180.0:.2f} deg" for r in refs]
+    assert _labels(msgs) == want and len(want) > 0
 
 
 def test_foxglove_layout_names_the_topics_written() -> None:

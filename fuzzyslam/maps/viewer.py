@@ -124,7 +124,7 @@ def reference_markers(
         )  # fmt: skip
         markers.append(
             MarkerSpec(t, frame, "label", rid, 9, (c[0], c[1], 0.0), 0.3, (0.0, 0.0, 0.3),
-                       (1.0, 1.0, 1.0, 1.0), text=f"{name} {np.rad2deg(angle):.2f} deg")
+                       (1.0, 1.0, 1.0, 1.0), text=f"{name} {np.rad2deg(angle) % 180.0:.2f} deg")
         )  # fmt: skip
     return encode_marker_array(markers)
 
