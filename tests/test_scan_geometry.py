@@ -167,6 +167,21 @@ def test_a_resampled_scan_with_time_increment_is_at_its_last_beam() -> None:
     np.testing.assert_allclose(off[:86], (np.r_[np.arange(0, 170, 2), 169] - 169) * ti)
 
 
+def test_a_scan_with_one_beam_read_is_at_that_beams_time() -> None:
+    """Beams 1 ms apart, a scan of three 1-rad beams of which only the third is in the
+    first scan's view: its ring is at that beam's time (stamp + 2 ms), not the stamp."""
+    ti, d = 1e-3, 1.0
+    a_min = A_MIN + 10 * A_INC - 2 * d
+    msgs = [
+        scan(1.0, beam_ranges(), time_increment=ti),
+        scan(2.0, beam_ranges(3, a_min, d), a_min, d, time_increment=ti),
+    ]
+    rings, st, _ = read(msgs)
+    r = rings[1]
+    assert np.count_nonzero(np.isfinite(r.ranges)) == 1 and st.extra["resampled_scans"] == 1
+    assert r.t == pytest.approx(2.0 + 2 * ti, abs=1e-9) and r.offsets is None
+
+
 # --- refused scans -----------------------------------------------------------------------
 
 

@@ -306,8 +306,8 @@ def scan_rings(
             rmax = np.full(len(kept), hi)
             if ti > 0 and read > 1:
                 yield Ring(t + last * ti, ranges, rmax, float(beam_width), offsets, own)
-            else:
-                yield Ring(t, ranges, rmax, float(beam_width), mounts=own)
+            else:  # one beam read: at its own time (the stamp when ti is 0)
+                yield Ring(t + last * ti, ranges, rmax, float(beam_width), mounts=own)
     finally:
         if refused > FEW_REFUSED:
             note(
