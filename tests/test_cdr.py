@@ -152,6 +152,36 @@ def test_range(h, kind, f) -> None:
     roundtrip(msg, M.RANGE)
 
 
+@settings(max_examples=80, deadline=None)
+@given(HEADERS, st.integers(0, 255), st.lists(F32, min_size=5, max_size=5))
+def test_range_of_iron_and_later_with_its_variance(h, kind, f) -> None:
+    """From ROS 2 Iron on, Range ends with a float32 variance: a Jazzy robot's sonar
+    messages (serialised by rosbags' Jazzy typestore) decode to the same fields (they
+    were all refused as inconsistent: a Jazzy sonar log had no readings); a payload
+    longer than the variance and its padding is still refused."""
+    from rosbags.typesys import Stores, get_typestore
+
+    jazzy = get_typestore(Stores.ROS2_JAZZY)
+    t = jazzy.types
+    hj = t["std_msgs/msg/Header"](
+        stamp=t["builtin_interfaces/msg/Time"](sec=h.stamp.sec, nanosec=h.stamp.nanosec),
+        frame_id=h.frame_id,
+    )
+    data = jazzy.serialize_cdr(t[M.RANGE](hj, kind, *f), M.RANGE)
+    got = cdr.decode_range(data)
+    assert (got.header.stamp.sec, got.header.stamp.nanosec, got.header.frame_id) == (
+        h.stamp.sec,
+        h.stamp.nanosec,
+        h.frame_id,
+    )
+    assert got.radiation_type == kind
+    want = np.array(f[:4], dtype=np.float32)
+    got_f = [got.field_of_view, got.min_range, got.max_range, got.range]
+    np.testing.assert_array_equal(np.array(got_f, dtype=np.float32), want)
+    with pytest.raises(cdr.CdrError):
+        cdr.decode_range(bytes(data) + bytes(4))
+
+
 @settings(max_examples=100, deadline=None)
 @given(
     st.lists(

@@ -314,7 +314,9 @@ def decode_image(buf: bytes | memoryview) -> Image:
 
 def decode_range(buf: bytes | memoryview) -> Range:
     """sensor_msgs/Range: header, radiation_type (u8), then four float32 aligned to 4:
-    field_of_view, min_range, max_range, range."""
+    field_of_view, min_range, max_range, range; from ROS 2 Iron on (Jazzy, Kilted, ...)
+    a fifth, variance, which is read past (the fixes model the sonar's noise
+    themselves)."""
     header, a = _header(buf)
     if a >= len(buf):
         raise CdrError(f"Range of {len(buf)} bytes is truncated")
@@ -322,8 +324,11 @@ def decode_range(buf: bytes | memoryview) -> Range:
     a += 1
     a += (4 - a) % 4
     fov, lo, hi, r = _F32X4.unpack_from(buf, a)
-    if len(buf) - a - 16 > 3:
-        raise CdrError(f"payload of {len(buf)} bytes, message ends at {a + 16}")
+    end = a + 16
+    if len(buf) - end > 3:  # Iron's variance, or more than padding
+        end += 4
+        if len(buf) - end > 3:
+            raise CdrError(f"payload of {len(buf)} bytes, message ends at {end}")
     return Range(header, kind, fov, lo, hi, r)
 
 
