@@ -15,14 +15,22 @@ picture is written as RGB (the figures are opaque) at a lower zlib level.
 
 from __future__ import annotations
 
+import contextlib
+import functools
 import math
 import os
+from collections.abc import Callable
+from pathlib import Path
+from typing import ParamSpec, TypeVar
 
 import matplotlib
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import to_rgba_array
 from matplotlib.figure import Figure
+
+P = ParamSpec("P")
+R = TypeVar("R")
 
 # The figures' one palette: Okabe & Ito (2008), "Color Universal Design", told apart with
 # any colour vision (tab10's orange and green are not, for deuteranopes). SERIES colours
@@ -37,8 +45,93 @@ SERIES_DASHES = ("-", "--", "-.", ":")
 EVENT_COLOURS = {"FGM frozen": GREEN, "lamp failure": VERMILLION, "bump": PURPLE}
 EXPECTED = BLACK
 
+# The figures' one style, at print size: a figure is drawn at its printed width (one
+# column, COLUMN_W, or both, WIDE_W: a two-column paper's widths), its text 8-9 pt, its
+# lines at least 1 pt, and written at PRINT_DPI (about 300 dots per inch in print).
+COLUMN_W = 3.5  # inches: a single column (8.9 cm)
+WIDE_W = 7.2  # inches: both columns (18.3 cm), the widest a figure is
+PRINT_DPI = 300
+STYLE = {
+    "font.size": 8.0,
+    "axes.titlesize": 9.0,
+    "axes.labelsize": 8.0,
+    "xtick.labelsize": 8.0,
+    "ytick.labelsize": 8.0,
+    "legend.fontsize": 8.0,
+    "figure.titlesize": 9.0,
+    "lines.linewidth": 1.2,
+    "lines.markersize": 5.0,
+    "axes.linewidth": 0.8,
+    "grid.linewidth": 0.5,
+    "xtick.major.width": 0.8,
+    "ytick.major.width": 0.8,
+    "legend.handlelength": 2.2,
+    "legend.borderaxespad": 0.3,
+    "savefig.pad_inches": 0.03,
+    "image.interpolation": "nearest",
+}
+MIN_LW = 1.0  # the thinnest line of data (pt)
+
 COMPRESS_LEVEL = 3  # zlib: 6 (PIL's default) costs 1.5x the time for files 5-8 % smaller
 SOFTWARE = f"Matplotlib version{matplotlib.__version__}, https://matplotlib.org/"
+
+
+def figure_style() -> contextlib.AbstractContextManager:
+    """The figures' one style (:data:`STYLE`: font sizes, line widths) as a context: a
+    figure is made, drawn and saved inside it (tick labels are made at the draw).
+
+    Returns
+    -------
+    context manager
+        ``matplotlib.rc_context(STYLE)``.
+    """
+    return matplotlib.rc_context(STYLE)
+
+
+def styled(fn: Callable[P, R]) -> Callable[P, R]:
+    """Run the figure function ``fn`` inside :func:`figure_style`.
+
+    Parameters
+    ----------
+    fn : callable
+        A function that makes and saves a figure.
+
+    Returns
+    -------
+    callable
+        The same function, styled.
+    """
+
+    @functools.wraps(fn)
+    def wrapper(*args: P.args, **kwargs: P.kwargs) -> R:
+        with figure_style():
+            return fn(*args, **kwargs)
+
+    return wrapper
+
+
+def log_name(path: str | os.PathLike | None) -> str:
+    """A log's or run's short name for a title: its file name, with its folder's name when
+    the file's name alone says little (``mrclam6-robot2/log.mcap``, ``trajectory.tum``'s
+    run directory).
+
+    Parameters
+    ----------
+    path : path or None
+        The file or directory.
+
+    Returns
+    -------
+    str
+        The name; empty for None or an empty path.
+    """
+    if path is None or str(path) == "":
+        return ""
+    p = Path(path)
+    generic = {"log.mcap", "truth.tum", "trajectory.tum", "estimates.mcap", "."}
+    if p.name in generic and p.parent.name:
+        return f"{p.parent.name}/{p.name}"
+    return p.name
 
 
 def fixed_layout(

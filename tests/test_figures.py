@@ -24,6 +24,7 @@ from matplotlib.lines import Line2D
 
 from fuzzyslam.cli import _register, cli
 from fuzzyslam.evaluation import figures as eval_figures
+from fuzzyslam.figsave import figure_style
 from fuzzyslam.maps import figures as map_figures
 
 pytestmark = pytest.mark.slow  # end to end: a simulated log, a run, a map, an evaluation
@@ -199,11 +200,13 @@ def test_fixed_layout_holds_every_artist(drawn, name) -> None:
     if name not in drawn:
         pytest.skip(f"{name} not drawn for this log")
     fig = drawn[name]
-    renderer = fig.canvas.get_renderer()
-    box = fig.get_tightbbox(renderer)  # inches
+    # measured in the figures' style (fuzzyslam/figsave.py): ticks are made at the draw
+    with figure_style():
+        renderer = fig.canvas.get_renderer()
+        box = fig.get_tightbbox(renderer)  # inches
+        boxes = [ax.get_tightbbox(renderer) for ax in fig.axes if ax.axison]  # colour bars too
     w, h = fig.get_size_inches()
-    assert box.x0 >= 0 and box.y0 >= 0 and box.x1 <= w and box.y1 <= h, (box, w, h)
-    boxes = [ax.get_tightbbox(renderer) for ax in fig.axes if ax.axison]  # colour bars too
+    assert box.x0 >= 0 and box.y0 >= 0 and box.x1 <= w and box.y1 <= h, (box.bounds, w, h)
     for i, a in enumerate(boxes):
         for b in boxes[i + 1 :]:
             overlap = min(a.x1, b.x1) - max(a.x0, b.x0), min(a.y1, b.y1) - max(a.y0, b.y0)

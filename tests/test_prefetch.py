@@ -235,12 +235,12 @@ def test_progress_sees_the_same_times(tmp_path: Path, forks, monkeypatch) -> Non
 DRAWING: dict = {}  # draw_noting_pid's file and the real draw_changes (set by the test)
 
 
-def draw_noting_pid(path, fgm, found) -> None:
+def draw_noting_pid(path, fgm, found, *rest) -> None:
     """``changes.draw_changes`` that notes which process drew (module-level: the figure
     process is sent it by name)."""
     with open(DRAWING["log"], "a", encoding="utf-8") as fh:
         fh.write(f"{os.getpid()}\n")
-    DRAWING["draw"](path, fgm, found)
+    DRAWING["draw"](path, fgm, found, *rest)
 
 
 @pytest.mark.slow

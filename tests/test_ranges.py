@@ -396,9 +396,9 @@ def test_excerpt_is_small_and_named():
 
 @pytest.mark.slow
 def test_hough_figure_is_a_grid_for_many_corridors(tmp_path, capsys):
-    """hough.png of a building with 17 corridors: rows of at most HOUGH_COLUMNS (3)
-    panels of one size, not a strip 17 panels wide: as wide as three panels with their
-    margins (a 7-inch column), as tall as its rows of panels."""
+    """hough.png of a building with 17 corridors: its HOUGH_REFS strongest only, in rows
+    of at most HOUGH_COLUMNS (3) panels of one size, not a strip 17 panels wide: as wide
+    as three panels with their margins (a 7-inch column), as tall as its rows of panels."""
     import cv2
 
     from fuzzyslam.maps import figures
@@ -422,13 +422,15 @@ def test_hough_figure_is_a_grid_for_many_corridors(tmp_path, capsys):
     path = tmp_path / "hough.png"
     figures.fig_hough(path, fgm, many, None, None, cfg.fgm)
     h, w = cv2.imread(str(path)).shape[:2]
-    cols, rows = figures.HOUGH_COLUMNS, -(-17 // figures.HOUGH_COLUMNS)
+    shown = min(17, figures.HOUGH_REFS)
+    cols, rows = min(figures.HOUGH_COLUMNS, shown), -(-shown // figures.HOUGH_COLUMNS)
     assert cols <= 3
     width = (
         figures.H_LEFT + figures.H_RIGHT + cols * figures.PANEL_W + (cols - 1) * figures.H_WSPACE
     )
     assert w <= width * figures.DPI + 1 and width <= 7.5 + 1e-9
-    assert h >= 2 * rows * figures.PANEL_H * figures.DPI
+    assert 2 * rows * figures.PANEL_H * figures.DPI <= h
+    assert h <= (2 * rows + 1) * (figures.PANEL_H + figures.H_HSPACE) * figures.DPI
 
 
 @pytest.mark.slow

@@ -15,56 +15,149 @@ import matplotlib.pyplot as plt
 import numpy as np
 from numpy.typing import NDArray
 
+from fuzzyslam.evaluation.align import Similarity
 from fuzzyslam.evaluation.core import Estimate, Evaluation, Truth
 from fuzzyslam.evaluation.lamps import LampMatch
 from fuzzyslam.figsave import (
     BLACK,
     BLUE,
+    COLUMN_W,
     EVENT_COLOURS,
     EXPECTED,
     GREEN,
     ORANGE,
+    PRINT_DPI,
     PURPLE,
     SERIES,  # fmt: skip
     SERIES_DASHES,
     SKY,
     VERMILLION,
+    WIDE_W,
     fixed_layout,
+    log_name,
     save_png,
+    styled,
 )
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.slam.health import chi2_quantile
 from fuzzyslam.streams.logmeta import World
 
 Array = NDArray[np.float64]
-DPI = 120  # figures are made at their PNG's dpi: the layout's text sizes are the drawing's
+DPI = PRINT_DPI  # made at print size and at the PNG's dpi (fuzzyslam/figsave.py's style)
 C_TRUTH, C_EST, C_ODOM = BLACK, BLUE, VERMILLION  # the Okabe-Ito palette (figsave.py)
 
 
-# Margins of the figures' fixed layouts (inches; fuzzyslam/figsave.py): tick labels and
-# an axis label left, a title on top, tick labels and an axis label below (and the
-# legend of the events 0.28 axes heights below the last axes); the blank rest is cropped.
-# Titles are placed at y=1.0 (as matplotlib places them by default, above axes without
-# top tick labels): otherwise it measures every y tick label at each draw to place them
-LEFT, RIGHT, TOP, BOTTOM = 0.95, 0.25, 0.45, 0.65
-EVENTS_BELOW = 0.28  # the events' legend: its top this far below the last axes (axes heights)
-LEGEND_RIGHT = 3.6  # Fig. 1's legend right of the axes (its longest label, font size 8)
-LEGEND_SIDE = 2.6  # consistency's and compare's legends right of their axes (font size 8)
+# Margins of the figures' fixed layouts (inches, 8-9 pt text; fuzzyslam/figsave.py): tick
+# labels and an axis label left, a title on top, tick labels and an axis label below (and
+# the legend of the events under them); the blank rest is cropped. Titles are placed at
+# y=1.0 (as matplotlib places them by default, above axes without top tick labels):
+# otherwise it measures every y tick label at each draw to place them
+LEFT, RIGHT, TOP, BOTTOM = 0.6, 0.12, 0.3, 0.45
+TOP2 = 0.45  # a title of two lines
+XLABEL_ROOM = 0.42  # below the axes: tick labels and the x label
+LEGEND_ROW = 0.155  # one legend row at 8 pt (inches)
+LEGEND_SIDE = 2.45  # consistency's and compare's legends right of their axes
+TIME_LABEL = "time since the log's start (s)"
 
 
-EVENTS_HEIGHT = 0.4  # the events' legend: one row of font size 8, and a blank to spare
+def log_start(truth: Truth) -> float:
+    """The log's start: the time origin of every time axis (the truth's first stamp, or
+    the first run's start when earlier).
+
+    Parameters
+    ----------
+    truth : Truth
+        The truth.
+
+    Returns
+    -------
+    float
+        Log time (s).
+    """
+    t0 = float(truth.t[0]) if truth.t.size else 0.0
+    if truth.scenario is not None:
+        starts = [a for _r, a, _b in truth.scenario.run_intervals()]
+        if starts:
+            t0 = min(t0, min(starts))
+    return t0
 
 
-def _events_bottom(fig: plt.Figure, rows: int, gaps: float) -> float:
-    """The bottom margin (inches) that holds the events' legend of :func:`_mark_events`
-    under ``rows`` axes separated by ``gaps`` inches in all: the legend's top hangs
-    EVENTS_BELOW axes heights below the last axes, whose height is
-    h_a = (h - TOP - b - gaps) / rows, so b = EVENTS_HEIGHT + EVENTS_BELOW h_a gives
-    b = (EVENTS_HEIGHT + k (h - TOP - gaps)) / (1 + k) with k = EVENTS_BELOW / rows
-    (at least BOTTOM)."""
+def landmark_noun(truth: Truth) -> str:
+    """What the landmarks are called in the figures: "lamps" for a simulated world's
+    ceiling lamps, "landmarks" otherwise (a real log's detections, ``--landmarks-truth``).
+
+    Parameters
+    ----------
+    truth : Truth
+        The truth.
+
+    Returns
+    -------
+    str
+    """
+    return "lamps" if truth.world is not None else "landmarks"
+
+
+def run_title(truth: Truth, est: Estimate) -> str:
+    """The log and the run a figure is of: ``LOG: LABEL`` (file names, :func:`log_name`).
+
+    Parameters
+    ----------
+    truth : Truth
+        The truth (its source: the log or truth file).
+    est : Estimate
+        The estimate (its label).
+
+    Returns
+    -------
+    str
+    """
+    log = log_name(truth.source)
+    return f"{log}: {est.label}" if log else est.label
+
+
+def _legend_rows(n: int, ncol: int) -> int:
+    return -(-n // max(ncol, 1))
+
+
+def events_legend(fig: plt.Figure, ax: plt.Axes, handles: list, bottom: float) -> None:
+    """The events' legend under ``ax`` (the last axes), below its x label: its top
+    ``XLABEL_ROOM`` inches under the axes, in two columns.
+
+    Parameters
+    ----------
+    fig : Figure
+        The figure (laid out: :func:`fuzzyslam.figsave.fixed_layout`).
+    ax : Axes
+        The bottom axes.
+    handles : list
+        The handles of :func:`mark_events` (nothing drawn without one).
+    bottom : float
+        The figure's bottom margin (inches, :func:`events_bottom`).
+    """
+    if not handles:
+        return
     h = fig.get_size_inches()[1]
-    k = EVENTS_BELOW / rows
-    return max(BOTTOM, (EVENTS_HEIGHT + k * (h - TOP - gaps)) / (1.0 + k))
+    x = ax.get_position().x0 + ax.get_position().width / 2.0
+    fig.legend(handles=handles, loc="upper center", bbox_to_anchor=(x, (bottom - XLABEL_ROOM) / h),
+               ncol=min(len(handles), 2), frameon=False, borderaxespad=0.0)  # fmt: skip
+
+
+def events_bottom(handles: int) -> float:
+    """The bottom margin (inches) that holds the x label and the events' legend (two
+    columns).
+
+    Parameters
+    ----------
+    handles : int
+        The legend's entries.
+
+    Returns
+    -------
+    float
+        Inches.
+    """
+    return XLABEL_ROOM + _legend_rows(handles, 2) * LEGEND_ROW + 0.12 if handles else BOTTOM
 
 
 def _save(fig: plt.Figure, path: Path) -> None:
@@ -73,6 +166,24 @@ def _save(fig: plt.Figure, path: Path) -> None:
     plt.close(fig)
 
 
+def _moved(est: Estimate, to_truth: Similarity | None) -> Estimate:
+    """The estimate in the truth's frame: poses, dead reckoning and landmarks moved by the
+    evaluation's alignment (``Evaluation.to_truth``; unchanged without one)."""
+    if to_truth is None:
+        return est
+    from dataclasses import replace
+
+    return replace(
+        est,
+        poses=to_truth.apply_poses(est.poses),
+        landmarks=to_truth.apply(est.landmarks) if est.landmarks is not None else None,
+        odometry=(est.odometry[0], to_truth.apply_poses(est.odometry[1]))
+        if est.odometry is not None
+        else None,
+    )
+
+
+@styled
 def fig1_paths(
     path: Path,
     truth: Truth,
@@ -80,138 +191,198 @@ def fig1_paths(
     fgm: BeliefMap | None = None,
     lamp_match: LampMatch | None = None,
     title: str = "",
+    to_truth: Similarity | None = None,
 ) -> None:
-    """Fig. 1: true, estimated and odometry-only paths; true and estimated lamps (duplicated and
-    missed ones marked when lamp_match is given); walls; the FGM underneath when given."""
-    fig, ax = plt.subplots(figsize=(8.6 + LEGEND_RIGHT, 6.5), dpi=DPI)
-    fixed_layout(fig, LEFT, LEGEND_RIGHT, 0.6, TOP)
-    if fgm is not None:
-        im = ax.imshow(
-            fgm.pignistic_occupied(),
-            origin="lower",
-            extent=fgm.grid.extent,
-            cmap="Greys",
-            vmin=0.0,
-            vmax=1.0,
-            interpolation="nearest",
-        )
-        fig.colorbar(im, ax=ax, shrink=0.5, location="bottom", pad=0.1, label="FGM BetP(occupied)")
+    """Fig. 1: true, estimated and odometry-only paths; true and estimated landmarks
+    (duplicated and missed ones marked when lamp_match is given); walls; the FGM
+    underneath when given. Everything in the truth's frame: the estimate, its dead
+    reckoning, landmarks and map moved by ``to_truth`` (the evaluation's alignment, the
+    one its numbers use), when given.
+
+    Parameters
+    ----------
+    path : Path
+        The PNG.
+    truth : Truth
+        The truth (path, world, true landmarks).
+    est : Estimate
+        The estimate as the run wrote it.
+    fgm : BeliefMap, optional
+        The map, in the estimate's frame.
+    lamp_match : LampMatch, optional
+        The evaluation's landmark matching (indices of ``est.landmarks``).
+    title : str
+        The title (default: the log, the run and what is drawn).
+    to_truth : Similarity, optional
+        The rigid motion from the estimate's frame to the truth's.
+    """
+    noun = landmark_noun(truth)
+    raw_lm = est.landmarks
+    est = _moved(est, to_truth)
     world: World | None = truth.world
+    true_lm = truth.landmark_array
+    pts = [truth.poses[:, :2], est.poses[:, :2]]
+    if world is not None:
+        pts.append(world.wall_array.reshape(-1, 2))
+    if est.odometry is not None:
+        pts.append(est.odometry[1][:, :2])
+    if est.landmarks is not None and est.landmarks.size:
+        pts.append(est.landmarks[:, :2])
+    if true_lm is not None and true_lm.size:
+        pts.append(np.asarray(true_lm, dtype=float)[:, :2])
+    if fgm is not None and to_truth is None:
+        e = fgm.grid.extent
+        pts.append(np.array([[e[0], e[2]], [e[1], e[3]]]))
+    allp = np.vstack([p for p in pts if p.size])
+    allp = allp[np.isfinite(allp).all(axis=1)]
+    lo, hi = allp.min(axis=0), allp.max(axis=0)
+    pad = 0.04 * float(np.max(hi - lo)) + 0.1
+    lo, hi = lo - pad, hi + pad
+    # the axes' shape from the data's (equal scale), between 0.6 and 1.3 of its width
+    right = RIGHT + (0.75 if fgm is not None else 0.0)
+    ax_w = COLUMN_W - LEFT - right
+    ratio = float(np.clip((hi[1] - lo[1]) / (hi[0] - lo[0]), 0.6, 1.3))
+    ax_h = ax_w * ratio
+    centre, size = (lo + hi) / 2.0, hi - lo
+    if size[1] / size[0] < ratio:
+        size[1] = size[0] * ratio
+    else:
+        size[0] = size[1] / ratio
+    lo, hi = centre - size / 2.0, centre + size / 2.0
+
+    fig = plt.figure(figsize=(COLUMN_W, 1.0), dpi=DPI)  # its height set below
+    ax = fig.add_subplot()
+    if fgm is not None:
+        im = ax.imshow(fgm.pignistic_occupied(), origin="lower", extent=fgm.grid.extent,
+                       cmap="Greys", vmin=0.0, vmax=1.0, interpolation="nearest")  # fmt: skip
+        if to_truth is not None:  # the map moved with the estimate
+            from matplotlib.transforms import Affine2D
+
+            m = np.eye(3)
+            m[:2, :2], m[:2, 2] = to_truth.scale * to_truth.rotation, to_truth.translation
+            im.set_transform(Affine2D(m) + ax.transData)
+        cax = ax.inset_axes((1.04, 0.0, 0.05, 1.0))
+        fig.colorbar(im, cax=cax, label="FGM BetP(occupied)")
     if world is not None:
         for i, w in enumerate(world.wall_array):
-            ax.plot(
-                w[[0, 2]],
-                w[[1, 3]],
-                color="0.45" if fgm is None else "tab:olive",
-                lw=1.2,
-                label=("true walls" if i == 0 else None),
-            )
+            ax.plot(w[[0, 2]], w[[1, 3]], color="0.45" if fgm is None else "tab:olive",
+                    lw=1.2, label=("true walls" if i == 0 else None))  # fmt: skip
     if est.odometry is not None:
         op = est.odometry[1]
-        ax.plot(op[:, 0], op[:, 1], color=C_ODOM, lw=0.8, ls="--", label="odometry only")
-    ax.plot(est.poses[:, 0], est.poses[:, 1], color=C_EST, lw=1.6, label=f"estimate ({est.label})")
-    # the truth over the estimate, thin and dashed: where they agree both show
-    ax.plot(truth.poses[:, 0], truth.poses[:, 1], color=C_TRUTH, lw=0.7, ls=(0, (4, 2)),
+        ax.plot(op[:, 0], op[:, 1], color=C_ODOM, lw=1.0, ls="--", label="odometry only")
+    ax.plot(est.poses[:, 0], est.poses[:, 1], color=C_EST, lw=1.3, label="estimate")
+    # the truth over the estimate, dashed: where they agree both show
+    ax.plot(truth.poses[:, 0], truth.poses[:, 1], color=C_TRUTH, lw=1.0, ls=(0, (4, 2)),
             label="true path", zorder=4)  # fmt: skip
-    if world is not None and world.lamp_array.size:
-        la = world.lamp_array
-        ax.scatter(
-            la[:, 0],
-            la[:, 1],
-            s=70,
-            marker="o",
-            facecolors="none",
-            edgecolors=ORANGE,
-            linewidths=1.5,
-            label="true lamps",
-            zorder=5,
-        )
-        for i, (x, y) in enumerate(la):
-            ax.annotate(str(i), (x, y), xytext=(4, 4), textcoords="offset points", fontsize=7)
+    if true_lm is not None and len(true_lm):
+        la = np.asarray(true_lm, dtype=float)
+        ax.scatter(la[:, 0], la[:, 1], s=36, marker="o", facecolors="none", edgecolors=ORANGE,
+                   linewidths=1.2, label=f"true {noun}", zorder=5)  # fmt: skip
+        if world is not None:  # the simulated lamps' numbers (fig4's axis)
+            for i, (x, y) in enumerate(la[:, :2]):
+                ax.annotate(str(i), (x, y), xytext=(3, 3), textcoords="offset points",
+                            fontsize=7)  # fmt: skip
     if est.landmarks is not None and est.landmarks.size:
-        ax.scatter(
-            est.landmarks[:, 0],
-            est.landmarks[:, 1],
-            s=40,
-            marker="x",
-            color=GREEN,
-            linewidths=1.5,
-            label="estimated lamps",
-            zorder=6,
-        )
+        ax.scatter(est.landmarks[:, 0], est.landmarks[:, 1], s=24, marker="x", color=GREEN,
+                   linewidths=1.2, label=f"estimated {noun}", zorder=6)  # fmt: skip
         left = (  # the estimates the matching left over: (indices, size, colour, width, label)
-            (lamp_match.spurious, 40, PURPLE, 1.5,
-             f"spurious lamps ({{}}, > {lamp_match.max_dist:.2f} m from any)"),
-            (lamp_match.duplicates, 90, VERMILLION, 2.0, "duplicated lamps ({})"),
+            (lamp_match.spurious, 24, PURPLE, 1.2,
+             f"spurious ({{}}, > {lamp_match.max_dist:.2f} m)"),
+            (lamp_match.duplicates, 50, VERMILLION, 1.6, "duplicated ({})"),
         ) if lamp_match is not None else ()  # fmt: skip
         for idx, size, colour, width, label in left:
             if idx:
                 d = est.landmarks[idx]
                 ax.scatter(d[:, 0], d[:, 1], s=size, marker="x", color=colour,
                            linewidths=width, label=label.format(len(d)), zorder=7)  # fmt: skip
-        if lamp_match is not None and lamp_match.missed and world is not None:
-            m = world.lamp_array[lamp_match.missed]
-            ax.scatter(
-                m[:, 0],
-                m[:, 1],
-                s=110,
-                marker="s",
-                facecolors="none",
-                edgecolors=VERMILLION,
-                linewidths=1.5,
-                label=f"missed lamps ({len(m)})",
-                zorder=7,
-            )
-    ax.scatter(*truth.poses[0, :2], s=60, marker="*", color="k", zorder=7, label="start")
-    pts = [truth.poses[:, :2], est.poses[:, :2]]
-    if world is not None:
-        pts.append(world.wall_array.reshape(-1, 2))
-    if est.odometry is not None:
-        pts.append(est.odometry[1][:, :2])
-    if fgm is not None:
-        e = fgm.grid.extent
-        pts.append(np.array([[e[0], e[2]], [e[1], e[3]]]))
-    allp = np.vstack(pts)
-    lo, hi = allp.min(axis=0), allp.max(axis=0)
-    pad = 0.04 * float(np.max(hi - lo)) + 0.1
-    ax.set_xlim(lo[0] - pad, hi[0] + pad)
-    ax.set_ylim(lo[1] - pad, hi[1] + pad)
+        if lamp_match is not None and lamp_match.missed and true_lm is not None:
+            m = np.asarray(true_lm, dtype=float)[lamp_match.missed]
+            ax.scatter(m[:, 0], m[:, 1], s=60, marker="s", facecolors="none",
+                       edgecolors=VERMILLION, linewidths=1.2, label=f"missed ({len(m)})",
+                       zorder=7)  # fmt: skip
+    del raw_lm
+    ax.scatter(*truth.poses[0, :2], s=40, marker="*", color="k", zorder=7, label="start")
+    ax.set_xlim(lo[0], hi[0])
+    ax.set_ylim(lo[1], hi[1])
     ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
-    ax.set_title(
-        title or f"Fig. 1: {'FGM, ' if fgm is not None else ''}paths and lamps (map frame)",
-        y=1.0,
-    )
+    frame = "truth frame, estimate aligned" if to_truth is not None else "map frame"
+    ax.set_xlabel(f"x (m), {frame}")
+    what = f"{'FGM, ' if fgm is not None else ''}paths and {noun}"
+    ax.set_title(title or f"Fig. 1: {what}\n{run_title(truth, est)}", y=1.0)
     ax.grid(alpha=0.3)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, framealpha=0.85)
+    # the legend under the axes, two columns (none over the map)
+    n = len(ax.get_legend_handles_labels()[0])
+    bottom = XLABEL_ROOM + _legend_rows(n, 2) * LEGEND_ROW + 0.08
+    h = TOP2 + ax_h + bottom
+    fig.set_size_inches(COLUMN_W, h)
+    fixed_layout(fig, LEFT, right, bottom, TOP2)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -XLABEL_ROOM / ax_h), ncol=2,
+              frameon=False, borderaxespad=0.0, columnspacing=1.0, handlelength=1.8)  # fmt: skip
     _save(fig, path)
 
 
-def _mark_events(axes: list[plt.Axes], truth: Truth) -> None:
-    """Vertical lines at run starts (labelled), the FGM freeze, lamp failures and bumps, with a
-    legend of the event kinds on the last axis."""
+def mark_events(axes: list[plt.Axes], truth: Truth, t0: float = 0.0) -> list:
+    """Vertical lines at run starts (labelled), the FGM freeze, lamp failures and bumps,
+    at their times since ``t0``.
+
+    Parameters
+    ----------
+    axes : list of Axes
+        The axes, sharing their time axis (the run labels on the first).
+    truth : Truth
+        The truth (or anything with its ``scenario`` and ``freeze_run``).
+    t0 : float
+        The time origin (s, log time: :func:`log_start`).
+
+    Returns
+    -------
+    list
+        The legend handles of the event kinds drawn (for :func:`events_legend`).
+    """
     if truth.scenario is None:
-        return
+        return []
     from matplotlib.lines import Line2D
 
     style = {
-        "run start": {"color": "0.6", "lw": 0.8, "ls": ":"},
+        "run start": {"color": "0.6", "lw": 1.0, "ls": ":"},
         "FGM frozen": {"color": EVENT_COLOURS["FGM frozen"], "lw": 1.2, "ls": "-"},
         "lamp failure": {"color": EVENT_COLOURS["lamp failure"], "lw": 1.2, "ls": "--"},
         "bump": {"color": EVENT_COLOURS["bump"], "lw": 1.0, "ls": "-."},
     }
-    times: dict[str, list[float]] = {k: [] for k in style}
-    for r, t0, _t1 in truth.scenario.run_intervals():
-        times["run start"].append(t0)
-        axes[0].annotate(
-            f"run {r}",
-            (t0, 1.0),
-            xycoords=("data", "axes fraction"),
-            xytext=(2, -10),
-            textcoords="offset points",
-            fontsize=7,
-        )
+    times = event_times(truth)
+    for r, a, _t1 in truth.scenario.run_intervals():
+        axes[0].annotate(f"run {r}", (a - t0, 1.0), xycoords=("data", "axes fraction"),
+                         xytext=(2, -9), textcoords="offset points", fontsize=8)  # fmt: skip
+    handles = []
+    for kind, ts in times.items():
+        for t in ts:
+            for ax in axes:
+                ax.axvline(t - t0, **style[kind])
+        if ts:
+            handles.append(Line2D([], [], label=f"{kind} ({len(ts)})", **style[kind]))
+    return handles
+
+
+def event_times(truth: Truth) -> dict[str, list[float]]:
+    """The times (s, log time) of a simulated log's events: run starts, the FGM freeze,
+    lamp failures, bumps (empty lists without a scenario).
+
+    Parameters
+    ----------
+    truth : Truth
+        The truth (its scenario and freeze run).
+
+    Returns
+    -------
+    dict
+        ``{"run start": [...], "FGM frozen": [...], "lamp failure": [...], "bump": [...]}``.
+    """
+    times: dict[str, list[float]] = {k: [] for k in ("run start", "FGM frozen",
+                                                      "lamp failure", "bump")}  # fmt: skip
+    if truth.scenario is None:
+        return times
+    times["run start"] = [a for _r, a, _b in truth.scenario.run_intervals()]
     for e in truth.scenario.events:
         if e.kind == "lamp_failure":
             times["lamp failure"].append(e.t)
@@ -221,40 +392,37 @@ def _mark_events(axes: list[plt.Axes], truth: Truth) -> None:
         t_freeze = truth.scenario.run_end_time(truth.freeze_run)
         if t_freeze is not None:
             times["FGM frozen"].append(t_freeze)
-    handles = []
-    for kind, ts in times.items():
-        for t in ts:
-            for ax in axes:
-                ax.axvline(t, **style[kind])
-        if ts:
-            handles.append(Line2D([], [], label=f"{kind} ({len(ts)})", **style[kind]))
-    if handles:
-        leg = axes[-1].get_legend()
-        axes[-1].legend(
-            handles=handles,
-            loc="upper center",
-            bbox_to_anchor=(0.5, -EVENTS_BELOW),
-            fontsize=8,
-            ncol=len(handles),
-            frameon=False,
-        )
-        if leg is not None:
-            axes[-1].add_artist(leg)
+    return times
 
 
+@styled
 def fig3_errors(path: Path, truth: Truth, ev: Evaluation, title: str = "") -> None:
-    """Fig. 3: x, y (cm) and heading (deg) errors against time, +-2 sigma from the covariance,
-    run boundaries, the FGM freeze, lamp failures and bumps marked."""
-    t = ev.assoc.t
-    fig, axes = plt.subplots(3, 1, figsize=(10, 7.5), sharex=True, dpi=DPI)
+    """Fig. 3: x, y (cm) and heading (deg) errors against the time since the log's start,
+    +-2 sigma from the covariance, run boundaries, the FGM freeze, lamp failures and bumps
+    marked.
+
+    Parameters
+    ----------
+    path : Path
+        The PNG.
+    truth : Truth
+        The truth (its start and events).
+    ev : Evaluation
+        The evaluation.
+    title : str
+        The title.
+    """
+    t0 = log_start(truth)
+    t = ev.assoc.t - t0
+    fig, axes = plt.subplots(3, 1, figsize=(COLUMN_W, 4.6), sharex=True, dpi=DPI)
     scale = [100.0, 100.0, 180.0 / np.pi]
-    names = ["x error (cm)", "y error (cm)", "heading error (deg)"]
+    names = ["x error (cm)", "y error (cm)", "heading err. (deg)"]
     for k, ax in enumerate(axes):
         e = ev.errors[:, k] * scale[k]
         if ev.sigma is not None:
             s2 = 2.0 * ev.sigma[:, k] * scale[k]
-            ax.fill_between(t, -s2, s2, color=C_EST, alpha=0.18, lw=0, label="+-2 sigma (filter)")
-        ax.plot(t, e, color=C_EST, lw=0.8, label="estimate - truth")
+            ax.fill_between(t, -s2, s2, color=C_EST, alpha=0.18, lw=0, label="±2σ (filter)")
+        ax.plot(t, e, color=C_EST, lw=1.0, label="estimate − truth")
         ax.axhline(0.0, color="k", lw=0.6)
         ax.set_ylabel(names[k])
         ax.grid(alpha=0.3)
@@ -265,21 +433,63 @@ def fig3_errors(path: Path, truth: Truth, ev: Evaluation, title: str = "") -> No
             lim = max(lim, float(np.nanpercentile(2.0 * ev.sigma[:, k] * scale[k], 99.5)))
         lim = lim * 1.1 if np.isfinite(lim) and lim > 0 else 1.0
         ax.set_ylim(-lim, lim)
-    _mark_events(list(axes), truth)
-    axes[0].legend(loc="upper right", fontsize=8)
-    axes[-1].set_xlabel("time (s)")
-    axes[0].set_title(title or "Fig. 3: pose errors against time", y=1.0)
-    fixed_layout(fig, LEFT, RIGHT, _events_bottom(fig, 3, 2 * 0.22), TOP, hspace=0.22)
+    handles = mark_events(list(axes), truth, t0)
+    axes[0].legend(loc="upper right", ncol=2, fontsize=8, borderaxespad=0.2)
+    axes[-1].set_xlabel(TIME_LABEL)
+    axes[0].set_title(title or f"Fig. 3: pose errors\n{run_title(truth, ev_label(ev))}", y=1.0)
+    bottom = events_bottom(len(handles))
+    fixed_layout(fig, LEFT, RIGHT, bottom, TOP2, hspace=0.12)
+    events_legend(fig, axes[-1], handles, bottom)
     _save(fig, path)
 
 
+def ev_label(ev: Evaluation) -> Estimate:
+    """A stand-in estimate holding the evaluation's label (for :func:`run_title`).
+
+    Parameters
+    ----------
+    ev : Evaluation
+        The evaluation.
+
+    Returns
+    -------
+    Estimate
+    """
+    return Estimate(np.zeros(0), np.zeros((0, 3)), label=str(ev.typed.label))
+
+
+@styled
 def fig4_lamp_errors(
-    path: Path, per_lamp: Mapping[str, Array], title: str = "", max_dist: float | None = None
+    path: Path,
+    per_lamp: Mapping[str, Array],
+    title: str = "",
+    max_dist: float | None = None,
+    noun: str = "lamp",
+    run: str = "",
 ) -> None:
-    """Fig. 4: position error of each true lamp (cm), one bar group per lamp, one bar per
-    labelled estimate (e.g. end of run 4, end of run 6, with bumps). Missed lamps: a cross."""
-    fig, ax = plt.subplots(figsize=(10, 4), dpi=DPI)
+    """Fig. 4: position error of each true landmark (cm), one bar group per landmark, one
+    bar per labelled estimate (e.g. end of run 4, end of run 6, with bumps). Missed
+    landmarks: a cross.
+
+    Parameters
+    ----------
+    path : Path
+        The PNG.
+    per_lamp : mapping
+        Label -> errors of the true landmarks (m; NaN: missed).
+    title : str
+        The title.
+    max_dist : float, optional
+        The matching distance (m), for the axis label.
+    noun : str
+        What the landmarks are ("lamp" or "landmark").
+    run : str
+        The log and run (:func:`run_title`), the title's second line.
+    """
     labels = list(per_lamp)
+    bottom = XLABEL_ROOM + 0.05 + len(labels) * LEGEND_ROW + 0.05
+    top = TOP2 if run and not title else TOP
+    fig, ax = plt.subplots(figsize=(COLUMN_W, 1.7 + top + bottom), dpi=DPI)
     n = max((len(v) for v in per_lamp.values()), default=0)
     width = 0.8 / max(len(labels), 1)
     x = np.arange(n)
@@ -292,26 +502,23 @@ def fig4_lamp_errors(
                       label=f"{lab} (mean {significant(mean)} cm)")  # fmt: skip
         miss = ~np.isfinite(v)
         if miss.any():
-            ax.scatter(
-                pos[miss],
-                np.zeros(miss.sum()),
-                marker="x",
-                color=bars.patches[0].get_facecolor(),
-                s=40,
-                zorder=5,
-            )
+            ax.scatter(pos[miss], np.zeros(miss.sum()), marker="x", s=24, zorder=5,
+                       color=bars.patches[0].get_facecolor())  # fmt: skip
     ax.set_xticks(x)
     ax.set_xticklabels([str(i) for i in x])
     ax.set_xlabel(
-        f"true lamp index (x on the axis: lamp not matched within {max_dist * 100:.0f} cm)"
+        f"true {noun} index (x: none within {max_dist * 100:.0f} cm)"
         if max_dist
-        else "true lamp index"
+        else f"true {noun} index"
     )
-    ax.set_ylabel("lamp position error (cm)")
-    ax.set_title(title or "Fig. 4: per-lamp position error", y=1.0)
+    ax.set_ylabel(f"{noun} error (cm)")
+    second = "\n" + run if run else ""
+    ax.set_title(title or f"Fig. 4: per-{noun} position error{second}", y=1.0)
     ax.grid(axis="y", alpha=0.3)
-    ax.legend(fontsize=8)
-    fixed_layout(fig, LEFT, RIGHT, BOTTOM, TOP)
+    fixed_layout(fig, LEFT, RIGHT, bottom, top)
+    ax_w = COLUMN_W - LEFT - RIGHT
+    ax.legend(loc="upper left", bbox_to_anchor=(-(LEFT - 0.05) / ax_w, -XLABEL_ROOM / 1.7),
+              frameon=False, borderaxespad=0.0)  # fmt: skip
     _save(fig, path)
 
 
@@ -336,8 +543,9 @@ def significant(v: float, digits: int = 2) -> str:
 
 
 def log_floor(*values: Array) -> float:
-    """The lower limit of a log axis that shows every positive finite value: the power of
-    ten at or below the smallest (1e-3 without one).
+    """The lower limit of a log axis from the data: half the 1st percentile of every
+    positive finite value (the few below it are drawn at it; no empty decades under the
+    data), 1e-3 without one.
 
     Parameters
     ----------
@@ -348,11 +556,13 @@ def log_floor(*values: Array) -> float:
     -------
     float
     """
-    pos = [v[np.isfinite(v) & (v > 0)] for v in (np.asarray(x, dtype=float) for x in values)]
+    pos = [
+        v[np.isfinite(v) & (v > 0)] for v in (np.asarray(x, dtype=float).ravel() for x in values)
+    ]
     pos = [p for p in pos if p.size]
     if not pos:
         return 1e-3
-    return float(10.0 ** np.floor(np.log10(min(float(p.min()) for p in pos))))
+    return float(np.percentile(np.concatenate(pos), 1.0)) / 2.0
 
 
 def running_mean(v: Array, frac: float = 0.02) -> Array:
@@ -387,31 +597,33 @@ def running_mean(v: Array, frac: float = 0.02) -> Array:
     return np.where(cnt > 0, (num[hi] - num[lo]) / np.maximum(cnt, 1), np.nan)
 
 
+@styled
 def fig_consistency(path: Path, truth: Truth, est: Estimate, ev: Evaluation) -> bool:
     """NEES (3 dof) against time with its per-sample 95 % band, and NIS of accepted updates
     per kind, normalised by dof. Returns False (nothing drawn) without covariance or updates."""
     has_nis = est.updates is not None and est.updates.t.size > 0
     if ev.nees is None and not has_nis:
         return False
-    fig, axes = plt.subplots(2, 1, figsize=(10 + LEGEND_SIDE, 6), sharex=True, dpi=DPI)
+    t0 = log_start(truth)
+    fig, axes = plt.subplots(2, 1, figsize=(WIDE_W, 3.8), sharex=True, dpi=DPI)
     ax = axes[0]
     side = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "fontsize": 8, "frameon": False}
     if ev.nees is not None:
         lo, hi = chi2_quantile(0.025, 3), chi2_quantile(0.975, 3)
         floor = log_floor(ev.nees)  # every sample inside the axes (zeros drawn at it)
         ax.semilogy(
-            ev.assoc.t,
+            ev.assoc.t - t0,
             np.maximum(ev.nees, floor),
             color=SKY,
-            lw=0.5,
+            lw=0.6,
             label=f"NEES (mean {np.nanmean(ev.nees):.2f})",
         )
         ax.semilogy(
-            ev.assoc.t,
+            ev.assoc.t - t0,
             running_mean(ev.nees),
             color=BLUE,
             lw=1.4,
-            label="running mean (2 % of samples)",
+            label="running mean (2 %)",
         )
         ax.axhspan(lo, hi, color=ORANGE, alpha=0.15, lw=0, label="95 % band, one sample (3 dof)")
         ax.axhline(3.0, color=EXPECTED, lw=0.9, ls="--", label="expected NEES = 3")
@@ -431,21 +643,22 @@ def fig_consistency(path: Path, truth: Truth, est: Estimate, ev: Evaluation) -> 
         floor = log_floor(*(v for _k, _m, v in kinds))
         for j, (kind, m, v) in enumerate(kinds):
             colour = SERIES[j % len(SERIES)]
-            ax.semilogy(u.t[m], np.maximum(v, floor), ".", ms=2, alpha=0.5, color=colour,
+            ax.semilogy(u.t[m] - t0, np.maximum(v, floor), ".", ms=2, alpha=0.5, color=colour,
                         label=f"{kind} ({m.sum()} accepted, mean {v.mean():.2f})")  # fmt: skip
-            ax.semilogy(u.t[m], running_mean(v), color=colour, lw=1.4,
+            ax.semilogy(u.t[m] - t0, running_mean(v), color=colour, lw=1.4,
                         ls=SERIES_DASHES[j % len(SERIES_DASHES)],
                         label=f"{kind}, running mean")  # fmt: skip
         ax.axhline(1.0, color=EXPECTED, lw=0.9, ls="--", label="expected NIS / dof = 1")
         ax.set_ylim(bottom=min(floor, 0.1))
         ax.legend(**side, markerscale=4)
     ax.set_ylabel("NIS / dof (dimensionless)")
-    ax.set_xlabel("time (s)")
+    ax.set_xlabel(TIME_LABEL)
     ax.grid(alpha=0.3, which="both")
-    _mark_events(list(axes), truth)
-    axes[0].set_title("Filter consistency against truth (NEES) and innovations (NIS)", y=1.0)
-    bottom = _events_bottom(fig, 2, 0.28)
-    fixed_layout(fig, LEFT, RIGHT + LEGEND_SIDE, bottom, TOP, hspace=0.28)
+    handles = mark_events(list(axes), truth, t0)
+    axes[0].set_title(f"Filter consistency (NEES, NIS): {run_title(truth, est)}", y=1.0)
+    bottom = events_bottom(len(handles))
+    fixed_layout(fig, LEFT, RIGHT + LEGEND_SIDE, bottom, TOP, hspace=0.15)
+    events_legend(fig, axes[-1], handles, bottom)
     _save(fig, path)
     return True
 
@@ -457,33 +670,48 @@ def fig4_sets(truth: Truth, est: Estimate, ev: Evaluation) -> dict[str, Array]:
     if by_run:
         last = max(by_run)
         runs = sorted({r for r in (truth.freeze_run, last) if r is not None and r in by_run})
-        return {f"{est.label}, end of run {r}": by_run[r].per_true for r in runs}
+        return {f"end of run {r}": by_run[r].per_true for r in runs}
     if ev.lamp_match is not None:
-        return {f"{est.label}, final map": ev.lamp_match.per_true}
+        return {"final map": ev.lamp_match.per_true}
     return {}
 
 
+@styled
 def fig_compare(path: Path, truth: Truth, runs: Sequence[tuple[str, Evaluation]]) -> None:
-    """Position error (cm, log scale) against time of several estimates of one truth, with
-    the run boundaries, the FGM freeze, lamp failures and bumps marked (``evaluate
-    --compare``)."""
-    fig, ax = plt.subplots(figsize=(10 + LEGEND_SIDE, 4.2), dpi=DPI)
+    """Position error (cm, log scale) against the time since the log's start of several
+    estimates of one truth, with the run boundaries, the FGM freeze, lamp failures and
+    bumps marked (``evaluate --compare``).
+
+    Parameters
+    ----------
+    path : Path
+        The PNG.
+    truth : Truth
+        The truth they share.
+    runs : sequence of (str, Evaluation)
+        Label and evaluation of each estimate.
+    """
+    t0 = log_start(truth)
+    fig, ax = plt.subplots(figsize=(WIDE_W, 2.6), dpi=DPI)
     errs = [np.hypot(ev.errors[:, 0], ev.errors[:, 1]) * 100.0 for _label, ev in runs]
-    floor = log_floor(*errs)  # every error inside the axes (zeros drawn at it)
+    floor = log_floor(*errs)  # every error inside the axes (those under it drawn at it)
     for j, ((label, ev), err) in enumerate(zip(runs, errs, strict=True)):
         # the palette's colours, none an event's, and dashes: curves that coincide show
-        ax.plot(ev.assoc.t, np.maximum(err, floor), lw=1.0, color=SERIES[j % len(SERIES)],
+        ax.plot(ev.assoc.t - t0, np.maximum(err, floor), lw=1.0, color=SERIES[j % len(SERIES)],
                 ls=SERIES_DASHES[j % len(SERIES_DASHES)], label=label)  # fmt: skip
     ax.set_yscale("log")
     ax.set_ylim(bottom=floor)
     ax.set_ylabel("position error (cm)")
-    ax.set_xlabel("time (s)")
+    ax.set_xlabel(TIME_LABEL)
     ax.grid(alpha=0.3, which="both")
-    # right of the axes (none over the data); first: _mark_events keeps it beside its own
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-    _mark_events([ax], truth)
-    ax.set_title("position error against time, side by side", y=1.0)
-    fixed_layout(fig, LEFT, RIGHT + LEGEND_SIDE, _events_bottom(fig, 1, 0.0), TOP)
+    # right of the axes (none over the data)
+    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+    handles = mark_events([ax], truth, t0)
+    log = log_name(truth.source)
+    ax.set_title("position error against time" + (f": {log}" if log else ""), y=1.0)
+    bottom = events_bottom(len(handles))
+    fixed_layout(fig, LEFT, RIGHT + LEGEND_SIDE, bottom, TOP)
+    events_legend(fig, ax, handles, bottom)
     _save(fig, path)
 
 
@@ -492,14 +720,18 @@ def draw_all(
 ) -> dict[str, str]:
     """Draw every figure the inputs allow into outdir; return {figure key: file name}."""
     out: dict[str, str] = {}
-    fig1_paths(outdir / "fig1_paths.png", truth, est, fgm, ev.lamp_match)
+    fig1_paths(outdir / "fig1_paths.png", truth, est, fgm, ev.lamp_match, to_truth=ev.to_truth)
     out["fig1"] = "fig1_paths.png"
     fig3_errors(outdir / "fig3_errors.png", truth, ev)
     out["fig3"] = "fig3_errors.png"
     sets = fig4_sets(truth, est, ev)
     if sets:
         fig4_lamp_errors(
-            outdir / "fig4_lamps.png", sets, max_dist=ev.metrics["params"]["lamp_max_dist_m"]
+            outdir / "fig4_lamps.png",
+            sets,
+            max_dist=ev.metrics["params"]["lamp_max_dist_m"],
+            noun=landmark_noun(truth)[:-1],
+            run=run_title(truth, est),
         )
         out["fig4"] = "fig4_lamps.png"
     if fig_consistency(outdir / "consistency.png", truth, est, ev):

@@ -39,7 +39,6 @@ from fuzzyslam.slam.events import FilterView
 from fuzzyslam.stamps import format_time
 
 CHANGE_FIELDS = ("t", "x", "y", "size", "cells")
-DPI = 100  # changes.png
 
 
 @dataclass(frozen=True)
@@ -244,6 +243,7 @@ class ChangeDetector(FlmAhead, FixAid):
         self.decisions: list[Change] = []
         self.rings = 0
         self.uncertain = 0
+        self.t_first: float | None = None  # the first ring's time: changes.png's origin
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
         """Detect changes in the ring's FLM, when the position is known well enough.
@@ -259,6 +259,8 @@ class ChangeDetector(FlmAhead, FixAid):
         ekf : FilterView
             The filter (its pose, covariance, dead reckoning, ``update_robot``).
         """
+        if self.t_first is None:
+            self.t_first = t
         if not self.started(t):
             return
         self.rings += 1
@@ -307,9 +309,10 @@ class ChangeDetector(FlmAhead, FixAid):
         Returns
         -------
         list of (callable, tuple)
-            ``(draw_changes, (path, fgm, detections))``.
+            ``(draw_changes, (path, fgm, detections, log start))``.
         """
-        return [(draw_changes, (Path(outdir) / "changes.png", self.fgm, self.decisions))]
+        t0 = self.t_first if self.t_first is not None else 0.0
+        return [(draw_changes, (Path(outdir) / "changes.png", self.fgm, self.decisions, t0))]
 
     def messages(
         self, topics: Any, start: float | None = None
@@ -363,9 +366,10 @@ def change_messages(changes: Sequence[Change], topic: str) -> list[tuple[str, st
     return out
 
 
-def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change]) -> None:
+def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change], t0: float = 0.0) -> None:
     """changes.png: the frozen FGM (pignistic occupancy, grey) with every detection drawn
-    over it (black-edged dots coloured by time, viridis: dark early, light late).
+    over it (black-edged dots coloured by their time since the log's start, viridis: dark
+    early, light late), one column wide, sized from the map's aspect.
 
     Parameters
     ----------
@@ -375,32 +379,40 @@ def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change]) -> None:
         The frozen FGM.
     changes : sequence of Change
         The detections.
+    t0 : float
+        The log's start (s, log time; the run's first ring): the time colour bar's origin.
     """
     # a Figure without pyplot (its import and figure manager are not needed for one
     # PNG), drawn once and cropped to its drawn pixels (fuzzyslam/figsave.py)
     from matplotlib.figure import Figure
 
-    from fuzzyslam.figsave import save_png
+    from fuzzyslam.figsave import COLUMN_W, PRINT_DPI, figure_style, fixed_layout, save_png
 
     g = fgm.grid
     ny, nx = g.shape
     x0, y0 = g.origin
     extent = (x0, x0 + nx * g.resolution, y0, y0 + ny * g.resolution)
     occ = fgm.m_o + 0.5 * fgm.m_t
-    fig = Figure(figsize=(8, 6), dpi=DPI)
-    ax = fig.add_subplot()
-    ax.imshow(occ, origin="lower", extent=extent, cmap="gray_r", vmin=0, vmax=1)
-    if changes:
-        xy = np.array([[c.x, c.y] for c in changes])
-        t = np.array([c.t for c in changes])
-        # viridis (dark to light, every shade visible on the white corridors, colour-blind
-        # safe), black-edged markers of a readable size
-        sc = ax.scatter(xy[:, 0], xy[:, 1], c=t, cmap="viridis", s=45, edgecolors="black",
-                        linewidths=0.7, zorder=3)  # fmt: skip
-        fig.colorbar(sc, ax=ax, label="time (s)")
-    ax.set_title(f"change detections ({len(changes)}) over the frozen FGM", y=1.0)
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_aspect("equal")
-    with atomic_path(path) as tmp:
-        save_png(fig, tmp, DPI, tight=True)
+    left, right, bottom, top = 0.6, 0.8, 0.42, 0.3  # inches: labels, the colour bar right
+    ax_w = COLUMN_W - left - right
+    ax_h = ax_w * float(np.clip((extent[3] - extent[2]) / (extent[1] - extent[0]), 0.35, 1.4))
+    with figure_style():
+        fig = Figure(figsize=(COLUMN_W, bottom + ax_h + top), dpi=PRINT_DPI)
+        ax = fig.add_subplot()
+        fixed_layout(fig, left, right, bottom, top)
+        ax.imshow(occ, origin="lower", extent=extent, cmap="gray_r", vmin=0, vmax=1)
+        if changes:
+            xy = np.array([[c.x, c.y] for c in changes])
+            t = np.array([c.t for c in changes]) - t0
+            # viridis (dark to light, every shade visible on the white corridors,
+            # colour-blind safe), black-edged markers of a readable size
+            sc = ax.scatter(xy[:, 0], xy[:, 1], c=t, cmap="viridis", s=20, edgecolors="black",
+                            linewidths=0.6, zorder=3)  # fmt: skip
+            cax = ax.inset_axes((1.0 + 0.08 / ax_w, 0.0, 0.1 / ax_w, 1.0))
+            fig.colorbar(sc, cax=cax, label="time since the log's start (s)")
+        ax.set_title(f"change detections ({len(changes)}) over the frozen FGM", y=1.0)
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_aspect("equal")
+        with atomic_path(path) as tmp:
+            save_png(fig, tmp, PRINT_DPI, tight=True)

@@ -15,7 +15,20 @@ from matplotlib import patheffects
 from matplotlib.lines import Line2D
 from matplotlib.ticker import MaxNLocator, MultipleLocator
 
-from fuzzyslam.figsave import BLACK, BLUE, ORANGE, VERMILLION, YELLOW, fixed_layout, save_png
+from fuzzyslam.figsave import (
+    BLACK,
+    BLUE,
+    COLUMN_W,
+    ORANGE,
+    PRINT_DPI,
+    VERMILLION,
+    WIDE_W,
+    YELLOW,
+    fixed_layout,
+    log_name,
+    save_png,
+    styled,
+)
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.maps.flm import build_flm
 from fuzzyslam.maps.grid import BeliefMap, Grid
@@ -25,8 +38,10 @@ from fuzzyslam.maps.references import Reference
 from fuzzyslam.rundir import read_landmarks
 from fuzzyslam.streams.logmeta import World
 
-DPI = 110  # figures are made at their PNG's dpi: the layout's text sizes are the drawing's
-LEGEND_RIGHT = 2.4  # fgm.png: its legend and corridor key right of the axes (inches)
+DPI = PRINT_DPI  # made at print size and at the PNG's dpi (fuzzyslam/figsave.py's style)
+LEGEND_RIGHT = 2.5  # fgm.png: its colour bar, legend and corridor key right of the axes (in)
+M_LEFT, M_BOTTOM, M_TOP = 0.6, 0.42, 0.3  # a map's margins (inches, 8-9 pt text)
+CBAR_RIGHT = 0.75  # a colour bar right of a map: gap, bar, tick labels, label (inches)
 HALO = [patheffects.withStroke(linewidth=2.5, foreground="white")]  # labels over the map
 
 
@@ -36,6 +51,26 @@ def _save(fig, path: Path, tight: bool = False) -> None:
     plt.close(fig)
 
 
+def _map_axes(extent, width: float, right: float, top: float = M_TOP):
+    """A figure ``width`` inches wide holding one map at equal scale: its axes' height from
+    the map's aspect (between 0.35 and 1.4 of its width), the margins fixed.
+
+    Returns the figure, the axes and the axes' size (inches)."""
+    ax_w = width - M_LEFT - right
+    aspect = float(np.clip((extent[3] - extent[2]) / max(extent[1] - extent[0], 1e-9), 0.35, 1.4))
+    ax_h = ax_w * aspect
+    fig, ax = plt.subplots(figsize=(width, M_BOTTOM + ax_h + top), dpi=DPI)
+    fixed_layout(fig, M_LEFT, right, M_BOTTOM, top)
+    return fig, ax, (ax_w, ax_h)
+
+
+def _side_colorbar(fig, ax, im, ax_w: float, label: str):
+    """A colour bar as tall as the axes, 0.08 inches right of them and 0.1 inches wide."""
+    cax = ax.inset_axes((1.0 + 0.08 / ax_w, 0.0, 0.1 / ax_w, 1.0))
+    return fig.colorbar(im, cax=cax, label=label)
+
+
+@styled
 def fig_fgm(
     path: Path,
     fgm: BeliefMap,
@@ -43,8 +78,9 @@ def fig_fgm(
     refs: list[Reference],
     world: World | None,
     landmarks: np.ndarray | None,
+    log: str = "",
 ) -> None:
-    """The paper's Fig. 1: BetP(O) of the FGM, the path, references, lamps.
+    """The paper's Fig. 1: BetP(O) of the FGM, the path, references, landmarks.
 
     Parameters
     ----------
@@ -59,10 +95,12 @@ def fig_fgm(
     world : World or None
         The true walls and lamps (simulated logs).
     landmarks : ndarray, shape (K, 2), or None
-        Estimated lamps.
+        Estimated landmarks (lamps of a simulated world).
+    log : str
+        The log's path, named in the title.
     """
-    fig, ax = plt.subplots(figsize=(9, 6.2), dpi=DPI)
-    fixed_layout(fig, 0.75, LEGEND_RIGHT, 1.15, 0.4)
+    noun = "lamps" if world is not None else "landmarks"
+    fig, ax, (ax_w, _ax_h) = _map_axes(fgm.grid.extent, WIDE_W, LEGEND_RIGHT)
     im = ax.imshow(
         fgm.pignistic_occupied(),
         origin="lower",
@@ -71,15 +109,14 @@ def fig_fgm(
         vmin=0,
         vmax=1,
     )
-    fig.colorbar(im, ax=ax, shrink=0.6, location="bottom", pad=0.1,
-                 label="BetP(occupied) (probability)")  # fmt: skip
-    ax.plot(poses[:, 0], poses[:, 1], "-", color=BLUE, lw=0.9, label="path")
+    _side_colorbar(fig, ax, im, ax_w, "BetP(occupied)")
+    ax.plot(poses[:, 0], poses[:, 1], "-", color=BLUE, lw=1.0, label="path")
     centre = np.mean(np.reshape(fgm.grid.extent, (2, 2)), axis=1)
     key = []
     for k, r in enumerate(refs):
         poly = np.vstack([r.region, r.region[:1]])
         ax.plot(poly[:, 0], poly[:, 1], "--", color=ORANGE, lw=1.0,
-                label="corridor region (number: key)" if k == 0 else "_")  # fmt: skip
+                label="corridor (number: key)" if k == 0 else "_")  # fmt: skip
         # its number at the region's corner farthest from the map's centre (off the
         # path, which runs down the region's middle), haloed white: the key beside says
         # its reference angle
@@ -89,29 +126,35 @@ def fig_fgm(
         key.append(f"{r.id}: {np.rad2deg(r.angle):.2f} deg")
     if world is not None and len(world.lamps):
         la = world.lamp_array
-        ax.plot(la[:, 0], la[:, 1], "o", mfc=YELLOW, mec=BLACK, mew=1.0, ms=8,
+        ax.plot(la[:, 0], la[:, 1], "o", mfc=YELLOW, mec=BLACK, mew=1.0, ms=6,
                 label="true lamps")  # fmt: skip
     if landmarks is not None and len(landmarks):
         ax.plot(landmarks[:, 0], landmarks[:, 1], "X", mfc=VERMILLION, mec=BLACK, mew=0.6,
-                ms=7, label="estimated lamps")  # fmt: skip
+                ms=6, label=f"estimated {noun}")  # fmt: skip
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
-    ax.set_title("Fuzzy global map: BetP(occupied) (dark = occupied)", y=1.0)
-    # the legend and the corridors' key right of the axes (none over the map)
-    leg = ax.legend(loc="upper left", bbox_to_anchor=(1.02, 1.0), fontsize=8, frameon=False)
+    name = log_name(log)
+    ax.set_title(f"Fuzzy global map{f' of {name}' if name else ''}: BetP(occupied)", y=1.0)
+    # the legend and the corridors' key right of the colour bar (none over the map)
+    x_leg = 1.0 + CBAR_RIGHT / ax_w
+    leg = ax.legend(loc="upper left", bbox_to_anchor=(x_leg, 1.0), frameon=False,
+                    borderaxespad=0.0)  # fmt: skip
     if key:
         # no measuring: the key hangs below the legend's rows at a fixed offset (points)
         rows = len(ax.get_legend_handles_labels()[0]) + 1
-        ax.annotate("corridor: reference angle\n" + "\n".join(key), (1.04, 1.0),
-                    xycoords="axes fraction", xytext=(0, -rows * 15), textcoords="offset points",
+        shown = key if len(key) <= 12 else [*key[:11], f"... ({len(key) - 11} more)"]
+        ax.annotate("corridor: reference angle\n" + "\n".join(shown), (x_leg, 1.0),
+                    xycoords="axes fraction", xytext=(0, -rows * 12), textcoords="offset points",
                     fontsize=8, va="top", ha="left", annotation_clip=False)  # fmt: skip
     assert leg is not None
     _save(fig, path, tight=True)
 
 
-def fig_conflict(path: Path, fgm: BeliefMap) -> None:
-    """Conflict mass m(emptyset) per cell.
+@styled
+def fig_conflict(path: Path, fgm: BeliefMap, log: str = "") -> None:
+    """Conflict mass m(∅) per cell, the figure sized from the map's aspect and the colour
+    bar as tall as the map.
 
     Parameters
     ----------
@@ -119,15 +162,17 @@ def fig_conflict(path: Path, fgm: BeliefMap) -> None:
         The PNG.
     fgm : BeliefMap
         The FGM.
+    log : str
+        The log's path, named in the title.
     """
-    fig, ax = plt.subplots(figsize=(8, 6), dpi=DPI)
-    fixed_layout(fig, 0.75, 1.2, 0.6, 0.4)
+    fig, ax, (ax_w, _ax_h) = _map_axes(fgm.grid.extent, COLUMN_W, CBAR_RIGHT)
     im = ax.imshow(fgm.m_c, origin="lower", extent=fgm.grid.extent, cmap="magma", vmin=0)
-    fig.colorbar(im, ax=ax, label="m(conflict) (mass)")
+    _side_colorbar(fig, ax, im, ax_w, "conflict mass m(∅)")
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
-    ax.set_title("FGM contradiction (conflict mass)", y=1.0)
+    name = log_name(log)
+    ax.set_title(f"FGM conflict{f': {name}' if name else ''}", y=1.0)
     _save(fig, path, tight=True)
 
 
@@ -245,11 +290,11 @@ HOUGH_PAD_DEG = 15.0  # the Hough planes drawn over [-15, 195) deg: peaks at 0 o
 PEAK_ROOM_DEG = 7.0  # a peak's circle is about this wide on the theta axis: none cut
 # hough.png's layout (inches): every panel the same size, the margins and gaps hold the
 # tick labels, axis labels and titles; the legend on top, the two colour bars right
-PANEL_W, PANEL_H = 1.6, 1.35
-H_LEFT, H_RIGHT, H_BOTTOM, H_TOP = 0.55, 0.95, 0.5, 0.95
-H_WSPACE, H_HSPACE = 0.6, 0.62
-HOUGH_FONTS = {"font.size": 8, "axes.titlesize": 8, "axes.labelsize": 8,
-               "xtick.labelsize": 7, "ytick.labelsize": 7, "legend.fontsize": 8}  # fmt: skip
+PANEL_W, PANEL_H = 1.55, 1.3
+H_LEFT, H_RIGHT, H_BOTTOM, H_TOP = 0.55, 0.85, 0.45, 0.85
+H_WSPACE, H_HSPACE = 0.55, 0.6
+HOUGH_REFS = 3  # hough.png: the strongest corridors (by Hough peak) drawn, and the FLM
+POOL_PX = 2.0  # a wall cell drawn at least this many pixels wide (max-pooled when smaller)
 # the peaks: red (the wall direction) and white (another), black-edged to show on any
 # colour of the plane and in the legend
 _EDGE = [patheffects.withStroke(linewidth=2.6, foreground="black")]
@@ -270,6 +315,84 @@ REGION = {"ls": "--", "color": ORANGE, "lw": 1.0, "label": "corridor region"}
 ROBOT = {"ls": "none", "marker": "^", "color": BLUE, "ms": 6, "label": "robot (FLM)"}
 
 
+def max_pool(
+    values: np.ndarray, extent: tuple[float, float, float, float], factor: int
+) -> tuple[np.ndarray, tuple[float, float, float, float]]:
+    """``values`` reduced by taking the largest of each ``factor`` by ``factor`` block of
+    cells (the last blocks padded with zeros), and the extent of the blocks: a wall one
+    cell wide stays whole when the picture has fewer pixels than the map cells.
+
+    Parameters
+    ----------
+    values : ndarray, shape (h, w)
+        Per-cell values (non-negative).
+    extent : (float, float, float, float)
+        (xmin, xmax, ymin, ymax) of the cells (``imshow(origin="lower")``).
+    factor : int
+        Cells per block side (1: unchanged).
+
+    Returns
+    -------
+    pooled : ndarray, shape (ceil(h / factor), ceil(w / factor))
+    extent : (float, float, float, float)
+        The blocks' extent (grown by the padding).
+    """
+    if factor <= 1 or values.size == 0:
+        return values, extent
+    h, w = values.shape
+    hb, wb = -(-h // factor), -(-w // factor)
+    padded = np.zeros((hb * factor, wb * factor), dtype=values.dtype)
+    padded[:h, :w] = values
+    pooled = padded.reshape(hb, factor, wb, factor).max(axis=(1, 3))
+    dx, dy = (extent[1] - extent[0]) / w, (extent[3] - extent[2]) / h
+    return pooled, (
+        extent[0],
+        extent[0] + wb * factor * dx,
+        extent[2],
+        extent[2] + hb * factor * dy,
+    )
+
+
+def pool_factor(cells: int, inches: float, dpi: float) -> int:
+    """The block size of :func:`max_pool` that draws a cell at least ``POOL_PX`` pixels
+    wide: ``cells`` cells across a panel ``inches`` wide at ``dpi``.
+
+    Parameters
+    ----------
+    cells : int
+        Cells across the panel.
+    inches : float
+        The panel's width.
+    dpi : float
+        Dots per inch.
+
+    Returns
+    -------
+    int
+        At least 1.
+    """
+    return max(1, int(np.ceil(POOL_PX * cells / max(inches * dpi, 1.0))))
+
+
+def strongest(refs: list[Reference], n: int = HOUGH_REFS) -> list[Reference]:
+    """The ``n`` references of the strongest Hough peak (``strength``), in their order.
+
+    Parameters
+    ----------
+    refs : list of Reference
+        The corridor references.
+    n : int
+        How many.
+
+    Returns
+    -------
+    list of Reference
+    """
+    keep = sorted(range(len(refs)), key=lambda k: -float(refs[k].strength))[:n]
+    return [refs[k] for k in sorted(keep)]
+
+
+@styled
 def fig_hough(
     path: Path,
     fgm: BeliefMap,
@@ -277,11 +400,14 @@ def fig_hough(
     flm: BeliefMap | None,
     flm_wd: WallDirection | None,
     params: MapParams,
+    log: str = "",
 ) -> None:
-    """The paper's Fig. 2: each corridor segment's wall evidence and an FLM (top) with
-    their Hough planes and peaks (bottom); a grid of such pairs, ``HOUGH_COLUMNS`` per
-    row, every panel ``PANEL_W`` by ``PANEL_H`` inches, one legend on top and one colour
-    bar per kind of image (wall weight, votes) on the right.
+    """The paper's Fig. 2: the wall evidence of the ``HOUGH_REFS`` corridors of the
+    strongest Hough peaks and an FLM (top) with their Hough planes and peaks (bottom); a
+    grid of such pairs, ``HOUGH_COLUMNS`` per row, every panel ``PANEL_W`` by ``PANEL_H``
+    inches, a title and one legend on top and one colour bar per kind of image (wall
+    weight, votes) on the right. Wall weights are max-pooled (:func:`max_pool`) where a
+    panel has fewer pixels than cells.
 
     Parameters
     ----------
@@ -297,12 +423,11 @@ def fig_hough(
         Its Hough wall direction.
     params : MapParams
         The ``fgm:`` section.
+    log : str
+        The log's path, named in the title.
     """
-    with plt.rc_context(HOUGH_FONTS):  # ticks are made at the draw: it is inside
-        _fig_hough(path, fgm, refs, flm, flm_wd, params)
-
-
-def _fig_hough(path, fgm, refs, flm, flm_wd, params) -> None:
+    total = len(refs)
+    refs = strongest(refs)
     n = len(refs) + (1 if flm is not None else 0)
     cols = min(max(n, 1), HOUGH_COLUMNS)
     blocks = -(-max(n, 1) // cols)
@@ -334,7 +459,10 @@ def _fig_hough(path, fgm, refs, flm, flm_wd, params) -> None:
     for k, r in enumerate(refs):
         lo, hi = _box_of_aspect(r.region.min(axis=0), r.region.max(axis=0), aspect)
         ax, bottom = pair(k)
-        part, extent = crop_cells(wts, fgm.grid, lo, hi)
+        # the cells of the corridor's region only (0.5 m around it), the panel around them
+        rlo, rhi = r.region.min(axis=0) - 0.5, r.region.max(axis=0) + 0.5
+        part, extent = crop_cells(wts, fgm.grid, np.maximum(lo, rlo), np.minimum(hi, rhi))
+        part, extent = max_pool(part, extent, pool_factor(max(part.shape), PANEL_W, DPI))
         im = ax.imshow(part, origin="lower", extent=extent, cmap="gray_r", vmin=0, vmax=1,
                        interpolation="nearest")  # fmt: skip
         _shared_colorbar(im, cbar_of, "wall")
@@ -353,8 +481,10 @@ def _fig_hough(path, fgm, refs, flm, flm_wd, params) -> None:
         ax, bottom = pair(n - 1)
         e = flm.grid.extent
         lo, hi = _box_of_aspect(np.array([e[0], e[2]]), np.array([e[1], e[3]]), aspect)
-        im = ax.imshow(wall_weights(flm, params.wall_threshold), origin="lower", extent=e,
-                       cmap="gray_r", vmin=0, vmax=1, interpolation="nearest")  # fmt: skip
+        fw = wall_weights(flm, params.wall_threshold)
+        fw, fe = max_pool(fw, e, pool_factor(max(fw.shape), PANEL_W, DPI))
+        im = ax.imshow(fw, origin="lower", extent=fe, cmap="gray_r", vmin=0, vmax=1,
+                       interpolation="nearest")  # fmt: skip
         _shared_colorbar(im, cbar_of, "wall")
         ax.plot(0, 0, **ROBOT)
         drawn["robot"] = True
@@ -383,8 +513,14 @@ def _fig_hough(path, fgm, refs, flm, flm_wd, params) -> None:
     entries = ((REGION, drawn["region"]), (ROBOT, drawn["robot"]), (PEAK_WALL, True),
                (PEAK_OTHER, drawn["other"]))  # fmt: skip
     handles = [Line2D([], [], **kw) for kw, on in entries if on]
-    fig.legend(handles=handles, loc="upper left", bbox_to_anchor=(H_LEFT / w, 1.0 - 0.05 / h),
-               ncol=2, frameon=False, handlelength=2.2, columnspacing=1.5)  # fmt: skip
+    name = log_name(log)
+    shown = f"the {len(refs)} strongest of {total} corridors" if total > len(refs) else "corridors"
+    fig.text(H_LEFT / w, 1.0 - 0.03 / h, f"Fig. 2{f': {name}' if name else ''}: {shown}"
+             f"{' and an FLM' if flm is not None else ''}", va="top", ha="left",
+             fontsize=9)  # fmt: skip
+    fig.legend(handles=handles, loc="upper left", bbox_to_anchor=(H_LEFT / w, 1.0 - 0.22 / h),
+               ncol=2, frameon=False, handlelength=2.2, columnspacing=1.5,
+               borderaxespad=0.0)  # fmt: skip
     _save(fig, path, tight=True)
 
 
@@ -423,6 +559,7 @@ def write_all(
     fov: float,
     mounts: np.ndarray,
     params: MapParams,
+    log: str = "",
 ) -> list[str]:
     """Write fgm.png, conflict.png, hough.png into ``outdir``; returns their names.
 
@@ -453,15 +590,18 @@ def write_all(
         sequence).
     params : MapParams
         The ``fgm:`` section.
+    log : str
+        The log's path, named in the titles.
 
     Returns
     -------
     list of str
     """
     lm = read_landmarks(landmarks_path)[0] if landmarks_path is not None else None
-    fig_fgm(outdir / "fgm.png", fgm, poses, refs, world, lm)
-    fig_conflict(outdir / "conflict.png", fgm)
+    fig_fgm(outdir / "fgm.png", fgm, poses, refs, world, lm, log=log)
+    fig_conflict(outdir / "conflict.png", fgm, log=log)
     k = pick_flm_ring(poses, refs)
     flm = build_flm(ranges[k], rmax[k], fov, mounts if mounts.ndim == 2 else mounts[k], params)
-    fig_hough(outdir / "hough.png", fgm, refs, flm, flm_wall_direction(flm, params), params)
+    fig_hough(outdir / "hough.png", fgm, refs, flm, flm_wall_direction(flm, params), params,
+              log=log)  # fmt: skip
     return ["fgm.png", "conflict.png", "hough.png"]

@@ -167,41 +167,68 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
     from matplotlib.figure import Figure
 
     from fuzzyslam.evaluation.evaluate import read_truth
+    from fuzzyslam.evaluation.figures import (
+        LEFT,
+        TIME_LABEL,
+        events_bottom,
+        events_legend,
+        log_start,
+        mark_events,
+    )
     from fuzzyslam.evaluation.metrics import associate, pose_errors
-    from fuzzyslam.figsave import SERIES, SERIES_DASHES, fixed_layout, save_png
+    from fuzzyslam.figsave import (
+        PRINT_DPI,
+        SERIES,
+        SERIES_DASHES,
+        WIDE_W,
+        figure_style,
+        fixed_layout,
+        save_png,
+    )
     from fuzzyslam.streams.tum import read_tum
 
     panels = [p for p in SUMMARY_PANELS if (root / seed_dir / f"{p[0]}.mcap").is_file()]
     if not panels:
         return False
-    fig = Figure(figsize=(10, 3.5 * len(panels)), dpi=110)
-    axes = fig.subplots(len(panels), 1, squeeze=False)[:, 0]
-    for ax, (log, title, runs) in zip(axes, panels, strict=True):
-        truth = read_truth(root / seed_dir / f"{log}.mcap", progress=False)  # beside the plan's
-        for j, (name, label) in enumerate(runs):
-            tum = root / seed_dir / name / "trajectory.tum"
-            if not tum.is_file():
-                continue
-            t, poses = read_tum(tum)
-            a = associate(t, poses, truth.t, truth.poses, 0.05)
-            e = pose_errors(a.est, a.truth)
-            # the Okabe-Ito palette and dashes: the curves coincide until the freeze
-            style = {"color": SERIES[j % len(SERIES)], "ls": SERIES_DASHES[j % len(SERIES_DASHES)]}
-            ax.plot(a.t, 100.0 * np.hypot(e[:, 0], e[:, 1]), lw=1.0, label=label, **style)
-        if truth.scenario is not None:
-            for r, t0, _t1 in truth.scenario.run_intervals():
-                ax.axvline(t0, color="0.8", lw=0.6)
-                ax.text(t0, 1.0, f" run {r}", transform=ax.get_xaxis_transform(), va="top",
-                        fontsize=7, color="0.4")  # fmt: skip
-        ax.set_yscale("log")
-        ax.set_ylabel("position error (cm)")
-        ax.set_title(f"{seed_dir}: {title}", fontsize=10, y=1.0)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8, loc="upper left")
-    axes[-1].set_xlabel("log time (s)")
-    # fixed margins (inches) for the labels and titles, one draw, the blank rest cropped
-    fixed_layout(fig, 0.9, 0.25, 0.6, 0.4, hspace=0.7)
-    save_png(fig, out, 110, tight=True)  # (fuzzyslam/figsave.py)
+    side, top, gap, ax_h = 1.65, 0.3, 0.3, 1.5  # inches: the legends right of the axes
+    with figure_style():
+        fig = Figure(figsize=(WIDE_W, 1.0), dpi=PRINT_DPI)  # its height set below
+        axes = fig.subplots(len(panels), 1, squeeze=False, sharex=True)[:, 0]
+        handles: list = []
+        for ax, (log, title, runs) in zip(axes, panels, strict=True):
+            truth = read_truth(root / seed_dir / f"{log}.mcap", progress=False)
+            t0 = log_start(truth)
+            for j, (name, label) in enumerate(runs):
+                tum = root / seed_dir / name / "trajectory.tum"
+                if not tum.is_file():
+                    continue
+                t, poses = read_tum(tum)
+                a = associate(t, poses, truth.t, truth.poses, 0.05)
+                e = pose_errors(a.est, a.truth)
+                # the Okabe-Ito palette and dashes: the curves coincide until the freeze
+                style = {"color": SERIES[j % len(SERIES)],
+                         "ls": SERIES_DASHES[j % len(SERIES_DASHES)]}  # fmt: skip
+                ax.plot(a.t - t0, 100.0 * np.hypot(e[:, 0], e[:, 1]), lw=1.0, label=label,
+                        **style)  # fmt: skip
+            ax.set_yscale("log")
+            ax.set_ylabel("position error (cm)")
+            ax.set_title(f"{seed_dir}/{log}.mcap: {title}", y=1.0)
+            ax.grid(True, which="both", alpha=0.3)
+            # right of the axes: over neither the data nor the run labels
+            ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False,
+                      borderaxespad=0.0)  # fmt: skip
+            # run starts (labelled), the freeze, lamp failures: compare.png's markers
+            drawn = mark_events([ax], truth, t0)
+            if len(drawn) > len(handles):
+                handles = drawn
+        axes[-1].set_xlabel(TIME_LABEL)
+        bottom = events_bottom(len(handles))
+        n = len(panels)
+        fig.set_size_inches(WIDE_W, top + n * ax_h + (n - 1) * gap + bottom)
+        # fixed margins (inches) for the labels and titles, one draw, the blank rest cropped
+        fixed_layout(fig, LEFT, side + 0.12, bottom, top, hspace=gap)
+        events_legend(fig, axes[-1], handles, bottom)
+        save_png(fig, out, PRINT_DPI, tight=True)  # (fuzzyslam/figsave.py)
     return True
 
 

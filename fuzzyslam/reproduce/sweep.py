@@ -149,9 +149,10 @@ def grid_points(sets: list[tuple[str, list[Any]]]) -> list[dict[str, Any]]:
 def sweep_steps(points: list[tuple[str, dict]], seeds: list[int]) -> list[Step]:
     """simulate -> run -> evaluate for every grid point and seed."""
     steps = []
-    for i, (cfg, _) in enumerate(points):
+    for i, (cfg, values) in enumerate(points):
         for s in seeds:
             d = f"g{i}/seed{s}"
+            label = point_label(values, f"seed {s}")  # the figures' titles
             steps += [
                 Step(f"{d}/log", ("simulate", cfg, "-o", f"{d}/log.mcap", "--seed", str(s)),
                      (), 16.0, "simulate",
@@ -159,12 +160,31 @@ def sweep_steps(points: list[tuple[str, dict]], seeds: list[int]) -> list[Step]:
                 Step(f"{d}/est", ("run", f"{d}/log.mcap", "-o", f"{d}/est", "--config", cfg),
                      (f"{d}/log",), 4.0, "run",
                      (("log", f"{d}/log.mcap"), ("outdir", f"{d}/est"), ("config", cfg))),
-                Step(f"{d}/eval", ("evaluate", f"{d}/log.mcap", f"{d}/est", "-o", f"{d}/eval"),
+                Step(f"{d}/eval", ("evaluate", f"{d}/log.mcap", f"{d}/est", "-o", f"{d}/eval",
+                                   "--label", label),
                      (f"{d}/log", f"{d}/est"), 5.0, "evaluate",
                      (("truth", f"{d}/log.mcap"), ("estimate", f"{d}/est"),
-                      ("outdir", f"{d}/eval"))),
+                      ("outdir", f"{d}/eval"), ("label", label))),
             ]  # fmt: skip
     return steps
+
+
+def point_label(values: dict, unit: str) -> str:
+    """A run's label in its evaluation's figures: the grid point's values and the seed or
+    log (``robot.wheel_noise=0.005, seed 1``).
+
+    Parameters
+    ----------
+    values : dict
+        The grid point (key -> value).
+    unit : str
+        The seed or log.
+
+    Returns
+    -------
+    str
+    """
+    return ", ".join([*(f"{k}={v}" for k, v in values.items()), unit])
 
 
 def log_units(logs: list[Path]) -> list[str]:
@@ -204,15 +224,18 @@ def log_steps(points: list[tuple[str, dict]], logs: list[Path], truth_topic: str
         else:
             truths.append(None)
     steps = []
-    for i, (cfg, _) in enumerate(points):
+    for i, (cfg, values) in enumerate(points):
         for log, unit, truth in zip(logs, log_units(logs), truths, strict=True):
             d = f"g{i}/{unit}"
             run_call = (("log", str(log)), ("outdir", f"{d}/est"), ("config", cfg))
             steps.append(Step(f"{d}/est", ("run", str(log), "-o", f"{d}/est", "--config", cfg),
                               (), 4.0, "run", run_call))  # fmt: skip
             if truth is not None:
-                argv = ("evaluate", truth[0], f"{d}/est", "-o", f"{d}/eval", *truth[1:])
-                call = (("truth", truth[0]), ("estimate", f"{d}/est"), ("outdir", f"{d}/eval"))
+                label = point_label(values, log.name if log.name != "log.mcap" else unit)
+                argv = ("evaluate", truth[0], f"{d}/est", "-o", f"{d}/eval", *truth[1:],
+                        "--label", label)  # fmt: skip
+                call = (("truth", truth[0]), ("estimate", f"{d}/est"), ("outdir", f"{d}/eval"),
+                        ("label", label))  # fmt: skip
                 if "--align" in truth:
                     call += (("align", True),)
                 steps.append(Step(f"{d}/eval", argv, (f"{d}/est",), 5.0, "evaluate", call))

@@ -17,11 +17,20 @@ import matplotlib
 
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
+import matplotlib.ticker
 
-from fuzzyslam.figsave import OKABE_ITO  # the figures' one palette (Okabe-Ito)
+from fuzzyslam.figsave import (  # the figures' one palette (Okabe-Ito) and style
+    OKABE_ITO,
+    PRINT_DPI,
+    WIDE_W,
+    fixed_layout,
+    save_png,
+    styled,
+)
 from fuzzyslam.fileio import atomic_path
 
-DPI = 150
+DPI = PRINT_DPI
+PANEL_W, PANEL_H = 1.65, 1.5  # inches; the panels side by side, at most WIDE_W in all
 MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
 # unit of a config key by its name's ending (the config's naming convention)
 SUFFIX_UNITS = {"_deg": "deg", "_m": "m", "_s": "s", "_hz": "Hz", "_px": "px", "_cm": "cm"}
@@ -87,6 +96,44 @@ def figure_name(key: str) -> str:
     return f"sweep_{re.sub(r'[^A-Za-z0-9_.-]', '_', key)}.png"
 
 
+def log_x(values: list[Any]) -> bool:
+    """A logarithmic x axis for the swept values: all positive numbers spanning more than
+    a decade.
+
+    Parameters
+    ----------
+    values : list
+        The swept values.
+
+    Returns
+    -------
+    bool
+    """
+    if not values or not _numeric(values):
+        return False
+    lo, hi = min(values), max(values)
+    return lo > 0 and hi / lo > 10.0
+
+
+def tick_text(v: Any) -> str:
+    """A swept value as its tick's text (``0.005``, ``2``, ``1e-05``: :func:`repr`'s
+    shortest form for numbers).
+
+    Parameters
+    ----------
+    v : any
+        The value.
+
+    Returns
+    -------
+    str
+    """
+    if isinstance(v, float):
+        return f"{v:g}"
+    return str(v)
+
+
+@styled
 def plot_sweep(root: Path, rows: list[dict], keys: list[str], n: int, over: str) -> list[Path]:
     """Draw ``root/sweep_KEY.png`` for every swept key (written atomically).
 
@@ -118,9 +165,22 @@ def plot_sweep(root: Path, rows: list[dict], keys: list[str], n: int, over: str)
         groups: dict[tuple, list[dict]] = {}
         for r in rows:
             groups.setdefault(tuple(r["values"][k] for k in others), []).append(r)
-        fig, axes = plt.subplots(1, max(len(measures), 1), figsize=(4.6 * len(measures), 4.0),
-                                 squeeze=False)  # fmt: skip
-        for ax, m in zip(axes[0], measures, strict=False):
+        left, right, wgap, hgap, top, bottom = 0.6, 0.15, 0.65, 0.6, 0.35, 0.45
+        cols = max(len(measures), 1)
+        while cols > 1 and left + right + cols * PANEL_W + (cols - 1) * wgap > WIDE_W:
+            cols -= 1  # too many measures for one row: more rows
+        rows = -(-max(len(measures), 1) // cols)
+        fig, axes = plt.subplots(
+            rows,
+            cols,
+            figsize=(left + right + cols * PANEL_W + (cols - 1) * wgap,
+                     top + bottom + rows * PANEL_H + (rows - 1) * hgap),
+            squeeze=False,
+            dpi=DPI,
+        )  # fmt: skip
+        for ax in axes.ravel()[len(measures) :]:
+            ax.set_axis_off()
+        for ax, m in zip(axes.ravel(), measures, strict=False):
             for g, (combo, members) in enumerate(groups.items()):
                 pts = [(xpos[r["values"][key]], r["measures"][m]) for r in members
                        if r["measures"][m]["n"]]  # fmt: skip
@@ -133,21 +193,35 @@ def plot_sweep(root: Path, rows: list[dict], keys: list[str], n: int, over: str)
                        [p[1]["max"] - p[1]["mean"] for p in pts]]  # fmt: skip
                 label = ", ".join(f"{k}={v}" for k, v in zip(others, combo, strict=True))
                 ax.errorbar(x, mean, yerr=err, color=OKABE_ITO[g % len(OKABE_ITO)],
-                            marker=MARKERS[g % len(MARKERS)], capsize=4, linewidth=1.5,
+                            marker=MARKERS[g % len(MARKERS)], capsize=3, linewidth=1.2,
                             label=label or None)  # fmt: skip
             ax.set_xlabel(key_label(key))
             ax.set_ylabel(m)
             ax.set_ylim(bottom=0)
             ax.grid(True, alpha=0.3)
-            if not numeric:
+            # ticks at the swept values only (a log axis when they span over a decade)
+            if log_x(values):
+                ax.set_xscale("log")
+                ax.minorticks_off()
+            if numeric:
+                ax.set_xticks(values, [tick_text(v) for v in values])
+                ax.xaxis.set_minor_locator(matplotlib.ticker.NullLocator())
+            else:
                 ax.set_xticks(range(len(values)), [str(v) for v in values])
+            if numeric and len(values) > 1:
+                lo, hi = min(values), max(values)
+                if log_x(values):
+                    ax.set_xlim(lo / (hi / lo) ** 0.08, hi * (hi / lo) ** 0.08)
+                else:
+                    ax.set_xlim(lo - 0.08 * (hi - lo), hi + 0.08 * (hi - lo))
             if others and len(groups) > 1:
                 ax.legend(fontsize=8)
-        fig.suptitle(f"Sweep of {key}: mean over {n} {over}, bars min to max")
-        fig.tight_layout()
+        fig.suptitle(f"Sweep of {key}: mean over {n} {over}, bars min to max", y=1.0,
+                     va="top", x=0.02, ha="left")  # fmt: skip
+        fixed_layout(fig, left, right, bottom, top, hspace=hgap, wspace=wgap)
         path = root / figure_name(key)
         with atomic_path(path) as tmp:
-            fig.savefig(tmp, format="png", dpi=DPI)
+            save_png(fig, tmp, DPI, tight=True)
         plt.close(fig)
         out.append(path)
     return out
