@@ -22,6 +22,7 @@ import dataclasses
 import difflib
 import math
 import os
+import re
 import stat
 import types
 import typing
@@ -212,6 +213,36 @@ class StrictLoader(_SafeLoader):
                 stack.extend(reversed(children))
 
 
+# YAML 1.2 floats that YAML 1.1 (PyYAML's resolver) reads as strings: an exponent without
+# a dot or without a sign (1e-3, 2.5e3, 1E6); what the floats of every config look like
+_EXPONENT_FLOAT = re.compile(r"^[-+]?(?:[0-9][0-9_]*(?:\.[0-9_]*)?|\.[0-9_]+)[eE][-+]?[0-9]+$")
+StrictLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float", _EXPONENT_FLOAT, list("-+.0123456789")
+)
+
+
+def yaml_value(text: str, source: str = "<value>") -> Any:
+    """One value of a command line (``--set KEY=VALUE``) read as YAML by the configs'
+    loader (:class:`StrictLoader`: ``1e-3`` is a number, as in a config file).
+
+    Parameters
+    ----------
+    text : str
+        The value's text.
+    source : str
+        What an error names (the option).
+
+    Returns
+    -------
+    object
+    """
+    loader = StrictLoader(text, source)
+    try:
+        return loader.get_single_data()
+    finally:
+        loader.dispose()
+
+
 def _read_yaml(text: str, source: str) -> dict[str, Any]:
     if len(text) > MAX_CONFIG_BYTES:
         raise ConfigError(source, f"config larger than {MAX_CONFIG_BYTES} bytes; refusing")
@@ -239,9 +270,12 @@ def _read_yaml(text: str, source: str) -> dict[str, Any]:
 
 def _read_text(path: Path) -> str:
     """The text of a config file, refusing non-files and files over the size limit
-    before reading them (a FIFO or /dev/zero never blocks or fills memory)."""
+    before reading them (a FIFO or /dev/zero never blocks or fills memory: opened
+    without blocking, O_NONBLOCK, a FIFO with no writer included, and its type checked
+    before any read)."""
     try:
-        with open(path, "rb") as f:
+        fd = os.open(path, os.O_RDONLY | getattr(os, "O_NONBLOCK", 0))
+        with open(fd, "rb") as f:
             if not stat.S_ISREG(os.fstat(f.fileno()).st_mode):
                 raise ConfigError(path, "config path is not a regular file")
             data = f.read(MAX_CONFIG_BYTES + 1)

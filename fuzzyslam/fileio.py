@@ -167,8 +167,9 @@ def check_output_target(path: str | os.PathLike, kind: str = "file or directory"
             raise InputError(p, "output path is a directory; refusing to replace it")
         return
     raise InputError(
-        p, "output path exists and is not a regular file or directory (a device, FIFO or "
-        "socket); refusing to replace it"
+        p,
+        "output path exists and is not a regular file or directory (a device, FIFO or "
+        "socket); refusing to replace it",
     )
 
 
@@ -218,6 +219,64 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
         mapped = _user_error(exc, tmp_path, path)
         if mapped is not None:
             raise mapped from exc
+        raise
+
+
+@contextlib.contextmanager
+def atomic_paths(paths: Iterable[str | os.PathLike]) -> Iterator[list[Path]]:
+    """Yield a temporary path beside each of ``paths`` (different files); rename them all
+    into place only when the block succeeds and every one is complete.
+
+    As :func:`atomic_path` for one file: each is flushed to the disk before the renames,
+    which are made together with Ctrl-C held, so the outputs are the old set or the new
+    one, never a new file beside an old one. On any exception every temporary file is
+    removed and every path left as it was; a write failure is an InputError naming the
+    user's path ("nothing was replaced").
+
+    Parameters
+    ----------
+    paths : iterable of path
+        The output files.
+
+    Yields
+    ------
+    list of Path
+        The temporary paths, in the order of ``paths``.
+    """
+    dests = [Path(p) for p in paths]
+    for dest in dests:
+        check_output_target(dest, "file")
+    tmps: list[Path] = []
+    try:
+        for dest in dests:
+            try:
+                fd, tmp = tempfile.mkstemp(
+                    prefix=f".{dest.name}.", suffix=".part", dir=dest.parent or "."
+                )
+            except OSError as exc:  # a read-only or full directory: the user's name
+                raise write_error(dest, exc) from exc
+            os.close(fd)
+            tmps.append(Path(tmp))
+        yield list(tmps)
+        _refuse_inputs(dests)
+        for tmp, dest in zip(tmps, dests, strict=True):
+            check_output_target(dest, "file")
+            with contextlib.suppress(OSError):  # mkstemp made it private
+                os.chmod(tmp, 0o666 & ~_umask())
+            _fsync_path(tmp)
+        with _deferred_interrupts():
+            for tmp, dest in zip(tmps, dests, strict=True):
+                os.replace(tmp, dest)
+        for parent in dict.fromkeys(d.parent if str(d.parent) else Path(".") for d in dests):
+            _fsync_path(parent, directory=True)
+    except BaseException as exc:
+        for tmp in tmps:
+            with contextlib.suppress(OSError):
+                tmp.unlink()
+        for tmp, dest in zip(tmps, dests, strict=False):  # the user's name of the file
+            mapped = _user_error(exc, tmp, dest)
+            if mapped is not None:
+                raise mapped from exc
         raise
 
 

@@ -1,7 +1,11 @@
-"""Progress bars on stderr (stdout is kept for the machine-readable summary)."""
+"""Progress bars on stderr (stdout is kept for the machine-readable summary).
+
+Progress and notes are best effort: a write to stderr that fails (a full disk under
+``2>FILE``, a reader gone) is dropped, never the command's error (:func:`say`)."""
 
 from __future__ import annotations
 
+import contextlib
 import os
 import sys
 from collections.abc import Iterable, Iterator
@@ -35,6 +39,23 @@ def display_mode(stream, show: bool = True) -> str:
     if not (show and enabled()):
         return "off"
     return "bar" if getattr(stream, "isatty", lambda: False)() else "lines"
+
+
+def say(text: str, stream=None) -> None:
+    """``text`` and a newline on ``stream`` (default: sys.stderr), flushed; a write that
+    fails (OSError: disk full, broken pipe) is dropped.
+
+    Parameters
+    ----------
+    text : str
+        One line.
+    stream : file-like, optional
+        Where to write.
+    """
+    with contextlib.suppress(OSError):
+        stream = stream if stream is not None else sys.stderr
+        click.echo(text, file=stream)
+        stream.flush()
 
 
 class Progress:
@@ -90,8 +111,7 @@ class Progress:
             self._line(label)
 
     def _line(self, text: str) -> None:
-        click.echo(text, file=self.stream)
-        self.stream.flush()
+        say(text, self.stream)
         self.last = self.clock()
 
     def update_to(self, amount: float) -> None:
@@ -134,7 +154,7 @@ def iterate(items: Iterable[T], length: int, label: str) -> Iterator[T]:
 
 def note(text: str) -> None:
     """One line on stderr for the user (always shown: a warning is not progress)."""
-    click.echo(f"fuzzyslam: note: {' '.join(text.split())}", err=True)
+    say(f"fuzzyslam: note: {' '.join(text.split())}")
 
 
 class PlanProgress:
@@ -187,8 +207,7 @@ class PlanProgress:
         """One line now (before the bar starts, in bar mode)."""
         if self.mode == "off":
             return
-        click.echo(f"{self.label}: {text}", file=self.stream)
-        self.stream.flush()
+        say(f"{self.label}: {text}", self.stream)
         self.last = self.clock()
         self._start_bar()
 

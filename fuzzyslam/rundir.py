@@ -38,6 +38,18 @@ OPTIONAL_OUTPUTS = (
     "calibration.yaml",
 )
 
+# every file a run may write into its directory
+RUN_OUTPUTS = (
+    TRAJECTORY,
+    ODOMETRY,
+    COVARIANCE,
+    UPDATES,
+    LANDMARKS,
+    ESTIMATES,
+    SUMMARY,
+    *OPTIONAL_OUTPUTS,
+)
+
 
 def landmarks_dict(lamps: Iterable[Any]) -> dict:
     """The content of landmarks.yaml: ``{frame: map, landmarks: [{id, x, y, cov,

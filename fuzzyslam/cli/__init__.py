@@ -103,8 +103,9 @@ class LogTimeType(click.ParamType):
         except (TypeError, ValueError):
             self.fail(f"{value!r} is not a number of seconds (or +SECONDS)", param, ctx)
         if not (math.isfinite(t) and 0.0 <= t <= MAX_LOG_TIME_S):
-            self.fail(f"must be a finite log time in [0, {MAX_LOG_TIME_S:g}] s, got {value}",
-                      param, ctx)
+            self.fail(
+                f"must be a finite log time in [0, {MAX_LOG_TIME_S:g}] s, got {value}", param, ctx
+            )
         return LogTime(t, relative)
 
 
@@ -181,6 +182,10 @@ def _register(args: list[str] | None = None) -> None:
                 raise
 
 
+# click >= 8.2 raises it for a command line without a command (older ones print the help)
+_NO_ARGS_IS_HELP: Any = getattr(click.exceptions, "NoArgsIsHelpError", ())
+
+
 class Terminated(KeyboardInterrupt):
     """SIGTERM, raised like Ctrl-C so that temporary outputs are removed on the way out."""
 
@@ -210,8 +215,11 @@ def main(argv: list[str] | None = None) -> None:
     code = EXIT_OK
     try:
         _register(args)
-        cli.main(args=args, prog_name="fuzzyslam", standalone_mode=False)
+        _invoke(args)
     except click.exceptions.Exit as exc:
+        code = exc.exit_code
+    except _NO_ARGS_IS_HELP as exc:  # bare ``fuzzyslam``: the help, as click shows it
+        click.echo(exc.format_message(), err=True)
         code = exc.exit_code
     except click.UsageError as exc:  # one line, as every failure (click's is four)
         cmd = exc.ctx.command_path if exc.ctx is not None else "fuzzyslam"
@@ -261,6 +269,17 @@ def main(argv: list[str] | None = None) -> None:
         _internal(exc)
         code = EXIT_INTERNAL
     sys.exit(code)
+
+
+def _invoke(args: list[str]) -> None:
+    """Parse ``args`` and run the command, as ``cli.main(standalone_mode=False)`` does
+    but without its blank line on stderr at Ctrl-C (click's, before raising Abort): an
+    interruption is one line, :func:`main`'s. Shell completion is kept."""
+    completion = getattr(cli, "_main_shell_completion", None)
+    if completion is not None:
+        completion({}, "fuzzyslam")
+    with cli.make_context("fuzzyslam", args) as ctx:
+        cli.invoke(ctx)
 
 
 def entry() -> None:

@@ -19,7 +19,8 @@ from fuzzyslam.cli import (
 
 
 def _parse_pose(_ctx, _param, value: str | None) -> tuple[float, float, float] | None:
-    """``X,Y,THETA`` as three finite floats."""
+    """``X,Y,THETA`` as three finite floats within the bounds of the config's
+    ``slam.start_pose`` (a usage error otherwise)."""
     if value is None:
         return None
     try:
@@ -28,7 +29,23 @@ def _parse_pose(_ctx, _param, value: str | None) -> tuple[float, float, float] |
         raise click.BadParameter(f"expected X,Y,THETA (three numbers), got {value!r}") from None
     if not all(map(math.isfinite, (x, y, th))):
         raise click.BadParameter(f"expected three finite numbers, got {value!r}")
+    lo, hi = _start_pose_bounds()
+    if not all(lo <= v <= hi for v in (x, y, th)):
+        raise click.BadParameter(
+            f"each value must be in [{lo:g}, {hi:g}] (as slam.start_pose), got {value!r}"
+        )
     return x, y, th
+
+
+def _start_pose_bounds() -> tuple[float, float]:
+    """The range of each value of the config's ``slam.start_pose``."""
+    import dataclasses
+
+    from fuzzyslam.config import DEFAULT_BOUND
+    from fuzzyslam.slam.params import SlamParams
+
+    (meta,) = (f.metadata for f in dataclasses.fields(SlamParams) if f.name == "start_pose")
+    return meta.get("min", -DEFAULT_BOUND), meta.get("max", DEFAULT_BOUND)
 
 
 @cli.command("run")
@@ -134,20 +151,38 @@ def run_command(
     """
     from fuzzyslam.slam.stage import run
 
-    emit(
-        stage_call(
-            run,
-            log,
-            outdir,
-            config,
-            seed,
-            map_dir,
-            fix,
-            fix_from,
-            ranges,
-            start_pose,
-            adapt_noise,
-            calibration,
-            prefetch,
-        )
+    summary = stage_call(
+        run,
+        log,
+        outdir,
+        config,
+        seed,
+        map_dir,
+        fix,
+        fix_from,
+        ranges,
+        start_pose,
+        adapt_noise,
+        calibration,
+        prefetch,
+    )
+    _tell_damage(log, summary.get("log_damage"))
+    emit(summary)
+
+
+def _tell_damage(log: Path, damage: dict | None) -> None:
+    """One note on stderr when the log was damaged or cut off (the summary's
+    ``log_damage``): how much was lost."""
+    from fuzzyslam.progress import note
+
+    if not damage or not (
+        damage.get("truncated") or damage.get("lost_bytes") or damage.get("damaged_records")
+    ):
+        return
+    note(
+        f"{log}: the log is damaged or cut off: {damage.get('lost_bytes', 0)} bytes lost "
+        f"({100 * damage.get('lost_fraction', 0.0):.2f} % of the file), "
+        f"{damage.get('damaged_records', 0)} damaged records skipped, "
+        f"{damage.get('salvaged_messages', 0)} messages salvaged; the estimate covers the "
+        "intact part only (the summary's log_damage)"
     )

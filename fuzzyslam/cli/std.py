@@ -7,7 +7,9 @@ failing. A reader that goes away (``| head -c 10``, ``| true``) closes the pipe:
 next write raises BrokenPipeError (Python ignores SIGPIPE). The summary and the progress
 are for the reader only, so the command goes on, its files are written, and it exits
 as it would have: :class:`QuietPipe` turns the stream into the null device at the first
-broken write, once, and remembers it.
+broken write, once, and remembers it. stderr carries only progress, notes and the error
+line, all best effort: any failed write to it (a full disk under ``2>FILE`` too) silences
+it the same way, and is never the command's failure nor blamed on an output file.
 """
 
 from __future__ import annotations
@@ -41,11 +43,16 @@ class QuietPipe:
     ----------
     stream : TextIO
         ``sys.stdout`` or ``sys.stderr``.
+    best_effort : bool
+        Any OSError of a write or flush silences the stream, not only a broken pipe
+        (stderr: a full disk must not fail the command; stdout's summary is an output,
+        whose write failure is the command's error).
     """
 
-    def __init__(self, stream: TextIO) -> None:
+    def __init__(self, stream: TextIO, best_effort: bool = False) -> None:
         self._stream = stream
         self.broken = False
+        self._quiet: type[OSError] = OSError if best_effort else BrokenPipeError
 
     def _silence(self) -> None:
         """The reader is gone: the descriptor goes to the null device (what is still
@@ -72,7 +79,7 @@ class QuietPipe:
         if not self.broken:
             try:
                 return self._stream.write(text)
-            except BrokenPipeError:
+            except self._quiet:
                 self._silence()
         return len(text)
 
@@ -81,7 +88,7 @@ class QuietPipe:
         if not self.broken:
             try:
                 self._stream.flush()
-            except BrokenPipeError:
+            except self._quiet:
                 self._silence()
                 with contextlib.suppress(OSError, ValueError):
                     self._stream.flush()  # what was buffered now goes to the null device
@@ -92,9 +99,9 @@ class QuietPipe:
 
 def guard_streams() -> None:
     """:func:`open_closed_descriptors`, then stdout and stderr wrapped in
-    :class:`QuietPipe` (once)."""
+    :class:`QuietPipe` (once; stderr best effort)."""
     open_closed_descriptors()
     for name in ("stdout", "stderr"):
         stream = getattr(sys, name)
         if not isinstance(stream, QuietPipe):
-            setattr(sys, name, QuietPipe(stream))
+            setattr(sys, name, QuietPipe(stream, best_effort=name == "stderr"))

@@ -61,11 +61,11 @@ def sweep_command(config: str, sets: tuple[str, ...], seeds: int | None,
     from fuzzyslam.reproduce.overrides import parse_set
     from fuzzyslam.reproduce.sweep import sweep
 
+    if logs_glob is not None and seeds is not None:
+        raise click.UsageError("give --seeds or --logs, not both")
     parsed = [parse_set(s) for s in sets]
     logs = None
     if logs_glob is not None:
-        if seeds is not None:
-            raise InputError(logs_glob, "give --seeds or --logs, not both")
         from fuzzyslam.streams.reader import bag_file
 
         # files, and ros2 bag folders as their MCAP file (a split bag: one line)

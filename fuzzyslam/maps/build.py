@@ -29,7 +29,7 @@ from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.quality import wall_quality
 from fuzzyslam.maps.references import Reference, extract_references
 from fuzzyslam.maps.summary import MapSummary, ReferenceEntry, ReferenceTruth, WallQuality
-from fuzzyslam.progress import Progress
+from fuzzyslam.progress import Progress, note
 from fuzzyslam.se2 import interpolate_poses, wrap_angle_period
 from fuzzyslam.slam import calibration_files
 from fuzzyslam.slam.log_setup import base_frame
@@ -118,6 +118,12 @@ def freeze_time(reader: LogReader, cfg: Config, opts: MapOptions) -> tuple[float
                 f"--until {opts.until} s is before the log's first message at "
                 f"{reader.start:.3f} s (log times are the log's own stamps; +S is S seconds "
                 "after its start)",
+            )
+        if t > reader.end:  # every ring is in the map, frozen at a time the log never saw
+            note(
+                f"{reader.path}: --until {opts.until} s is after the log's last message at "
+                f"{reader.end:.3f} s; the map holds the whole log and records freeze_time "
+                f"{t:.3f} s"
             )
         return t, "--until"
     scenario = read_scenario(reader)

@@ -9,6 +9,7 @@ from typing import Any
 
 from fuzzyslam.config import load_config
 from fuzzyslam.errors import InputError, UsageError
+from fuzzyslam.fileio import check_input_file
 from fuzzyslam.maps.build import MapOptions, build_map
 from fuzzyslam.stamps import LogTime
 
@@ -79,6 +80,11 @@ def run(
         sort=sort,
         calibration=Path(calibration) if calibration else None,
     )
-    if opts.calibration is not None and not opts.calibration.is_file():
+    # the optional inputs checked before the work (a FIFO: not a regular file, at once)
+    if opts.calibration is not None and not opts.calibration.exists():
         raise InputError(opts.calibration, "no such calibration file (--calibration)")
+    if opts.calibration is not None:
+        check_input_file(opts.calibration, "calibration file (--calibration)")
+    if opts.landmarks is not None:
+        check_input_file(opts.landmarks, "landmarks file (--landmarks)")
     return build_map(log, trajectory, outdir, cfg, opts)

@@ -16,17 +16,23 @@ from typing import Any
 
 import yaml
 
-from fuzzyslam.config import Config, _merge, clip, config_from_raw, config_layers
+from fuzzyslam.config import Config, _merge, clip, config_from_raw, config_layers, yaml_value
 from fuzzyslam.errors import ConfigError, InputError
 
+GRID_SYNTAX = "KEY=V1,V2,... (e.g. fgm.freeze_run=1,2)"  # sweep's --set
+ONE_SYNTAX = "KEY=VALUE (e.g. slam.calibrate=true)"  # reproduce's --set
 
-def parse_set(text: str) -> tuple[str, list[Any]]:
-    """``KEY=V1,V2,...`` -> (KEY, [values]); each value is read as YAML (0.5, true, text).
+
+def parse_set(text: str, syntax: str = GRID_SYNTAX) -> tuple[str, list[Any]]:
+    """``KEY=V1,V2,...`` -> (KEY, [values]); each value is read as YAML (0.5, 1e-3, true,
+    text) by the configs' loader (``config.yaml_value``); an empty value is refused.
 
     Parameters
     ----------
     text : str
         The option's text, e.g. ``fgm.freeze_run=1,2``.
+    syntax : str
+        The option's form, for the error of a malformed one.
 
     Returns
     -------
@@ -38,11 +44,14 @@ def parse_set(text: str) -> tuple[str, list[Any]]:
     key, sep, values = text.partition("=")
     key = key.strip()
     if not sep or not key or not values.strip():
-        raise InputError(label, "--set must be KEY=V1,V2,... (e.g. fgm.freeze_run=1,2)")
+        raise InputError(label, f"--set must be {syntax}")
     if key.split(".")[0] == "extends":
         raise InputError(label, "'extends' cannot be set; give the config to extend as CONFIG")
+    parts = values.split(",")
+    if any(not v.strip() for v in parts):
+        raise InputError(label, f"an empty value; --set must be {syntax}")
     try:
-        return key, [yaml.safe_load(v) for v in values.split(",")]
+        return key, [yaml_value(v, label) for v in parts]
     except yaml.YAMLError as exc:
         problem = getattr(exc, "problem", None) or "syntax error"
         raise InputError(label, f"a value is not YAML: {clip(problem, 80)}") from None
@@ -61,7 +70,7 @@ def parse_one(text: str) -> tuple[str, Any]:
     (str, object)
         The dotted key and its value read as YAML.
     """
-    key, values = parse_set(text)
+    key, values = parse_set(text, ONE_SYNTAX)
     if len(values) != 1:
         raise InputError(
             f"--set {text}", "--set takes one value (KEY=VALUE); a grid is 'fuzzyslam sweep'"

@@ -9,7 +9,7 @@ from typing import Any
 
 from fuzzyslam.config import DEFAULT_CONFIG, load_config
 from fuzzyslam.errors import InputError
-from fuzzyslam.fileio import atomic_path, check_outputs
+from fuzzyslam.fileio import atomic_paths, check_outputs
 
 
 def run(
@@ -21,8 +21,8 @@ def run(
 ) -> dict[str, Any]:
     """Simulate ``config`` (a YAML path or an embedded name; default paper.yaml) with
     ``seed`` into the MCAP file ``output``; ``preview`` (PNG) and ``truth_tum`` (the true
-    trajectory as TUM) are written too when given, every file complete before the log is
-    renamed into place. Returns the JSON summary.
+    trajectory as TUM) are written too when given, every file complete before any is
+    renamed into place (``fileio.atomic_paths``). Returns the JSON summary.
 
     Parameters
     ----------
@@ -59,14 +59,15 @@ def run(
     from fuzzyslam.sim.preview import save_preview
     from fuzzyslam.sim.record import write_truth_tum
 
-    # every file complete before the log is renamed into place: never a new log beside an
-    # old preview or truth (they are renamed first, the log right after)
-    with atomic_path(output) as staged:
-        summary, plan = simulate_to_mcap(cfg, staged, source=cfg_name)
+    # every file complete before any is renamed into place: never a new log beside an
+    # old preview or truth, nor a new preview beside an old log
+    with atomic_paths([output, *extras]) as staged:
+        summary, plan = simulate_to_mcap(cfg, staged[0], source=cfg_name)
+        named = dict(zip(extras, staged[1:], strict=True))
         if preview:
-            save_preview(plan, preview, title=f"{cfg.name}, seed {cfg.seed}")
+            save_preview(plan, named[preview], title=f"{cfg.name}, seed {cfg.seed}")
         if truth_tum:
-            write_truth_tum(plan, truth_tum)
+            write_truth_tum(plan, named[truth_tum])
     summary["file"] = str(Path(output))
     if preview:
         summary["preview"] = preview

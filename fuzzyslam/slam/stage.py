@@ -23,7 +23,7 @@ from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, check_outputs
 from fuzzyslam.forked import ChildCalls
 from fuzzyslam.progress import Progress, note
-from fuzzyslam.rundir import OPTIONAL_OUTPUTS
+from fuzzyslam.rundir import OPTIONAL_OUTPUTS, RUN_OUTPUTS
 from fuzzyslam.slam import calibration as cal
 from fuzzyslam.slam import calibration_files
 from fuzzyslam.slam.events import Event
@@ -169,9 +169,13 @@ def run(
     from fuzzyslam.config import load_config
     from fuzzyslam.errors import UsageError
 
+    if fix_from is not None and map_dir is None:  # it would be ignored
+        raise UsageError("--fix-from needs --map FGMDIR (a frozen map from 'map')")
     cfg = load_config(config, seed)
     if map_dir is not None:  # the map's directory is an input: a run never writes into it
         check_outputs([map_dir], [outdir])
+    if calibration is not None and Path(outdir).is_dir():  # refused now, not after the run
+        check_outputs([calibration], [Path(outdir) / n for n in RUN_OUTPUTS])
     if map_dir is None and fix in (None, "none"):
         aids = []  # lamps only (aids_for_log's answer), the plug-ins not even imported
     else:
