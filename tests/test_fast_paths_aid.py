@@ -249,3 +249,35 @@ def test_conjunctive_grouped_equals_one_bincount_per_commonality():
         new, old = conjunctive_grouped(m, groups, ngroups), plain(m, groups, ngroups)
         for a, b in zip(new, old, strict=True):
             assert a.shape == (ngroups,) and np.array_equal(a, b)
+
+
+def test_local_map_pickles_sparse_bit_for_bit():
+    """An FLM pickled (slam/prefetch.py's pipe) keeps only its non-vacuous cells and comes
+    back with the same bits in every mass (-0.0 and NaN included), the same dtype, shape
+    and layout, and its echoes; masses not of the grid's float32 shape pickle whole."""
+    import pickle
+
+    from fuzzyslam.maps.flm import LocalMap, build_flm
+    from fuzzyslam.maps.params import MapParams
+
+    ang = np.arange(16) * (2 * np.pi / 16)
+    mounts = np.column_stack([0.2 * np.cos(ang), 0.2 * np.sin(ang), ang])
+    ranges = np.linspace(0.4, 3.0, 16)
+    ranges[3] = np.nan
+    flm = build_flm(ranges, 6.5, np.deg2rad(25.0), mounts, MapParams())
+    flm.m_e[0, 0] = -0.0  # bits that compare equal to the vacuous value
+    flm.m_c[0, 1] = np.nan
+    data = pickle.dumps(flm, pickle.HIGHEST_PROTOCOL)
+    assert len(data) < len(pickle.dumps(flm.__dict__, pickle.HIGHEST_PROTOCOL)) / 2
+    back = pickle.loads(data)
+    assert type(back) is LocalMap and back.grid == flm.grid
+    for name in ("m_e", "m_o", "m_t", "m_c"):
+        a, b = getattr(flm, name), getattr(back, name)
+        assert a.dtype == b.dtype and a.shape == b.shape and b.flags.c_contiguous
+        assert np.array_equal(a.view(np.uint32), b.view(np.uint32))
+    assert np.array_equal(back.readings.sensors, flm.readings.sensors)
+    assert np.array_equal(back.readings.ranges, flm.readings.ranges)
+    odd = LocalMap(flm.grid, flm.m_e.astype(float), flm.m_o, flm.m_t, flm.m_c, None)
+    again = pickle.loads(pickle.dumps(odd))
+    assert again.m_e.dtype == float and np.array_equal(again.m_e, odd.m_e)
+
