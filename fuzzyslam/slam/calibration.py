@@ -297,7 +297,7 @@ class CalibratedPreintegrator(Preintegrator):
         self._arrays = None
         self.dist += abs(dt)
         self.turn += abs(dr)
-        super().add(dt, dr)
+        self._compose(dt, dr, mx, my, c, s, a, b, ch, sh)  # Preintegrator.add of (dt, dr)
 
     def _matrices(self) -> tuple[np.ndarray, np.ndarray]:
         """D and E (3, k) each, from their columns (built once per preintegration)."""

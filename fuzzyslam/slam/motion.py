@@ -99,10 +99,7 @@ class Preintegrator:
         self.reset()
 
     def reset(self) -> None:
-        """Start a new relative motion (identity, zero covariance).
-
-
-        """
+        """Start a new relative motion (identity, zero covariance)."""
         self.dx = self.dy = self.dth = 0.0
         self._q = [0.0] * 6  # q00 q01 q02 q11 q12 q22
         self.steps = 0
@@ -117,17 +114,36 @@ class Preintegrator:
         d_rot : float
             Rotation increment (rad).
         """
-        k_tt, k_tr, k_rr, k_rt = self.noise
-        adt, adr = abs(d_trans), abs(d_rot)
-        mt = k_tt * adt + k_tr * adr  # motion_noise, written out
-        mr = k_rr * adr + k_rt * adt
         h = 0.5 * d_rot
         mx, my = d_trans * math.cos(h), d_trans * math.sin(h)
         dth = self.dth
         c, s = math.cos(dth), math.sin(dth)
-        # A = [[1, 0, a], [0, 1, b], [0, 0, 1]]: A Q A^T
+        # A = [[1, 0, a], [0, 1, b], [0, 0, 1]]
         a = -s * mx - c * my
         b = c * mx - s * my
+        self._compose(d_trans, d_rot, mx, my, c, s, a, b, math.cos(dth + h), math.sin(dth + h))
+
+    def _compose(
+        self,
+        d_trans: float,
+        d_rot: float,
+        mx: float,
+        my: float,
+        c: float,
+        s: float,
+        a: float,
+        b: float,
+        ch: float,
+        sh: float,
+    ) -> None:
+        """:meth:`add` given the step's geometry (the calibrated subclass has it already):
+        m(u) = (mx, my, d_rot), (c, s) of the heading so far, A's (a, b), and (ch, sh) of
+        the heading at the step's midpoint."""
+        k_tt, k_tr, k_rr, k_rt = self.noise
+        adt, adr = abs(d_trans), abs(d_rot)
+        mt = k_tt * adt + k_tr * adr  # motion_noise, written out
+        mr = k_rr * adr + k_rt * adt
+        # A Q A^T
         q00, q01, q02, q11, q12, q22 = self._q
         q00, q01, q02, q11, q12 = (
             q00 + 2 * a * q02 + a * a * q22,
@@ -137,7 +153,7 @@ class Preintegrator:
             q12 + b * q22,
         )
         # B G_u = [[ch, -k sh], [sh, k ch], [0, 1]], k = dt / 2: + B G_u diag(mt, mr) (B G_u)^T
-        ch, sh, k = math.cos(dth + h), math.sin(dth + h), 0.5 * d_trans
+        k = 0.5 * d_trans
         kk = k * k * mr
         self._q = [
             q00 + ch * ch * mt + kk * sh * sh,
@@ -149,7 +165,7 @@ class Preintegrator:
         ]
         self.dx += c * mx - s * my
         self.dy += s * mx + c * my
-        self.dth = dth + d_rot
+        self.dth += d_rot
         self.steps += 1
 
     @property
