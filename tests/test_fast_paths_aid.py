@@ -281,3 +281,19 @@ def test_local_map_pickles_sparse_bit_for_bit():
     again = pickle.loads(pickle.dumps(odd))
     assert again.m_e.dtype == float and np.array_equal(again.m_e, odd.m_e)
 
+
+def test_heading_decision_replace_is_dataclasses_replace():
+    """HeadingDecision.replace (the heading aid's, 3-4 a ring): dataclasses.replace's
+    decision, and its TypeError for a name that is not a field."""
+    import dataclasses
+
+    from fuzzyslam.fixes.heading_measure import HeadingDecision
+
+    d = HeadingDecision(1.5, 2, 0.25, 0.5, True, "ok", 0.75, sigma=0.01)
+    for changes in ({}, {"x": 1.0, "y": -2.0}, {"nis": 3.0, "accepted": False, "reason": "gated"}):
+        a, b = dataclasses.replace(d, **changes), d.replace(**changes)
+        assert type(b) is HeadingDecision and a == b and vars(a) == vars(b) and b is not d
+    with pytest.raises(TypeError):
+        d.replace(bogus=1)
+    with pytest.raises(dataclasses.FrozenInstanceError):
+        d.replace(x=0.0).x = 1.0

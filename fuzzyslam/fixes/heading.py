@@ -255,7 +255,7 @@ class HeadingFixAid(FixAid):
             t, wall, self.refs, pose, ekf.pose_cov, self.params, corridor=corridor
         )
         junction = why == "junction"
-        d = replace(d, odometry=odo_heading, unsure_junction=junction and unsure_junction(cands),
+        d = d.replace(odometry=odo_heading, unsure_junction=junction and unsure_junction(cands),
                     x=x0, y=y0)  # fmt: skip
         history = window.single if window is not None else self.decisions
         recover = d.reason == "gated"
@@ -279,7 +279,7 @@ class HeadingFixAid(FixAid):
             # inflation's heading column carries that lever, Q += v^2 g g^T, g = (J L, 1),
             # L = p - p_bump, so the fix moves the position with the heading.
             offset, sigma, _ = streak_offset([x for x in streak if formed(x)])
-            d = replace(d, measured=float(wrap_angle(d.odometry + offset)), sigma=sigma)
+            d = d.replace(measured=float(wrap_angle(d.odometry + offset)), sigma=sigma)
             v = float(wrap_angle(d.measured - d.predicted))
             dist = (
                 float(np.hypot(*(pose[:2] - self._last_ok_xy)))
@@ -290,7 +290,7 @@ class HeadingFixAid(FixAid):
             lever = pose[:2] - bump_position(streak, history, self._last_ok_xy)
             g = np.array([-lever[1], lever[0], 1.0])
             ekf.inflate_robot(np.diag([q_xy, q_xy, 0.0]) + v * v * np.outer(g, g))
-            d = replace(d, accepted=True, reason="recovered")
+            d = d.replace(accepted=True, reason="recovered")
             self.recoveries += 1
             if window is not None:  # the window's older rings are from before the bump
                 window.restart(t, ring, ekf)
@@ -303,13 +303,13 @@ class HeadingFixAid(FixAid):
             res = ekf.update_robot(
                 [d.measured], [[d.sigma * d.sigma]], [2], gate_chi2=self.params.gate_chi2
             )
-            d = replace(d, nis=float(res.nis))
+            d = d.replace(nis=float(res.nis))
             if not res.accepted:
-                d = replace(d, accepted=False, reason="gated")
+                d = d.replace(accepted=False, reason="gated")
             else:
                 self._last_ok_xy = ekf.pose[:2]
         self._update_suspicion(single, d)
-        self.decisions.append(replace(d, x=x0, y=y0))
+        self.decisions.append(d.replace(x=x0, y=y0))
         self._watch_position(t, ekf.pose_cov)  # a recovery inflates it
 
     def _watch_position(

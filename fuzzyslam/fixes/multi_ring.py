@@ -29,7 +29,6 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import replace
 from typing import Any
 
 import numpy as np
@@ -178,7 +177,7 @@ class MultiRingWindow:
         if not due:
             if single.reason == "gated":
                 return single
-            return replace(single, measured=math.nan, accepted=False, reason="between_fixes")
+            return single.replace(measured=math.nan, accepted=False, reason="between_fixes")
         self.since_fix = 0
         self.travelled = 0.0
         self.formed += 1
