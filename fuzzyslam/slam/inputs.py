@@ -5,10 +5,15 @@ Input streams (topic names from the config's ``topics`` section):
 - odometry: ``topics.joint_states`` wheel angles (nominal ``robot.wheel_radius`` and
   ``robot.wheel_base``), or ``topics.odom`` pose increments when the log has no
   encoders or ``slam.use_encoders`` is false;
-- lamps: ``topics.image`` mono8 frames + ``topics.camera_info`` (ceiling height from
+- lamps: ``topics.image`` frames + ``topics.camera_info`` (ceiling height from
   ``camera.ceiling_height``, the lens offset and image axes from the /tf_static mount of
   ``ceiling_camera`` if present, composed in 3D (a camera turned or mounted upside down),
-  else ``camera.offset``), or ``topics.detections`` PoseArray or vision_msgs
+  else ``camera.offset``; the lens distortion of the CameraInfo undone on the blobs'
+  centroids, ``CeilingCamera.unproject``). The frames are ``sensor_msgs/Image`` of any
+  common encoding or ``sensor_msgs/CompressedImage`` (JPEG, PNG), decoded to grey by
+  the topic's type in the log (:func:`frame_stream`); a log that records only
+  image_transport's ``topics.image + "/compressed"`` is read from it. Or
+  ``topics.detections`` PoseArray or vision_msgs
   Detection3DArray (base_link points; the latter's own covariances are used);
   A log with neither has no lamps (``lamp_source`` "none"): the same filter on
   odometry alone, corrected only by the aids;
@@ -22,7 +27,8 @@ confirmed by the glitch gate (slam/odom_gate.py) when the odometry is nav_msgs/O
 skipped and counted (``odometry_jumps``).
 
 Glitches are counted in ``warnings`` (never silently used): frames of another
-encoding or of another size than the CameraInfo's, frames stamped more than
+encoding that cannot be decoded or of another size than the CameraInfo's, frames
+stamped more than
 ``slam.odometry_stale_s`` before the odometry's first message (``frames_before_odometry``:
 where the robot was is unknown; also counted as lost frames), NaN odometry, odometry increments
 faster than the robot can move (``implausible_odometry``: wheel speeds over
@@ -30,7 +36,8 @@ faster than the robot can move (``implausible_odometry``: wheel speeds over
 ``robot.max_turn_rate``), header stamps out of order, joint states without the wheel
 joints. A CameraInfo that no pinhole ceiling camera can have (a focal length that is
 not finite and positive, fx and fy more than 1 % apart, a field of view outside
-[1, 179] degrees, a principal point off the image) is a bad input. Event times are
+[1, 179] degrees, a principal point off the image, a lens distortion model it cannot
+undo) is a bad input. Event times are
 header stamps, and events come in their order, not in the order they were logged: a
 detection logged up to ``REORDER_S`` after odometry stamped later is put back in its
 place (``warnings.reordered``).
@@ -130,6 +137,8 @@ class LogInputs:
     # what opening the log found worth a line on stderr, said once by the stage (a run
     # with --adapt-noise opens the log twice)
     notes: list[str] = field(default_factory=list)
+    # a frame message -> its 8-bit grey image (frame_stream: by the topic's type)
+    to_grey: Callable[[Any], np.ndarray] = M.image_to_array
 
     @property
     def placeable_from(self) -> float:
@@ -399,8 +408,13 @@ class LogInputs:
         return self._cov_cache[1].copy()
 
     def _frame(self, t: float, msg) -> Frame | None:
+        """A frame's lamps: the message decoded to grey (``to_grey``: an undecodable one
+        is one ``bad_frames``), the blobs detected, their centroids unprojected (the
+        lens' distortion undone: ``CeilingCamera.unproject``) with the pixel noise
+        ``slam.pixel_sigma`` on the ceiling (through the undistortion's local scale when
+        the lens distorts: ``CeilingCamera.ceiling_covariances``)."""
         try:
-            img = M.image_to_array(msg)
+            img = self.to_grey(msg)
         except ValueError as exc:
             self.warn("bad_frames", f"{self.lamp_topic} at t={t:.3f} s: {exc}")
             return None
@@ -423,8 +437,18 @@ class LogInputs:
             self.warnings["blobs_rejected"] = (
                 self.warnings.get("blobs_rejected", 0) + blobs.rejected
             )
-        z = self.camera.unproject(blobs.uv)
-        return Frame(t, z, self._measurement_cov(len(z), self.camera.metric_sigma(p.pixel_sigma)))
+        cam = self.camera
+        z = cam.unproject(blobs.uv)
+        if not cam.distorted:
+            return Frame(t, z, self._measurement_cov(len(z), cam.metric_sigma(p.pixel_sigma)))
+        cov = cam.ceiling_covariances(blobs.uv, p.pixel_sigma)
+        ok = np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(cov), axis=(1, 2))
+        if not np.all(ok):  # beyond what the lens model can undo (a fisheye's rim)
+            self.warnings["blobs_rejected"] = self.warnings.get("blobs_rejected", 0) + int(
+                np.count_nonzero(~ok)
+            )
+            z, cov = z[ok], cov[ok]
+        return Frame(t, z, cov)
 
     def _pose_array(self, t: float, msg) -> Frame | None:
         """Detections (PoseArray or vision_msgs/Detection3DArray): each with the message's
@@ -576,6 +600,63 @@ class LogInputs:
         return False
 
 
+def frame_topic(reader: LogReader, topic: str) -> str:
+    """The camera's frame topic: ``topic`` (``topics.image``) when the log has it, else
+    image_transport's compressed one, ``topic + "/compressed"`` (a robot that records
+    only that, as bandwidth asks), else '' (no frames).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    topic : str
+        ``topics.image``.
+
+    Returns
+    -------
+    str
+    """
+    if reader.has(topic):
+        return topic
+    compressed = topic.rstrip("/") + "/compressed"
+    return compressed if reader.has(compressed) else ""
+
+
+def frame_stream(reader: LogReader, topic: str) -> Callable[[Any], np.ndarray]:
+    """The decoder of the frames of ``topic`` by its type in the log:
+    :func:`~fuzzyslam.streams.messages.image_to_array` for ``sensor_msgs/msg/Image``,
+    :func:`~fuzzyslam.streams.messages.compressed_to_array` for
+    ``sensor_msgs/msg/CompressedImage``.
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    topic : str
+        The frame topic.
+
+    Returns
+    -------
+    callable
+        Message -> (H, W) uint8 grey image (ValueError on a frame it cannot decode).
+
+    Raises
+    ------
+    InputError
+        A topic of another type: one line naming it and its type.
+    """
+    typename = reader.topics[topic]
+    if typename == M.IMAGE:
+        return M.image_to_array
+    if typename == M.COMPRESSED_IMAGE:
+        return M.compressed_to_array
+    raise InputError(
+        reader.path,
+        f"{topic} carries {typename}, not camera frames ({M.IMAGE} or "
+        f"{M.COMPRESSED_IMAGE}; set topics.image)",
+    )
+
+
 def open_inputs(
     path: str | os.PathLike,
     cfg: Config,
@@ -629,8 +710,11 @@ def open_inputs(
         notes=notes,
     )
     camera, detection_mount = None, None
-    if reader.has(tp.image):
-        lamp_topic, lamp_source = tp.image, "frames"
+    to_grey = M.image_to_array
+    image_topic = frame_topic(reader, tp.image)
+    if image_topic:
+        lamp_topic, lamp_source = image_topic, "frames"
+        to_grey = frame_stream(reader, image_topic)
         info = first_message(reader, tp.camera_info) if reader.has(tp.camera_info) else None
         if info is None:
             reader.require([tp.camera_info], "the config's topics.camera_info")
@@ -645,6 +729,12 @@ def open_inputs(
         if problem:
             raise InputError(reader.path, f"{tp.camera_info}: {problem}")
         camera = CeilingCamera.from_camera_info(info, cfg.camera.ceiling_height, offset, axes)
+        if camera.distorted and "image_rect" in lamp_topic:  # image_pipeline's naming
+            notes.append(
+                f"{path}: {lamp_topic} looks rectified (image_proc's image_rect) while "
+                f"{tp.camera_info} has a non-zero D, which is undone on its lamps: point "
+                "topics.image at the raw image (image_raw) unless it is not rectified"
+            )
     elif reader.has(tp.detections):
         lamp_topic, lamp_source = tp.detections, "detections"
         detection_mount = detection_mount_of(reader, cfg, frames.base, notes)
@@ -676,6 +766,7 @@ def open_inputs(
         detection_mount=detection_mount,
         odom_twist=twist,
         notes=notes,
+        to_grey=to_grey,
     )
     # the run starts no earlier than the first frame that can be placed (a log time)
     inputs.start = max(inputs.start, inputs.placeable_from - clock)

@@ -14,6 +14,7 @@ import math
 
 import numpy as np
 
+from fuzzyslam.camera import distortion_coefficients
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.se2 import quaternion_to_yaw
@@ -35,12 +36,16 @@ def camera_info_problem(info) -> str | None:
     """Why a CameraInfo cannot be a pinhole ceiling camera (None if it can): a size
     that is not positive, focal lengths fx, fy that are not finite and positive or
     differ by more than 1 % (square pixels are assumed), a horizontal field of view
-    outside [1, 179] degrees, a principal point that is not finite or is off the image.
+    outside [1, 179] degrees, a principal point that is not finite or is off the image,
+    a lens distortion the camera cannot undo (``distortion_model`` and ``d``:
+    :func:`fuzzyslam.camera.distortion_coefficients`; plumb_bob, rational_polynomial and
+    equidistant can; any model with D all zeros is none).
 
     Parameters
     ----------
     info : sensor_msgs/CameraInfo
-        The message (width, height, k: the 3x3 camera matrix row by row).
+        The message (width, height, k: the 3x3 camera matrix row by row,
+        distortion_model, d).
 
     Returns
     -------
@@ -62,6 +67,10 @@ def camera_info_problem(info) -> str | None:
         return f"focal length {fx:.6g} px gives a {hfov:.3g}-degree field of view"
     if not (-0.5 <= cx <= w - 0.5 and -0.5 <= cy <= h - 0.5):
         return f"principal point ({cx:.6g}, {cy:.6g}) is off the {w}x{h} image"
+    try:
+        distortion_coefficients(getattr(info, "distortion_model", ""), getattr(info, "d", ()))
+    except ValueError as exc:
+        return str(exc)
     return None
 
 

@@ -18,6 +18,7 @@ from fuzzyslam.streams.typestore import msgtype
 RANGE = "sensor_msgs/msg/Range"
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
 IMAGE = "sensor_msgs/msg/Image"
+COMPRESSED_IMAGE = "sensor_msgs/msg/CompressedImage"
 CAMERA_INFO = "sensor_msgs/msg/CameraInfo"
 JOINT_STATE = "sensor_msgs/msg/JointState"
 ODOMETRY = "nav_msgs/msg/Odometry"
@@ -150,15 +151,185 @@ def image_mono8(t: float, frame_id: str, img: np.ndarray) -> Any:
     )
 
 
-def image_to_array(msg: Any) -> np.ndarray:
-    """(H, W) uint8 array of a mono8 Image; ValueError on another encoding or a bad size."""
-    if msg.encoding not in ("mono8", "8UC1"):
-        raise ValueError(f"unsupported image encoding '{msg.encoding}' (expected mono8)")
-    h, w, step = int(msg.height), int(msg.width), int(msg.step)
+# sensor_msgs/image_encodings.hpp (REP 104's image encodings; cv_bridge's conversions):
+# encoding -> (channels, bytes per channel, the cv2.cvtColor code to grey or None). The
+# OpenCV names of the Bayer codes are the ROS ones (BayerRGGB2GRAY is BayerBG2GRAY,
+# cv_bridge's choice for bayer_rggb8); 8UC3/8UC4 are OpenCV's BGR/BGRA order, as in
+# cv_bridge. Filled at the first frame that needs OpenCV (:func:`_grey_codes`).
+_GREY_CODES: dict[str, tuple[int, int, int | None]] = {}
+# planar YUV 4:2:0 / 4:4:4 with the luma plane first: the grey image is its first H rows
+_LUMA_FIRST = ("nv12", "nv21", "nv24", "i420", "yv12")
+# image_transport's compressed formats: the image's own encoding, then the codec
+# ("bgr8; jpeg compressed bgr8", "mono8; png compressed", or "jpeg" alone)
+COMPRESSED_DEPTH = "compresseddepth"  # compressed_depth_image_transport: a depth map
+
+
+def _grey_codes() -> dict[str, tuple[int, int, int | None]]:
+    """The encodings :func:`image_to_array` converts (besides mono8), with their layout
+    and ``cv2.cvtColor`` code (OpenCV imported on first use: a log of mono8 frames never
+    needs it here)."""
+    if not _GREY_CODES:
+        import cv2
+
+        rgb = {"bgr": cv2.COLOR_BGR2GRAY, "rgb": cv2.COLOR_RGB2GRAY}
+        rgba = {"bgra": cv2.COLOR_BGRA2GRAY, "rgba": cv2.COLOR_RGBA2GRAY}
+        bayer = {
+            "rggb": cv2.COLOR_BayerRGGB2GRAY,
+            "bggr": cv2.COLOR_BayerBGGR2GRAY,
+            "gbrg": cv2.COLOR_BayerGBRG2GRAY,
+            "grbg": cv2.COLOR_BayerGRBG2GRAY,
+        }
+        codes: dict[str, tuple[int, int, int | None]] = {"mono16": (1, 2, None)}
+        codes["16uc1"] = codes["mono16"]
+        for bits, size in (("8", 1), ("16", 2)):
+            codes |= {f"{k}{bits}": (3, size, c) for k, c in rgb.items()}
+            codes |= {f"{k}{bits}": (4, size, c) for k, c in rgba.items()}
+            codes |= {f"bayer_{k}{bits}": (1, size, c) for k, c in bayer.items()}
+            codes[f"{bits}uc3"] = (3, size, cv2.COLOR_BGR2GRAY)
+            codes[f"{bits}uc4"] = (4, size, cv2.COLOR_BGRA2GRAY)
+        # YUV 4:2:2, two bytes a pixel: ROS's "yuv422" is UYVY, "yuv422_yuy2" YUYV
+        for name in ("yuv422", "uyvy", "yuv422_uyvy"):
+            codes[name] = (2, 1, cv2.COLOR_YUV2GRAY_UYVY)
+        for name in ("yuyv", "yuv422_yuy2", "yuy2"):
+            codes[name] = (2, 1, cv2.COLOR_YUV2GRAY_YUY2)
+        _GREY_CODES.update(codes)
+    return _GREY_CODES
+
+
+def _rows(msg: Any, h: int, w: int, row_bytes: int) -> np.ndarray:
+    """The (h, row_bytes) uint8 pixel bytes of an Image, each row cut from its
+    ``step``; ValueError when the data does not hold them."""
+    step = int(msg.step)
     data = np.asarray(msg.data, dtype=np.uint8)
-    if h <= 0 or w <= 0 or step < w or data.size < h * step:
-        raise ValueError(f"image of {data.size} bytes does not match {w}x{h} (step {step})")
-    return data[: h * step].reshape(h, step)[:, :w]
+    if h <= 0 or w <= 0 or step < row_bytes or data.size < h * step:
+        said = f"image of {data.size} bytes does not match {w}x{h} {msg.encoding} (step {step}"
+        if w > 0 and row_bytes > w and step >= w and data.size >= h * step:
+            # data laid out with fewer bytes a pixel than the encoding has: mislabelled
+            per = step // w
+            like = ", mono8's layout" if per == 1 else ""
+            said += f": {per} byte(s) a pixel{like}; {msg.encoding} has {row_bytes // w}"
+        raise ValueError(said + ")")
+    return data[: h * step].reshape(h, step)[:, :row_bytes]
+
+
+def image_to_array(msg: Any) -> np.ndarray:
+    """The 8-bit grey image of a sensor_msgs/Image, as the lamp detector thresholds it.
+
+    mono8 / 8UC1 frames are used as they are (a view of the message's data). The other
+    common encodings of REP 104's ``sensor_msgs/image_encodings.hpp`` are converted with
+    OpenCV (``cv2.cvtColor``, no loop over pixels), as cv_bridge does:
+
+    - colour (bgr8, rgb8, bgra8, rgba8, 8UC3 and 8UC4 as BGR/BGRA, and their 16-bit
+      forms): the luma Y = 0.299 R + 0.587 G + 0.114 B (``COLOR_BGR2GRAY`` and its
+      kin), so a grey frame (R = G = B = v) gives v exactly;
+    - Bayer mosaics (bayer_rggb8, bayer_bggr8, bayer_gbrg8, bayer_grbg8, and 16-bit):
+      demosaiced to grey (``COLOR_BayerRGGB2GRAY`` ...);
+    - YUV 4:2:2 (yuv422 = UYVY, uyvy, yuyv, yuv422_yuy2): the Y channel
+      (``COLOR_YUV2GRAY_UYVY``, ``COLOR_YUV2GRAY_YUY2``); NV12, NV21, NV24, I420 and
+      YV12: their luma plane, the first ``height`` rows;
+    - 16 bits a channel (mono16, 16UC1, bgr16, ...; ``is_bigendian`` honoured): scaled to
+      8 bits by their high byte, ``v >> 8`` (65535 -> 255), the grey level a camera's
+      16-bit output of the same exposure would have at 8 bits. A camera that puts 10 or
+      12 significant bits in the low end of a 16-bit word gives dark frames so: record
+      it as mono8 or scale ``slam.threshold`` down accordingly.
+
+    Parameters
+    ----------
+    msg : sensor_msgs/Image
+        The frame (height, width, encoding, is_bigendian, step, data).
+
+    Returns
+    -------
+    ndarray of uint8, shape (H, W)
+
+    Raises
+    ------
+    ValueError
+        On an encoding it does not convert (float or signed depth images, an unknown
+        name) or data that does not hold height rows of ``step`` bytes.
+
+    References
+    ----------
+    REP 104 and ``sensor_msgs/image_encodings.hpp`` (the encoding names); OpenCV,
+    "Color conversions", https://docs.opencv.org/4.x/de/d25/imgproc_color_conversions.html
+    """
+    enc = msg.encoding
+    h, w = int(msg.height), int(msg.width)
+    if enc in ("mono8", "8UC1"):
+        return _rows(msg, h, w, w)
+    key = str(enc).strip().lower()
+    if key in _LUMA_FIRST:
+        return _rows(msg, h, w, w)
+    layout = _grey_codes().get(key)
+    if layout is None:
+        raise ValueError(
+            f"unsupported image encoding '{enc}' (mono8, mono16, bgr8, rgb8, bgra8, rgba8, "
+            "yuv422, yuyv, nv12, bayer_* and their 16-bit forms are read)"
+        )
+    channels, size, code = layout
+    rows = _rows(msg, h, w, w * channels * size)
+    if size == 2:
+        big = bool(msg.is_bigendian)
+        rows = np.ascontiguousarray(rows).view(">u2" if big else "<u2")
+        if rows.dtype != np.uint16:  # not the machine's byte order: OpenCV needs it
+            rows = rows.astype(np.uint16)
+    img = rows.reshape(h, w, channels) if channels > 1 else rows
+    if code is not None:
+        import cv2
+
+        img = cv2.cvtColor(np.ascontiguousarray(img), code)
+    if size == 2:
+        return (img >> 8).astype(np.uint8)
+    return img
+
+
+def compressed_to_array(msg: Any) -> np.ndarray:
+    """The 8-bit grey image of a sensor_msgs/CompressedImage (image_transport's
+    ``compressed`` plugin: JPEG or PNG; any format ``cv2.imdecode`` reads).
+
+    Decoded with ``cv2.imdecode(data, IMREAD_GRAYSCALE | IMREAD_ANYDEPTH)``: the codec's
+    own grey (a colour JPEG's luma, a colour PNG's BGR -> grey as ``COLOR_BGR2GRAY``); a
+    16-bit PNG is scaled to 8 bits by ``v >> 8`` as :func:`image_to_array` does. The
+    ``format`` field ("bgr8; jpeg compressed bgr8", "mono8; png compressed", "jpeg") is
+    not needed to decode: the data say their codec. A ``compressedDepth`` image (a depth
+    map of compressed_depth_image_transport) is not a camera frame.
+
+    Parameters
+    ----------
+    msg : sensor_msgs/CompressedImage
+        The frame (format, data).
+
+    Returns
+    -------
+    ndarray of uint8, shape (H, W)
+
+    Raises
+    ------
+    ValueError
+        On empty or undecodable data, or a compressedDepth image.
+
+    References
+    ----------
+    OpenCV, ``cv::imdecode`` and ``ImreadModes``,
+    https://docs.opencv.org/4.x/d4/da8/group__imgcodecs.html; ROS
+    ``compressed_image_transport`` (the ``format`` field).
+    """
+    fmt = str(msg.format)
+    if COMPRESSED_DEPTH in fmt.lower().replace(" ", ""):
+        raise ValueError(f"a depth image ('{fmt}'), not a camera frame")
+    data = np.asarray(msg.data, dtype=np.uint8)
+    if not data.size:
+        raise ValueError(f"empty CompressedImage ('{fmt}')")
+    import cv2
+
+    img = cv2.imdecode(data, cv2.IMREAD_GRAYSCALE | cv2.IMREAD_ANYDEPTH)
+    if img is None or img.ndim != 2:
+        raise ValueError(f"CompressedImage ('{fmt}') of {data.size} bytes cannot be decoded")
+    if img.dtype == np.uint16:
+        return (img >> 8).astype(np.uint8)
+    if img.dtype != np.uint8:
+        raise ValueError(f"CompressedImage ('{fmt}') decodes to {img.dtype}, not 8 or 16 bits")
+    return img
 
 
 def camera_info(
