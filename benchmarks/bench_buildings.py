@@ -222,24 +222,29 @@ def figure(path: Path, fgm, truth: Path, traj: Path, title: str) -> None:
     """The FGM (BetP(occupied)) with the true path and the localised one (PNG)."""
     from matplotlib.figure import Figure
 
-    from fuzzyslam.figsave import BLACK, ORANGE, save_png
+    from fuzzyslam.figsave import BLACK, MIN_LW, ORANGE, PRINT_DPI, WIDE_W, save_png, styled
 
-    _, p_tr, _ = clean_truth(truth)
-    _, est = read_tum(traj)
-    fig = Figure(figsize=(7, 5.6))
-    ax = fig.add_subplot()
-    ax.imshow(
-        1.0 - fgm.pignistic_occupied(), origin="lower", extent=fgm.grid.extent, cmap="gray",
-        vmin=0, vmax=1,
-    )  # fmt: skip
-    ax.plot(est[:, 0], est[:, 1], "-", color=ORANGE, lw=1.0, label="localised (pose fixes)")
-    ax.plot(p_tr[:, 0], p_tr[:, 1], "--", color=BLACK, lw=0.7, label="truth")  # on top
-    ax.set_aspect("equal")
-    ax.set_xlabel("x (m)")
-    ax.set_ylabel("y (m)")
-    ax.set_title(title, fontsize=9, wrap=True)
-    ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8, frameon=False)
-    save_png(fig, path, 150, tight=True)
+    @styled  # the figures' one style (fuzzyslam/figsave.py): a page's width, 8-9 pt text
+    def draw() -> None:
+        _, p_tr, _ = clean_truth(truth)
+        _, est = read_tum(traj)
+        fig = Figure(figsize=(WIDE_W, 0.75 * WIDE_W))
+        ax = fig.add_subplot()
+        ax.imshow(
+            1.0 - fgm.pignistic_occupied(), origin="lower", extent=fgm.grid.extent,
+            cmap="gray", vmin=0, vmax=1,
+        )  # fmt: skip
+        ax.plot(est[:, 0], est[:, 1], "-", color=ORANGE, lw=1.5 * MIN_LW,
+                label="localised (pose fixes)")  # fmt: skip
+        ax.plot(p_tr[:, 0], p_tr[:, 1], "--", color=BLACK, lw=MIN_LW, label="truth")  # on top
+        ax.set_aspect("equal")
+        ax.set_xlabel("x (m)")
+        ax.set_ylabel("y (m)")
+        ax.set_title(title, wrap=True)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), frameon=False)
+        save_png(fig, path, PRINT_DPI, tight=True)
+
+    draw()
 
 
 def bench_building(
