@@ -115,3 +115,96 @@ def test_run_with_own_covariance_equals_model(tmp_path: Path) -> None:
     assert ta.shape == tb.shape and np.allclose(ta, tb, rtol=0, atol=1e-9)
     assert a["counts"]["detections_own_covariance"] == 0
     assert b["counts"]["detections_own_covariance"] == a["counts"]["detections"] > 100
+
+
+# vision_msgs 2 (ROS 2 Foxy): the hypothesis' id and score on it, the tracking fields
+FOXY_VISION = {
+    "vision_msgs/msg/ObjectHypothesisWithPose": (
+        "string id\nfloat64 score\ngeometry_msgs/PoseWithCovariance pose\n"
+    ),
+    "vision_msgs/msg/BoundingBox3D": "geometry_msgs/Pose center\ngeometry_msgs/Vector3 size\n",
+    "vision_msgs/msg/Detection3D": (
+        "std_msgs/Header header\nvision_msgs/ObjectHypothesisWithPose[] results\n"
+        "vision_msgs/BoundingBox3D bbox\nsensor_msgs/PointCloud2 source_cloud\n"
+        "bool is_tracking\nstring tracking_id\n"
+    ),
+    "vision_msgs/msg/Detection3DArray": (
+        "std_msgs/Header header\nvision_msgs/Detection3D[] detections\n"
+    ),
+}
+
+
+def test_detections_of_another_vision_msgs_release_are_read_by_the_logs_definition(
+    tmp_path: Path,
+) -> None:
+    """A Foxy robot's Detection3DArray (vision_msgs 2: another layout than Humble's, its
+    definition in the log's Schema record, as rosbag2 writes it) is decoded by the log's
+    own definition: the same points and covariances as the Humble copy (they were all
+    undecodable: no lamps, dead reckoning)."""
+    from mcap.reader import make_reader
+    from mcap.writer import Writer
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    slam = load_config("real_detections.yaml").slam
+    humble = tmp_path / "humble.mcap"
+    _rewrite(humble, slam.detection_cov)
+    foxy = get_typestore(Stores.ROS2_FOXY)
+    for name, text in FOXY_VISION.items():
+        foxy.register(get_types_from_msg(text, name))
+    t = foxy.types
+    name = M.DETECTION3D_ARRAY
+    schema_text, _ = foxy.generate_msgdef(name, ros_version=2)
+    log = tmp_path / "foxy.mcap"
+    with open(humble, "rb") as src, open(log, "wb") as dst:
+        w = Writer(dst)
+        w.start(profile="ros2")
+        schemas: dict[int, int] = {}
+        channels: dict[int, int] = {}
+        for schema, channel, message in make_reader(src).iter_messages(log_time_order=True):
+            data = message.data
+            if channel.topic == TOPIC:
+                msg = deserialize(data, name)  # the Humble copy, as Foxy would write it
+                dets = [
+                    t["vision_msgs/msg/Detection3D"](
+                        header=d.header,
+                        results=[
+                            t["vision_msgs/msg/ObjectHypothesisWithPose"](
+                                id=h.hypothesis.class_id,
+                                score=h.hypothesis.score,
+                                pose=h.pose,
+                            )
+                            for h in d.results
+                        ],
+                        bbox=d.bbox,
+                        source_cloud=t["sensor_msgs/msg/PointCloud2"](
+                            header=d.header,
+                            height=0,
+                            width=0,
+                            fields=[],
+                            is_bigendian=False,
+                            point_step=0,
+                            row_step=0,
+                            data=np.zeros(0, np.uint8),
+                            is_dense=True,
+                        ),
+                        is_tracking=False,
+                        tracking_id="",
+                    )
+                    for d in msg.detections
+                ]
+                data = foxy.serialize_cdr(t[name](header=msg.header, detections=dets), name)
+                text = schema_text
+            else:
+                text = schema.data.decode()
+            key = (schema.name, text)
+            if key not in schemas:
+                schemas[key] = w.register_schema(schema.name, "ros2msg", text.encode())
+            if channel.id not in channels:
+                channels[channel.id] = w.register_channel(channel.topic, "cdr", schemas[key])
+            w.add_message(channels[channel.id], message.log_time, bytes(data),
+                          message.publish_time, message.sequence)  # fmt: skip
+        w.finish()
+    got, want = _frames(log), _frames(humble)
+    assert len(got) == len(want) > 10
+    for a, b in zip(got, want, strict=True):
+        assert np.array_equal(a.z, b.z) and np.array_equal(a.cov, b.cov)

@@ -398,19 +398,38 @@ DECODERS: dict[str, Callable[[Any], Any]] = {
 }
 
 
-def decoder(typename: str) -> Callable[[Any], Any]:
+def decoder(typename: str, slow: Callable[[Any], Any] | None = None) -> Callable[[Any], Any]:
     """The decoder of a (normalised) type name: a fast one for little-endian payloads of
-    the types in ``DECODERS``, rosbags for the rest (big-endian, other types).
+    the types in ``DECODERS``, ``slow`` for the rest (big-endian, other types): by default
+    rosbags with the typestore's definitions.
 
     The decoder raises an exception (``CdrError``, ``struct.error``, rosbags' errors) on a
-    payload it cannot read."""
+    payload it cannot read.
+
+    Parameters
+    ----------
+    typename : str
+        The type name.
+    slow : callable, optional
+        CDR bytes -> message for what the fast decoders do not read (the log's own
+        definition: ``typestore.file_deserializer``).
+
+    Returns
+    -------
+    callable
+    """
     fast = DECODERS.get(typename)
+    if slow is None:
+
+        def slow(buf):
+            return deserialize(buf, typename)
+
     if fast is None:
-        return lambda buf: deserialize(buf, typename)
+        return slow
 
     def decode(buf):
         if buf[1] == 1 and buf[0] == 0:
             return fast(buf)
-        return deserialize(buf, typename)
+        return slow(buf)
 
     return decode

@@ -23,7 +23,7 @@ from __future__ import annotations
 import struct
 import zlib
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import BinaryIO
 
 from mcap.reader import SeekingReader
@@ -74,6 +74,30 @@ class Summary:
     end: int
     metadata: dict[str, dict[str, str]]
     attachments: dict[str, bytes]
+    # schema name -> its ros2msg definition text (the file's own message definitions)
+    definitions: dict[str, str] = field(default_factory=dict)
+
+
+def schema_text(encoding: str, data: bytes) -> str | None:
+    """A Schema record's ros2msg definition text (None: another encoding or not UTF-8).
+
+    Parameters
+    ----------
+    encoding : str
+        The record's schema encoding (``ros2msg`` for ROS 2 messages).
+    data : bytes
+        Its data.
+
+    Returns
+    -------
+    str or None
+    """
+    if encoding != "ros2msg":
+        return None
+    try:
+        return bytes(data).decode("utf-8")
+    except UnicodeDecodeError:
+        return None
 
 
 def read_summary(f: BinaryIO, size: int) -> Summary | None:
@@ -130,11 +154,15 @@ def read_summary(f: BinaryIO, size: int) -> Summary | None:
                 if cid in channels
             }
             t0, t1 = st.message_start_time, st.message_end_time
+        definitions = {sc.name: schema_text(sc.encoding, sc.data) for sc in s.schemas.values()}
+        definitions = {k: v for k, v in definitions.items() if v is not None}
         metadata = {md.name: dict(md.metadata) for md in reader.iter_metadata()}
         attachments = {a.name: bytes(a.data) for a in reader.iter_attachments()}
     except Exception:  # any record of the summary that does not parse: not usable
         return None
-    return Summary(summary_start, channels, chunks, counts, t0, t1, metadata, attachments)
+    return Summary(
+        summary_start, channels, chunks, counts, t0, t1, metadata, attachments, definitions
+    )
 
 
 def _groups(chunks: list[ChunkRef]) -> Iterator[list[ChunkRef]]:

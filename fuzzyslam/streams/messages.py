@@ -436,6 +436,13 @@ def detection3d_array(
     return msgtype(DETECTION3D_ARRAY)(header=header(t, frame_id), detections=dets)
 
 
+def _score(h: Any) -> float:
+    """A detection hypothesis' score: vision_msgs 3 and later (Galactic, Humble, ...)
+    hold it in ``hypothesis``, vision_msgs 2 (Foxy) on the hypothesis itself."""
+    inner = getattr(h, "hypothesis", h)
+    return float(inner.score)
+
+
 def detections_of(msg: Any, dims: int = 2) -> tuple[np.ndarray, np.ndarray]:
     """Landmark detections of a PoseArray or a vision_msgs/Detection3DArray.
 
@@ -464,7 +471,7 @@ def detections_of(msg: Any, dims: int = 2) -> tuple[np.ndarray, np.ndarray]:
     covs = np.full((len(msg.detections), dims, dims), np.nan)
     for k, d in enumerate(msg.detections):
         if d.results:
-            best = max(d.results, key=lambda h: h.hypothesis.score)
+            best = max(d.results, key=_score)
             p, c = best.pose.pose.position, np.asarray(best.pose.covariance, dtype=float)
             pts[k] = (p.x, p.y, p.z)[:dims]
             if c.size == 36:

@@ -33,9 +33,10 @@ from fuzzyslam.streams.indexed import (
     chunk_offsets,
     indexed_messages,
     read_summary,
+    schema_text,
 )
 from fuzzyslam.streams.recover import MCAP_MAGIC, Damage, walk
-from fuzzyslam.streams.typestore import normalise_typename, typestore
+from fuzzyslam.streams.typestore import file_deserializer, normalise_typename, typestore
 
 __all__ = ["MCAP_MAGIC", "LogMessage", "LogReader"]
 
@@ -137,6 +138,8 @@ class LogReader:
         self.end = 0.0
         self._damage = Damage()
         self._decoders: dict[str, Callable[[Any], Any] | None] = {}
+        # type name -> the log's own ros2msg definition of it (its Schema records)
+        self.definitions: dict[str, str] = {}
         # decompressed chunks shared by this reader's walks (indexed.indexed_messages),
         # forgotten when the file changes (its size or modification time)
         self._recent: dict[int, bytes] = {}
@@ -147,6 +150,7 @@ class LogReader:
             return
         for topic, schema in s.channels.values():
             self.topics[topic] = normalise_typename(schema)
+        self.definitions = {normalise_typename(k): v for k, v in s.definitions.items()}
         self.counts = dict(s.counts)
         self._span_ns = (int(s.start), int(s.end))
         self.start, self.end = s.start / 1e9, s.end / 1e9
@@ -163,6 +167,7 @@ class LogReader:
             for rec in walk(f, self.size, dmg):
                 if isinstance(rec, Schema):
                     schemas[rec.id] = normalise_typename(rec.name)
+                    self._define(rec)
                 elif isinstance(rec, Channel):
                     channels[rec.id] = rec.topic
                     if rec.schema_id in schemas:
@@ -346,6 +351,7 @@ class LogReader:
             for rec in walk(f, self.size, dmg, start, data_end, sync):
                 if isinstance(rec, Schema):
                     schemas[rec.id] = normalise_typename(rec.name)
+                    self._define(rec)
                 elif isinstance(rec, Channel):
                     if rec.schema_id in schemas and rec.id not in channels:
                         channels[rec.id] = (rec.topic, schemas[rec.schema_id])
@@ -361,11 +367,23 @@ class LogReader:
                     if out is not None:
                         yield out
 
+    def _define(self, rec: Schema) -> None:
+        """Keep a Schema record's definition text (the first of its type) for the
+        decoders (:meth:`_decoder`)."""
+        text = schema_text(rec.encoding, rec.data)
+        if text is not None:
+            self.definitions.setdefault(normalise_typename(rec.name), text)
+
     def _decoder(self, typename: str) -> Callable[[Any], Any] | None:
-        """The payload decoder of a type (None: a type the typestore does not know)."""
-        if typename not in self._decoders:  # the fast decoders' types need no typestore
-            known = typename in DECODERS or typename in typestore().types
-            self._decoders[typename] = decoder(typename) if known else None
+        """The payload decoder of a type (None: a type neither the log's definitions nor
+        the typestore know): the fast decoders, else rosbags by the log's own definition
+        of the type (a message that changed between ROS 2 releases is read as the log
+        recorded it), else by the typestore's."""
+        if typename not in self._decoders:
+            text = self.definitions.get(typename)
+            own = file_deserializer(typename, text) if text is not None else None
+            known = typename in DECODERS or own is not None or typename in typestore().types
+            self._decoders[typename] = decoder(typename, own) if known else None
         return self._decoders[typename]
 
     def _decode(self, topic: str, typename: str, t_ns: int, payload: Any) -> LogMessage | None:

@@ -4,6 +4,7 @@ fast paths of streams/cdr.py and streams/cdr_encode.py; rosbags is imported on f
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from functools import cache, lru_cache
 from typing import TYPE_CHECKING, Any
 
@@ -60,3 +61,34 @@ def serialize(msg: Any, name: str) -> bytes:
 def deserialize(data: bytes | memoryview, name: str) -> Any:
     """Message object from CDR bytes."""
     return typestore().deserialize_cdr(data, normalise_typename(name))
+
+
+def file_deserializer(name: str, text: str) -> Callable[[Any], Any] | None:
+    """A deserializer of type ``name`` by a log's own message definition (its Schema
+    record's ros2msg text, dependencies as ``MSG: pkg/Type`` blocks), as rosbags'
+    AnyReader reads a log: a message whose definition changed between ROS 2 releases
+    (vision_msgs' detections between Foxy and Humble) is read as the log recorded it.
+
+    Parameters
+    ----------
+    name : str
+        The (normalised) type name.
+    text : str
+        The definition text.
+
+    Returns
+    -------
+    callable or None
+        CDR bytes -> message; None when the text does not parse (the typestore's own
+        definition is used then).
+    """
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    try:
+        store = get_typestore(Stores.EMPTY)
+        store.register(get_types_from_msg(text, name))
+        if name not in store.types:  # the text defines other types only
+            return None
+    except Exception:  # a definition rosbags cannot read: ours instead
+        return None
+    return lambda buf: store.deserialize_cdr(buf, name)
