@@ -251,6 +251,19 @@ def test_sweep_ticks_at_the_swept_values_on_a_log_axis(tmp_path, monkeypatch) ->
     assert not sweep_plot.log_x([0.005, 0.02]) and sweep_plot.log_x([0.001, 0.1])
 
 
+def test_a_sweep_over_two_keys_draws_a_plot_per_key(tmp_path) -> None:
+    """Two swept keys: one PNG per key, each with a line per value of the other key (the
+    second key's plot once failed: the layout reused the table rows' name)."""
+    from fuzzyslam.reproduce import sweep_plot
+
+    rows = [{"values": {"a.x": x, "b.y": y},
+             "measures": {"e (cm)": {"mean": x + y, "min": x, "max": x + 2 * y, "n": 2}}}
+            for x in (1.0, 2.0) for y in (10.0, 20.0, 30.0)]  # fmt: skip
+    paths = sweep_plot.plot_sweep(tmp_path, rows, ["a.x", "b.y"], 2, "seeds")
+    assert [p.name for p in paths] == ["sweep_a.x.png", "sweep_b.y.png"]
+    assert all(p.stat().st_size > 1000 for p in paths)
+
+
 def test_sweep_labels_its_evaluations_with_the_grid_value_and_seed() -> None:
     from fuzzyslam.reproduce.sweep import sweep_steps
 

@@ -169,12 +169,12 @@ def plot_sweep(root: Path, rows: list[dict], keys: list[str], n: int, over: str)
         cols = max(len(measures), 1)
         while cols > 1 and left + right + cols * PANEL_W + (cols - 1) * wgap > WIDE_W:
             cols -= 1  # too many measures for one row: more rows
-        rows = -(-max(len(measures), 1) // cols)
+        nrows = -(-max(len(measures), 1) // cols)
         fig, axes = plt.subplots(
-            rows,
+            nrows,
             cols,
             figsize=(left + right + cols * PANEL_W + (cols - 1) * wgap,
-                     top + bottom + rows * PANEL_H + (rows - 1) * hgap),
+                     top + bottom + nrows * PANEL_H + (nrows - 1) * hgap),
             squeeze=False,
             dpi=DPI,
         )  # fmt: skip
