@@ -70,8 +70,9 @@ JACOBIAN_STEP_PX = 1e-3  # the central difference of the forward model's derivat
 
 def distortion_coefficients(model: str, d) -> tuple[float, ...]:
     """The distortion coefficients of a CameraInfo as the camera uses them: () for none
-    (every coefficient zero, whatever the model's name: the simulator's logs), else
-    ``d`` (equidistant: its four k1-k4, trailing zeros dropped).
+    (every coefficient zero of a model other than the equidistant one, whatever its
+    name: the simulator's logs), else ``d`` (equidistant: its four k1-k4, trailing zeros
+    dropped; all four zero is still the equidistant lens, r = f theta, not a pinhole).
 
     Parameters
     ----------
@@ -98,9 +99,9 @@ def distortion_coefficients(model: str, d) -> tuple[float, ...]:
     c = np.asarray(d, dtype=float).ravel()
     if not np.all(np.isfinite(c)):
         raise ValueError(f"distortion coefficients D = {c.tolist()} are not all finite")
-    if not np.any(c):
-        return ()
     kind = DISTORTION_MODELS.get(str(model).strip().lower())
+    if not np.any(c):  # a pinhole, but for a fisheye: r = f theta is its lens, not r = f tan
+        return (0.0, 0.0, 0.0, 0.0) if kind == "fisheye" else ()
     known = ", ".join(k for k in DISTORTION_MODELS if k != "fisheye")
     if kind is None:
         raise ValueError(
@@ -299,14 +300,22 @@ class CeilingCamera:
         bad = ~np.all(np.isfinite(x), axis=1)
         x[bad] = q[bad]  # no start from OpenCV: from the raw pixel
         for _ in range(NEWTON_STEPS):
-            res = self.distort(x) - q
-            if np.all(np.abs(res) <= UNDISTORT_TOL_PX):
+            live = np.flatnonzero(np.all(np.isfinite(x), axis=1))
+            res = self.distort(x[live]) - q[live]
+            todo = live[np.any(np.abs(res) > UNDISTORT_TOL_PX, axis=1)]
+            if not len(todo):
                 break
-            j = self.distort_jacobians(x)
+            res = res[np.any(np.abs(res) > UNDISTORT_TOL_PX, axis=1)]
+            j = self.distort_jacobians(x[todo])
             with np.errstate(all="ignore"):
-                x = x - np.linalg.solve(j, res[:, :, None])[:, :, 0]
-        res = self.distort(x) - q
-        ok = np.max(np.abs(res), axis=1) <= UNDISTORT_TOL_PX
+                det = j[:, 0, 0] * j[:, 1, 1] - j[:, 0, 1] * j[:, 1, 0]
+            # a flat model (past a fisheye's rim the raw pixel stops moving) has no step
+            step = np.isfinite(det) & (np.abs(det) > 1e-12)
+            x[todo[~step]] = np.nan
+            x[todo[step]] -= np.linalg.solve(j[step], res[step][:, :, None])[:, :, 0]
+        live = np.all(np.isfinite(x), axis=1)
+        ok = np.zeros(len(q), dtype=bool)
+        ok[live] = np.max(np.abs(self.distort(x[live]) - q[live]), axis=1) <= UNDISTORT_TOL_PX
         # the root on the lens' side of where its model turns back, not a far one
         ok &= np.hypot(*((x - [self.cx, self.cy]) / self.f).T) < self._valid_radius
         x[~ok] = np.nan

@@ -255,7 +255,46 @@ def test_a_distortion_it_cannot_undo_is_one_line(model: str, d, said: str) -> No
         distortion_coefficients(model, d)
 
 
-def test_zero_distortion_of_any_model_is_none() -> None:
-    for model in ("plumb_bob", "rational_polynomial", "equidistant", "", "anything"):
+def test_zero_distortion_of_a_radtan_or_unknown_model_is_none() -> None:
+    for model in ("plumb_bob", "rational_polynomial", "", "anything"):
         assert camera_info_problem(info(model, [0.0] * 5)) is None
         assert distortion_coefficients(model, [0.0] * 5) == ()
+
+
+def test_an_equidistant_lens_with_zero_coefficients_is_still_equidistant() -> None:
+    """D = 0 of the equidistant model is the ideal fisheye, r = f theta, not a pinhole
+    (r = f tan theta): a pixel 240 px off the centre of a 300-px lens is 2 m off on a
+    ceiling 2 m up as a pinhole, 2 tan(0.8 rad) = 2.06 m as the fisheye it is; OpenCV's
+    own undistortion agrees, and a tiny D does not jump away from it."""
+    import cv2
+
+    def cam(d):
+        msg = SimpleNamespace(width=640, height=480, k=[300, 0, 320, 0, 300, 240, 0, 0, 1],
+                              distortion_model="equidistant", d=d)  # fmt: skip
+        return CeilingCamera.from_camera_info(msg, 2.0)
+
+    zero, tiny = cam([0.0] * 4), cam([1e-9, 0.0, 0.0, 0.0])
+    assert zero.distorted and distortion_coefficients("equidistant", [0.0] * 4) == (0.0,) * 4
+    px = np.array([[560.0, 240.0]])
+    x = zero.unproject(px)[0, 0]
+    assert x == pytest.approx(2.0 * np.tan(0.8), rel=1e-9)
+    assert tiny.unproject(px)[0, 0] == pytest.approx(x, rel=1e-6)
+    k = np.array([[300.0, 0, 320], [0, 300, 240], [0, 0, 1]])
+    ocv = cv2.fisheye.undistortPoints(px.reshape(1, 1, 2), k, np.zeros(4)).reshape(2)
+    assert x == pytest.approx(2.0 * ocv[0], rel=1e-6)
+
+
+def test_a_fisheye_pixel_past_its_rim_is_nan_and_the_others_are_kept() -> None:
+    """A fisheye whose model stops growing before the image's edge (an Intel T265-like
+    lens, 848x800, f = 285: its rim about 411 px from the centre): pixels past the rim
+    come back NaN (the forward model is flat there: its Jacobian singular), those inside
+    are undistorted, in the same batch (it once raised LinAlgError for the batch)."""
+    msg = SimpleNamespace(width=848, height=800, k=[285, 0, 424, 0, 285, 400, 0, 0, 1],
+                          distortion_model="equidistant",
+                          d=[-0.0069, 0.0430, -0.0405, 0.0076])  # fmt: skip
+    cam = CeilingCamera.from_camera_info(msg, 2.5)
+    px = np.array([[424.0, 400.0], [0.0, 400.0], [847.0, 400.0], [600.0, 500.0], [0.0, 0.0]])
+    out = cam.undistort(px)
+    assert np.all(np.isfinite(out[[0, 3]])) and np.all(np.isnan(out[[1, 2, 4]]))
+    np.testing.assert_allclose(cam.distort(out[[0, 3]]), px[[0, 3]], atol=1e-5)
+    assert np.all(np.isnan(cam.ceiling_covariances(px, 0.5)[[1, 2, 4]]))
