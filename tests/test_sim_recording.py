@@ -74,6 +74,8 @@ def test_every_message_decodes_with_rosbags(tiny):
             assert msg is not None
             n += 1
     assert n == tiny["summary"]["messages_total"]
+    # the distribution of its definitions and QoS format, as rosbag2 records it
+    assert LogReader(tiny["mcap"]).metadata["rosbag2"] == {"ROS_DISTRO": "humble"}
 
 
 def test_every_message_decodes_with_mcap_ros2(tiny):
@@ -114,7 +116,7 @@ def test_metadata_first_and_consistent(tiny):
                 break
             if isinstance(rec, Metadata):
                 first.append(rec.name)
-    assert first == ["fuzzyslam.world", "fuzzyslam.scenario"]
+    assert first == ["rosbag2", "fuzzyslam.world", "fuzzyslam.scenario"]
     r = LogReader(tiny["mcap"])
     world, scen = read_world(r), read_scenario(r)
     assert len(world.lamps) == 15 and len(world.walls) == 8 and len(world.corridors) == 4

@@ -173,6 +173,7 @@ class _LeanWriter(Writer):
                 self._finalize()
 
 
+ROS_DISTRO = "humble"  # streams/typestore.py's definitions
 # QoS durability and reliability as rosbag2 records them (rmw's enum values)
 _RELIABLE, _TRANSIENT_LOCAL, _VOLATILE = 1, 1, 2
 _INFINITE = "{sec: 2147483647, nsec: 4294967295}"  # rosbag2's record of an unset duration
@@ -241,6 +242,9 @@ class LogWriter:
                 self._file, chunk_size=self.chunk_size, compression=CompressionType.ZSTD
             )
             self._writer.start(profile="ros2", library=f"fuzzyslam {__version__}")
+            # as rosbag2 writes it: the distribution whose message definitions (the
+            # typestore's) and QoS format (offered_qos) the file has
+            self._writer.add_metadata("rosbag2", {"ROS_DISTRO": ROS_DISTRO})
         except BaseException:
             if not self._stack.__exit__(*sys.exc_info()):
                 raise
