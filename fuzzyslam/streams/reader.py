@@ -381,9 +381,12 @@ class LogReader:
         recorded it), else by the typestore's."""
         if typename not in self._decoders:
             text = self.definitions.get(typename)
-            own = file_deserializer(typename, text) if text is not None else None
-            known = typename in DECODERS or own is not None or typename in typestore().types
-            self._decoders[typename] = decoder(typename, own) if known else None
+            if text is not None:  # made when first needed (no rosbags import before)
+                self._decoders[typename] = decoder(typename, file_deserializer(typename, text))
+            elif typename in DECODERS or typename in typestore().types:
+                self._decoders[typename] = decoder(typename)
+            else:
+                self._decoders[typename] = None
         return self._decoders[typename]
 
     def _decode(self, topic: str, typename: str, t_ns: int, payload: Any) -> LogMessage | None:

@@ -63,11 +63,13 @@ def deserialize(data: bytes | memoryview, name: str) -> Any:
     return typestore().deserialize_cdr(data, normalise_typename(name))
 
 
-def file_deserializer(name: str, text: str) -> Callable[[Any], Any] | None:
+def file_deserializer(name: str, text: str) -> Callable[[Any], Any]:
     """A deserializer of type ``name`` by a log's own message definition (its Schema
     record's ros2msg text, dependencies as ``MSG: pkg/Type`` blocks), as rosbags'
     AnyReader reads a log: a message whose definition changed between ROS 2 releases
     (vision_msgs' detections between Foxy and Humble) is read as the log recorded it.
+    Made on its first call (rosbags is imported only for a message that needs it); a
+    text that does not parse falls back to the typestore's definition.
 
     Parameters
     ----------
@@ -78,17 +80,29 @@ def file_deserializer(name: str, text: str) -> Callable[[Any], Any] | None:
 
     Returns
     -------
-    callable or None
-        CDR bytes -> message; None when the text does not parse (the typestore's own
-        definition is used then).
+    callable
+        CDR bytes -> message.
     """
+    made: list[Callable[[Any], Any]] = []
+
+    def deserialize_by_definition(buf):
+        if not made:
+            made.append(_definition_deserializer(name, text) or (lambda b: deserialize(b, name)))
+        return made[0](buf)
+
+    return deserialize_by_definition
+
+
+def _definition_deserializer(name: str, text: str) -> Callable[[Any], Any] | None:
+    """rosbags' deserializer of ``name`` from ``text`` alone (None: it does not parse or
+    does not define ``name``)."""
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
     try:
         store = get_typestore(Stores.EMPTY)
         store.register(get_types_from_msg(text, name))
-        if name not in store.types:  # the text defines other types only
-            return None
-    except Exception:  # a definition rosbags cannot read: ours instead
+    except Exception:  # a definition rosbags cannot read: the typestore's instead
+        return None
+    if name not in store.types:
         return None
     return lambda buf: store.deserialize_cdr(buf, name)
