@@ -70,6 +70,7 @@ from fuzzyslam.slam.log_setup import (
     first_message,
     mount_in_base,
     odometry_clock,
+    odometry_source,
     streams_start,
     tf_frames,
     twist_only,
@@ -90,6 +91,8 @@ READ_STATE = ("warnings", "first_problem", "gap_seconds", "own_covariances", "ri
 # (LogInputs._stamp_order): camera and detector pipelines deliver within a second
 REORDER_S = 5.0
 CLOCK_STEP_MESSAGES = 3  # odometry messages in a row off the clock by one amount: a step
+# rad: wheel angles published wrapped lie in (-pi, pi] or [0, 2 pi) (LogInputs._unwrapped)
+WRAPPED_ANGLES = (-math.pi - 1e-9, math.tau + 1e-9)
 
 
 @dataclass
@@ -318,8 +321,30 @@ class LogInputs:
             return None, prev
         if prev is None:
             return None, cur
-        d_trans, d_rot = self._wheel_odometry(cur[0] - prev[0], cur[1] - prev[1])
+        d_left, d_right = cur[0] - prev[0], cur[1] - prev[1]
+        if abs(d_left) > math.pi or abs(d_right) > math.pi:  # a wheel angle wrapped?
+            d_left, d_right = (
+                self._unwrapped(d_left, prev[0], cur[0]),
+                self._unwrapped(d_right, prev[1], cur[1]),
+            )
+        d_trans, d_rot = self._wheel_odometry(d_left, d_right)
         return self._increment(t, t - prev[2], d_trans, d_rot, prev, cur)
+
+    def _unwrapped(self, d: float, before: float, after: float) -> float:
+        """A wheel's angle increment ``d`` (rad) from ``before`` to ``after``, taken modulo
+        2 pi when both angles lie in ``WRAPPED_ANGLES`` and ``d`` is over pi: the driver
+        publishes its wheel angles wrapped ((-pi, pi] or [0, 2 pi): a continuous joint's
+        position, an absolute encoder), and the wheel crossed the wrap, turning by
+        ``math.remainder(d, 2 pi)`` (``warnings.wheel_angle_wraps``). Unwrapped angles
+        leave that interval within a turn of the wheel, and a jump of over pi between two
+        messages is none a wheel makes (a wheel that turns half a turn per message, over
+        10 turns a second at 20 Hz, cannot be told from a wrap). Any other ``d`` is
+        returned as it is (the speed gate judges it)."""
+        lo, hi = WRAPPED_ANGLES
+        if abs(d) <= math.pi or not (lo <= before <= hi and lo <= after <= hi):
+            return d
+        self.warn("wheel_angle_wraps")
+        return math.remainder(d, math.tau)
 
     def _increment(self, t: float, dt: float, d_trans: float, d_rot: float, prev, cur):
         """The increment ending at ``t`` (over ``dt`` s) as an Odom event and ``cur`` as the
@@ -685,17 +710,11 @@ def open_inputs(
     """
     reader = LogReader(path)
     tp = cfg.topics
-    if cfg.slam.use_encoders and reader.has(tp.joint_states):
-        odom_topic, odom_source = tp.joint_states, "encoders"
-    elif reader.has(tp.odom):
-        odom_topic, odom_source = tp.odom, "odom"
-    else:
-        looked = [tp.odom] if not cfg.slam.use_encoders else [tp.joint_states, tp.odom]
-        keys = "topics.odom" if not cfg.slam.use_encoders else "topics.joint_states / topics.odom"
-        reader.require(looked, f"the config's {keys}")
-        raise AssertionError("unreachable")
+    odom_topic, odom_source, passed_over = odometry_source(reader, cfg)
     period, clock, odom_first = odometry_clock(reader, odom_topic)
     notes: list[str] = []
+    if passed_over:
+        notes.append(f"{path}: {passed_over}: the odometry is read from {odom_topic}")
     twist = odom_source == "odom" and twist_only(reader, odom_topic)
     if twist:
         notes.append(

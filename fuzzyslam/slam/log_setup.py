@@ -17,6 +17,7 @@ import numpy as np
 from fuzzyslam.camera import distortion_coefficients
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
+from fuzzyslam.robot import WHEEL_NAMES
 from fuzzyslam.se2 import quaternion_to_yaw
 from fuzzyslam.slam.events import TfFrames
 from fuzzyslam.slam.odom_gate import OdomGate, first_plausible_pose
@@ -111,9 +112,87 @@ def base_frame(reader: LogReader, cfg: Config) -> str:
     str
     """
     tp = cfg.topics
-    if (cfg.slam.use_encoders and reader.has(tp.joint_states)) or not reader.has(tp.odom):
+    if not reader.has(tp.odom) or odometry_source(reader, cfg)[1] == "encoders":
         return TfFrames().base
     return tf_frames(reader, cfg, tp.odom, series=False).base
+
+
+JOINT_LOOK = 50  # JointState messages looked at for the wheels (joint_state_problem)
+
+
+def joint_state_problem(reader: LogReader, topic: str) -> str:
+    """Why the wheel encoders of ``topic`` (sensor_msgs/JointState) cannot be read ('' when
+    they can), from its first ``JOINT_LOOK`` messages: no message names both wheel joints
+    (``robot.WHEEL_NAMES``; another robot's names, a skid-steer's four wheels, or the two
+    wheels published in separate messages), or their positions are empty (a driver that
+    fills only the velocities). Read as they are, each such message would be skipped,
+    and the run would end with no odometry.
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    topic : str
+        The JointState topic.
+
+    Returns
+    -------
+    str
+        One line ('' for none).
+    """
+    seen: list[str] = []
+    for m in itertools.islice(reader.messages([topic]), JOINT_LOOK):
+        names = [str(n) for n in m.msg.name]
+        if all(w in names for w in WHEEL_NAMES):
+            if len(m.msg.position) < len(names) and len(m.msg.velocity):
+                return "carries the wheels' velocities only (position empty)"
+            return ""
+        seen += [n for n in names if n not in seen]
+    wheels = " and ".join(WHEEL_NAMES)
+    if all(w in seen for w in WHEEL_NAMES):
+        return f"carries {wheels} in separate messages, not both in one"
+    return f"names no joints {wheels} (it names: {', '.join(seen) or 'none'})"
+
+
+def odometry_source(reader: LogReader, cfg: Config) -> tuple[str, str, str]:
+    """The odometry the filter reads: ``topics.joint_states`` (\"encoders\") when
+    ``slam.use_encoders`` and the log has it and its wheels can be read
+    (:func:`joint_state_problem`), else ``topics.odom`` (\"odom\", nav_msgs/Odometry).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    cfg : Config
+        The config (``topics``, ``slam.use_encoders``).
+
+    Returns
+    -------
+    (str, str, str)
+        The topic, the source (encoders or odom) and why the encoders were passed over
+        ('' when they were not); InputError (one line, what to change) when neither can
+        be read.
+    """
+    tp = cfg.topics
+    problem = ""
+    if cfg.slam.use_encoders and reader.has(tp.joint_states):
+        problem = joint_state_problem(reader, tp.joint_states)
+        if not problem:
+            return tp.joint_states, "encoders", ""
+        problem = f"{tp.joint_states} {problem}"
+        if not reader.has(tp.odom):
+            raise InputError(
+                reader.path,
+                f"{problem}: the wheel encoders are read from the angles of joints "
+                f"{' and '.join(WHEEL_NAMES)}, both in each message; record them so, or "
+                f"record nav_msgs/Odometry (topics.odom)",
+            )
+    if reader.has(tp.odom):
+        return tp.odom, "odom", problem
+    keys = "topics.joint_states / topics.odom" if cfg.slam.use_encoders else "topics.odom"
+    looked = [tp.joint_states, tp.odom] if cfg.slam.use_encoders else [tp.odom]
+    reader.require(looked, f"the config's {keys}")
+    raise AssertionError("unreachable")
 
 
 TF_SEARCH_S = 30.0  # s of /tf searched for odom -> base (a driver starts within this)

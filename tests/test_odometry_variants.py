@@ -1,0 +1,133 @@
+"""Wheel odometry as real robots record it (slam/inputs.py, slam/log_setup.py): the tiny
+simulated log (tests/test_robust_logs.py's ``tiny``) rewritten as another driver would
+have published its /joint_states, run with ``fuzzyslam run``. Each variant either gives
+the clean log's estimate or is said in one line, never a silent wrong estimate.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_robust_logs import JOINTS, Tiny, cli, error_lines, keep, load_tum, rewrite, tiny
+
+from fuzzyslam.streams.reader import LogMessage
+
+__all__ = ["tiny"]  # the session fixture, shared with test_robust_logs.py
+
+ODOM = "/odom"
+
+
+def joints(change):
+    """A rewrite fault that passes each /joint_states message through ``change(msg)``."""
+
+    def fault(m: LogMessage):
+        if m.topic == JOINTS:
+            change(m.msg)
+        return keep(m)
+
+    return fault
+
+
+@pytest.mark.parametrize("low", [-math.pi, 0.0], ids=["pm_pi", "zero_2pi"])
+def test_wheel_angles_published_wrapped_give_the_unwrapped_run(
+    tiny: Tiny, tmp_path: Path, low: float
+) -> None:
+    def wrap(msg) -> None:
+        msg.position = np.remainder(np.asarray(msg.position) - low, math.tau) + low
+
+    log = rewrite(tiny.log, tmp_path / "wrapped.mcap", joints(wrap))
+    code, out, err = cli("run", log, "-o", tmp_path / "est", "--config", tiny.config)
+    assert code == 0, err
+    s = json.loads(out)
+    assert s["warnings"]["wheel_angle_wraps"] > 10  # the wheels turned many times
+    assert "implausible_odometry" not in s["warnings"]
+    assert s["counts"]["odometry"] == tiny.run["counts"]["odometry"]
+    got, want = load_tum(tmp_path / "est" / "odometry.tum"), load_tum(tiny.est / "odometry.tum")
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+    got = load_tum(tmp_path / "est" / "trajectory.tum")
+    np.testing.assert_allclose(got, load_tum(tiny.est / "trajectory.tum"), rtol=0, atol=1e-6)
+
+
+def other_names(msg) -> None:
+    msg.name = ["left_wheel_joint", "right_wheel_joint"]
+
+
+def velocities_only(msg) -> None:
+    msg.velocity, msg.position = np.ones(2), np.zeros(0)
+
+
+def split(m: LogMessage):
+    if m.topic != JOINTS:
+        return keep(m)
+    out = []
+    for k in range(2):
+        msg = type(m.msg)(
+            header=m.msg.header,
+            name=[m.msg.name[k]],
+            position=np.asarray(m.msg.position)[k : k + 1],
+            velocity=np.zeros(0),
+            effort=np.zeros(0),
+        )
+        out.append((m.topic, m.typename, msg, m.t))
+    return out
+
+
+VARIANTS = {
+    "other_names": (joints(other_names), "left_wheel_joint, right_wheel_joint"),
+    "velocities_only": (joints(velocities_only), "velocities only"),
+    "separate_messages": (split, "separate messages"),
+}
+
+
+@pytest.mark.parametrize("variant", list(VARIANTS))
+def test_unreadable_wheel_joints_fall_back_to_odometry_and_say_so(
+    tiny: Tiny, tmp_path: Path, variant: str
+) -> None:
+    fault, why = VARIANTS[variant]
+    log = rewrite(tiny.log, tmp_path / "joints.mcap", fault)
+    code, out, err = cli("run", log, "-o", tmp_path / "est", "--config", tiny.config)
+    assert code == 0, err
+    s = json.loads(out)
+    assert s["odometry_source"] == f"odom ({ODOM})"
+    (line,) = [ln for ln in error_lines(err) if JOINTS in ln]
+    assert why in line and f"read from {ODOM}" in line
+    # the log's /odom is the dead reckoning of the same encoders
+    got = load_tum(tmp_path / "est" / "trajectory.tum")
+    np.testing.assert_allclose(got, load_tum(tiny.est / "trajectory.tum"), rtol=0, atol=1e-3)
+
+
+def test_unreadable_wheel_joints_without_odometry_are_one_line_naming_them(
+    tiny: Tiny, tmp_path: Path
+) -> None:
+    def fault(m: LogMessage):
+        if m.topic == ODOM:
+            return []
+        if m.topic == JOINTS:
+            other_names(m.msg)
+        return keep(m)
+
+    log = rewrite(tiny.log, tmp_path / "joints.mcap", fault)
+    code, out, err = cli("run", log, "-o", tmp_path / "est", "--config", tiny.config)
+    assert code == 3 and out == ""
+    (line,) = error_lines(err)
+    assert str(log) in line and "left_wheel_joint, right_wheel_joint" in line
+    assert "wheel_left_joint and wheel_right_joint" in line and "topics.odom" in line
+    assert not (tmp_path / "est").exists()
+
+
+def test_extra_joints_and_any_order_read_the_two_wheels(tiny: Tiny, tmp_path: Path) -> None:
+    def extra(msg) -> None:
+        left, right = np.asarray(msg.position)
+        msg.name = ["caster_joint", "wheel_right_joint", "arm_joint", "wheel_left_joint"]
+        msg.position = np.array([0.3, right, 1.0, left])
+
+    log = rewrite(tiny.log, tmp_path / "extra.mcap", joints(extra))
+    code, out, err = cli("run", log, "-o", tmp_path / "est", "--config", tiny.config)
+    assert code == 0, err
+    assert json.loads(out)["odometry_source"] == f"encoders ({JOINTS})"
+    got = (tmp_path / "est" / "trajectory.tum").read_bytes()
+    assert got == (tiny.est / "trajectory.tum").read_bytes()
