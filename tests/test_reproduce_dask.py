@@ -118,6 +118,7 @@ def test_scheduler_unreachable_is_one_line(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.slow  # waits out the connect timeout and its margin: 7 s
 def test_an_address_that_is_no_dask_scheduler_is_one_line(tmp_path):
     """A server that accepts the connection and says nothing (a dashboard's port, any HTTP
     server) held the client's handshake for ever: now one line and exit 3 after the
