@@ -4,7 +4,9 @@ Input streams (topic names from the config's ``topics`` section):
 
 - odometry: ``topics.joint_states`` wheel angles (nominal ``robot.wheel_radius`` and
   ``robot.wheel_base``), or ``topics.odom`` pose increments when the log has no
-  encoders or ``slam.use_encoders`` is false;
+  encoders or ``slam.use_encoders`` is false, or, with neither, the pose increments of
+  the odom -> base transforms on ``topics.tf`` (a log recorded for slam_toolbox or
+  gmapping: each read as an Odometry pose, ``log_setup.tf_odometry``, and said);
 - lamps: ``topics.image`` frames + ``topics.camera_info`` (ceiling height from
   ``camera.ceiling_height``, the lens offset and image axes from the /tf_static mount of
   ``ceiling_camera`` if present, composed in 3D (a camera turned or mounted upside down),
@@ -73,6 +75,8 @@ from fuzzyslam.slam.log_setup import (
     odometry_source,
     streams_start,
     tf_frames,
+    tf_odometry,
+    tf_odometry_frames,
     twist_only,
 )
 from fuzzyslam.slam.odom_gate import REANCHOR, OdomGate, within_speed
@@ -121,6 +125,9 @@ class LogInputs:
     odom_first: float = -np.inf  # the odometry's first stamp (odometry_clock)
     # Odometry whose pose never changes while its twist does: the twist integrated
     odom_twist: bool = False
+    # odometry read from /tf (odom_source "tf"): its odom and base frames, whose
+    # transforms are read as Odometry poses (log_setup.tf_odometry)
+    odom_pair: tuple[str, str] | None = None
     # the detections' frame in the base frame (/tf_static), None when they are in it
     detection_mount: Rigid | None = None
     _clock_row: tuple[float, int] | None = None  # odometry messages off the clock: offset, n
@@ -229,7 +236,10 @@ class LogInputs:
         topics = [self.odom_topic, self.lamp_topic] if self.lamp_topic else [self.odom_topic]
         odom_topic = self.odom_topic
         unplaced = self.placeable_from
-        for m in self.reader.messages(topics):
+        msgs = self.reader.messages(topics)
+        if self.odom_pair is not None:  # /tf's odom -> base transforms as Odometry
+            msgs = tf_odometry(msgs, odom_topic, self.odom_pair)
+        for m in msgs:
             topic, msg = m.topic, m.msg
             t = M.stamp_to_sec(msg.header.stamp)
             before = last_t[topic]
@@ -711,9 +721,24 @@ def open_inputs(
     reader = LogReader(path)
     tp = cfg.topics
     odom_topic, odom_source, passed_over = odometry_source(reader, cfg)
-    period, clock, odom_first = odometry_clock(reader, odom_topic)
+    names, pair = None, None
+    if odom_source == "tf":
+        names = tf_odometry_frames(reader, cfg)
+        assert names is not None  # odometry_source found it
+        pair = (names.odom, names.base)
+    period, clock, odom_first = odometry_clock(reader, odom_topic, pair)
     notes: list[str] = []
-    if passed_over:
+    if pair is not None:
+        why = f"no {tp.odom}"
+        if passed_over:
+            why = f"{passed_over}, and {why}"
+        elif cfg.slam.use_encoders:
+            why = f"no {tp.joint_states} or {tp.odom}"
+        notes.append(
+            f"{path}: {why}: the odometry is read from {odom_topic}'s {pair[0]} -> {pair[1]} "
+            "transforms"
+        )
+    elif passed_over:
         notes.append(f"{path}: {passed_over}: the odometry is read from {odom_topic}")
     twist = odom_source == "odom" and twist_only(reader, odom_topic)
     if twist:
@@ -727,6 +752,7 @@ def open_inputs(
         odom_topic if odom_source == "odom" else None,
         clock=(clock, REORDER_S),
         notes=notes,
+        names=names,
     )
     camera, detection_mount = None, None
     to_grey = M.image_to_array
@@ -762,7 +788,7 @@ def open_inputs(
     sensor = open_ranges(reader, cfg, ranges, base=frames.base) if need_rings else None
     mounts = sensor.mounts if sensor is not None else np.zeros((0, 3))
     gate = OdomGate()
-    pose = filter_start_pose(reader, cfg, odom_topic, odom_source, start_pose, gate)
+    pose = filter_start_pose(reader, cfg, odom_topic, odom_source, start_pose, gate, pair)
     inputs = LogInputs(
         reader,
         cfg,
@@ -773,7 +799,7 @@ def open_inputs(
         camera,
         mounts,
         pose,
-        streams_start(reader, [odom_topic, lamp_topic]),
+        streams_start(reader, [odom_topic, lamp_topic], pair),
         reader.end,
         ranges=sensor,
         _gate=gate,
@@ -784,6 +810,7 @@ def open_inputs(
         odom_first=odom_first,
         detection_mount=detection_mount,
         odom_twist=twist,
+        odom_pair=pair,
         notes=notes,
         to_grey=to_grey,
     )

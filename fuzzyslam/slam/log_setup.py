@@ -11,6 +11,8 @@ from __future__ import annotations
 
 import itertools
 import math
+from collections.abc import Iterable, Iterator
+from types import SimpleNamespace
 
 import numpy as np
 
@@ -23,7 +25,7 @@ from fuzzyslam.slam.events import TfFrames
 from fuzzyslam.slam.odom_gate import OdomGate, first_plausible_pose
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.logmeta import read_scenario
-from fuzzyslam.streams.reader import LogReader
+from fuzzyslam.streams.reader import LogMessage, LogReader
 from fuzzyslam.streams.tf import Rigid, TfProblem, locate, static_tree
 
 ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
@@ -98,7 +100,8 @@ def first_message(reader: LogReader, topic: str):
 def base_frame(reader: LogReader, cfg: Config) -> str:
     """The robot's base frame, in which the sensors' /tf_static mounts are expressed: the
     child frame of the log's nav_msgs/Odometry when the filter reads it (no encoders, or
-    ``slam.use_encoders`` false), else ``base_link`` (REP 105).
+    ``slam.use_encoders`` false), the base frame of /tf's odom -> base when the odometry
+    is read from it (:func:`tf_odometry_frames`), else ``base_link`` (REP 105).
 
     Parameters
     ----------
@@ -112,7 +115,10 @@ def base_frame(reader: LogReader, cfg: Config) -> str:
     str
     """
     tp = cfg.topics
-    if not reader.has(tp.odom) or odometry_source(reader, cfg)[1] == "encoders":
+    if not reader.has(tp.odom):
+        tf = None if encoders_readable(reader, cfg) else tf_odometry_frames(reader, cfg)
+        return tf.base if tf is not None else TfFrames().base
+    if odometry_source(reader, cfg)[1] == "encoders":
         return TfFrames().base
     return tf_frames(reader, cfg, tp.odom, series=False).base
 
@@ -154,10 +160,36 @@ def joint_state_problem(reader: LogReader, topic: str) -> str:
     return f"names no joints {wheels} (it names: {', '.join(seen) or 'none'})"
 
 
+def encoders_readable(reader: LogReader, cfg: Config) -> bool:
+    """Whether the filter reads the wheel encoders: ``slam.use_encoders``, the log has
+    ``topics.joint_states`` and its wheels can be read (:func:`joint_state_problem`).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    cfg : Config
+        The config (``topics``, ``slam.use_encoders``).
+
+    Returns
+    -------
+    bool
+    """
+    tp = cfg.topics
+    return (
+        cfg.slam.use_encoders
+        and reader.has(tp.joint_states)
+        and not joint_state_problem(reader, tp.joint_states)
+    )
+
+
 def odometry_source(reader: LogReader, cfg: Config) -> tuple[str, str, str]:
     """The odometry the filter reads: ``topics.joint_states`` (\"encoders\") when
     ``slam.use_encoders`` and the log has it and its wheels can be read
-    (:func:`joint_state_problem`), else ``topics.odom`` (\"odom\", nav_msgs/Odometry).
+    (:func:`joint_state_problem`), else ``topics.odom`` (\"odom\", nav_msgs/Odometry),
+    else the odom -> base transforms of ``topics.tf`` (\"tf\", as slam_toolbox and
+    gmapping read it: a log of /scan and /tf alone; :func:`tf_odometry_frames`, read as
+    Odometry poses by :func:`tf_odometry`).
 
     Parameters
     ----------
@@ -169,9 +201,9 @@ def odometry_source(reader: LogReader, cfg: Config) -> tuple[str, str, str]:
     Returns
     -------
     (str, str, str)
-        The topic, the source (encoders or odom) and why the encoders were passed over
-        ('' when they were not); InputError (one line, what to change) when neither can
-        be read.
+        The topic, the source (encoders, odom or tf) and why the encoders were passed
+        over ('' when they were not); InputError (one line, what to change) when none
+        can be read.
     """
     tp = cfg.topics
     problem = ""
@@ -180,22 +212,140 @@ def odometry_source(reader: LogReader, cfg: Config) -> tuple[str, str, str]:
         if not problem:
             return tp.joint_states, "encoders", ""
         problem = f"{tp.joint_states} {problem}"
-        if not reader.has(tp.odom):
-            raise InputError(
-                reader.path,
-                f"{problem}: the wheel encoders are read from the angles of joints "
-                f"{' and '.join(WHEEL_NAMES)}, both in each message; record them so, or "
-                f"record nav_msgs/Odometry (topics.odom)",
-            )
     if reader.has(tp.odom):
         return tp.odom, "odom", problem
+    if tf_odometry_frames(reader, cfg) is not None:
+        return tp.tf, "tf", problem
+    if problem:
+        raise InputError(
+            reader.path,
+            f"{problem}: the wheel encoders are read from the angles of joints "
+            f"{' and '.join(WHEEL_NAMES)}, both in each message; record them so, or "
+            f"record nav_msgs/Odometry (topics.odom) or odom -> base_link on {tp.tf}",
+        )
     keys = "topics.joint_states / topics.odom" if cfg.slam.use_encoders else "topics.odom"
     looked = [tp.joint_states, tp.odom] if cfg.slam.use_encoders else [tp.odom]
-    reader.require(looked, f"the config's {keys}")
-    raise AssertionError("unreachable")
+    option = f"the config's {keys} / topics.tf"
+    if not reader.has(tp.tf):
+        reader.require([*looked, tp.tf], option)
+    have = ", ".join(sorted(reader.topics)) or "none"
+    raise InputError(
+        reader.path,
+        f"missing stream(s) {', '.join(looked)}, and {tp.tf} has no "
+        f"{TfFrames().odom} -> {' or '.join(BASE_ALIASES)} in its first {TF_SEARCH_S:g} s "
+        f"(set them in {option}; the log has: {have})",
+    )
 
 
 TF_SEARCH_S = 30.0  # s of /tf searched for odom -> base (a driver starts within this)
+
+
+def tf_odometry_frames(reader: LogReader, cfg: Config) -> TfFrames | None:
+    """The frames of the odom -> base transforms of ``topics.tf`` that the odometry can
+    be read from when the log has neither encoders nor nav_msgs/Odometry
+    (:func:`odometry_source`): parent ``odom``, child ``base_link`` or ``base_footprint``
+    (``BASE_ALIASES``, REP 120; ``base_link`` when both are), looked for in the first
+    ``TF_SEARCH_S`` of /tf as :func:`tf_frames` looks (leading slashes dropped).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    cfg : Config
+        The config (``topics.tf``).
+
+    Returns
+    -------
+    TfFrames or None
+        Their odom and base names (None when /tf has no such transform).
+    """
+    if not reader.has(cfg.topics.tf):
+        return None
+    odom = TfFrames().odom
+    t_first = None
+    for m in reader.messages([cfg.topics.tf]):
+        t_first = m.t if t_first is None else t_first
+        found = {
+            str(ts.child_frame_id).lstrip("/")
+            for ts in m.msg.transforms
+            if str(ts.header.frame_id).lstrip("/") == odom
+        }
+        for base in BASE_ALIASES:
+            if base in found:
+                return TfFrames(odom=odom, base=base)
+        if m.t - t_first > TF_SEARCH_S:
+            break
+    return None
+
+
+def tf_odometry(
+    msgs: Iterable[LogMessage], topic: str, pair: tuple[str, str]
+) -> Iterator[LogMessage]:
+    """``msgs`` with each TFMessage of ``topic`` replaced by its ``pair`` (odom, base)
+    transforms read as nav_msgs/Odometry (``header``, ``child_frame_id``,
+    ``pose.pose.position`` and ``.orientation``: the transform's own header, translation
+    and rotation, not copied), one message each at the TFMessage's log time, several in
+    one TFMessage in stamp order; its other transforms are left out, and a TFMessage
+    without the pair with them. The Odometry path then reads them unchanged (the gate,
+    the clock checks, the increments). Messages of other topics pass as they are.
+
+    Parameters
+    ----------
+    msgs : iterable of LogMessage
+        Messages in log-time order.
+    topic : str
+        The /tf topic (``topics.tf``).
+    pair : (str, str)
+        The odometry's odom and base frames (:func:`tf_odometry_frames`).
+
+    Returns
+    -------
+    iterator of LogMessage
+    """
+    for m in msgs:
+        if m.topic != topic:
+            yield m
+            continue
+        found = [
+            ts
+            for ts in m.msg.transforms
+            if (str(ts.header.frame_id).lstrip("/"), str(ts.child_frame_id).lstrip("/")) == pair
+        ]
+        if len(found) > 1:
+            found.sort(key=lambda ts: (ts.header.stamp.sec, ts.header.stamp.nanosec))
+        for ts in found:
+            tr = ts.transform
+            pose = SimpleNamespace(
+                pose=SimpleNamespace(position=tr.translation, orientation=tr.rotation)
+            )
+            odo = SimpleNamespace(header=ts.header, child_frame_id=ts.child_frame_id, pose=pose)
+            yield m._replace(msg=odo)
+
+
+def odometry_messages(
+    reader: LogReader, topic: str, pair: tuple[str, str] | None = None
+) -> Iterator[LogMessage]:
+    """The messages of the odometry ``topic``: with ``pair`` (the odometry read from /tf:
+    :func:`odometry_source`) and ``topic`` a TFMessage topic, its ``pair`` transforms as
+    Odometry (:func:`tf_odometry`); else as logged.
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    topic : str
+        The topic.
+    pair : (str, str) or None
+        The odom and base frames of odometry read from /tf.
+
+    Returns
+    -------
+    iterator of LogMessage
+    """
+    msgs = reader.messages([topic])
+    if pair is None or reader.topics.get(topic) != M.TF_MESSAGE:
+        return msgs
+    return tf_odometry(msgs, topic, pair)
 
 
 def tf_frames(
@@ -206,6 +356,7 @@ def tf_frames(
     series: bool = True,
     clock: tuple[float, float] | None = None,
     notes: list[str] | None = None,
+    names: TfFrames | None = None,
 ) -> TfFrames:
     """The /tf frames of the estimates (:class:`TfFrames`): the odometry's own frame names
     when it is nav_msgs/Odometry (``odom_topic``; else odom and base_link), and whether
@@ -234,12 +385,15 @@ def tf_frames(
     notes : list of str, optional
         Gets that note (for the caller to say once: a run with --adapt-noise opens the
         log twice).
+    names : TfFrames, optional
+        The odom and base names to use instead (the odometry read from /tf:
+        :func:`tf_odometry_frames`).
 
     Returns
     -------
     TfFrames
     """
-    frames = TfFrames()
+    frames = names if names is not None else TfFrames()
     if odom_topic is not None:
         first = first_message(reader, odom_topic)
         odom = str(first.header.frame_id).lstrip("/") if first is not None else ""
@@ -309,7 +463,11 @@ def _odom_series(t: list[float], xyq: list[tuple[float, ...]]):
 
 
 def first_odometry_pose(
-    reader: LogReader, topic: str, default: np.ndarray, gate: OdomGate
+    reader: LogReader,
+    topic: str,
+    default: np.ndarray,
+    gate: OdomGate,
+    pair: tuple[str, str] | None = None,
 ) -> np.ndarray:
     """The first confirmed odometry pose (slam/odom_gate.py ``first_plausible_pose``, from
     the first 100 messages), ``gate`` primed with it; ``default`` when there is none.
@@ -324,6 +482,8 @@ def first_odometry_pose(
         The pose without a confirmed one.
     gate : OdomGate
         The glitch gate, primed with the pose found.
+    pair : (str, str) or None
+        The odom and base frames when ``topic`` is /tf (:func:`odometry_messages`).
 
     Returns
     -------
@@ -331,7 +491,7 @@ def first_odometry_pose(
         x, y (m), theta (rad).
     """
     t, poses = [], []
-    for m in reader.messages([topic]):
+    for m in odometry_messages(reader, topic, pair):
         p = M.pose_of(m.msg.pose.pose)
         if np.all(np.isfinite(p)):
             t.append(M.stamp_to_sec(m.msg.header.stamp))
@@ -346,7 +506,13 @@ def first_odometry_pose(
 
 
 def filter_start_pose(
-    reader: LogReader, cfg: Config, odom_topic: str, odom_source: str, given, gate: OdomGate
+    reader: LogReader,
+    cfg: Config,
+    odom_topic: str,
+    odom_source: str,
+    given,
+    gate: OdomGate,
+    pair: tuple[str, str] | None = None,
 ):
     """The filter's start pose (:mod:`fuzzyslam.slam.inputs`' docstring), checked finite.
 
@@ -359,11 +525,13 @@ def filter_start_pose(
     odom_topic : str
         The odometry topic.
     odom_source : str
-        "odom" (nav_msgs/Odometry) or "encoders".
+        "odom" (nav_msgs/Odometry), "tf" (its odom -> base transforms) or "encoders".
     given : (float, float, float) or None
         ``--start-pose``.
     gate : OdomGate
         The glitch gate (primed when the first odometry pose is used).
+    pair : (str, str) or None
+        The odom and base frames of odometry read from /tf (:func:`odometry_messages`).
 
     Returns
     -------
@@ -377,14 +545,16 @@ def filter_start_pose(
         pose = np.asarray(scen.start_pose, dtype=float)
     else:
         pose = np.asarray(cfg.slam.start_pose, dtype=float)
-        if odom_source == "odom" and pose.shape == (3,) and not np.any(pose):
-            pose = first_odometry_pose(reader, odom_topic, pose, gate)
+        if odom_source in ("odom", "tf") and pose.shape == (3,) and not np.any(pose):
+            pose = first_odometry_pose(reader, odom_topic, pose, gate, pair)
     if pose.shape != (3,) or not np.all(np.isfinite(pose)):
         raise InputError(reader.path, "start pose must be three finite numbers (x, y, theta)")
     return pose
 
 
-def streams_start(reader: LogReader, topics: list[str]) -> float:
+def streams_start(
+    reader: LogReader, topics: list[str], pair: tuple[str, str] | None = None
+) -> float:
     """The log time of the first message of the streams the filter reads (odometry,
     lamps): the run's start, not the log's (a converter may log /tf_static or a
     CameraInfo at time 0, decades before a Unix-time robot's first message).
@@ -395,17 +565,24 @@ def streams_start(reader: LogReader, topics: list[str]) -> float:
         The log.
     topics : list of str
         The streams ('' for none).
+    pair : (str, str) or None
+        The odom and base frames of odometry read from /tf: its first such transform's
+        (:func:`odometry_messages`).
 
     Returns
     -------
     float
         Seconds; the log's start when none of them has a message.
     """
-    firsts = [m.t for tp in topics if tp for m in itertools.islice(reader.messages([tp]), 1)]
+    firsts = [
+        m.t for tp in topics if tp for m in itertools.islice(odometry_messages(reader, tp, pair), 1)
+    ]
     return min(firsts, default=reader.start)
 
 
-def odometry_clock(reader: LogReader, topic: str) -> tuple[float, float, float]:
+def odometry_clock(
+    reader: LogReader, topic: str, pair: tuple[str, str] | None = None
+) -> tuple[float, float, float]:
     """The odometry's period, clock offset and first stamp, from its first
     ``PERIOD_SAMPLES`` messages.
 
@@ -427,6 +604,9 @@ def odometry_clock(reader: LogReader, topic: str) -> tuple[float, float, float]:
         The log.
     topic : str
         The odometry topic.
+    pair : (str, str) or None
+        The odom and base frames when ``topic`` is /tf: its odom -> base transforms'
+        stamps (:func:`odometry_messages`).
 
     Returns
     -------
@@ -435,7 +615,7 @@ def odometry_clock(reader: LogReader, topic: str) -> tuple[float, float, float]:
         than two (one) messages cannot give, -inf for the stamp of no message.
     """
     stamps, logged = [], []
-    for m in reader.messages([topic]):
+    for m in odometry_messages(reader, topic, pair):
         stamps.append(M.stamp_to_sec(m.msg.header.stamp))
         logged.append(m.t)
         if len(stamps) >= PERIOD_SAMPLES:

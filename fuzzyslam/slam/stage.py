@@ -27,7 +27,7 @@ from fuzzyslam.rundir import OPTIONAL_OUTPUTS, RUN_OUTPUTS
 from fuzzyslam.slam import calibration as cal
 from fuzzyslam.slam import calibration_files
 from fuzzyslam.slam.events import Event
-from fuzzyslam.slam.inputs import open_inputs
+from fuzzyslam.slam.inputs import LogInputs, open_inputs
 from fuzzyslam.slam.latency import MotionTap, delay_note
 from fuzzyslam.slam.log_setup import slow_odometry_note
 from fuzzyslam.slam.noise import DetectionNoiseEstimate, suggestion
@@ -72,7 +72,7 @@ def make_summary(
     est = res.noise_estimate
     return RunSummary(
         log=str(inputs.reader.path),
-        odometry_source=f"{inputs.odom_source}{TWIST[inputs.odom_twist]} ({inputs.odom_topic})",
+        odometry_source=_odometry_source(inputs),
         lamp_source=f"{inputs.lamp_source} ({inputs.lamp_topic})",
         start_pose=[float(v) for v in inputs.start_pose],
         log_duration_s=round(duration, 3),
@@ -278,6 +278,13 @@ def run_stage(
         return as_json(summary)
     once = _run_once(log, outdir, cfg, aids, False, ranges, start_pose, calibration, prefetch)
     return as_json(once)
+
+
+def _odometry_source(inputs: LogInputs) -> str:
+    """The summary's ``odometry_source``: the kind, its topic, and for /tf its frames
+    (``tf (/tf odom -> base_link)``)."""
+    pair = f" {inputs.odom_pair[0]} -> {inputs.odom_pair[1]}" if inputs.odom_pair else ""
+    return f"{inputs.odom_source}{TWIST[inputs.odom_twist]} ({inputs.odom_topic}{pair})"
 
 
 def start_time(events: Iterator[Event], t0: float) -> tuple[Iterator[Event], float]:
