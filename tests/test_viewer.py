@@ -222,6 +222,11 @@ def test_run_with_a_map_shows_map_and_fixes(chain) -> None:
         # the corridor labels are fgm.mcap's: each angle in [0, 180) deg as references.yaml
         # says it (the run once printed the reloaded -4.62 for 175.38)
         assert _labels(msgs) == _labels(decode_both(chain / "fgm" / "fgm.mcap"))
+        # the map first in the file (a reader in file order sees it before any pose)
+        with open(chain / fix / "estimates.mcap", "rb") as f:
+            order = [c.topic for _s, c, _m in make_reader(f).iter_messages(log_time_order=False)]
+        assert order[:3] == ["/map", "/map_conflict", "/map_references"]
+        assert order.count("/map") == 1
 
 
 def _labels(msgs: dict) -> list[str]:

@@ -308,6 +308,20 @@ class StreamingOutputs:
         self._odo_t.clear()
         self._odo_u.clear()
 
+    def write_messages(self, messages) -> None:
+        """Write ``messages`` (topic, type name, message or its CDR bytes, t) into
+        estimates.mcap now: the map the fixes use, before the run's first pose (a reader
+        of the file in its order, ``mcap cat``, sees it first), or the aids' messages at
+        the end.
+
+        Parameters
+        ----------
+        messages : iterable of (str, str, message or bytes, float)
+            The messages.
+        """
+        for topic, typename, msg, t in messages:
+            self._mcap.write(topic, typename, msg, t)
+
     def finish(self, res: SlamResult, extra=()) -> None:
         """Write what is left: the last blocks, landmarks.yaml and ``extra`` (topic, type
         name, message or its CDR bytes, t) messages of estimates.mcap (e.g. the aids'
@@ -323,8 +337,7 @@ class StreamingOutputs:
         self._flush_rows()
         self._flush_odometry()
         write_landmarks(self.tmp / LANDMARKS, res.lamps)
-        for topic, typename, msg, t in extra:
-            self._mcap.write(topic, typename, msg, t)
+        self.write_messages(extra)
         self._mcap_open = False
         self._mcap.__exit__(None, None, None)
         self._close()

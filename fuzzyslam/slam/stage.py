@@ -386,6 +386,13 @@ def _run_once(
         figures as drawer,  # reaped before the staging directory is removed or renamed
         StreamingOutputs(tmp, cfg, inputs.start_pose, inputs.frames) as streamed,
     ):
+        if aids:  # the map the fixes use first in estimates.mcap, at the log's start
+            from fuzzyslam.fixes.viewer import map_messages
+
+            t_map = inputs.start + inputs.clock_offset
+            for aid in aids:
+                shown = getattr(aid, "viewer_map", None)
+                streamed.write_messages(map_messages(shown, cfg.topics, t_map))
         res = _run_filter(inputs, cfg, aids, streamed, model, prefetch)
         # the figures first: the figure process draws them while this one writes the
         # aids' files, their messages and the run's outputs (none of which they read)
@@ -398,9 +405,8 @@ def _run_once(
                     fn(*args)
         for aid in aids:
             aid.write(tmp)
-        extra = [  # the aids' messages for estimates.mcap (/map stamped at the log's start)
-            m for aid in aids if hasattr(aid, "messages")
-            for m in aid.messages(cfg.topics, inputs.start + inputs.clock_offset)
+        extra = [  # the aids' own messages for estimates.mcap (their map is written)
+            m for aid in aids if hasattr(aid, "messages") for m in aid.messages(cfg.topics, None)
         ]  # fmt: skip
         write_outputs(tmp, streamed, res, extra)
         for drawing in drawings:
