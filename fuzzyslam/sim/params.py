@@ -51,6 +51,15 @@ class RobotParams:
         default=0.01, metadata={"min": 0.0, "max": 1.0, "unit": "rad/sqrt(rad)"}
     )
     ticks_per_rev: int = field(default=4096, metadata={"min": 1})
+    # the wheels' joints in sensor_msgs/JointState (ros2_control names them after the
+    # URDF: left_wheel_joint, ...); the simulator writes these, the filter reads them
+    left_wheel_joint: str = "wheel_left_joint"
+    right_wheel_joint: str = "wheel_right_joint"
+
+    @property
+    def wheel_joints(self) -> tuple[str, str]:
+        """The left and right wheels' joint names."""
+        return (self.left_wheel_joint, self.right_wheel_joint)
 
 
 @dataclass

@@ -218,7 +218,9 @@ def write_truth_tum(plan: Plan, path: str | os.PathLike) -> None:
         Path(tmp).write_text(format_tum(plan.drive.t, plan.drive.pose), encoding="utf-8")
 
 
-def robot_payloads(plan: Plan, block: int = 1024) -> Iterator[tuple[bytes, bytes, bytes, bytes]]:
+def robot_payloads(
+    plan: Plan, wheels: tuple[str, str] = WHEEL_NAMES, block: int = 1024
+) -> Iterator[tuple[bytes, bytes, bytes, bytes]]:
     """CDR of (/joint_states, /odom, /ground_truth/odom, /tf) at every robot step, in
     order, encoded ``block`` steps at a time: the wheel angles, the dead reckoning and the
     true pose, with the velocities of the step before (0 at the first), and the dead
@@ -230,6 +232,8 @@ def robot_payloads(plan: Plan, block: int = 1024) -> Iterator[tuple[bytes, bytes
     ----------
     plan : Plan
         The simulation's plan.
+    wheels : (str, str)
+        The wheels' joint names (``robot.left_wheel_joint``, ``right_wheel_joint``).
     block : int
         Steps encoded at once.
 
@@ -248,7 +252,7 @@ def robot_payloads(plan: Plan, block: int = 1024) -> Iterator[tuple[bytes, bytes
         k = slice(a, min(a + block, n))
         t = dr.t[k]
         yield from zip(
-            E.encode_joint_state_block(t, WHEEL_NAMES, enc.angles[k]),
+            E.encode_joint_state_block(t, wheels, enc.angles[k]),
             E.encode_odometry_block(t, "odom", "base_link", enc.dead_reckoning[k], v_odo[k],
                                     w_odo[k]),
             E.encode_odometry_block(t, "map", "base_link", dr.pose[k], v_true[k], w_true[k]),
@@ -313,7 +317,7 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
     rngs = rng_streams(cfg.seed)
     plan = make_plan(cfg, rngs, source)
     world, dr, enc = plan.world, plan.drive, plan.encoders
-    robot = robot_payloads(plan)
+    robot = robot_payloads(plan, cfg.robot.wheel_joints)
     topics = cfg.topics
     mounts = sonar_mounts(cfg.sonar.count, cfg.robot.radius)
     cam = simcam.make_camera(cfg.camera)

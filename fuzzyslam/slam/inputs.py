@@ -59,7 +59,6 @@ import numpy as np
 from fuzzyslam.camera import IDENTITY_AXES, CeilingCamera, floor_mount
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
-from fuzzyslam.robot import WHEEL_NAMES
 from fuzzyslam.slam.deskew import deskewed
 from fuzzyslam.slam.events import Event, Frame, Odom, RingEvent, TfFrames
 from fuzzyslam.slam.latency import delay_odometry
@@ -79,7 +78,7 @@ from fuzzyslam.slam.log_setup import (
     tf_odometry_frames,
     twist_only,
 )
-from fuzzyslam.slam.odom_gate import REANCHOR, OdomGate, within_speed
+from fuzzyslam.slam.odom_gate import REANCHOR, SPEED_MARGIN, OdomGate, within_speed
 from fuzzyslam.stamps import in_stamp_order
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.ranges import RangeSensor, open_ranges
@@ -314,9 +313,10 @@ class LogInputs:
         if msg.name != self._names:
             names = list(msg.name)
             try:
-                self._idx = [names.index(n) for n in WHEEL_NAMES]
+                self._idx = [names.index(n) for n in self.cfg.robot.wheel_joints]
             except ValueError:
-                self.warn("joint_states_without_wheels", f"joint state lacks {WHEEL_NAMES}")
+                wheels = self.cfg.robot.wheel_joints
+                self.warn("joint_states_without_wheels", f"joint state lacks {wheels}")
                 return None, prev
             self._names = names
         idx = self._idx
@@ -332,29 +332,34 @@ class LogInputs:
         if prev is None:
             return None, cur
         d_left, d_right = cur[0] - prev[0], cur[1] - prev[1]
+        dt = t - prev[2]
         if abs(d_left) > math.pi or abs(d_right) > math.pi:  # a wheel angle wrapped?
-            d_left, d_right = (
-                self._unwrapped(d_left, prev[0], cur[0]),
-                self._unwrapped(d_right, prev[1], cur[1]),
-            )
+            d_left, d_right = self._unwrapped(dt, d_left, d_right, prev, cur)
         d_trans, d_rot = self._wheel_odometry(d_left, d_right)
-        return self._increment(t, t - prev[2], d_trans, d_rot, prev, cur)
+        return self._increment(t, dt, d_trans, d_rot, prev, cur)
 
-    def _unwrapped(self, d: float, before: float, after: float) -> float:
-        """A wheel's angle increment ``d`` (rad) from ``before`` to ``after``, taken modulo
-        2 pi when both angles lie in ``WRAPPED_ANGLES`` and ``d`` is over pi: the driver
-        publishes its wheel angles wrapped ((-pi, pi] or [0, 2 pi): a continuous joint's
-        position, an absolute encoder), and the wheel crossed the wrap, turning by
-        ``math.remainder(d, 2 pi)`` (``warnings.wheel_angle_wraps``). Unwrapped angles
-        leave that interval within a turn of the wheel, and a jump of over pi between two
-        messages is none a wheel makes (a wheel that turns half a turn per message, over
-        10 turns a second at 20 Hz, cannot be told from a wrap). Any other ``d`` is
-        returned as it is (the speed gate judges it)."""
+    def _unwrapped(
+        self, dt: float, d_left: float, d_right: float, prev, cur
+    ) -> tuple[float, float]:
+        """The wheels' angle increments (rad) over ``dt`` from the readings ``prev`` to
+        ``cur``, each taken modulo 2 pi where the driver publishes its wheel angles
+        wrapped ((-pi, pi] or [0, 2 pi): a continuous joint's position, an absolute
+        encoder) and the wheel crossed the wrap (``warnings.wheel_angle_wraps``): a jump of
+        over pi between two angles that both lie in ``WRAPPED_ANGLES``, faster than the
+        wheel can turn (``SPEED_MARGIN`` times the robot's top wheel rate, (max_speed +
+        max_turn_rate b / 2) / r, slam/odom_gate.py). An unwrapped log's first turn of the
+        wheels lies in that interval too: a jump the wheel can have made (a gap in the
+        messages, a fast wheel at a low rate) is motion, left to the speed gate."""
         lo, hi = WRAPPED_ANGLES
-        if abs(d) <= math.pi or not (lo <= before <= hi and lo <= after <= hi):
-            return d
-        self.warn("wheel_angle_wraps")
-        return math.remainder(d, math.tau)
+        r = self.cfg.robot
+        rate = SPEED_MARGIN * (r.max_speed + 0.5 * r.max_turn_rate * r.wheel_base) / r.wheel_radius
+        out = []
+        for d, a, b in ((d_left, prev[0], cur[0]), (d_right, prev[1], cur[1])):
+            if abs(d) > max(math.pi, rate * dt) and lo <= a <= hi and lo <= b <= hi:
+                self.warn("wheel_angle_wraps")
+                d = math.remainder(d, math.tau)
+            out.append(d)
+        return out[0], out[1]
 
     def _increment(self, t: float, dt: float, d_trans: float, d_rot: float, prev, cur):
         """The increment ending at ``t`` (over ``dt`` s) as an Odom event and ``cur`` as the

@@ -126,10 +126,12 @@ def base_frame(reader: LogReader, cfg: Config) -> str:
 JOINT_LOOK = 50  # JointState messages looked at for the wheels (joint_state_problem)
 
 
-def joint_state_problem(reader: LogReader, topic: str) -> str:
+def joint_state_problem(
+    reader: LogReader, topic: str, wheels: tuple[str, str] = WHEEL_NAMES
+) -> str:
     """Why the wheel encoders of ``topic`` (sensor_msgs/JointState) cannot be read ('' when
     they can), from its first ``JOINT_LOOK`` messages: no message names both wheel joints
-    (``robot.WHEEL_NAMES``; another robot's names, a skid-steer's four wheels, or the two
+    (``wheels``; another robot's names, a skid-steer's four wheels, or the two
     wheels published in separate messages), or their positions are empty (a driver that
     fills only the velocities). Read as they are, each such message would be skipped,
     and the run would end with no odometry.
@@ -140,6 +142,9 @@ def joint_state_problem(reader: LogReader, topic: str) -> str:
         The log.
     topic : str
         The JointState topic.
+    wheels : (str, str)
+        The left and right wheels' joint names (``robot.left_wheel_joint``,
+        ``robot.right_wheel_joint``).
 
     Returns
     -------
@@ -149,15 +154,18 @@ def joint_state_problem(reader: LogReader, topic: str) -> str:
     seen: list[str] = []
     for m in itertools.islice(reader.messages([topic]), JOINT_LOOK):
         names = [str(n) for n in m.msg.name]
-        if all(w in names for w in WHEEL_NAMES):
+        if all(w in names for w in wheels):
             if len(m.msg.position) < len(names) and len(m.msg.velocity):
                 return "carries the wheels' velocities only (position empty)"
             return ""
         seen += [n for n in names if n not in seen]
-    wheels = " and ".join(WHEEL_NAMES)
-    if all(w in seen for w in WHEEL_NAMES):
-        return f"carries {wheels} in separate messages, not both in one"
-    return f"names no joints {wheels} (it names: {', '.join(seen) or 'none'})"
+    both = " and ".join(wheels)
+    if all(w in seen for w in wheels):
+        return f"carries {both} in separate messages, not both in one"
+    return (
+        f"names no joints {both} (it names: {', '.join(seen) or 'none'}; "
+        "robot.left_wheel_joint / right_wheel_joint name them)"
+    )
 
 
 def encoders_readable(reader: LogReader, cfg: Config) -> bool:
@@ -179,7 +187,7 @@ def encoders_readable(reader: LogReader, cfg: Config) -> bool:
     return (
         cfg.slam.use_encoders
         and reader.has(tp.joint_states)
-        and not joint_state_problem(reader, tp.joint_states)
+        and not joint_state_problem(reader, tp.joint_states, cfg.robot.wheel_joints)
     )
 
 
@@ -208,7 +216,7 @@ def odometry_source(reader: LogReader, cfg: Config) -> tuple[str, str, str]:
     tp = cfg.topics
     problem = ""
     if cfg.slam.use_encoders and reader.has(tp.joint_states):
-        problem = joint_state_problem(reader, tp.joint_states)
+        problem = joint_state_problem(reader, tp.joint_states, cfg.robot.wheel_joints)
         if not problem:
             return tp.joint_states, "encoders", ""
         problem = f"{tp.joint_states} {problem}"
@@ -220,7 +228,7 @@ def odometry_source(reader: LogReader, cfg: Config) -> tuple[str, str, str]:
         raise InputError(
             reader.path,
             f"{problem}: the wheel encoders are read from the angles of joints "
-            f"{' and '.join(WHEEL_NAMES)}, both in each message; record them so, or "
+            f"{' and '.join(cfg.robot.wheel_joints)}, both in each message; record them so, or "
             f"record nav_msgs/Odometry (topics.odom) or odom -> base_link on {tp.tf}",
         )
     keys = "topics.joint_states / topics.odom" if cfg.slam.use_encoders else "topics.odom"
