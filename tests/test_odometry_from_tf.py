@@ -17,6 +17,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from mcap_ros2.decoder import DecoderFactory
 from test_robust_logs import cli, error_lines, rewrite
 
 from fuzzyslam.streams import messages as M
@@ -218,3 +219,41 @@ def test_unreadable_encoders_without_odom_fall_back_to_tf(tmp_path: Path) -> Non
     assert code == 0, err
     got = np.loadtxt(tmp_path / "est" / "trajectory.tum")
     np.testing.assert_allclose(got, np.loadtxt(tmp_path / "want" / "trajectory.tum"), atol=1e-9)
+
+
+def test_odometry_on_tf_that_starts_late_is_found(tmp_path: Path) -> None:
+    """A bag recorded before the robot's driver came up: /tf's odom -> base_link starts
+    40 s in, another frame's transform on /tf from the start (the sample without its
+    encoders and /odom). The odometry is still read
+    from /tf (it was refused: the transform was looked for in the first 30 s only), from
+    there on, and the log's own odom -> base_link is known to the estimates (not
+    written twice)."""
+    start = None
+
+    def late(m: LogMessage):
+        nonlocal start
+        if m.topic in ("/joint_states", "/odom"):
+            return []
+        start = m.t if start is None else start
+        if m.topic == "/tf" and m.t < start + 40.0:  # another frame's transform only
+            ts = m.msg.transforms[0]
+            wheel = M.transform_stamped(0.0, "base_link", "wheel", 0.0, 0.1, 0.0, 0.0)
+            wheel.header.stamp = ts.header.stamp
+            m.msg.transforms = [wheel]
+        return [(m.topic, m.typename, m.msg, m.t)]
+
+    log = rewrite(SAMPLE, tmp_path / "late.mcap", late)
+    code, out, err = cli("run", log, "-o", tmp_path / "est")
+    assert code == 0, err
+    assert NOTE in err and json.loads(out)["odometry_source"] == "tf (/tf odom -> base_link)"
+    with open(tmp_path / "est" / "estimates.mcap", "rb") as f:
+        from mcap.reader import make_reader
+
+        pairs = {
+            (ts.header.frame_id, ts.child_frame_id)
+            for _s, _c, _m, msg in make_reader(
+                f, decoder_factories=[DecoderFactory()]
+            ).iter_decoded_messages(topics=["/tf"])
+            for ts in msg.transforms
+        }
+    assert ("map", "odom") in pairs and ("odom", "base_link") not in pairs

@@ -240,7 +240,7 @@ def odometry_source(reader: LogReader, cfg: Config) -> tuple[str, str, str]:
     raise InputError(
         reader.path,
         f"missing stream(s) {', '.join(looked)}, and {tp.tf} has no "
-        f"{TfFrames().odom} -> {' or '.join(BASE_ALIASES)} in its first {TF_SEARCH_S:g} s "
+        f"{TfFrames().odom} -> {' or '.join(BASE_ALIASES)} transform "
         f"(set them in {option}; the log has: {have})",
     )
 
@@ -252,8 +252,9 @@ def tf_odometry_frames(reader: LogReader, cfg: Config) -> TfFrames | None:
     """The frames of the odom -> base transforms of ``topics.tf`` that the odometry can
     be read from when the log has neither encoders nor nav_msgs/Odometry
     (:func:`odometry_source`): parent ``odom``, child ``base_link`` or ``base_footprint``
-    (``BASE_ALIASES``, REP 120; ``base_link`` when both are), looked for in the first
-    ``TF_SEARCH_S`` of /tf as :func:`tf_frames` looks (leading slashes dropped).
+    (``BASE_ALIASES``, REP 120; ``base_link`` when both are), looked for in the whole
+    of /tf, however late they start (a bag recorded before the robot's driver came up;
+    leading slashes dropped).
 
     Parameters
     ----------
@@ -270,9 +271,7 @@ def tf_odometry_frames(reader: LogReader, cfg: Config) -> TfFrames | None:
     if not reader.has(cfg.topics.tf):
         return None
     odom = TfFrames().odom
-    t_first = None
     for m in reader.messages([cfg.topics.tf]):
-        t_first = m.t if t_first is None else t_first
         found = {
             str(ts.child_frame_id).lstrip("/")
             for ts in m.msg.transforms
@@ -281,8 +280,6 @@ def tf_odometry_frames(reader: LogReader, cfg: Config) -> TfFrames | None:
         for base in BASE_ALIASES:
             if base in found:
                 return TfFrames(odom=odom, base=base)
-        if m.t - t_first > TF_SEARCH_S:
-            break
     return None
 
 
@@ -429,8 +426,8 @@ def tf_frames(
             xyq.append((tr.x, tr.y, q.x, q.y, q.z, q.w))
         if found and not series:
             break
-        if not found and m.t - t_first > TF_SEARCH_S:
-            break
+        if not found and names is None and m.t - t_first > TF_SEARCH_S:
+            break  # (the odometry's own transforms are on /tf: found, however late)
     if not found:
         return frames
     offset = float(np.median(np.subtract(t, logged))) if t else 0.0
