@@ -208,3 +208,48 @@ def test_detections_of_another_vision_msgs_release_are_read_by_the_logs_definiti
     assert len(got) == len(want) > 10
     for a, b in zip(got, want, strict=True):
         assert np.array_equal(a.z, b.z) and np.array_equal(a.cov, b.cov)
+
+
+def test_one_type_name_with_two_definitions_decodes_each_channel_by_its_own(
+    tmp_path: Path,
+) -> None:
+    """Two channels of one type name whose schemas differ (bags of two ROS releases
+    merged): each channel's messages are decoded by its own schema, in a whole file and
+    in the same file cut before its summary (one channel was lost, a different one
+    each way)."""
+    import struct
+
+    from mcap.writer import Writer
+    from rosbags.typesys import Stores, get_types_from_msg, get_typestore
+
+    name = "my_msgs/msg/Reading"
+    defs = {"/a": "float32 value\n", "/b": "float64 value\nfloat64 variance\n"}
+    log = tmp_path / "two.mcap"
+    with open(log, "wb") as f:
+        w = Writer(f)
+        w.start(profile="ros2")
+        ids = {}
+        for topic, text in defs.items():
+            sid = w.register_schema(name, "ros2msg", text.encode())
+            ids[topic] = w.register_channel(topic, "cdr", sid)
+        for k in range(3):
+            for topic, text in defs.items():
+                store = get_typestore(Stores.EMPTY)
+                store.register(get_types_from_msg(text, name))
+                cls = store.types[name]
+                msg = cls(1.5 + k) if topic == "/a" else cls(2.5 + k, 0.25)
+                t = (k + 1) * 10**9
+                w.add_message(ids[topic], t, bytes(store.serialize_cdr(msg, name)), t)
+        w.finish()
+    raw = log.read_bytes()
+    (summary_start,) = struct.unpack_from("<Q", raw, len(raw) - 8 - 20)
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(raw[:summary_start])
+    for path in (log, cut):
+        reader = LogReader(path)
+        got = {(m.topic, round(float(m.msg.value), 6)) for m in reader.messages()}
+        want = {("/a", 1.5 + k) for k in range(3)} | {("/b", 2.5 + k) for k in range(3)}
+        assert got == want, path
+        variances = [m.msg.variance for m in reader.messages(["/b"])]
+        assert variances == [0.25] * 3
+        assert reader.damage()["undecodable"] == 0

@@ -74,8 +74,9 @@ class Summary:
     end: int
     metadata: dict[str, dict[str, str]]
     attachments: dict[str, bytes]
-    # schema name -> its ros2msg definition text (the file's own message definitions)
-    definitions: dict[str, str] = field(default_factory=dict)
+    # channel id -> its schema's ros2msg definition text (the file's own definitions: two
+    # channels of one type name may carry different ones, e.g. bags of two ROS releases)
+    definitions: dict[int, str] = field(default_factory=dict)
 
 
 def schema_text(encoding: str, data: bytes) -> str | None:
@@ -154,8 +155,12 @@ def read_summary(f: BinaryIO, size: int) -> Summary | None:
                 if cid in channels
             }
             t0, t1 = st.message_start_time, st.message_end_time
-        definitions = {sc.name: schema_text(sc.encoding, sc.data) for sc in s.schemas.values()}
-        definitions = {k: v for k, v in definitions.items() if v is not None}
+        texts = {sid: schema_text(sc.encoding, sc.data) for sid, sc in s.schemas.items()}
+        definitions = {
+            cid: texts[ch.schema_id]
+            for cid, ch in s.channels.items()
+            if texts.get(ch.schema_id) is not None
+        }
         metadata = {md.name: dict(md.metadata) for md in reader.iter_metadata()}
         attachments = {a.name: bytes(a.data) for a in reader.iter_attachments()}
     except Exception:  # any record of the summary that does not parse: not usable

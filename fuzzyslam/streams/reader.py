@@ -137,9 +137,9 @@ class LogReader:
         self.start = 0.0
         self.end = 0.0
         self._damage = Damage()
-        self._decoders: dict[str, Callable[[Any], Any] | None] = {}
-        # type name -> the log's own ros2msg definition of it (its Schema records)
-        self.definitions: dict[str, str] = {}
+        self._decoders: dict[tuple[str, str | None], Callable[[Any], Any] | None] = {}
+        # channel id -> the log's own ros2msg definition of its type (its Schema record)
+        self._texts: dict[int, str] = {}
         # decompressed chunks shared by this reader's walks (indexed.indexed_messages),
         # forgotten when the file changes (its size or modification time)
         self._recent: dict[int, bytes] = {}
@@ -150,7 +150,7 @@ class LogReader:
             return
         for topic, schema in s.channels.values():
             self.topics[topic] = normalise_typename(schema)
-        self.definitions = {normalise_typename(k): v for k, v in s.definitions.items()}
+        self._texts = dict(s.definitions)
         self.counts = dict(s.counts)
         self._span_ns = (int(s.start), int(s.end))
         self.start, self.end = s.start / 1e9, s.end / 1e9
@@ -167,7 +167,6 @@ class LogReader:
             for rec in walk(f, self.size, dmg):
                 if isinstance(rec, Schema):
                     schemas[rec.id] = normalise_typename(rec.name)
-                    self._define(rec)
                 elif isinstance(rec, Channel):
                     channels[rec.id] = rec.topic
                     if rec.schema_id in schemas:
@@ -291,7 +290,7 @@ class LogReader:
             )
             return
         fns = {
-            cid: (topic, typename, self._decoder(typename))
+            cid: (topic, typename, self._decoder(typename, self._texts.get(cid)))
             for cid, (topic, typename) in chans.items()
         }
         last_ns, seen = -1, set()
@@ -346,15 +345,18 @@ class LogReader:
         logged before ``from_ns`` and the ``seen`` (channel id, sequence) at ``from_ns``
         left out. ``channels``: channel id -> (topic, type name) known beforehand."""
         schemas: dict[int, str] = {}
+        texts: dict[int, str | None] = {}  # schema id -> its definition text
         channels = dict(channels)
+        chan_texts = {cid: self._texts.get(cid) for cid in channels}
         with open(self.path, "rb") as f:
             for rec in walk(f, self.size, dmg, start, data_end, sync):
                 if isinstance(rec, Schema):
                     schemas[rec.id] = normalise_typename(rec.name)
-                    self._define(rec)
+                    texts[rec.id] = schema_text(rec.encoding, rec.data)
                 elif isinstance(rec, Channel):
                     if rec.schema_id in schemas and rec.id not in channels:
                         channels[rec.id] = (rec.topic, schemas[rec.schema_id])
+                        chan_texts[rec.id] = texts.get(rec.schema_id)
                 elif isinstance(rec, Message):
                     if rec.log_time < from_ns or (
                         rec.log_time == from_ns and (rec.channel_id, rec.sequence) in seen
@@ -363,34 +365,31 @@ class LogReader:
                     ch = channels.get(rec.channel_id)
                     if ch is None or (wanted is not None and ch[0] not in wanted):
                         continue
-                    out = self._decode(ch[0], ch[1], rec.log_time, rec.data)
+                    text = chan_texts.get(rec.channel_id)
+                    out = self._decode(ch[0], ch[1], rec.log_time, rec.data, text)
                     if out is not None:
                         yield out
 
-    def _define(self, rec: Schema) -> None:
-        """Keep a Schema record's definition text (the first of its type) for the
-        decoders (:meth:`_decoder`)."""
-        text = schema_text(rec.encoding, rec.data)
-        if text is not None:
-            self.definitions.setdefault(normalise_typename(rec.name), text)
-
-    def _decoder(self, typename: str) -> Callable[[Any], Any] | None:
-        """The payload decoder of a type (None: a type neither the log's definitions nor
-        the typestore know): the fast decoders, else rosbags by the log's own definition
-        of the type (a message that changed between ROS 2 releases is read as the log
-        recorded it), else by the typestore's."""
-        if typename not in self._decoders:
-            text = self.definitions.get(typename)
+    def _decoder(self, typename: str, text: str | None = None) -> Callable[[Any], Any] | None:
+        """The payload decoder of a type as its channel's schema defines it (``text``;
+        None: a type neither the log's definition nor the typestore knows): the fast
+        decoders, else rosbags by that definition (a message that changed between ROS 2
+        releases is read as the log recorded it, channel by channel), else by the
+        typestore's."""
+        key = (typename, text)
+        if key not in self._decoders:
             if text is not None:  # made when first needed (no rosbags import before)
-                self._decoders[typename] = decoder(typename, file_deserializer(typename, text))
+                self._decoders[key] = decoder(typename, file_deserializer(typename, text))
             elif typename in DECODERS or typename in typestore().types:
-                self._decoders[typename] = decoder(typename)
+                self._decoders[key] = decoder(typename)
             else:
-                self._decoders[typename] = None
-        return self._decoders[typename]
+                self._decoders[key] = None
+        return self._decoders[key]
 
-    def _decode(self, topic: str, typename: str, t_ns: int, payload: Any) -> LogMessage | None:
-        fn = self._decoder(typename)
+    def _decode(
+        self, topic: str, typename: str, t_ns: int, payload: Any, text: str | None = None
+    ) -> LogMessage | None:
+        fn = self._decoder(typename, text)
         if fn is None:
             self._damage.undecodable += 1
             return None
