@@ -175,3 +175,27 @@ def test_a_gap_in_the_first_wheel_turn_is_motion_not_a_wrap(tiny: Tiny, tmp_path
     assert "wheel_angle_wraps" not in json.loads(out)["warnings"]
     got, want = load_tum(tmp_path / "est" / "odometry.tum"), load_tum(tiny.est / "odometry.tum")
     assert np.hypot(*(got[-1, 1:3] - want[-1, 1:3])) < 0.02
+
+
+def test_odometry_that_stops_mid_log_is_said(tiny: Tiny, tmp_path: Path) -> None:
+    """/odom (the encoders dropped) whose driver stops 20 s into the log while the camera
+    goes on: the frames after it are skipped (an estimate held still, flagged
+    events_lost) and one line on stderr says the odometry fell silent (it said only that
+    the filter looked lost)."""
+    start = None
+
+    def stop(m: LogMessage):
+        nonlocal start
+        start = m.t if start is None else start
+        if m.topic == JOINTS or (m.topic == ODOM and m.t > start + 20.0):
+            return []
+        return keep(m)
+
+    log = rewrite(tiny.log, tmp_path / "stop.mcap", stop)
+    code, out, err = cli("run", log, "-o", tmp_path / "est", "--config", tiny.config)
+    assert code == 0, err
+    s = json.loads(out)
+    assert s["counts"]["frames_stale_odometry"] > 10
+    said = [ln for ln in err.splitlines() if "fell silent" in ln]
+    assert len(said) == 1 and "odom (/odom)" in said[0]
+    assert f"{s['counts']['frames_stale_odometry']} frames skipped" in said[0]

@@ -322,6 +322,14 @@ def _tell(summary: RunSummary, cfg: Config | None = None) -> None:
             f"({', '.join(health.reasons) or 'NIS or association windows'}; see "
             "the summary's filter_health): do not trust this estimate"
         )
+    stale = summary.counts.frames_stale_odometry
+    if stale:  # the driver stopped (or paused): say which stream, not only that frames were lost
+        limit = f" over slam.odometry_stale_s = {cfg.slam.odometry_stale_s:g} s" if cfg else ""
+        note(
+            f"odometry {summary.odometry_source} fell silent{limit} while the log went on: "
+            f"{stale} frames skipped, the estimate held still meanwhile (its driver stopped? "
+            "the summary's counts.frames_stale_odometry)"
+        )
     delay = summary.odometry_delay_estimate
     if cfg is not None and delay:
         line = delay_note(delay["delay_s"], cfg.slam.odometry_delay_s)
