@@ -137,6 +137,7 @@ def _child(args: list, cwd: Path, close: int | None = None, env_progress: bool =
     return p.returncode, err.decode()
 
 
+@pytest.mark.slow  # fault injection: subprocesses and pipes closed under them
 def test_reader_gone_or_stream_closed_is_not_a_failure(tmp_path: Path, tiny_log) -> None:
     """A summary nobody reads (the pipe's reader gone, ``| true``), stdout closed
     (``>&-``) or stderr closed (``2>&-``, with progress on): exit 0, nothing on stderr
@@ -201,6 +202,7 @@ def _interrupt(args: list[str], cwd: Path, sig: int, after: float) -> tuple[int,
     return p.returncode, err.decode()
 
 
+@pytest.mark.slow  # fault injection: a signal to a running simulate
 @pytest.mark.parametrize(
     ("sig", "code"),
     [(signal.SIGINT, errors.EXIT_INTERRUPTED), (signal.SIGTERM, errors.EXIT_TERMINATED)],
