@@ -199,3 +199,20 @@ def test_odometry_that_stops_mid_log_is_said(tiny: Tiny, tmp_path: Path) -> None
     said = [ln for ln in err.splitlines() if "fell silent" in ln]
     assert len(said) == 1 and "odom (/odom)" in said[0]
     assert f"{s['counts']['frames_stale_odometry']} frames skipped" in said[0]
+
+
+def test_encoder_ticks_instead_of_radians_are_one_line_saying_so(
+    tiny: Tiny, tmp_path: Path
+) -> None:
+    """Wheel angles published as raw encoder ticks (4096 a turn), not radians: every
+    increment is faster than the robot can move; one line says so and what to check
+    (it said only "no usable odometry")."""
+
+    def ticks(msg) -> None:
+        msg.position = np.round(np.asarray(msg.position) * 4096 / math.tau)
+
+    log = rewrite(tiny.log, tmp_path / "ticks.mcap", joints(ticks))
+    code, out, err = cli("run", log, "-o", tmp_path / "est", "--config", tiny.config)
+    (line,) = error_lines(err)
+    assert code == 3 and out == "" and str(log) in line
+    assert "faster than the robot can move" in line and "radians" in line

@@ -280,6 +280,27 @@ def run_stage(
     return as_json(once)
 
 
+def _no_odometry(inputs: LogInputs) -> str:
+    """Why a log gave no usable odometry increment, in one line: its glitch counts and,
+    when every increment was faster than the robot can move, what to check (encoder
+    angles in ticks or degrees rather than radians, the robot's wheel radius and base)."""
+    rejected = inputs.warnings.get("implausible_odometry", 0)
+    line = f"no usable odometry on {inputs.odom_topic}"
+    if rejected:
+        hint = (
+            "are the wheel angles in radians and robot.wheel_radius, wheel_base right?"
+            if inputs.odom_source == "encoders"
+            else "robot.max_speed and max_turn_rate bound them"
+        )
+        line += (
+            f": all {rejected} increments faster than the robot can move "
+            f"(warnings.implausible_odometry; {hint})"
+        )
+    elif inputs.first_problem:
+        line += f" ({inputs.first_problem})"
+    return line
+
+
 def _odometry_source(inputs: LogInputs) -> str:
     """The summary's ``odometry_source``: the kind, its topic, and for /tf its frames
     (``tf (/tf odom -> base_link)``)."""
@@ -508,7 +529,7 @@ def _run_filter(
     if inputs.lamp_source == "detections":
         res.counts = replace(res.counts, detections_own_covariance=inputs.own_covariances)
     if res.counts.odometry == 0:
-        raise InputError(inputs.reader.path, f"no usable odometry on {inputs.odom_topic}")
+        raise InputError(inputs.reader.path, _no_odometry(inputs))
     if inputs.lamp_source == "frames" and res.counts.frames == 0:
         problem = inputs.first_problem or "no frames"
         raise InputError(inputs.reader.path, f"no usable camera frame ({problem})")
