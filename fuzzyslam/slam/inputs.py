@@ -75,7 +75,6 @@ from fuzzyslam.slam.log_setup import (
     streams_start,
     tf_frames,
     tf_odometry,
-    tf_odometry_frames,
     twist_only,
 )
 from fuzzyslam.slam.odom_gate import REANCHOR, SPEED_MARGIN, OdomGate, within_speed
@@ -725,12 +724,8 @@ def open_inputs(
     """
     reader = LogReader(path)
     tp = cfg.topics
-    odom_topic, odom_source, passed_over = odometry_source(reader, cfg)
-    names, pair = None, None
-    if odom_source == "tf":
-        names = tf_odometry_frames(reader, cfg)
-        assert names is not None  # odometry_source found it
-        pair = (names.odom, names.base)
+    odom_topic, odom_source, passed_over, names = odometry_source(reader, cfg)
+    pair = (names.odom, names.base) if names is not None else None
     period, clock, odom_first = odometry_clock(reader, odom_topic, pair)
     notes: list[str] = []
     if pair is not None:

@@ -13,6 +13,7 @@ import itertools
 import math
 from collections.abc import Iterable, Iterator
 from types import SimpleNamespace
+from typing import NamedTuple
 
 import numpy as np
 
@@ -115,12 +116,12 @@ def base_frame(reader: LogReader, cfg: Config) -> str:
     str
     """
     tp = cfg.topics
-    if not reader.has(tp.odom):
-        tf = None if encoders_readable(reader, cfg) else tf_odometry_frames(reader, cfg)
-        return tf.base if tf is not None else TfFrames().base
-    if odometry_source(reader, cfg)[1] == "encoders":
+    if encoders_readable(reader, cfg):
         return TfFrames().base
-    return tf_frames(reader, cfg, tp.odom, series=False).base
+    if reader.has(tp.odom):
+        return tf_frames(reader, cfg, tp.odom, series=False).base
+    tf = tf_odometry_frames(reader, cfg)
+    return tf.base if tf is not None else TfFrames().base
 
 
 JOINT_LOOK = 50  # JointState messages looked at for the wheels (joint_state_problem)
@@ -191,7 +192,16 @@ def encoders_readable(reader: LogReader, cfg: Config) -> bool:
     )
 
 
-def odometry_source(reader: LogReader, cfg: Config) -> tuple[str, str, str]:
+class OdometrySource(NamedTuple):
+    """The odometry the filter reads (:func:`odometry_source`)."""
+
+    topic: str
+    kind: str  # encoders, odom or tf
+    passed_over: str  # why the encoders were passed over ('' when they were not)
+    tf: TfFrames | None  # kind tf: the odom and base frames of its transforms
+
+
+def odometry_source(reader: LogReader, cfg: Config) -> OdometrySource:
     """The odometry the filter reads: ``topics.joint_states`` (\"encoders\") when
     ``slam.use_encoders`` and the log has it and its wheels can be read
     (:func:`joint_state_problem`), else ``topics.odom`` (\"odom\", nav_msgs/Odometry),
@@ -208,22 +218,23 @@ def odometry_source(reader: LogReader, cfg: Config) -> tuple[str, str, str]:
 
     Returns
     -------
-    (str, str, str)
-        The topic, the source (encoders, odom or tf) and why the encoders were passed
-        over ('' when they were not); InputError (one line, what to change) when none
-        can be read.
+    OdometrySource
+        The topic, the source (encoders, odom or tf), why the encoders were passed over
+        ('' when they were not) and the /tf frames; InputError (one line, what to
+        change) when none can be read.
     """
     tp = cfg.topics
     problem = ""
     if cfg.slam.use_encoders and reader.has(tp.joint_states):
         problem = joint_state_problem(reader, tp.joint_states, cfg.robot.wheel_joints)
         if not problem:
-            return tp.joint_states, "encoders", ""
+            return OdometrySource(tp.joint_states, "encoders", "", None)
         problem = f"{tp.joint_states} {problem}"
     if reader.has(tp.odom):
-        return tp.odom, "odom", problem
-    if tf_odometry_frames(reader, cfg) is not None:
-        return tp.tf, "tf", problem
+        return OdometrySource(tp.odom, "odom", problem, None)
+    frames = tf_odometry_frames(reader, cfg)
+    if frames is not None:
+        return OdometrySource(tp.tf, "tf", problem, frames)
     if problem:
         raise InputError(
             reader.path,
@@ -252,7 +263,7 @@ def tf_odometry_frames(reader: LogReader, cfg: Config) -> TfFrames | None:
     """The frames of the odom -> base transforms of ``topics.tf`` that the odometry can
     be read from when the log has neither encoders nor nav_msgs/Odometry
     (:func:`odometry_source`): parent ``odom``, child ``base_link`` or ``base_footprint``
-    (``BASE_ALIASES``, REP 120; ``base_link`` when both are), looked for in the whole
+    (``BASE_ALIASES``, REP 120; ``base_link`` when a message has both), looked for in the whole
     of /tf, however late they start (a bag recorded before the robot's driver came up;
     leading slashes dropped).
 
