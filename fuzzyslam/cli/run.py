@@ -134,8 +134,9 @@ def run_command(
 
     \b
     Reads odometry (wheel encoders on topics.joint_states, or topics.odom when the log
-    has no encoders or slam.use_encoders is false) and lamps (mono8 frames on
-    topics.image with topics.camera_info, or PoseArray detections on
+    has no readable encoders or slam.use_encoders is false, or else the odom -> base_link
+    transforms on topics.tf) and lamps (camera frames on topics.image, raw or
+    compressed, with topics.camera_info, or PoseArray / Detection3DArray detections on
     topics.detections; a log with neither runs on odometry and the map's fixes), and
     runs the augmented-state EKF with JCBB data association, tentative lamps and a
     guard against duplicate lamps.
