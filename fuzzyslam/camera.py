@@ -419,8 +419,11 @@ class CeilingCamera:
         q = np.asarray(uv, dtype=float).reshape(-1, 2)
         if not self.dist:
             return np.repeat(np.eye(2)[None], len(q), axis=0)
-        x = self.undistort(q)
-        out = np.full((len(q), 2, 2), np.nan)
+        return self._undistortion_scale(self.undistort(q))
+
+    def _undistortion_scale(self, x: np.ndarray) -> np.ndarray:
+        """:meth:`undistort_jacobians` at the ideal pixels ``x`` (N, 2) already found."""
+        out = np.full((len(x), 2, 2), np.nan)
         ok = np.all(np.isfinite(x), axis=1)
         j = self.distort_jacobians(x[ok])
         good = np.abs(np.linalg.det(j)) > 1e-12  # the model not folded over here
@@ -446,10 +449,39 @@ class CeilingCamera:
         -------
         ndarray, shape (N, 2, 2)
         """
-        j = self.undistort_jacobians(uv)
+        return self._covariances(self.undistort_jacobians(uv), sigma_px)
+
+    def _covariances(self, j: np.ndarray, sigma_px: float) -> np.ndarray:
+        """:meth:`ceiling_covariances` of the undistortion's local scales ``j`` (N, 2, 2)."""
         a = np.array(self.axes, dtype=float).reshape(2, 2)
         m = a @ j * (sigma_px * self.height / self.f)
         return m @ np.swapaxes(m, 1, 2)
+
+    def ceiling_measurements(
+        self, uv: np.ndarray, sigma_px: float
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """:meth:`unproject` and :meth:`ceiling_covariances` of raw pixels with the lens'
+        distortion undone once for both (a frame's lamps).
+
+        Parameters
+        ----------
+        uv : ndarray, shape (N, 2)
+            Raw pixels.
+        sigma_px : float
+            The detector's standard deviation (px) in the raw image.
+
+        Returns
+        -------
+        points : ndarray, shape (N, 2)
+            Base-frame ceiling points (NaN where the lens model cannot undo a pixel).
+        covs : ndarray, shape (N, 2, 2)
+        """
+        q = np.asarray(uv, dtype=float).reshape(-1, 2)
+        if not self.dist:
+            eye = np.repeat(np.eye(2)[None], len(q), axis=0)
+            return self._ceiling(q), self._covariances(eye, sigma_px)
+        x = self.undistort(q)
+        return self._ceiling(x), self._covariances(self._undistortion_scale(x), sigma_px)
 
     def project(self, pts_robot: np.ndarray) -> np.ndarray:
         """Pixels (N, 2) of ceiling points (N, 2) given in the robot frame (base_link);
@@ -468,8 +500,10 @@ class CeilingCamera:
         """Robot-frame ceiling points (N, 2) of pixels (N, 2); with lens distortion, of
         the raw image's pixels, undistorted first (:meth:`undistort`)."""
         q = np.asarray(uv, dtype=float).reshape(-1, 2)
-        if self.dist:
-            q = self.undistort(q)
+        return self._ceiling(self.undistort(q) if self.dist else q)
+
+    def _ceiling(self, q: np.ndarray) -> np.ndarray:
+        """Robot-frame ceiling points (N, 2) of ideal pinhole pixels ``q`` (N, 2)."""
         s = self.height / self.f
         if self.axes != IDENTITY_AXES:  # the image plane's point, through A
             return (q - np.array([self.cx, self.cy])) * s @ np.array(self.axes).reshape(

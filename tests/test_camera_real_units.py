@@ -298,3 +298,15 @@ def test_a_fisheye_pixel_past_its_rim_is_nan_and_the_others_are_kept() -> None:
     assert np.all(np.isfinite(out[[0, 3]])) and np.all(np.isnan(out[[1, 2, 4]]))
     np.testing.assert_allclose(cam.distort(out[[0, 3]]), px[[0, 3]], atol=1e-5)
     assert np.all(np.isnan(cam.ceiling_covariances(px, 0.5)[[1, 2, 4]]))
+
+
+@pytest.mark.parametrize("model, d", [("plumb_bob", PLUMB_BOB), ("equidistant", EQUIDISTANT),
+                                      ("plumb_bob", [0.0] * 5)])  # fmt: skip
+def test_ceiling_measurements_are_unproject_and_ceiling_covariances(model: str, d) -> None:
+    """A frame's lamps undistorted once (``ceiling_measurements``) give the points and
+    covariances of ``unproject`` and ``ceiling_covariances``, which undistort apart."""
+    cam = CeilingCamera.from_camera_info(info(model, d), 1.7)
+    uv = np.array([[CX, CY], [10.0, 12.5], [150.0, 100.0], [80.0, 5.0]])
+    z, cov = cam.ceiling_measurements(uv, 0.7)
+    np.testing.assert_array_equal(z, cam.unproject(uv))
+    np.testing.assert_array_equal(cov, cam.ceiling_covariances(uv, 0.7))

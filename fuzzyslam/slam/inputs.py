@@ -477,10 +477,10 @@ class LogInputs:
                 self.warnings.get("blobs_rejected", 0) + blobs.rejected
             )
         cam = self.camera
-        z = cam.unproject(blobs.uv)
         if not cam.distorted:
+            z = cam.unproject(blobs.uv)
             return Frame(t, z, self._measurement_cov(len(z), cam.metric_sigma(p.pixel_sigma)))
-        cov = cam.ceiling_covariances(blobs.uv, p.pixel_sigma)
+        z, cov = cam.ceiling_measurements(blobs.uv, p.pixel_sigma)
         ok = np.all(np.isfinite(z), axis=1) & np.all(np.isfinite(cov), axis=(1, 2))
         if not np.all(ok):  # beyond what the lens model can undo (a fisheye's rim)
             self.warnings["blobs_rejected"] = self.warnings.get("blobs_rejected", 0) + int(
