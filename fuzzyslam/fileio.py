@@ -188,7 +188,8 @@ def _fsync_path(path: Path, directory: bool = False) -> None:
 
 @contextlib.contextmanager
 def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
-    """Yield a temporary path beside ``path``; rename it onto ``path`` on success.
+    """Yield a temporary path beside ``path``; rename it onto ``path`` on success
+    (:func:`atomic_paths` of one file).
 
     The temporary file is flushed to the disk (fsync) before the rename, so ``path`` is
     either the old file or the complete new one, also after a crash. On any exception
@@ -196,30 +197,8 @@ def atomic_path(path: str | os.PathLike) -> Iterator[Path]:
     it was; a write failure (disk full, file size limit) is an InputError naming
     ``path``. A ``path`` that is a device, FIFO, socket or directory is refused.
     """
-    path = Path(path)
-    check_output_target(path, "file")
-    try:
-        fd, tmp = tempfile.mkstemp(prefix=f".{path.name}.", suffix=".part", dir=path.parent or ".")
-    except OSError as exc:  # a read-only or full directory: the user's name, not the temp's
-        raise write_error(path, exc) from exc
-    os.close(fd)
-    tmp_path = Path(tmp)
-    try:
-        yield tmp_path
-        _refuse_inputs([path])
-        check_output_target(path, "file")
-        with contextlib.suppress(OSError):  # mkstemp made it private: give it a file's usual mode
-            os.chmod(tmp_path, 0o666 & ~_umask())
-        _fsync_path(tmp_path)
-        os.replace(tmp_path, path)
-        _fsync_path(path.parent if str(path.parent) else Path("."), directory=True)
-    except BaseException as exc:
-        with contextlib.suppress(OSError):
-            tmp_path.unlink()
-        mapped = _user_error(exc, tmp_path, path)
-        if mapped is not None:
-            raise mapped from exc
-        raise
+    with atomic_paths([path]) as (tmp,):
+        yield tmp
 
 
 @contextlib.contextmanager
