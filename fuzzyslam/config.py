@@ -45,6 +45,7 @@ from fuzzyslam.sim.params import (
     WorldParams,
 )
 from fuzzyslam.slam.params import SlamParams
+from fuzzyslam.streams.distro import OutputParams
 from fuzzyslam.streams.ranges import RangeParams
 from fuzzyslam.streams.topics import Topics
 
@@ -80,6 +81,7 @@ class Config:
     fgm: MapParams = field(default_factory=MapParams)
     fixes: FixParams = field(default_factory=FixParams)
     evaluation: EvalParams = field(default_factory=EvalParams)
+    output: OutputParams = field(default_factory=OutputParams)
 
 
 def embedded_names() -> list[str]:

@@ -296,7 +296,7 @@ def _write_viewer_log(path: Path, fgm, refs: list[Reference], t: float, cfg: Con
     from fuzzyslam.streams.writer import LogWriter
 
     ref_rows = [(r.id, r.name, r.angle, r.region) for r in refs]
-    with LogWriter(path, latched=cfg.topics.latched()) as w:
+    with LogWriter(path, latched=cfg.topics.latched(), ros_distro=cfg.output.ros_distro) as w:
         for topic, typename, msg, tm in fgm_messages(fgm, ref_rows, t, cfg.topics):
             w.write(topic, typename, msg, tm)
 

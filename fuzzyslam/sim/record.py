@@ -332,7 +332,9 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
         start_pose=[float(v) for v in plan.start_pose],
         duration=dr.duration,
         events=plan.events,
-        config=config_to_dict(cfg),
+        # the simulation's config: the output format (its rosbag2 record says which) is
+        # not part of it, so a Humble log is what it was before the choice
+        config={k: v for k, v in config_to_dict(cfg).items() if k != "output"},
     )
     sonar_topics = [topics.sonar(i) for i in range(cfg.sonar.count)]
     sonar_types = [M.RANGE] * cfg.sonar.count
@@ -344,7 +346,9 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
     fire = sonar_firings(cfg.sonar, dr.duration, source)  # (K, M)
     sequential = cfg.sonar.firing_gap_s > 0.0  # one message per reading, at its time
     m_sonars, i0, ideal, r = cfg.sonar.count, 0, np.zeros((0, 0)), np.zeros(0)
-    with LogWriter(out, latched=topics.latched()) as w, Progress(dr.duration, "simulate") as bar:
+    distro = cfg.output.ros_distro
+    writer = LogWriter(out, latched=topics.latched(), ros_distro=distro)
+    with writer as w, Progress(dr.duration, "simulate") as bar:
         w.json_metadata(WORLD_KEY, world.to_dict())
         w.json_metadata(SCENARIO_KEY, scenario.to_dict())
         if plan.obstacles:
@@ -354,7 +358,7 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
         lamp_z = cfg.camera.mount_height + cfg.camera.ceiling_height
         w.write(topics.world_markers, M.MARKER_ARRAY, world_markers(world, lamp_z), 0.0)
         info = M.camera_info(0.0, CAMERA_FRAME, cam.width, cam.height_px, cam.f, cam.cx, cam.cy)
-        info_cdr = serialize(info, M.CAMERA_INFO)
+        info_cdr = serialize(info, M.CAMERA_INFO, distro)
         w.write_cdr(topics.camera_info, M.CAMERA_INFO, info_cdr, 0.0)
         sonar_t = fire.ravel() if sequential else fire[:, 0]
         for t, kind, i in schedule(plan, sonar_t, cfg.camera.rate_hz):
@@ -379,7 +383,9 @@ def simulate_to_mcap(cfg, out: str | os.PathLike, source: str = "config") -> tup
                     st.no_echo += int(np.sum(r >= cfg.sonar.max_range))
                 k = slice(j, j + 1) if sequential else slice(None)
                 cdrs = E.encode_ranges(t, frames[k], r[k], fov, cfg.sonar.min_range,
-                                       cfg.sonar.max_range)  # fmt: skip
+                                       cfg.sonar.max_range,
+                                       simsonar.reading_variance(r[k], cfg.sonar),
+                                       distro)  # fmt: skip
                 w.write_cdr_at(sonar_topics[k], sonar_types[k], cdrs, t)
             else:
                 pose = interpolate_pose(dr.t, dr.pose, t)

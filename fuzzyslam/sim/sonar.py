@@ -194,6 +194,30 @@ def measure(ideal: np.ndarray, params: SonarParams, rng: np.random.Generator) ->
     return np.where(no_echo, params.max_range, r)
 
 
+def reading_variance(r: np.ndarray, params: SonarParams) -> np.ndarray:
+    """The variance of :func:`measure`'s noise about a reading, as a Range message carries
+    it (``variance``, Iron on): the proportional noise at the reading's range plus the
+    quantisation's, ``(noise_frac r)^2 + quantization^2 / 12``; 0 (REP 117 and the
+    message's comment: unknown) for a no-echo reading (the maximum range), which
+    measures no range. Crosstalk (an outlier, not noise) is not in it.
+
+    Parameters
+    ----------
+    r : ndarray, shape (M,)
+        Readings (m), as :func:`measure` returns them.
+    params : SonarParams
+        Noise, quantisation and maximum range.
+
+    Returns
+    -------
+    ndarray, shape (M,)
+        Variances (m^2).
+    """
+    r = np.asarray(r, dtype=float)
+    var = (params.noise_frac * r) ** 2 + params.quantization**2 / 12.0
+    return np.where(r >= params.max_range, 0.0, var)
+
+
 def sensor_poses(pose: np.ndarray, mounts: np.ndarray) -> np.ndarray:
     """World poses (M, 3) of sensors mounted at ``mounts`` (M, 3) on a robot at ``pose``.
 

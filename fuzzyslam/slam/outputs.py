@@ -183,6 +183,7 @@ class StreamingOutputs:
         self.tmp = Path(tmp)
         self.frames = frames or TfFrames()
         self.topics = cfg.topics
+        self.ros_distro = cfg.output.ros_distro
         self.start_pose = np.asarray(start_pose, dtype=float)
         self.rows = 0
         self.lamp_nis = ExactSum()  # accepted lamp updates (summary's mean_nis_lamp)
@@ -212,7 +213,9 @@ class StreamingOutputs:
             self._files.append(self._cov)
             self._upd = text(UPDATES)
             self._files.append(self._upd)
-            self._mcap = LogWriter(self.tmp / ESTIMATES, latched=self.topics.latched()).__enter__()
+            self._mcap = LogWriter(
+                self.tmp / ESTIMATES, latched=self.topics.latched(), ros_distro=self.ros_distro
+            ).__enter__()
         except BaseException:
             self._close()
             raise

@@ -22,11 +22,13 @@ import numpy as np
 from fuzzyslam.se2 import yaw_to_quaternion
 from fuzzyslam.stamps import split_ns, to_ns
 from fuzzyslam.streams import messages as M
-from fuzzyslam.streams.typestore import serialize
+from fuzzyslam.streams.distro import DEFAULT_ROS_DISTRO
+from fuzzyslam.streams.typestore import field_names, serialize
 
 _U32 = struct.Struct("<I")
 _STAMP = struct.Struct("<iI")
 _F32 = struct.Struct("<f")
+_F32X2 = struct.Struct("<2f")
 
 
 def _stamps(t: np.ndarray) -> tuple[list[int], list[int]]:
@@ -100,21 +102,61 @@ def encode_joint_state_block(
 
 
 @lru_cache(maxsize=256)
-def _range_template(frame: str, fov: float, rmin: float, rmax: float) -> tuple[bytes, bytes]:
-    tpl = serialize(M.range_msg(0.0, frame, 0.0, fov, rmin, rmax), M.RANGE)
-    return tpl[:4], tpl[12:-4]  # the range (float32) ends the message
+def _range_template(
+    frame: str, fov: float, rmin: float, rmax: float, distro: str
+) -> tuple[bytes, bytes, bool]:
+    """The Range's bytes before the stamp and from the stamp's end to the range, and
+    whether the distribution's Range has a variance after it."""
+    tpl = serialize(M.range_msg(0.0, frame, 0.0, fov, rmin, rmax, 0.0, distro), M.RANGE, distro)
+    variance = "variance" in field_names(M.RANGE, distro)
+    # the range (float32) ends the message, or is followed by the variance (float32)
+    return tpl[:4], tpl[12 : -8 if variance else -4], variance
 
 
 def encode_ranges(
-    t: float, frames: Sequence[str], r: Sequence[float], fov: float, rmin: float, rmax: float
+    t: float,
+    frames: Sequence[str],
+    r: Sequence[float],
+    fov: float,
+    rmin: float,
+    rmax: float,
+    variance: float | Sequence[float] = 0.0,
+    distro: str = DEFAULT_ROS_DISTRO,
 ) -> list[bytes]:
-    """sensor_msgs/Range of ``messages.range_msg(t, frames[j], r[j], fov, rmin, rmax)``
-    for every sonar j of one ring (one stamp)."""
+    """sensor_msgs/Range of ``messages.range_msg(t, frames[j], r[j], fov, rmin, rmax,
+    variance[j], distro)`` for every sonar j of one ring (one stamp).
+
+    Parameters
+    ----------
+    t : float
+        The stamp (s).
+    frames : sequence of str
+        The sonars' frames.
+    r : sequence of float
+        Their ranges (m).
+    fov, rmin, rmax : float
+        Field of view (rad), minimum and maximum range (m).
+    variance : float or sequence of float
+        The ranges' variances (m^2; one for all, or one per sonar; 0: unknown), written
+        where the distribution's Range has the field (Iron on), else not.
+    distro : str
+        One of ``streams/distro.ROS_DISTROS`` (default Humble).
+
+    Returns
+    -------
+    list of bytes
+        One payload per sonar.
+    """
     stamp = _STAMP.pack(*split_ns(t))
+    r = np.asarray(r, dtype=float).tolist()
+    var = np.broadcast_to(np.asarray(variance, dtype=float), (len(r),)).tolist()
     out = []
-    for frame, rj in zip(frames, np.asarray(r, dtype=float).tolist(), strict=True):
-        head, body = _range_template(frame, float(fov), float(rmin), float(rmax))
-        out.append(head + stamp + body + _F32.pack(rj))
+    for frame, rj, vj in zip(frames, r, var, strict=True):
+        head, body, has_variance = _range_template(
+            frame, float(fov), float(rmin), float(rmax), distro
+        )
+        tail = _F32X2.pack(rj, vj) if has_variance else _F32.pack(rj)
+        out.append(head + stamp + body + tail)
     return out
 
 
@@ -289,10 +331,10 @@ class MarkerSpec:
 
 
 def encode_marker_array(markers: Sequence[MarkerSpec]) -> bytes:
-    """Little-endian CDR of the visualization_msgs/MarkerArray (ROS 2 Humble) of
-    ``messages.marker(*astuple(m))`` for each m, written field by field: the bytes
-    ``typestore.serialize`` gives for it (tests/test_cdr.py), without the typestore
-    (its import and set-up cost 0.1 s of a run's start).
+    """Little-endian CDR of the visualization_msgs/MarkerArray (ROS 2 Humble, and Jazzy:
+    the same fields) of ``messages.marker(*astuple(m))`` for each m, written field by
+    field: the bytes ``typestore.serialize`` gives for it (tests/test_cdr.py), without the
+    typestore (its import and set-up cost 0.1 s of a run's start).
 
     Parameters
     ----------

@@ -13,7 +13,8 @@ import numpy as np
 
 from fuzzyslam.se2 import quaternion_to_yaw, yaw_to_quaternion
 from fuzzyslam.stamps import split_ns
-from fuzzyslam.streams.typestore import msgtype
+from fuzzyslam.streams.distro import DEFAULT_ROS_DISTRO
+from fuzzyslam.streams.typestore import field_names, msgtype
 
 RANGE = "sensor_msgs/msg/Range"
 LASER_SCAN = "sensor_msgs/msg/LaserScan"
@@ -76,15 +77,46 @@ def cov6_to_cov3(cov36: Any) -> np.ndarray:
     return c6[np.ix_(idx, idx)].copy()
 
 
-def range_msg(t: float, frame_id: str, r: float, fov: float, rmin: float, rmax: float) -> Any:
-    """sensor_msgs/Range, radiation ULTRASOUND."""
-    return msgtype(RANGE)(
+def range_msg(
+    t: float,
+    frame_id: str,
+    r: float,
+    fov: float,
+    rmin: float,
+    rmax: float,
+    variance: float = 0.0,
+    distro: str = DEFAULT_ROS_DISTRO,
+) -> Any:
+    """sensor_msgs/Range, radiation ULTRASOUND, of the typestore of ``distro``.
+
+    Parameters
+    ----------
+    t : float
+        Stamp (s).
+    frame_id : str
+        The sonar's frame.
+    r, fov, rmin, rmax : float
+        Range, field of view (rad), minimum and maximum range.
+    variance : float
+        The range's variance (m^2; 0: unknown), in the message where the distribution's
+        Range has the field (Iron on: Jazzy), else not.
+    distro : str
+        One of ``streams/distro.ROS_DISTROS`` (default Humble).
+
+    Returns
+    -------
+    object
+        The rosbags message.
+    """
+    fields = {"variance": float(variance)} if "variance" in field_names(RANGE, distro) else {}
+    return msgtype(RANGE, distro)(
         header=header(t, frame_id),
         radiation_type=0,
         field_of_view=float(fov),
         min_range=float(rmin),
         max_range=float(rmax),
         range=float(r),
+        **fields,
     )
 
 

@@ -1,9 +1,10 @@
 """The ros2msg definitions (schema texts) of the messages ``run`` writes into estimates.mcap
-(with fixes, the map and the fixes' markers too), as rosbags' ROS 2 Humble typestore
-generates them, so that writing them needs no typestore (tests/test_cdr.py checks each
-equals the typestore's text). Each message's own definition is written once; a type's
-text is its definition followed by those of the types it uses, each after a separator
-line and ``MSG: name``."""
+(with fixes, the map and the fixes' markers too), as rosbags' ROS 2 Humble and Jazzy
+typestores generate them, so that writing them needs no typestore (tests/test_cdr.py and
+tests/test_ros_distro.py check each equals the typestore's text). Each message's own
+definition is written once; a type's text is its definition followed by those of the
+types it uses, each after a separator line and ``MSG: name``. Of these types Jazzy's
+differ from Humble's in one line: Marker's constant ``ARROW_STRIP=12``."""
 
 from __future__ import annotations
 
@@ -121,9 +122,25 @@ _USES: dict[str, tuple[str, ...]] = {
 }
 
 
-def _text(name: str) -> str:
-    own = _DEFINITIONS[name.replace("/msg/", "/")]
-    return own + "".join(f"{_SEPARATOR}MSG: {d}\n{_DEFINITIONS[d]}" for d in _USES[name])
+# Jazzy's: Humble's, with Marker's constant ARROW_STRIP after TRIANGLE_LIST
+_JAZZY_DEFINITIONS: dict[str, str] = {
+    **_DEFINITIONS,
+    "visualization_msgs/Marker": _DEFINITIONS["visualization_msgs/Marker"].replace(
+        "int32 TRIANGLE_LIST=11\n", "int32 TRIANGLE_LIST=11\nint32 ARROW_STRIP=12\n"
+    ),
+}
 
 
-MSGDEFS: dict[str, str] = {name: _text(name) for name in _USES}
+def _text(name: str, definitions: dict[str, str]) -> str:
+    own = definitions[name.replace("/msg/", "/")]
+    return own + "".join(f"{_SEPARATOR}MSG: {d}\n{definitions[d]}" for d in _USES[name])
+
+
+MSGDEFS: dict[str, str] = {name: _text(name, _DEFINITIONS) for name in _USES}
+"""ROS 2 Humble's texts."""
+
+MSGDEFS_OF: dict[str, dict[str, str]] = {
+    "humble": MSGDEFS,
+    "jazzy": {name: _text(name, _JAZZY_DEFINITIONS) for name in _USES},
+}
+"""The texts of each distribution of ``streams/distro.ROS_DISTROS``."""

@@ -1,6 +1,11 @@
-"""The ROS 2 message typestore (rosbags) used for every message read or written but the
+"""The ROS 2 message typestores (rosbags) used for every message read or written but the
 fast paths of streams/cdr.py and streams/cdr_encode.py; rosbags is imported on first use
-(0.12 s of start-up with the typestore: a lamps-only ``run`` does without it)."""
+(0.12 s of start-up with the typestore: a lamps-only ``run`` does without it).
+
+Messages are read with Humble's (a log's own definitions first: :func:`file_deserializer`);
+they are written with the definitions of the output's distribution (``distro``, one of
+``streams/distro.ROS_DISTROS``; Humble by default).
+"""
 
 from __future__ import annotations
 
@@ -8,20 +13,36 @@ from collections.abc import Callable
 from functools import cache, lru_cache
 from typing import TYPE_CHECKING, Any
 
-from fuzzyslam.streams.msgdefs import MSGDEFS
+from fuzzyslam.streams.distro import DEFAULT_ROS_DISTRO, ROS_DISTROS, check_distro
+from fuzzyslam.streams.msgdefs import MSGDEFS_OF
 from fuzzyslam.streams.vision_msgs import DEFINITIONS
 
 if TYPE_CHECKING:
     from rosbags.typesys.store import Typestore
 
 
-@lru_cache(maxsize=1)
-def typestore() -> Typestore:
-    """The ROS 2 Humble typestore (standard message types) with the vision_msgs detection
-    types (streams/vision_msgs.py) registered."""
+def typestore(distro: str = DEFAULT_ROS_DISTRO) -> Typestore:
+    """The typestore of a ROS 2 distribution (standard message types) with the vision_msgs
+    detection types (streams/vision_msgs.py, the same in Humble and Jazzy) registered;
+    one per distribution, made on first use.
+
+    Parameters
+    ----------
+    distro : str
+        One of ``streams/distro.ROS_DISTROS`` (default Humble).
+
+    Returns
+    -------
+    rosbags.typesys.store.Typestore
+    """
+    return _typestore(distro)
+
+
+@lru_cache(maxsize=len(ROS_DISTROS))
+def _typestore(distro: str) -> Typestore:
     from rosbags.typesys import Stores, get_types_from_msg, get_typestore
 
-    store = get_typestore(Stores.ROS2_HUMBLE)
+    store = get_typestore(Stores[f"ROS2_{check_distro(distro).upper()}"])
     types: dict[str, Any] = {}
     for name, text in DEFINITIONS.items():
         types.update(get_types_from_msg(text, name))
@@ -37,25 +58,47 @@ def normalise_typename(name: str) -> str:
     return name
 
 
-def msgtype(name: str) -> Any:
-    """The message class of a type name, e.g. msgtype('sensor_msgs/msg/Range')."""
-    return typestore().types[normalise_typename(name)]
+def msgtype(name: str, distro: str = DEFAULT_ROS_DISTRO) -> Any:
+    """The message class of a type name, e.g. msgtype('sensor_msgs/msg/Range'), in the
+    typestore of ``distro`` (default Humble)."""
+    return typestore(distro).types[normalise_typename(name)]
+
+
+def field_names(name: str, distro: str = DEFAULT_ROS_DISTRO) -> tuple[str, ...]:
+    """The fields of a message type in ``distro``, in order.
+
+    Parameters
+    ----------
+    name : str
+        The type name, e.g. 'sensor_msgs/msg/Range'.
+    distro : str
+        One of ``streams/distro.ROS_DISTROS``.
+
+    Returns
+    -------
+    tuple of str
+        E.g. Range's in Jazzy end with 'range', 'variance'.
+    """
+    return tuple(f[0] for f in typestore(distro).fielddefs[normalise_typename(name)][1])
 
 
 @cache
-def msgdef(name: str) -> str:
-    """The ros2msg definition text of a type, with dependencies as 'MSG: pkg/Type' blocks
-    (the typestore's; of the types in streams/msgdefs.py, its copy of that text)."""
+def msgdef(name: str, distro: str = DEFAULT_ROS_DISTRO) -> str:
+    """The ros2msg definition text of a type, with dependencies as 'MSG: pkg/Type' blocks,
+    in ``distro`` (default Humble): the typestore's; of the types in streams/msgdefs.py,
+    its copy of that text."""
     name = normalise_typename(name)
-    if name in MSGDEFS:
-        return MSGDEFS[name]
-    text, _ = typestore().generate_msgdef(name, ros_version=2)
+    known = MSGDEFS_OF[check_distro(distro)]
+    if name in known:
+        return known[name]
+    text, _ = typestore(distro).generate_msgdef(name, ros_version=2)
     return text
 
 
-def serialize(msg: Any, name: str) -> bytes:
-    """CDR bytes of a message."""
-    return bytes(typestore().serialize_cdr(msg, normalise_typename(name)))
+def serialize(msg: Any, name: str, distro: str = DEFAULT_ROS_DISTRO) -> bytes:
+    """CDR bytes of a message by the definition of ``distro`` (default Humble; a message
+    of another distribution's class is written by its fields of that name)."""
+    return bytes(typestore(distro).serialize_cdr(msg, normalise_typename(name)))
 
 
 def deserialize(data: bytes | memoryview, name: str) -> Any:

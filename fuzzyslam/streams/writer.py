@@ -1,4 +1,6 @@
-"""MCAP log writer: ROS 2 profile, ros2msg schemas, CDR messages, zstd chunks.
+"""MCAP log writer: ROS 2 profile, ros2msg schemas, CDR messages, zstd chunks; the message
+definitions, and the rosbag2 record's ``ROS_DISTRO``, of one ROS 2 distribution (the
+config's ``output.ros_distro``: streams/distro.py).
 
 Writes to a temporary name and renames onto the target only when the file is finished,
 closed and flushed to the disk without error (fileio.atomic_path), so a failed or
@@ -26,6 +28,7 @@ from mcap.writer import CompressionType, IndexType, Writer
 from fuzzyslam import __version__
 from fuzzyslam.fileio import atomic_path
 from fuzzyslam.stamps import to_ns
+from fuzzyslam.streams.distro import DEFAULT_ROS_DISTRO, check_distro
 from fuzzyslam.streams.topics import Topics
 from fuzzyslam.streams.typestore import msgdef, normalise_typename, serialize
 
@@ -173,7 +176,7 @@ class _LeanWriter(Writer):
                 self._finalize()
 
 
-ROS_DISTRO = "humble"  # streams/typestore.py's definitions
+ROS_DISTRO = DEFAULT_ROS_DISTRO  # the distribution written unless one is given
 # QoS durability and reliability as rosbag2 records them (rmw's enum values)
 _RELIABLE, _TRANSIENT_LOCAL, _VOLATILE = 1, 1, 2
 _INFINITE = "{sec: 2147483647, nsec: 4294967295}"  # rosbag2's record of an unset duration
@@ -210,7 +213,10 @@ class LogWriter:
 
     Every channel carries the QoS its publisher offered (:func:`offered_qos`): the
     ``latched`` topics (default ``Topics().latched()``, the default names) transient
-    local, the others volatile.
+    local, the others volatile. ``ros_distro`` (default Humble) is the distribution
+    whose definitions the schemas hold and whose name the rosbag2 metadata record
+    holds; messages given as objects are serialised by its definitions, those given as
+    bytes must follow them (``streams/cdr_encode.py``'s encoders take the distribution).
 
     >>> with LogWriter("out.mcap", latched={"/tf_static"}) as w:   # doctest: +SKIP
     ...     w.write("/sonar/s00", "sensor_msgs/msg/Range", msg, t)
@@ -221,8 +227,10 @@ class LogWriter:
         path: str | os.PathLike,
         chunk_size: int = 1024 * 1024,
         latched: Collection[str] | None = None,
+        ros_distro: str = ROS_DISTRO,
     ) -> None:
         self.path = Path(path)
+        self.ros_distro = check_distro(ros_distro)
         self.chunk_size = chunk_size
         self.latched = Topics().latched() if latched is None else frozenset(latched)
         self._stack = contextlib.ExitStack()
@@ -244,7 +252,7 @@ class LogWriter:
             self._writer.start(profile="ros2", library=f"fuzzyslam {__version__}")
             # as rosbag2 writes it: the distribution whose message definitions (the
             # typestore's) and QoS format (offered_qos) the file has
-            self._writer.add_metadata("rosbag2", {"ROS_DISTRO": ROS_DISTRO})
+            self._writer.add_metadata("rosbag2", {"ROS_DISTRO": self.ros_distro})
         except BaseException:
             if not self._stack.__exit__(*sys.exc_info()):
                 raise
@@ -259,7 +267,7 @@ class LogWriter:
             return cid
         if typename not in self._schemas:
             self._schemas[typename] = self._writer.register_schema(
-                name=typename, encoding="ros2msg", data=msgdef(typename).encode()
+                name=typename, encoding="ros2msg", data=msgdef(typename, self.ros_distro).encode()
             )
         cid = self._writer.register_channel(
             topic=topic,
@@ -277,7 +285,7 @@ class LogWriter:
         writes them) with log and publish time ``t`` (seconds of log time; MCAP times
         are unsigned, so a time before the epoch, e.g. a message stamped before a
         simulation's t = 0, is logged at 0: its header keeps its stamp)."""
-        data = msg if isinstance(msg, bytes) else serialize(msg, typename)
+        data = msg if isinstance(msg, bytes) else serialize(msg, typename, self.ros_distro)
         self.write_cdr(topic, typename, data, t)
 
     def write_cdr(self, topic: str, typename: str, data: bytes, t: float) -> None:
