@@ -162,6 +162,7 @@ def excerpt_logs(tmp_path_factory) -> Path:
     return d
 
 
+@pytest.mark.slow  # end to end: a map and a pose-fix run of each log (4 s)
 def test_carmen_excerpt_with_odometry_on_tf(excerpt_logs: Path) -> None:
     """The CARMEN excerpt with /odom as /tf transforms (and other transforms beside them):
     ``map --trajectory`` builds the same map, and ``run --map --fix pose --fix-from +0``

@@ -178,16 +178,17 @@ def test_a_gap_in_the_first_wheel_turn_is_motion_not_a_wrap(tiny: Tiny, tmp_path
 
 
 def test_odometry_that_stops_mid_log_is_said(tiny: Tiny, tmp_path: Path) -> None:
-    """/odom (the encoders dropped) whose driver stops 20 s into the log while the camera
-    goes on: the frames after it are skipped (an estimate held still, flagged
-    events_lost) and one line on stderr says the odometry fell silent (it said only that
-    the filter looked lost)."""
+    """/odom (the encoders dropped) whose driver stops 20 s into the log, its odom ->
+    base_link on /tf with it (no other odometry to read: tests/test_odometry_sources_cut.py),
+    while the camera goes on: the frames after it are skipped (an estimate held still,
+    flagged events_lost) and one line on stderr says the odometry fell silent (it said
+    only that the filter looked lost)."""
     start = None
 
     def stop(m: LogMessage):
         nonlocal start
         start = m.t if start is None else start
-        if m.topic == JOINTS or (m.topic == ODOM and m.t > start + 20.0):
+        if m.topic == JOINTS or (m.topic in (ODOM, "/tf") and m.t > start + 20.0):
             return []
         return keep(m)
 

@@ -65,6 +65,7 @@ from fuzzyslam.slam.latency import delay_odometry
 from fuzzyslam.slam.log_setup import (
     GAP_PERIODS,
     ODOM_GAP_S,
+    WRAPPED_ANGLES,
     camera_info_problem,
     detection_mount_of,
     filter_start_pose,
@@ -77,7 +78,7 @@ from fuzzyslam.slam.log_setup import (
     tf_odometry,
     twist_only,
 )
-from fuzzyslam.slam.odom_gate import REANCHOR, SPEED_MARGIN, OdomGate, within_speed
+from fuzzyslam.slam.odom_gate import ORIGIN, REANCHOR, SPEED_MARGIN, OdomGate, within_speed
 from fuzzyslam.stamps import in_stamp_order
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.ranges import RangeSensor, open_ranges
@@ -88,13 +89,19 @@ from fuzzyslam.streams.tf import Rigid, static_tree
 CAMERA_FRAME = "ceiling_camera"
 # what reading the events changes that the run reports (with the reader's damage):
 # LogInputs.read_state, which slam/prefetch.py sends back from the child that read them
-READ_STATE = ("warnings", "first_problem", "gap_seconds", "own_covariances", "ring_stats", "lost")
+READ_STATE = (
+    "warnings",
+    "first_problem",
+    "gap_seconds",
+    "own_covariances",
+    "ring_stats",
+    "lost",
+    "odometry_restarts",
+)
 # s of stamps a late message may lag the newest one read and still be put in its place
 # (LogInputs._stamp_order): camera and detector pipelines deliver within a second
 REORDER_S = 5.0
 CLOCK_STEP_MESSAGES = 3  # odometry messages in a row off the clock by one amount: a step
-# rad: wheel angles published wrapped lie in (-pi, pi] or [0, 2 pi) (LogInputs._unwrapped)
-WRAPPED_ANGLES = (-math.pi - 1e-9, math.tau + 1e-9)
 
 
 @dataclass
@@ -137,6 +144,8 @@ class LogInputs:
     _names: list = field(default_factory=list)
     _idx: list = field(default_factory=list)
     _rejected_in_row: int = 0
+    # the stamps (s) at which the odometry driver restarted at the origin (_restarted)
+    odometry_restarts: list[float] = field(default_factory=list)
     _cov_cache: tuple | None = None
     _detect: Callable | None = None  # slam/detect.py's detect_lamps, from the first frame
     ranges: RangeSensor | None = None
@@ -171,6 +180,25 @@ class LogInputs:
         self.warnings[key] = self.warnings.get(key, 0) + count
         if problem and not self.first_problem:
             self.first_problem = problem
+
+    def restart_line(self) -> str:
+        """The one line on the odometry driver's restarts read (:meth:`_restarted`),
+        '' for none: when (the new stream's first stamps, s) and what was done.
+
+        Returns
+        -------
+        str
+        """
+        at = self.odometry_restarts
+        if not at:
+            return ""
+        when = ", ".join(f"{t:.3f}" for t in at[:5]) + (", ..." if len(at) > 5 else "")
+        times = "" if len(at) == 1 else f" {len(at)} times"
+        return (
+            f"{self.reader.path}: {self.odom_topic}'s driver restarted{times} at t = {when} s "
+            "(its pose jumped to near (0, 0, 0) and went on from there): read on from the "
+            "new origin, the motion since the restart kept (warnings.odometry_restarts)"
+        )
 
     def read_state(self) -> dict[str, Any]:
         """What reading the events has changed that the run reports: the fields of
@@ -277,7 +305,10 @@ class LogInputs:
             else:
                 ev = lamp(t, msg)
             if ev is not None:
-                yield ev
+                if type(ev) is list:  # several increments at once (_restarted)
+                    yield from ev
+                else:
+                    yield ev
 
     def _stamp_order(self, events: Iterator[Event]) -> Iterator[Event]:
         """``events`` (read in log-time order, each topic in stamp order) in header-stamp
@@ -407,13 +438,49 @@ class LogInputs:
             self.warn("odometry_jumps_kept", f"odometry jump at t={t:.3f} s kept as motion")
         if prev is None:
             return None, (pose, t)
+        if status == "restart":
+            return self._restarted(prev)
+        return self._pose_step(t, pose, prev)
+
+    def _pose_step(self, t: float, pose: tuple[float, float, float], prev):
+        """The increment from the pose ``prev`` ((x, y, theta), t) to ``pose`` at ``t``
+        (:meth:`_odom_pose`) through :meth:`_increment`."""
         (px, py, pth), pt = prev
         dx, dy = pose[0] - px, pose[1] - py
         c, s = math.cos(pth), math.sin(pth)
         rx = c * dx + s * dy
         d_trans = math.copysign(math.hypot(dx, dy), rx)
-        d_rot = math.remainder(yaw - pth, math.tau)
+        d_rot = math.remainder(pose[2] - pth, math.tau)
         return self._increment(t, t - pt, d_trans, d_rot, prev, (pose, t))
+
+    def _restarted(self, prev):
+        """The increments of an odometry driver that restarted at the origin (the gate's
+        ``"restart"``, slam/odom_gate.py): from the origin (0, 0, 0) at the last accepted
+        pose's time to the first pose after the restart (the motion since the restart),
+        then from pose to pose of those the gate held back to confirm it, each at its own
+        stamp (the reorder buffer puts them before the frames read meanwhile). Only the
+        motion between the last pose before the restart and the restart itself is lost.
+        Counted (``warnings.odometry_restarts``) and said after the run
+        (``odometry_restarts``: the first pose's times)."""
+        poses = self._gate.restarted
+        t_new = poses[0][0]
+        held = len(poses) - 1  # refused while the gate waited: not stray after all
+        jumps = self.warnings.get("odometry_jumps", 0) - held
+        if jumps > 0:
+            self.warnings["odometry_jumps"] = jumps
+        else:
+            self.warnings.pop("odometry_jumps", None)
+        if self.first_problem.startswith(f"odometry pose at t={t_new:.3f} s"):
+            self.first_problem = ""
+        self.warn("odometry_restarts", f"{self.odom_topic}: driver restarted at t={t_new:.3f} s")
+        self.odometry_restarts.append(t_new)
+        out = []
+        ref = (ORIGIN, prev[1])
+        for tk, pk in poses:
+            ev, ref = self._pose_step(tk, tuple(pk), ref)
+            if ev is not None:
+                out.append(ev)
+        return out or None, ref
 
     def _odom_twist(self, t: float, msg, prev):
         """An Odometry twist (forward speed v, turn rate w in the base frame, REP 105) as
@@ -724,15 +791,16 @@ def open_inputs(
     """
     reader = LogReader(path)
     tp = cfg.topics
-    odom_topic, odom_source, passed_over, names = odometry_source(reader, cfg)
+    source = odometry_source(reader, cfg)
+    odom_topic, odom_source, passed_over, names = source[:4]
     pair = (names.odom, names.base) if names is not None else None
     period, clock, odom_first = odometry_clock(reader, odom_topic, pair)
     notes: list[str] = []
     if pair is not None:
-        why = f"no {tp.odom}"
+        why = source.odom_passed_over or f"no {tp.odom}"
         if passed_over:
             why = f"{passed_over}, and {why}"
-        elif cfg.slam.use_encoders:
+        elif cfg.slam.use_encoders and not source.odom_passed_over:
             why = f"no {tp.joint_states} or {tp.odom}"
         notes.append(
             f"{path}: {why}: the odometry is read from {odom_topic}'s {pair[0]} -> {pair[1]} "
@@ -787,7 +855,7 @@ def open_inputs(
         lamp_topic, lamp_source = "", "none"  # odometry alone (and the aids' fixes)
     sensor = open_ranges(reader, cfg, ranges, base=frames.base) if need_rings else None
     mounts = sensor.mounts if sensor is not None else np.zeros((0, 3))
-    gate = OdomGate()
+    gate = OdomGate(restarts=True)  # a driver restart read on from its origin
     pose = filter_start_pose(reader, cfg, odom_topic, odom_source, start_pose, gate, pair)
     inputs = LogInputs(
         reader,

@@ -20,10 +20,10 @@ import numpy as np
 from fuzzyslam.camera import distortion_coefficients
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
-from fuzzyslam.robot import WHEEL_NAMES
-from fuzzyslam.se2 import quaternion_to_yaw
+from fuzzyslam.robot import WHEEL_NAMES, odometry_to_wheel_increments
+from fuzzyslam.se2 import between, interpolate_poses, quaternion_to_yaw
 from fuzzyslam.slam.events import TfFrames
-from fuzzyslam.slam.odom_gate import OdomGate, first_plausible_pose
+from fuzzyslam.slam.odom_gate import SPEED_MARGIN, OdomGate, first_plausible_pose
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.logmeta import read_scenario
 from fuzzyslam.streams.reader import LogMessage, LogReader
@@ -34,6 +34,8 @@ GAP_PERIODS = 3.0  # ... or for this many of its periods (the median step), whic
 SLOW_ODOMETRY_S = 0.5  # odometry slower than this (its median step): a note (slam/stage.py)
 # (CARMEN logs at 4.6 and 5.4 Hz localise as well as faster ones; ACES cut to 1.1 Hz not)
 PERIOD_SAMPLES = 500  # odometry messages its period and clock are measured on
+# rad: wheel angles published wrapped lie in (-pi, pi] or [0, 2 pi) (LogInputs._unwrapped)
+WRAPPED_ANGLES = (-math.pi - 1e-9, math.tau + 1e-9)
 
 
 def camera_info_problem(info) -> str | None:
@@ -199,15 +201,19 @@ class OdometrySource(NamedTuple):
     kind: str  # encoders, odom or tf
     passed_over: str  # why the encoders were passed over ('' when they were not)
     tf: TfFrames | None  # kind tf: the odom and base frames of its transforms
+    # kind tf in a log that has topics.odom: why /odom was passed over (odom_cut_short)
+    odom_passed_over: str = ""
 
 
 def odometry_source(reader: LogReader, cfg: Config) -> OdometrySource:
     """The odometry the filter reads: ``topics.joint_states`` (\"encoders\") when
     ``slam.use_encoders`` and the log has it and its wheels can be read
-    (:func:`joint_state_problem`), else ``topics.odom`` (\"odom\", nav_msgs/Odometry),
+    (:func:`joint_state_problem`) and agree with the log's other odometry
+    (:func:`reversed_wheels`), else ``topics.odom`` (\"odom\", nav_msgs/Odometry),
+    unless it falls silent long before /tf's odom -> base does (:func:`odom_cut_short`),
     else the odom -> base transforms of ``topics.tf`` (\"tf\", as slam_toolbox and
     gmapping read it: a log of /scan and /tf alone; :func:`tf_odometry_frames`, read as
-    Odometry poses by :func:`tf_odometry`).
+    Odometry poses by :func:`tf_odometry`). Decided once, for the whole run.
 
     Parameters
     ----------
@@ -228,9 +234,15 @@ def odometry_source(reader: LogReader, cfg: Config) -> OdometrySource:
     if cfg.slam.use_encoders and reader.has(tp.joint_states):
         problem = joint_state_problem(reader, tp.joint_states, cfg.robot.wheel_joints)
         if not problem:
-            return OdometrySource(tp.joint_states, "encoders", "", None)
-        problem = f"{tp.joint_states} {problem}"
+            problem = reversed_wheels(reader, cfg)
+            if not problem:
+                return OdometrySource(tp.joint_states, "encoders", "", None)
+        else:
+            problem = f"{tp.joint_states} {problem}"
     if reader.has(tp.odom):
+        cut = odom_cut_short(reader, cfg)
+        if cut is not None:
+            return OdometrySource(tp.tf, "tf", problem, cut[0], cut[1])
         return OdometrySource(tp.odom, "odom", problem, None)
     frames = tf_odometry_frames(reader, cfg)
     if frames is not None:
@@ -254,6 +266,211 @@ def odometry_source(reader: LogReader, cfg: Config) -> OdometrySource:
         f"{TfFrames().odom} -> {' or '.join(BASE_ALIASES)} transform "
         f"(set them in {option}; the log has: {have})",
     )
+
+
+def odom_cut_short(reader: LogReader, cfg: Config) -> tuple[TfFrames, str] | None:
+    """The /tf odometry to read instead of ``topics.odom`` when /odom covers markedly less
+    of the log than /tf's odom -> base transforms (a driver whose /odom publisher stopped
+    while its /tf broadcaster, or another node's, went on), with the reason in one line;
+    None to read /odom.
+
+    The rule is the odometry's own gap (:func:`odometry_clock`): /odom is silent for
+    longer than gap = max(``ODOM_GAP_S``, ``GAP_PERIODS`` periods) after its last message
+    while /tf carries an odom -> base transform logged later than that, and /tf's
+    odometry starts no later than /odom's first message + gap (it loses nothing at the
+    start). Read as /odom, such a run holds still from /odom's end on ("fell silent").
+    Cheap: /odom's last message comes from its last chunks (``LogReader.last_time``), and
+    /tf is read from then on only until its first odom -> base; a log whose /odom reaches
+    within ``ODOM_GAP_S`` of the log's end is not looked at further.
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    cfg : Config
+        The config (``topics.odom``, ``topics.tf``).
+
+    Returns
+    -------
+    (TfFrames, str) or None
+        /tf's odometry frames (:func:`tf_odometry_frames`) and why /odom was passed over.
+    """
+    tp = cfg.topics
+    if not reader.has(tp.tf):
+        return None
+    last = reader.last_time(tp.odom)
+    if last is None or last >= reader.end - ODOM_GAP_S:
+        return None  # /odom reaches the log's end (or has no message: not this rule)
+    frames = tf_odometry_frames(reader, cfg)
+    if frames is None:
+        return None
+    pair = (frames.odom, frames.base)
+    period = odometry_clock(reader, tp.odom)[0]
+    gap = max(ODOM_GAP_S, GAP_PERIODS * period)
+    first_odom = next(iter(reader.messages([tp.odom])), None)
+    first_tf = next(odometry_messages(reader, tp.tf, pair), None)
+    if first_odom is None or first_tf is None or first_tf.t > first_odom.t + gap:
+        return None
+    later = tf_odometry(reader.messages([tp.tf], last + gap), tp.tf, pair)
+    if next(later, None) is None:
+        return None
+    t0 = reader.start
+    return frames, (
+        f"{tp.odom} falls silent at {last - t0:.2f} s of the log's {reader.end - t0:.2f} s "
+        f"(its driver stopped?) while {tp.tf}'s {pair[0]} -> {pair[1]} goes on"
+    )
+
+
+CHECK_PATH_M = 2.0  # m of the other odometry's first motion the encoders are checked on
+CHECK_TURN_RAD = math.pi / 2  # ... and rad of turn (|d_rot| summed): a turn to compare
+CHECK_MESSAGES = 5000  # of its messages read at most (a robot idle that long: no check)
+CHECK_STEP_S = 0.25  # s: the grid both are compared on (latencies, rates differ)
+CHECK_WHEEL_RAD = math.pi  # rad each wheel must turn (by both sources) for a verdict
+CHECK_AGREE = 0.5  # |correlation| of a wheel's increments with the other's: a verdict
+
+
+def reversed_wheels(reader: LogReader, cfg: Config) -> str:
+    """Why the wheel encoders must not be read ('' when they may): a wheel whose angle
+    runs against the motion the log's other odometry (``topics.odom``, else /tf's
+    odom -> base) records over its first stretch of motion (``CHECK_PATH_M`` of path and
+    ``CHECK_TURN_RAD`` of turn, at most ``CHECK_MESSAGES`` messages), in one line naming
+    the wheel and what to check.
+
+    A mirrored motor whose sign the driver does not flip publishes a wheel angle that
+    runs backwards: read as it is, driving straight looks like spinning on the spot
+    (d_rot = r (dR - dL) / b with dL of the wrong sign) and the run is wrong from the
+    start. The other odometry's increments (d_trans, d_rot) on a ``CHECK_STEP_S`` grid
+    give the wheel increments it implies, dL = (d_trans - b d_rot / 2) / r and
+    dR = (d_trans + b d_rot / 2) / r (``robot.odometry_to_wheel_increments``, nominal r
+    and b); each measured wheel's increments are compared with them by their
+    correlation about zero, c = sum(d_meas d_implied) / sqrt(sum d_meas^2 sum
+    d_implied^2) (+1: the same motion, -1: reversed; an error of r only scales the
+    implied increments, one of b shifts them little). A wheel with c < -``CHECK_AGREE``
+    is reversed; both wheels agreeing (c > ``CHECK_AGREE``) while the turns
+    anti-correlate are the two joints swapped. No verdict (''), when either source or
+    either wheel moves less than ``CHECK_WHEEL_RAD`` or the log has no other odometry.
+    With a verdict :func:`odometry_source` reads the other odometry: the driver's own,
+    which the robot drove by (a driver that applies its sign flip to its odometry but
+    publishes the raw joint angles).
+
+    Parameters
+    ----------
+    reader : LogReader
+        The log.
+    cfg : Config
+        The config (``topics``, ``robot`` wheel joints, radius and base).
+
+    Returns
+    -------
+    str
+        One line ('' for none).
+    """
+    tp, robot = cfg.topics, cfg.robot
+    pair = None
+    other = tp.odom
+    if not reader.has(tp.odom):
+        frames = tf_odometry_frames(reader, cfg)
+        if frames is None:
+            return ""
+        other, pair = tp.tf, (frames.odom, frames.base)
+    t, poses = [], []
+    path = turn = 0.0
+    for m in itertools.islice(odometry_messages(reader, other, pair), CHECK_MESSAGES):
+        p = M.pose_of(m.msg.pose.pose)
+        if not np.all(np.isfinite(p)):
+            continue
+        if poses:
+            path += math.hypot(p[0] - poses[-1][0], p[1] - poses[-1][1])
+            turn += abs(math.remainder(p[2] - poses[-1][2], math.tau))
+        t.append(m.t)
+        poses.append(p)
+        if path >= CHECK_PATH_M and turn >= CHECK_TURN_RAD:
+            break
+    if len(t) < 2 or t[-1] - t[0] < 2 * CHECK_STEP_S:
+        return ""
+    js_t, js = [], []
+    left, right = robot.wheel_joints
+    for m in reader.messages([tp.joint_states]):
+        if m.t > t[-1]:
+            break
+        names = list(m.msg.name)
+        pos = m.msg.position
+        if left in names and right in names and len(pos) == len(names):
+            js_t.append(m.t)
+            js.append((pos[names.index(left)], pos[names.index(right)]))
+    if len(js_t) < 2:
+        return ""
+    return _wheel_verdict(
+        np.asarray(t), np.asarray(poses), np.asarray(js_t), np.asarray(js, dtype=float), cfg, other
+    )
+
+
+def _wheel_verdict(
+    t: np.ndarray, poses: np.ndarray, js_t: np.ndarray, wheels: np.ndarray, cfg: Config, other: str
+) -> str:
+    """:func:`reversed_wheels`' comparison of the wheel angles ``wheels`` (M, 2: left,
+    right, rad) logged at ``js_t`` (M,) with the poses ``poses`` (N, 3) of the odometry
+    ``other`` logged at ``t`` (N,), on their common stretch; its line ('' for none)."""
+    robot = cfg.robot
+    # wheel angles published wrapped unwrapped, as LogInputs._unwrapped does: a jump over
+    # pi, faster than the wheel can turn, between two angles both in WRAPPED_ANGLES
+    d = np.diff(wheels, axis=0)
+    rate = SPEED_MARGIN * (robot.max_speed + 0.5 * robot.max_turn_rate * robot.wheel_base)
+    rate /= robot.wheel_radius
+    lo, hi = WRAPPED_ANGLES
+    inside = (wheels >= lo) & (wheels <= hi)
+    wrapped = (np.abs(d) > np.maximum(math.pi, rate * np.diff(js_t))[:, None]) & (
+        inside[1:] & inside[:-1]
+    )
+    d = np.where(wrapped, np.remainder(d + math.pi, math.tau) - math.pi, d)
+    ang = np.vstack([wheels[:1], wheels[:1] + np.cumsum(d, axis=0)])
+    lo, hi = max(t[0], js_t[0]), min(t[-1], js_t[-1])
+    if hi - lo < 2 * CHECK_STEP_S:
+        return ""
+    grid = np.arange(lo, hi + 1e-9, CHECK_STEP_S)
+    p = interpolate_poses(t, poses, grid)
+    rel = between(p[:-1], p[1:])  # each step in the frame of its start: (d_trans, ., d_rot)
+    want_l, want_r = odometry_to_wheel_increments(
+        rel[:, 0], rel[:, 2], robot.wheel_radius, robot.wheel_base
+    )
+    got_l = np.diff(np.interp(grid, js_t, ang[:, 0]))
+    got_r = np.diff(np.interp(grid, js_t, ang[:, 1]))
+    moved = [np.sum(np.abs(v)) for v in (want_l, want_r, got_l, got_r)]
+    if min(moved) < CHECK_WHEEL_RAD:
+        return ""
+
+    def corr(a: np.ndarray, b: np.ndarray) -> float:
+        return float(np.dot(a, b) / math.sqrt(np.dot(a, a) * np.dot(b, b)))
+
+    c_l, c_r = corr(got_l, want_l), corr(got_r, want_r)
+    b = robot.wheel_base
+    turn_got = float(np.sum(got_r - got_l)) * robot.wheel_radius / b
+    turn_want = float(np.sum(rel[:, 2]))
+    said = (
+        f"over the first {grid[-1] - grid[0]:.1f} s of motion {other} turns "
+        f"{math.degrees(turn_want):+.0f} deg, the encoders {math.degrees(turn_got):+.0f} deg"
+    )
+    tp = cfg.topics
+    left, right = robot.wheel_joints
+    bad = [w for w, c in ((left, c_l), (right, c_r)) if c < -CHECK_AGREE]
+    if bad:
+        which = " and ".join(bad)
+        return (
+            f"{tp.joint_states}: {which}'s angle runs against the motion {other} records "
+            f"({said}): {'that wheel looks' if len(bad) == 1 else 'both wheels look'} "
+            "reversed (a mirrored motor whose sign the driver does not flip: check its "
+            "direction / invert setting, and that robot.left_wheel_joint and "
+            "right_wheel_joint name the right joints)"
+        )
+    if min(c_l, c_r) > CHECK_AGREE and np.sum(np.abs(rel[:, 2])) >= 0.5 * CHECK_TURN_RAD:
+        d_rot_got = (got_r - got_l) * robot.wheel_radius / b
+        if corr(d_rot_got, rel[:, 2]) < -CHECK_AGREE:
+            return (
+                f"{tp.joint_states}: the encoders turn against {other} ({said}): "
+                f"{left} and {right} look swapped (check robot.left_wheel_joint and "
+                "right_wheel_joint)"
+            )
+    return ""
 
 
 TF_SEARCH_S = 30.0  # s of /tf searched for odom -> base (a driver starts within this)

@@ -27,18 +27,31 @@ increment is measured from the last accepted pose. After ``reset_after`` refusal
 row the stream has not come back: it really moved (a correction of the pose stream, a
 turn faster than the limits), and the latest pose is accepted with the whole increment
 from the last accepted one (``"reset"``: the motion is kept, only delayed).
+
+A driver restart (``restarts``) is told from both as soon as it is unambiguous: the pose
+jumps to near the odometry's origin (0, 0, 0), where a robot that restarted its
+odometry is, and then goes on smoothly from there. A refused pose that the robot can
+have reached from the origin since the last accepted pose (the arc test above, from
+(0, 0, 0) over that time) is a candidate; ``RESTART_CONFIRM`` poses after it, each a
+plausible increment from the one before and none a plausible one from the last accepted
+pose (the stream did not come back), confirm it (``"restart"``: the candidate and the
+poses after it, :attr:`OdomGate.restarted`, are the new stream, read from the origin
+on). A single stray pose at the origin, or one that the stream then leaves, is refused
+as any other.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 SPEED_MARGIN = 3.0  # increments over this many times the robot's top speed: refused
 SLACK_S = 0.2  # s of top speed always allowed (stamp jitter, a first message)
 REANCHOR = 5  # after this many refusals in a row, restart from the latest reading
+RESTART_CONFIRM = 2  # poses that go on from a pose at the origin: a driver restart
+ORIGIN = (0.0, 0.0, 0.0)  # where a restarted driver's odometry starts (its odom frame's)
 
 
 def within_speed(
@@ -79,9 +92,14 @@ class OdomGate:
     lateral_tol: float = 0.15
     lateral_frac: float = 0.2
     reset_after: int = 10
+    restarts: bool = False  # tell a driver restart to the origin (module docstring)
     _pose: np.ndarray | None = None
     _t: float = 0.0
     _refused: int = 0
+    # a restart's candidate and the poses that went on from it: (t, pose) each
+    _pending: list = field(default_factory=list)
+    # after "restart": the new stream's poses so far, the candidate first ((t, pose) each)
+    restarted: list = field(default_factory=list)
 
     def prime(self, t: float, pose: np.ndarray) -> None:
         """Start from a known reference pose (e.g. :func:`first_plausible_pose`).
@@ -94,6 +112,7 @@ class OdomGate:
             The reference pose.
         """
         self._pose, self._t, self._refused = np.asarray(pose, dtype=float), float(t), 0
+        self._pending = []
 
     @property
     def pose(self) -> np.ndarray | None:
@@ -102,8 +121,10 @@ class OdomGate:
 
     def step(self, t: float, pose: np.ndarray) -> str:
         """``"first"``, ``"ok"`` (an increment from :attr:`pose` to ``pose``),
-        ``"jump"`` (refused) or ``"reset"`` (accepted after refusals: an increment from the
-        previous reference, read before the call, to ``pose``).
+        ``"jump"`` (refused), ``"reset"`` (accepted after refusals: an increment from the
+        previous reference, read before the call, to ``pose``) or ``"restart"`` (the
+        driver restarted at the origin: :attr:`restarted` holds the poses since, the
+        last one ``pose``; module docstring).
 
         Parameters
         ----------
@@ -122,12 +143,31 @@ class OdomGate:
             return "first"
         if self.plausible(self._pose, pose, t - self._t):
             self._pose, self._t, self._refused = pose, t, 0
+            if self._pending:
+                self._pending = []
             return "ok"
+        if self.restarts and self._restart(t, pose):
+            self._pose, self._t, self._refused = pose, t, 0
+            self.restarted, self._pending = self._pending, []
+            return "restart"
         self._refused += 1
         if self._refused >= self.reset_after:
-            self._pose, self._t, self._refused = pose, t, 0
+            self._pose, self._t, self._refused, self._pending = pose, t, 0, []
             return "reset"
         return "jump"
+
+    def _restart(self, t: float, pose) -> bool:
+        """Follow a refused pose as a possible restart (module docstring): True when it
+        confirms one."""
+        pend = self._pending
+        if pend:
+            t_last, last = pend[-1]
+            if self.plausible(last, pose, t - t_last):
+                pend.append((t, pose))
+                return len(pend) > RESTART_CONFIRM
+        # since the last accepted pose, could the robot have come here from the origin?
+        self._pending = [(t, pose)] if self.plausible(ORIGIN, pose, t - self._t) else []
+        return False
 
     def plausible(self, a: np.ndarray, b: np.ndarray, dt: float) -> bool:
         """Whether the increment from pose ``a`` to ``b`` in ``dt`` s is possible.

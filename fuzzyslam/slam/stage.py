@@ -442,6 +442,9 @@ def _run_once(
             drawing.result()
         summary = make_summary(res, inputs, time.perf_counter() - wall0, aids, streamed)
         write_summary(tmp, as_json(summary))
+    restarts = inputs.restart_line()  # found while reading the events
+    if restarts and not _quiet:
+        note(restarts)
     if tell and not _quiet:
         _tell(summary, cfg)
     return summary

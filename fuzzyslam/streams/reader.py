@@ -261,6 +261,35 @@ class LogReader:
         except json.JSONDecodeError:
             raise InputError(self.path, f"metadata '{name}' is not valid JSON") from None
 
+    def last_time(self, topic: str) -> float | None:
+        """The log time of the last message of ``topic`` (a stream that stopped before the
+        log ended). On an intact file only its last chunks are read: a chunk whose
+        Message Indexes name the topic holds one of its messages at or after the chunk's
+        start, so the last one lies at or after the latest such start; else (no summary,
+        chunks without Message Indexes) all its messages are read.
+
+        Parameters
+        ----------
+        topic : str
+            The topic.
+
+        Returns
+        -------
+        float or None
+            Seconds; None when the topic has no message.
+        """
+        s, start = self._summary, None
+        if s is not None and s.chunks and all(c.message_indexes for c in s.chunks):
+            ids = {cid for cid, (tp, _) in s.channels.items() if tp == topic}
+            starts = [c.start for c in s.chunks if ids & c.message_indexes.keys()]
+            if not starts:
+                return None
+            start = max(starts) / 1e9 - 1e-3  # (a ms earlier: the float's rounding)
+        last = None
+        for m in self.messages([topic], start):
+            last = m.t
+        return last
+
     def messages(
         self, topics: Iterable[str] | None = None, start: float | None = None
     ) -> Iterator[LogMessage]:
