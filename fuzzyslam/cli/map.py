@@ -94,9 +94,11 @@ def map_cmd(
       fgm.npz            per-cell masses, grid geometry, freeze time, log identity
       fgm.yaml, fgm.pgm  nav2 map_server occupancy picture (trinary)
       references.yaml    each corridor's reference angle (rad, mod pi), strength, region
+      fgm.mcap           /map, /map_conflict, /map_references for Foxglove
       fgm.png            the FGM with the path, references and lamps (paper's Fig. 1)
       conflict.png       the conflict mass per cell
       hough.png          corridor segments and an FLM with their Hough planes (Fig. 2)
+                         (the three PNGs not with --no-figures)
       calibration.yaml   the odometry calibration at the freeze time (when the
                          trajectory's run calibrated: --calibration)
       summary.json       the JSON printed on stdout

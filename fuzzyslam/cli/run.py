@@ -13,7 +13,6 @@ from fuzzyslam.cli import (
     config_option,
     emit,
     ranges_option,
-    seed_option,
     stage_call,
 )
 
@@ -115,7 +114,14 @@ def _start_pose_bounds() -> tuple[float, float]:
     "process may use >= 2 CPUs; FUZZYSLAM_PREFETCH=0 turns it off too). The outputs are "
     "the same either way.",
 )
-@seed_option
+@click.option(
+    "--seed",
+    type=click.IntRange(min=0),
+    default=None,
+    help="Accepted so that a pipeline can pass one seed to every stage; it changes "
+    "nothing: run is deterministic without it (nothing in the filter, the fixes or the "
+    "maps is random), and the same log and config give the same files.",
+)
 def run_command(
     log: Path,
     outdir: Path,
@@ -144,10 +150,15 @@ def run_command(
     \b
     Writes trajectory.tum, odometry.tum (dead reckoning), covariance.csv,
     landmarks.yaml, updates.csv (innovation and NIS of every update attempt),
-    estimates.mcap (/slam/pose, /tf, /slam/landmarks for Foxglove) and summary.json;
-    with --map also heading_fixes.csv (heading fixes), pose_fixes.csv (--fix pose),
-    changes.csv and changes.png (--fix pose with fixes.detect_changes), and /map and the
-    fixes in estimates.mcap.
+    estimates.mcap (/slam/pose; /tf map -> odom, and odom -> base_link unless the
+    log's /tf carries it; /slam/landmarks: for Foxglove) and summary.json; with
+    slam.calibrate (on in paper.yaml and the presets that extend it, except
+    real_detections.yaml) also calibration.csv and calibration.yaml (the odometry
+    factors over time, at the end);
+    with --map also heading_fixes.csv (heading fixes, or --fix pose with
+    fixes.pose_with_heading), pose_fixes.csv (--fix pose), changes.csv and changes.png
+    (--fix pose with fixes.detect_changes), and /map and the fixes in estimates.mcap
+    (a fix topic once a fix is formed).
     The JSON summary is also printed on stdout; progress goes to stderr.
     """
     from fuzzyslam.slam.stage import run

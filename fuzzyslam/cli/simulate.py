@@ -46,6 +46,7 @@ def simulate(
       /sonar/s00 .. /sonar/s15   Range, a whole ring per stamp, sonar rate (or one
                                  sonar every sonar.firing_gap_s, a Pioneer's ring)
       /ceiling_camera/image_raw  mono8 frames, + /ceiling_camera/camera_info
+      /tf                        odom -> base_link (the dead reckoning), robot rate
       /tf_static                 base_link -> sonar_NN, ceiling_camera
       /sim/events                JSON of run starts/ends, lamp failures, bumps
       /sim/world                 walls and lamps as markers (Foxglove), at t=0
