@@ -11,6 +11,8 @@ Exit codes:
 
 from __future__ import annotations
 
+from fuzzyslam.summary import path_text
+
 EXIT_OK = 0
 EXIT_INTERNAL = 1
 EXIT_USAGE = 2
@@ -31,7 +33,9 @@ class InputError(FuzzyslamError):
     def __init__(self, path: object, problem: str) -> None:
         self.path = str(path)
         self.problem = problem
-        super().__init__(f"{self.path}: {problem}")
+        # the message shows the path as the text outputs do (summary.path_text: valid
+        # Unicode under any locale); ``path`` keeps it as the system gave it
+        super().__init__(f"{path_text(self.path)}: {problem}")
 
     def __reduce__(self) -> tuple:
         """Pickled as (type, path, problem): the exception comes back whole from a child

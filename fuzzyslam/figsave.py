@@ -24,10 +24,13 @@ from pathlib import Path
 from typing import ParamSpec, TypeVar
 
 import matplotlib
+import matplotlib.style
 import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import to_rgba_array
 from matplotlib.figure import Figure
+
+from fuzzyslam.summary import path_text
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -77,15 +80,24 @@ SOFTWARE = f"Matplotlib version{matplotlib.__version__}, https://matplotlib.org/
 
 
 def figure_style() -> contextlib.AbstractContextManager:
-    """The figures' one style (:data:`STYLE`: font sizes, line widths) as a context: a
-    figure is made, drawn and saved inside it (tick labels are made at the draw).
+    """The figures' one style (:data:`STYLE`: font sizes, line widths) on matplotlib's
+    defaults, as a context: a figure is made, drawn and saved inside it (tick labels are
+    made at the draw).
+
+    The style starts from matplotlib's own defaults, not from the user's settings (a
+    ``matplotlibrc`` in MPLCONFIGDIR, MATPLOTLIBRC or the working directory: fonts, grid,
+    colours, line widths), so that the same inputs give the same PNG bytes anywhere.
+    Matplotlib's ``"default"`` style sets every setting of the picture and leaves those
+    of the session alone (backend, interactive, toolbar, ...): the figure process forked
+    by a run (``forked.py``) keeps its canvas.
 
     Returns
     -------
     context manager
-        ``matplotlib.rc_context(STYLE)``.
+        ``matplotlib.style.context(["default", STYLE])``: the settings are restored on
+        leaving it.
     """
-    return matplotlib.rc_context(STYLE)
+    return matplotlib.style.context(["default", STYLE])
 
 
 def styled(fn: Callable[P, R]) -> Callable[P, R]:
@@ -123,15 +135,17 @@ def log_name(path: str | os.PathLike | None) -> str:
     Returns
     -------
     str
-        The name; empty for None or an empty path.
+        The name, as :func:`fuzzyslam.summary.path_text` shows it (valid Unicode under
+        any locale: matplotlib cannot draw the lone surrogates of a name the locale
+        could not decode); empty for None or an empty path.
     """
     if path is None or str(path) == "":
         return ""
     p = Path(path)
     generic = {"log.mcap", "truth.tum", "trajectory.tum", "estimates.mcap", "."}
     if p.name in generic and p.parent.name:
-        return f"{p.parent.name}/{p.name}"
-    return p.name
+        return path_text(f"{p.parent.name}/{p.name}")
+    return path_text(p.name)
 
 
 def fixed_layout(

@@ -5,12 +5,17 @@ Each stage builds its summary as a dataclass (``slam.summary.RunSummary``,
 ``maps.summary.MapSummary``, ``evaluation.results.Metrics``, ``reproduce.report.Results``;
 nested dataclasses for their sections), so that a metric renamed or left out is a
 ``TypeError`` where it is made, not a blank where it is read. :func:`as_json` turns
-such a tree into the JSON object every file and stdout carry (``summary_text``)."""
+such a tree into the JSON object every file and stdout carry (``summary_text``).
+
+A path (or any text the system gave: a command-line argument, a file's name) enters the
+text outputs (the JSON summaries, report.md, figure titles, stderr lines) as
+:func:`path_text` has it: its bytes read as UTF-8, whatever the locale."""
 
 from __future__ import annotations
 
 import json
 import math
+import os
 from dataclasses import fields, is_dataclass
 from typing import Any
 
@@ -54,11 +59,69 @@ def key(name: str) -> dict[str, str]:
     return {"key": name}
 
 
+def path_text(path: str | bytes | os.PathLike) -> str:
+    """A path as the text outputs show it (JSON summaries, report.md, CSV and YAML
+    headers, figure titles, stderr lines): its bytes on the file system decoded as UTF-8,
+    a byte sequence that is not UTF-8 as U+FFFD.
+
+    Python gives a path or command-line argument that its locale's encoding cannot
+    decode (``é/lög.mcap`` under ``LC_ALL=C`` without UTF-8 mode, or a Latin-1 name under
+    a UTF-8 locale) as lone surrogates (``"\\udcc3\\udca9"``), which no UTF-8 file can hold
+    and matplotlib cannot draw; here they become the characters they encode (or U+FFFD).
+    Also for any text the system gave (a command-line ``--label``).
+
+    Parameters
+    ----------
+    path : str, bytes or path-like
+        The path, as given or as ``os.fsdecode`` made it.
+
+    Returns
+    -------
+    str
+        Valid Unicode text (``path`` itself for a UTF-8 path under a UTF-8 locale).
+    """
+    raw = os.fspath(path)
+    if isinstance(raw, str):
+        try:
+            raw = os.fsencode(raw)  # the bytes the system gave
+        except UnicodeEncodeError:  # characters the locale's encoding lacks: text already
+            try:
+                raw = raw.encode("utf-8", "surrogateescape")
+            except UnicodeEncodeError:
+                raw = raw.encode("utf-8", "surrogatepass")
+    return raw.decode("utf-8", "replace")
+
+
+def valid_text(text: str) -> str:
+    """``text`` unchanged when it is valid Unicode (it encodes as UTF-8), else as
+    :func:`path_text` has it (lone surrogates: bytes the system gave that its locale's
+    encoding could not decode).
+
+    Parameters
+    ----------
+    text : str
+        Any text.
+
+    Returns
+    -------
+    str
+        Text that UTF-8 can hold.
+    """
+    if text.isascii():
+        return text
+    try:
+        text.encode("utf-8")
+    except UnicodeEncodeError:
+        return path_text(text)
+    return text
+
+
 def as_json(obj: Any) -> Any:
     """The JSON value of a summary: a dataclass as an object of its fields (in field
     order, each under its name or its ``key`` metadata, :data:`OMIT` ones left out),
-    dicts, lists and tuples element by element, anything else unchanged (numbers keep
-    their type: the writers choose how to print numpy scalars and NaN).
+    dicts, lists and tuples element by element, text as :func:`valid_text` has it (a path
+    the locale could not decode, as :func:`path_text`), anything else unchanged (numbers
+    keep their type: the writers choose how to print numpy scalars and NaN).
 
     Parameters
     ----------
@@ -83,6 +146,8 @@ def as_json(obj: Any) -> Any:
         return [as_json(v) for v in obj]
     if isinstance(obj, tuple):
         return tuple(as_json(v) for v in obj)
+    if isinstance(obj, str):
+        return valid_text(obj)
     return obj
 
 

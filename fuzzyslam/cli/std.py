@@ -10,6 +10,8 @@ as it would have: :class:`QuietPipe` turns the stream into the null device at th
 broken write, once, and remembers it. stderr carries only progress, notes and the error
 line, all best effort: any failed write to it (a full disk under ``2>FILE`` too) silences
 it the same way, and is never the command's failure nor blamed on an output file.
+Text written through it that holds a path the locale could not decode (lone surrogates)
+is written as :func:`fuzzyslam.summary.valid_text` has it (the path's bytes read as UTF-8).
 """
 
 from __future__ import annotations
@@ -18,6 +20,8 @@ import contextlib
 import os
 import sys
 from typing import Any, TextIO
+
+from fuzzyslam.summary import valid_text
 
 
 def open_closed_descriptors() -> None:
@@ -64,7 +68,8 @@ class QuietPipe:
             os.close(null)
 
     def write(self, text: str) -> int:
-        """Write ``text``; nothing when the reader is gone.
+        """Write ``text`` (a path in it that the locale could not decode as
+        :func:`fuzzyslam.summary.valid_text` has it); nothing when the reader is gone.
 
         Parameters
         ----------
@@ -78,7 +83,8 @@ class QuietPipe:
         """
         if not self.broken:
             try:
-                return self._stream.write(text)
+                self._stream.write(valid_text(text))
+                return len(text)
             except self._quiet:
                 self._silence()
         return len(text)

@@ -38,7 +38,7 @@ from fuzzyslam.streams.logmeta import read_scenario, read_world
 from fuzzyslam.streams.reader import MCAP_MAGIC, LogReader
 from fuzzyslam.streams.topics import Topics
 from fuzzyslam.streams.tum import format_tum, read_tum, read_tum_planar
-from fuzzyslam.summary import OMIT
+from fuzzyslam.summary import OMIT, path_text
 
 KIND_MCAP = "mcap"
 RUN_MARKS = ("trajectory.tum", "summary.json", "estimates.mcap")  # a run's, not a bag's
@@ -111,7 +111,7 @@ def read_truth(path: str | os.PathLike, progress: bool = True) -> Truth:
         if not planar:
             note(f"{path}: a 3-D trajectory: evaluated in the plane (z, roll and pitch ignored)")
         t, poses, dropped, refused = drop_stray_truth(t, poses)
-        return Truth(t, poses, source=str(path), lines_dropped=dropped, lines_refused=refused)
+        return Truth(t, poses, source=path_text(path), lines_dropped=dropped, lines_refused=refused)
     if kind != KIND_MCAP:
         raise InputError(path, "TRUTH must be a simulated MCAP log or a TUM file, not a directory")
     reader = LogReader(path)
@@ -150,7 +150,7 @@ def read_truth(path: str | os.PathLike, progress: bool = True) -> Truth:
         world,
         scenario,
         freeze,
-        str(path),
+        path_text(path),
         reader.damage(),
         lines_dropped=dropped,
         lines_refused=refused,
@@ -249,19 +249,21 @@ def read_landmark_history(path: Path, topic: str) -> list[tuple[float, np.ndarra
 def read_estimate(path: str | os.PathLike, label: str | None = None, full: bool = True) -> Estimate:
     """An estimate from a run OUTDIR (every file it holds) or a TUM file (poses only);
     ``full=False``: only what a compared estimate's row and curve need (trajectory.tum and
-    landmarks.yaml: not the covariances, updates, dead reckoning, fixes or map history)."""
+    landmarks.yaml: not the covariances, updates, dead reckoning, fixes or map history).
+    Its label and source (the report's and the figures' text) as
+    :func:`fuzzyslam.summary.path_text` has them."""
     kind = detect_kind(path)
     p = Path(path)
     if kind == KIND_TUM:
         t, poses = read_tum(p)
-        return Estimate(t, poses, label=label or p.stem, source=str(p))
+        return Estimate(t, poses, label=path_text(label or p.stem), source=path_text(p))
     if kind != KIND_RUNDIR:
         raise InputError(p, "ESTIMATE must be a run output directory or a TUM file, not a log")
     traj = p / R.TRAJECTORY
     if not traj.is_file():
         raise InputError(p, "not a run output directory (no trajectory.tum)")
     t, poses = read_tum(traj)
-    est = Estimate(t, poses, label=label or p.name, source=str(p))
+    est = Estimate(t, poses, label=path_text(label or p.name), source=path_text(p))
     if (p / R.LANDMARKS).is_file():
         est.landmarks, est.landmark_ids = R.read_landmarks(p / R.LANDMARKS)
     if not full:

@@ -39,7 +39,7 @@ from fuzzyslam.streams.ranges import open_ranges
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.sonar import RingStats, deskewed_mounts
 from fuzzyslam.streams.tum import read_tum
-from fuzzyslam.summary import OMIT, as_json
+from fuzzyslam.summary import OMIT, as_json, path_text
 
 
 @dataclass
@@ -418,9 +418,9 @@ def build_map(
     calib_csv = opts.calibration or Path(traj_path).parent / "calibration.csv"
     calib = calibration_files.at_time(calib_csv, t_end)
     summary = MapSummary(
-        log=str(log_path),
-        trajectory=str(traj_path),
-        output=str(outdir),
+        log=path_text(log_path),
+        trajectory=path_text(traj_path),
+        output=path_text(outdir),
         log_id=log_id,
         cells=int(np.prod(fgm.grid.shape)),
         shape=list(fgm.grid.shape),
