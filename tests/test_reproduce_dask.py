@@ -7,6 +7,7 @@ import contextlib
 import io
 import json
 import os
+import shutil
 import signal
 import struct
 import subprocess
@@ -573,7 +574,9 @@ def test_sweep_over_recorded_logs(tmp_path):
     cmd = json.loads((records / "g0__log1_b_log__eval.json").read_text())["command"]
     assert "truth.tum" in cmd and "--align" in cmd
     cmd = json.loads((records / "g0__log0_a_log__eval.json").read_text())["command"]
-    assert "truth.tum" not in cmd and "a/log.mcap" in cmd
+    assert "truth.tum" not in cmd and "logs/log0_a_log/log.mcap" in cmd  # a link in OUTDIR
+    link = tmp_path / "sw" / "logs" / "log0_a_log" / "log.mcap"
+    assert link.resolve() == (tmp_path / "runs" / "a" / "log.mcap").resolve()
     assert (tmp_path / "sw" / "sweep_slam.use_encoders.png").is_file()
     # a changed log: its steps run again, the other log's are skipped
     with open(tmp_path / "runs" / "a" / "log.mcap", "ab") as f:
@@ -582,3 +585,33 @@ def test_sweep_over_recorded_logs(tmp_path):
     assert p.returncode == 0, p.stderr
     again = json.loads(p.stdout)
     assert again["ran"] == 4 and again["skipped"] == 4
+
+
+@pytest.mark.slow
+def test_sweep_over_logs_on_dask_equals_a_local_run_elsewhere(tmp_path, dask_cluster):
+    """``sweep --logs 'runs/*/log.mcap'`` on the local pool in one folder, and in another
+    with ``--scheduler`` (the workers in working directories of their own: the steps
+    read the logs through OUTDIR's links, on the shared filesystem) and with
+    ``--scheduler --ship-files`` (the links' bytes travel with the tasks): the same
+    files, byte for byte but the timing fields, and every step on the workers."""
+    from test_sweep_repeatable import MICRO, _snapshot
+
+    address, worker_pids, _ = dask_cluster
+    log = tmp_path / "micro.mcap"
+    assert cli("simulate", MICRO, "-o", log).returncode == 0
+    for d in ("L", "D"):
+        for run in ("a", "b"):
+            (tmp_path / d / "runs" / run).mkdir(parents=True)
+            shutil.copyfile(log, tmp_path / d / "runs" / run / "log.mcap")
+    args = ("sweep", MICRO, "--set", "slam.use_encoders=true,false", "--logs",
+            "runs/*/log.mcap")  # fmt: skip
+    p = cli(*args, "-o", "sw", cwd=tmp_path / "L")
+    assert p.returncode == 0, p.stderr
+    local = _snapshot(tmp_path / "L" / "sw")
+    assert len([k for k in local if k.endswith("metrics.json")]) == 4
+    for out, extra in (("sw", ()), ("shipped", ("--ship-files",))):
+        p = cli(*args, "-o", out, "--scheduler", address, *extra, cwd=tmp_path / "D")
+        assert p.returncode == 0, p.stderr
+        done = [ln for ln in p.stderr.splitlines() if " done in " in ln]
+        assert len(done) == 8 and all(any(w in ln for w in worker_pids) for ln in done)
+        assert _snapshot(tmp_path / "D" / out) == local, out

@@ -112,10 +112,17 @@ class LogTimeType(click.ParamType):
 LOG_TIME = LogTimeType()
 
 
+# The largest seed: a config's ``seed`` is refused above it (config.py's DEFAULT_BOUND,
+# the bound of a field without its own; not imported: config.py loads numpy, which must
+# come after the BLAS variables above), so ``--seed`` (simulate), reproduce's seeds and
+# sweep's are too: a seed given on the command line is one a config may hold
+MAX_SEED = 1_000_000_000
+
+
 def seed_option(f):
     return click.option(
         "--seed",
-        type=click.IntRange(min=0),
+        type=click.IntRange(min=0, max=MAX_SEED),
         default=None,
         help="Random seed (overrides the config's); same config and seed give the same files.",
     )(f)

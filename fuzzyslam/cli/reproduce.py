@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from fuzzyslam.cli import cli, emit
+from fuzzyslam.cli import MAX_SEED, cli, emit
 
 
 @cli.command("reproduce")
@@ -28,7 +28,7 @@ from fuzzyslam.cli import cli, emit
 )
 @click.option(
     "--first-seed",
-    type=click.IntRange(min=0),
+    type=click.IntRange(min=0, max=MAX_SEED),
     default=0,
     show_default=True,
     help="First seed of the range.",
@@ -123,6 +123,11 @@ def reproduce_command(
     from fuzzyslam.reproduce.overrides import parse_one
     from fuzzyslam.reproduce.stage import run
 
+    if first_seed + seeds - 1 > MAX_SEED:  # the bound of a config's seed (and --seed)
+        raise click.UsageError(
+            f"the last seed, --first-seed {first_seed} + --seeds {seeds} - 1, is above "
+            f"{MAX_SEED}, the largest seed"
+        )
     seed_list = list(range(first_seed, first_seed + seeds))
     overrides: dict = {}
     for s in sets:

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from fuzzyslam.cli import cli, emit
+from fuzzyslam.cli import MAX_SEED, cli, emit
 
 
 @cli.command("sweep")
@@ -49,8 +49,10 @@ def sweep_command(config: str, sets: tuple[str, ...], seeds: int | None,
 
     Writes OUTDIR/sweep.md and sweep.json (per grid point: mean, sd, min, max over
     seeds or logs of the position and heading errors), one figure per swept key
-    (sweep_KEY.png) and each step's files under gI/seedS/ (gI/logJ_NAME/).
-    Resumable: a step whose command, configs and inputs are unchanged is skipped
+    (sweep_KEY.png) and each step's files under gI/seedS/ (gI/logJ_NAME/; the steps
+    read each log through a link, logs/logJ_NAME/, so OUTDIR may move).
+    Resumable: a step whose command, configs, inputs and code (the package's sources,
+    numpy, scipy, opencv and mcap versions) are unchanged is skipped
     (counted as "skipped" in the summary), so a sweep killed halfway goes on.
     Every grid point's config is checked before anything is written; an OUTDIR that
     is neither empty nor a previous sweep's output is refused.
@@ -63,6 +65,10 @@ def sweep_command(config: str, sets: tuple[str, ...], seeds: int | None,
 
     if logs_glob is not None and seeds is not None:
         raise click.UsageError("give --seeds or --logs, not both")
+    if seeds is not None and seeds - 1 > MAX_SEED:  # the bound of a config's seed (--seed)
+        raise click.UsageError(
+            f"the last seed, --seeds {seeds} - 1, is above {MAX_SEED}, the largest seed"
+        )
     parsed = [parse_set(s) for s in sets]
     logs = None
     if logs_glob is not None:

@@ -47,6 +47,7 @@ def parse_set(text: str, syntax: str = GRID_SYNTAX) -> tuple[str, list[Any]]:
         raise InputError(label, f"--set must be {syntax}")
     if key.split(".")[0] == "extends":
         raise InputError(label, "'extends' cannot be set; give the config to extend as CONFIG")
+    refuse_seed(key, label, syntax)
     parts = values.split(",")
     if any(not v.strip() for v in parts):
         raise InputError(label, f"an empty value; --set must be {syntax}")
@@ -55,6 +56,36 @@ def parse_set(text: str, syntax: str = GRID_SYNTAX) -> tuple[str, list[Any]]:
     except yaml.YAMLError as exc:
         problem = getattr(exc, "problem", None) or "syntax error"
         raise InputError(label, f"a value is not YAML: {clip(problem, 80)}") from None
+
+
+# The options that choose the seeds, by the command (its --set form): every simulate
+# step is given its seed (``--seed S``), which overrides a config's ``seed``
+SEED_OPTIONS = {GRID_SYNTAX: "--seeds N", ONE_SYNTAX: "--seeds N and --first-seed S"}
+
+
+def refuse_seed(key: str, label: str, syntax: str = GRID_SYNTAX) -> None:
+    """Refuse ``seed`` as a ``--set`` key (an InputError, one line naming ``label``): each
+    simulate step of a sweep or reproduce passes its own ``--seed``, which overrides the
+    config's, so a set ``seed`` would be recorded (commands.sh, results.json, the
+    ``gI.yaml`` and ``set_*.yaml`` files, sweep.md's rows) and silently ignored.
+
+    Parameters
+    ----------
+    key : str
+        The dotted key.
+    label : str
+        What the error names (the ``--set`` option).
+    syntax : str
+        The command's ``--set`` form (:data:`GRID_SYNTAX`: sweep, :data:`ONE_SYNTAX`:
+        reproduce), which tells the seed options to point to.
+    """
+    if key.split(".")[0] == "seed":
+        options = SEED_OPTIONS.get(syntax, "--seeds N")
+        raise InputError(
+            label,
+            "'seed' cannot be set: every simulate step passes its own --seed, which "
+            f"overrides the config's; choose the seeds with {options}",
+        )
 
 
 def parse_one(text: str) -> tuple[str, Any]:
@@ -186,6 +217,7 @@ def check_grid(base: str, sets: list[tuple[str, list[Any]]]) -> list[Config]:
     keys = [k for k, _ in sets]
     labels = {k: set_label(k, vs) for k, vs in sets}
     for key in keys:
+        refuse_seed(key, labels[key])
         if keys.count(key) > 1:
             raise InputError(labels[key], f"'{clip(key, 80)}' is given in more than one --set")
     raw, chain = config_layers(base)
@@ -208,6 +240,8 @@ def check_suite(suite, overrides: dict[str, Any]) -> None:
         Dotted key -> value (:func:`parse_one`).
     """
     labels = {k: set_label(k, [v]) for k, v in overrides.items()}
+    for k in overrides:
+        refuse_seed(k, labels[k], ONE_SYNTAX)
     for field in dataclasses.fields(suite):
         raw, chain = config_layers(getattr(suite, field.name))
         _checked(raw, chain[0], overrides, labels)
