@@ -49,6 +49,16 @@ from fuzzyslam.stamps import format_time
 # than this share left the pose unpinned (flat or multimodal likelihood)
 AMBIGUOUS_WINDOW = 40
 AMBIGUOUS_SHARE = 0.5
+# filter_health's second finding (PoseFixAid.troubles): more than this share of the match
+# attempts made so far (at least REFUSED_MIN of them) refused by the NIS gate or found on
+# the search window's edge (REFUSED_REASONS; derivation in PoseFixAid.refused)
+REFUSED_MIN = 20
+REFUSED_SHARE = 0.5
+REFUSED_REASONS = frozenset({"gated", "edge", "recovered"})
+# PoseFixAid.run_note: rings decided, and the share of them skipped as ``prior_better``,
+# from which a run without lamps is told it was dead reckoning
+PRIOR_BETTER_MIN = 20
+PRIOR_BETTER_SHARE = 0.9
 
 
 def cov_inflation(travel: float, corr_distance: float, cap: float) -> float:
@@ -367,6 +377,95 @@ class PoseFixAid(FlmAhead, FixAid):
         if over.size == 0:
             return None
         return "pose_matches_ambiguous", tried[int(over[0]) + w - 1].t
+
+    def refused(self) -> tuple[str, float] | None:
+        """("pose_matches_refused", the time) once more than ``REFUSED_SHARE`` of the match
+        attempts made so far, and at least ``REFUSED_MIN`` of them, were refused by the
+        NIS gate or found on the search window's edge (``gated``, ``edge``, and
+        ``recovered``: gated first), else None. Rings the filter knew better than the
+        map (``prior_better``) are not attempts.
+
+        Derivation. A consistent filter's match is refused by the 3-dof gate at 99 %
+        (``pose_gate_chi2`` 11.34) 1 % of the time, and its mode lies outside the
+        +-3 sigma search window at most 3 x 0.27 %: about 2 % of attempts. More than
+        half refused means the median match disagrees with the filter beyond its gate:
+        the noncentral chi2(3, lambda) has its median at 11.34 for lambda = 9.3, an
+        offset of 3.05 sigmas of S, so the filter's own pose is the outlier, not the
+        matches (an odometry scale or wheel base error, a range sensor mount turned,
+        ranges stamped off the odometry's clock). By chance, at a refusal rate of 5 %
+        (2.5 times the consistent one: map errors) the probability that the share ever
+        exceeds half after 20 or more attempts is 2e-9 (the binomial tails summed over
+        n); at 10 %, 3e-6.
+
+        Over the attempts so far, not a sliding window: a refused ring is retried at the
+        next ring while an applied match waits for ``pose_min_travel``, so a localised
+        run's short episode packs many refusals into few seconds (the full Freiburg
+        sonar log: 40 refusals in a row, 35 s at 0.5 m of error, then localised again;
+        any 20 successive attempts there reach 100 %, its share of the attempts so far
+        at most 21 %). Measured on the CARMEN logs with ``--fix-from 0``: at most 21 %
+        on the full ACES and Freiburg logs (scan and sonar) and 20 % on the Freiburg
+        excerpt; 57-88 % with the odometry scaled 15 % (scan and sonar), the laser mount
+        turned 10 deg or the ranges stamped 1 s late (scan); 45 % (not flagged) with the
+        sonar ranges 1 s late, whose APE stays within 0.03 m of the clean run's. A filter
+        that goes wrong late in a long log is found only once its refusals outnumber the
+        matches it took before (the NIS windows may see it first).
+
+        Returns
+        -------
+        (str, float) or None
+        """
+        tried = [d for d in self.decisions if d.reason != "prior_better"]
+        if len(tried) < REFUSED_MIN:
+            return None
+        bad = np.cumsum([d.reason in REFUSED_REASONS for d in tried])
+        n = np.arange(1, len(tried) + 1)
+        over = np.flatnonzero((bad > REFUSED_SHARE * n) & (n >= REFUSED_MIN))
+        if over.size == 0:
+            return None
+        return "pose_matches_refused", tried[int(over[0])].t
+
+    def troubles(self) -> list[tuple[str, float]]:
+        """Every finding of the aid for ``filter_health``: :meth:`trouble`'s (matches
+        ambiguous) and :meth:`refused`'s (matches refused), in time order.
+
+        Returns
+        -------
+        list of (str, float)
+        """
+        found = [f for f in (self.trouble(), self.refused()) if f is not None]
+        return sorted(found, key=lambda f: f[1])
+
+    def run_note(self, lamps: bool) -> str:
+        """One line for stderr when more than ``PRIOR_BETTER_SHARE`` of the rings decided
+        (at least ``PRIOR_BETTER_MIN``) were skipped as ``prior_better`` in a run without
+        lamps, else ''. Such a ring is not matched because the filter's position sigma is
+        below ``fixes.pose_map_sigma``; with no lamps, that is the pose fixes' own
+        covariance floor (``pose_min_sigma``) or ``pose_map_sigma`` set far too large
+        (10 times on the Freiburg excerpt: 271 of 274 rings skipped, the run dead
+        reckoning with nothing said). With lamps the filter may know its position that
+        well from them: nothing is said.
+
+        Parameters
+        ----------
+        lamps : bool
+            Whether the run's log has lamps (``LogInputs.lamp_source`` not "none").
+
+        Returns
+        -------
+        str
+        """
+        n = len(self.decisions)
+        skipped = sum(d.reason == "prior_better" for d in self.decisions)
+        if lamps or n < PRIOR_BETTER_MIN or skipped <= PRIOR_BETTER_SHARE * n:
+            return ""
+        p = self.params
+        return (
+            f"pose fixes: {skipped} of {n} rings not matched, the filter's position sigma "
+            f"already below fixes.pose_map_sigma ({p.pose_map_sigma:g} m; the summary's "
+            "aids.PoseFixAid.reasons.prior_better): with no lamps the estimate is nearly "
+            f"dead reckoning: are fixes.pose_map_sigma and pose_min_sigma "
+            f"({p.pose_min_sigma:g} m) larger than the map's error?"
+        )
 
     def summary(self) -> PoseSummary:
         """The aid's entry in the run summary.

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import heapq
 import itertools
+import math
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
 
@@ -69,29 +70,63 @@ MAX_FRAME_GAP_S = 0.5  # consecutive frames further apart than this are not pair
 UNIQUE_DEG = 2.0  # the second-nearest bearing must be this much (and 3x) further away
 MAX_RANGE_STEP_M = 0.5
 DELAY_NOTE_S = 0.05  # an estimate this far from the configured delay is told (stderr)
+# the lags searched about the configured delay (s): estimate_odometry_delay's default grid
+GRID_LO, GRID_HI, GRID_STEP = -0.2, 0.6, 0.025
+# a lag whose residuals beat the configured delay's by fewer standard errors is not advised
+DROP_Z = 3.0
 
 
-def delay_note(estimate: float, configured: float) -> str:
+def delay_note(
+    estimate: float, configured: float, drop_z: float = math.inf, at_edge: bool = False
+) -> str:
     """The one-line advice when the estimated latency differs from the configured one.
+
+    A lag on the edge of the searched grid (``at_edge``: ``GRID_LO`` or ``GRID_HI``
+    about the configured delay) is a bound, not a measurement: the line says "at least"
+    (or "at most") and to check the clocks (a 1 s offset between the odometry's and the
+    camera's stamps gave the grid's edge, 0.8 s, on MRCLAM robot 3). A lag inside the
+    grid is advised only when its residuals are significantly smaller than the
+    configured delay's: the paired drop of the clipped squared residuals more than
+    ``DROP_Z`` standard errors (``drop_z``, :func:`paired_drop_z`); else the line says
+    the fit barely changes and advises nothing (MRCLAM robot 2 with that 1 s offset:
+    0.03 s, 1.7 standard errors).
 
     Parameters
     ----------
     estimate, configured : float
         The estimated and the configured odometry delay (s).
+    drop_z : float
+        The residuals' drop from the configured delay to the estimate, in standard
+        errors (default: significant).
+    at_edge : bool
+        The estimate is on the searched grid's edge.
 
     Returns
     -------
     str
-        The line naming the key and the value, when they differ by more than
-        ``DELAY_NOTE_S``; else ''.
+        The line, when they differ by more than ``DELAY_NOTE_S``; else ''.
     """
     if abs(estimate - configured) <= DELAY_NOTE_S:
         return ""
+    head = "odometry_delay_estimate: the detections' bearings say the odometry"
+    if at_edge:
+        bound = "at least" if estimate > configured else "at most"
+        return (
+            f"{head} leads the motion by {bound} {max(estimate, 0.0):.3f} s, the edge of "
+            f"the lags searched ({GRID_LO:+g} to {GRID_HI:+g} s about slam.odometry_delay_s "
+            f"= {configured:g}): not a measurement; check the clocks of the odometry and "
+            "the detections (an offset between their stamps)"
+        )
+    if not drop_z > DROP_Z:
+        return (
+            f"{head} may lead the motion by {estimate:.3f} s, but the fit is barely better "
+            f"than at slam.odometry_delay_s = {configured:g} ({drop_z:.1f} standard errors,"
+            f" {DROP_Z:g} needed): keep it unless the clocks are known to be off"
+        )
     advice = max(round(estimate, 2), 0.0)
     return (
-        f"odometry_delay_estimate: the detections' bearings say the odometry leads the "
-        f"motion by {estimate:.3f} s (slam.odometry_delay_s is {configured:g}): set "
-        f"slam.odometry_delay_s: {advice:g} in your config"
+        f"{head} leads the motion by {estimate:.3f} s (slam.odometry_delay_s is "
+        f"{configured:g}): set slam.odometry_delay_s: {advice:g} in your config"
     )
 
 
@@ -103,6 +138,10 @@ class DelayEstimate:
     pairs: int  # sightings of one landmark in consecutive frames that were used
     residual_deg: float  # robust scale of the bearing-change residuals at the estimate
     residual_at_configured_deg: float  # the same at the configured delay
+    # the residuals' paired drop from the configured delay to the estimate, in standard
+    # errors (paired_drop_z), and whether the estimate is on the searched grid's edge
+    drop_z: float = math.nan
+    at_edge: bool = False
 
     def as_dict(self) -> dict:
         """The summary's ``odometry_delay_estimate``.
@@ -110,13 +149,16 @@ class DelayEstimate:
         Returns
         -------
         dict
-            ``delay_s``, ``pairs``, ``residual_deg``, ``residual_at_configured_deg``.
+            ``delay_s``, ``pairs``, ``residual_deg``, ``residual_at_configured_deg``,
+            ``residual_drop_z`` (standard errors) and ``at_search_edge``.
         """
         return {
             "delay_s": round(self.delay_s, 3),
             "pairs": self.pairs,
             "residual_deg": round(self.residual_deg, 3),
             "residual_at_configured_deg": round(self.residual_at_configured_deg, 3),
+            "residual_drop_z": round(self.drop_z, 2) if math.isfinite(self.drop_z) else None,
+            "at_search_edge": self.at_edge,
         }
 
 
@@ -162,7 +204,9 @@ class MotionTap:
             return None
         cum_trans, cum_rot = np.cumsum(d_trans), np.cumsum(d_rot)
         lag, scale, scale0 = estimate_odometry_delay(t, cum_trans, cum_rot, pairs)
-        return DelayEstimate(configured + lag, len(pairs), scale, scale0)
+        z = paired_drop_z(t, cum_trans, cum_rot, pairs, lag)
+        edge = min(abs(lag - GRID_LO), abs(lag - GRID_HI)) < 0.2 * GRID_STEP
+        return DelayEstimate(configured + lag, len(pairs), scale, scale0, z, edge)
 
 
 def consecutive_sightings(frames: list[tuple[float, np.ndarray]]) -> np.ndarray:
@@ -211,6 +255,64 @@ def consecutive_sightings(frames: list[tuple[float, np.ndarray]]) -> np.ndarray:
     return np.concatenate(rows) if rows else np.zeros((0, 5))
 
 
+def _clipped_loss(t: np.ndarray, cum_trans: np.ndarray, cum_rot: np.ndarray, pairs: np.ndarray):
+    """The per-pair truncated quadratic loss of :func:`estimate_odometry_delay`: a
+    function of the lags (g,) giving (g, k) squared residuals db - db_pred clipped at 3
+    robust sigmas of those at lag 0."""
+    t0, t1, db, b, r = pairs.T
+    coef = np.sin(b) / np.maximum(r, 1e-3)
+
+    def residuals(lag: np.ndarray) -> np.ndarray:
+        """(g, k) residuals db - db_pred for each lag of ``lag`` (g,)."""
+        a = t0[None, :] - lag[:, None]
+        c = t1[None, :] - lag[:, None]
+        turn = np.interp(c, t, cum_rot) - np.interp(a, t, cum_rot)
+        dist = np.interp(c, t, cum_trans) - np.interp(a, t, cum_trans)
+        return db[None, :] - (-turn + dist * coef[None, :])
+
+    # truncated quadratic loss, clipped at 3 robust sigmas of the residuals at lag 0:
+    # smooth in the lag (a median is not), and a wrong pairing costs at most the clip
+    clip = 3.0 * 1.4826 * float(np.median(np.abs(residuals(np.zeros(1)))))
+
+    def loss(lag: np.ndarray) -> np.ndarray:
+        return np.minimum(residuals(lag) ** 2, clip**2)
+
+    return loss
+
+
+def paired_drop_z(
+    t: np.ndarray, cum_trans: np.ndarray, cum_rot: np.ndarray, pairs: np.ndarray, lag: float
+) -> float:
+    """How significantly the lag ``lag`` explains the bearing changes better than lag 0
+    (the configured delay): the mean over the k pairs of d_i = l_i(0) - l_i(lag), the
+    drop of each pair's clipped squared residual (:func:`estimate_odometry_delay`'s
+    loss), over its standard error std(d) / sqrt(k) (a paired comparison: the same
+    sightings at both lags). Successive pairs share frames, so the error is somewhat
+    understated; ``DROP_Z`` = 3 leaves room for that.
+
+    Parameters
+    ----------
+    t, cum_trans, cum_rot : ndarray (n,)
+        Odometry stamps, cumulative distance and turn.
+    pairs : ndarray (k, 5)
+        ``consecutive_sightings``.
+    lag : float
+        The estimate's lag (s).
+
+    Returns
+    -------
+    float
+        The drop in standard errors (0 when the lag is 0 or every d_i is equal; inf
+        when they all drop by the same positive amount).
+    """
+    loss = _clipped_loss(t, cum_trans, cum_rot, pairs)(np.array([0.0, float(lag)]))
+    d = loss[0] - loss[1]
+    mean, sd = float(d.mean()), float(d.std(ddof=1)) if len(d) > 1 else 0.0
+    if sd > 0:
+        return mean / (sd / math.sqrt(len(d)))
+    return math.inf if mean > 0 else 0.0
+
+
 def estimate_odometry_delay(
     t: np.ndarray,
     cum_trans: np.ndarray,
@@ -255,25 +357,15 @@ def estimate_odometry_delay(
     scale_at_zero : float
         The same at lag 0 (deg): the improvement the lag brings.
     """
-    grid = np.arange(-0.2, 0.6 + 1e-9, 0.025) if lags is None else np.asarray(lags, float)
-    t0, t1, db, b, r = pairs.T
-    coef = np.sin(b) / np.maximum(r, 1e-3)
-
-    def residuals(lag: np.ndarray) -> np.ndarray:
-        """(g, k) residuals db - db_pred for each lag of ``lag`` (g,)."""
-        a = t0[None, :] - lag[:, None]
-        c = t1[None, :] - lag[:, None]
-        turn = np.interp(c, t, cum_rot) - np.interp(a, t, cum_rot)
-        dist = np.interp(c, t, cum_trans) - np.interp(a, t, cum_trans)
-        return db[None, :] - (-turn + dist * coef[None, :])
-
-    # truncated quadratic loss, clipped at 3 robust sigmas of the residuals at lag 0:
-    # smooth in the lag (a median is not), and a wrong pairing costs at most the clip
-    clip = 3.0 * 1.4826 * float(np.median(np.abs(residuals(np.zeros(1)))))
+    if lags is None:
+        grid = np.arange(GRID_LO, GRID_HI + 1e-9, GRID_STEP)
+    else:
+        grid = np.asarray(lags, float)
+    loss = _clipped_loss(t, cum_trans, cum_rot, pairs)
 
     def scale(lag: np.ndarray) -> np.ndarray:
         """Robust residual scale (rad) for each lag of ``lag`` (g,)."""
-        return np.sqrt(np.mean(np.minimum(residuals(lag) ** 2, clip**2), axis=1))
+        return np.sqrt(np.mean(loss(lag), axis=1))
 
     s = scale(grid)
     i = int(np.argmin(s))

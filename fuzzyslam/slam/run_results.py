@@ -158,13 +158,51 @@ class FilterHealth:
     landmark_births_untrusted: int
     diverged: bool
     reasons: list[str]
-    diverged_at: float | None
+    diverged_at: float | None  # on the log's stamp clock (s; Unix time on real logs)
     out_of_bounds_spans: list[list[float]]
     odometry_gap_s: float
     orphan_landmarks: int
     # landmark motion windows (slam/map_motion.py), present when lamps were mapped
     map_motion_windows: int = OMIT
     map_motion_windows_out_of_bounds: int = OMIT
+    # diverged_at as seconds from the log's start (LogInputs.start on the stamps' clock),
+    # present when the run is flagged and its start is known
+    diverged_after_start_s: float | None = OMIT
+
+
+# the likely causes of each reason, named in the flagged line on stderr (slam/stage.py)
+REASON_CAUSES = {
+    "nis": "noise set too small, a sensor mount or clock offset",
+    "nis_rate": "noise set too small, a sensor mount or clock offset",
+    "association": "an odometry scale or turn error, a detector mount's yaw",
+    "orphan_landmarks": "detection noise too small, a mount or time error",
+    "map_motion": "an odometry delay or clock offset, bearing noise too small",
+    "position_unresolved": "fixes too sparse for the odometry noise, fixes.junction_margin",
+    "pose_off_map": "heading fixes on the wrong walls (start pose, map)",
+    "pose_matches_ambiguous": "too few range sensors or a featureless place for the map",
+    "pose_matches_refused": "odometry scale, the range sensor's mount, a clock offset",
+    "events_lost": "stamps on another clock or back in time, a driver that stopped",
+}
+
+
+def reason_causes(reasons: Sequence[str]) -> str:
+    """The reasons, each with its likely causes (``REASON_CAUSES``), for one line:
+    ``association: odometry scale ...; orphan_landmarks: ...``.
+
+    Parameters
+    ----------
+    reasons : sequence of str
+        ``filter_health.reasons``.
+
+    Returns
+    -------
+    str
+    """
+    parts = []
+    for r in reasons:
+        cause = REASON_CAUSES.get(r)
+        parts.append(f"{r}: {cause}" if cause else r)
+    return "; ".join(parts)
 
 
 def filter_health(
@@ -175,6 +213,7 @@ def filter_health(
     map_motion: MapMotionMonitor | None = None,
     aids: Sequence[Any] = (),
     lost: tuple[str, float] | None = None,
+    start: float | None = None,
 ) -> FilterHealth:
     """The filter's health at the end of a run: the guards' and windows' counts; the map
     turned untrustworthy (orphan landmarks, :func:`~fuzzyslam.slam.health.orphan_landmarks`)
@@ -195,9 +234,14 @@ def filter_health(
     aids : sequence, optional
         The fix plug-ins; one with a ``trouble()`` that answers (reason, time) adds that
         reason (the heading aid's ``position_unresolved``: the position's 99 % ellipse
-        wider than the margin of its corridor choice, fixes/heading.py).
+        wider than the margin of its corridor choice, fixes/heading.py); one with
+        ``troubles()`` adds each (reason, time) of its list instead (the pose aid's
+        ``pose_matches_ambiguous`` and ``pose_matches_refused``).
     lost : (str, float), optional
         :func:`lost_events`' answer (reason ``events_lost``).
+    start : float, optional
+        The log's start on the stamps' clock (s): ``diverged_after_start_s`` is
+        ``diverged_at`` - ``start`` (the time into the log the notes print).
 
     Returns
     -------
@@ -223,6 +267,10 @@ def filter_health(
         if map_motion.diverged_at is not None:
             findings.append(("map_motion", map_motion.diverged_at))
     for aid in aids:
+        many = getattr(aid, "troubles", None)  # an aid with several findings
+        if many is not None:
+            findings.extend(many())
+            continue
         trouble = getattr(aid, "trouble", None)
         found = trouble() if trouble is not None else None
         if found is not None:
@@ -233,6 +281,9 @@ def filter_health(
         reasons.append(reason)
         diverged_at = t if diverged_at is None else min(diverged_at, t)
     diverged = diverged or bool(findings)
+    after = OMIT
+    if diverged_at is not None and start is not None:
+        after = round(float(diverged_at) - float(start), 3)
     return FilterHealth(
         **guards,
         **windows,
@@ -242,6 +293,7 @@ def filter_health(
         odometry_gap_s=round(gap_s, 3),
         orphan_landmarks=orphans,
         **motion,
+        diverged_after_start_s=after,
     )
 
 
