@@ -25,13 +25,14 @@ input process share it; the modules that draw, known once the aids are made, fol
 from __future__ import annotations
 
 import contextlib
+import gc
 import importlib
 import os
 import pickle
 import signal
 import sys
 import traceback
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
 from fuzzyslam.cpus import usable_cpus
@@ -47,6 +48,11 @@ FIGURE_MODULES = ("fuzzyslam.figsave",)
 # leave of the cores, and its calls come when the filter has finished
 NICE = 10
 ENV = "FUZZYSLAM_PREFETCH"  # "0" (or off, no, false): never an input or figure process
+# Young-generation threshold of the cyclic garbage collector in a process that forks its
+# workers (Python's default 700): a run or a step allocates millions of objects (decoded
+# messages, the filter's small arrays, matplotlib's artists), so the default collects
+# hundreds of times, each older collection rescanning its survivors (:func:`fewer_collections`)
+GC_THRESHOLD = (10000, 10, 10)
 
 
 def wanted(requested: bool = True) -> bool:
@@ -79,6 +85,21 @@ def wanted(requested: bool = True) -> bool:
         except ValueError:
             pass
     return True
+
+
+@contextlib.contextmanager
+def fewer_collections() -> Iterator[None]:
+    """Meanwhile, the cyclic garbage collector's young generation is collected every
+    ``GC_THRESHOLD[0]`` allocations (children forked meanwhile keep it), then the
+    thresholds are as before. The collector's timing changes nothing a stage computes.
+    A pose run of the paper log: no full collection instead of one in each process (50-90
+    ms each), about 70 young collections instead of 200."""
+    before = gc.get_threshold()
+    gc.set_threshold(*GC_THRESHOLD)
+    try:
+        yield
+    finally:
+        gc.set_threshold(*before)
 
 
 def flush_std() -> None:

@@ -217,3 +217,25 @@ def test_a_pose_run_forks_its_figure_process_before_its_imports(tmp_path, tiny) 
         assert drawn == ([f"drawn by {pid}"] if name == "changes" else [])
     assert (outs["changes"] / "changes.png").is_file()
     assert not (outs["none"] / "changes.png").exists()
+
+
+def test_a_run_collects_its_young_generation_less_often(monkeypatch, tmp_path) -> None:
+    """``run`` runs its stage with the garbage collector's ``GC_THRESHOLD`` (its input
+    process forked meanwhile inherits it), and leaves the thresholds as they were."""
+    import gc
+
+    from test_robust_logs import cli
+
+    from fuzzyslam.slam import stage
+
+    seen = []
+    monkeypatch.setattr(stage, "run", lambda *a, **k: seen.append(gc.get_threshold()) or {})
+    outer = gc.get_threshold()  # (another test may have set reproduce's for this process)
+    gc.set_threshold(700, 10, 10)  # Python's default
+    try:
+        code, _, err = cli("run", tmp_path / "log.mcap", "-o", tmp_path / "out", "--no-prefetch")
+        after = gc.get_threshold()
+    finally:
+        gc.set_threshold(*outer)
+    assert code == 0, err
+    assert seen == [(10000, 10, 10)] and after == (700, 10, 10)

@@ -162,13 +162,16 @@ def run_command(
     (a fix topic once a fix is formed).
     The JSON summary is also printed on stdout; progress goes to stderr.
     """
-    from fuzzyslam.forked import ChildCalls, wanted
+    from fuzzyslam.forked import ChildCalls, fewer_collections, wanted
 
     # a pose run draws changes.png in a figure process (slam/stage.py): forked now, before
     # the imports below, it imports matplotlib on the second core, idle while this process
     # starts (fuzzyslam/forked.py); closed by the stage if no aid draws
     early = map_dir is not None and fix == "pose" and wanted(prefetch)
-    with ChildCalls() if early else contextlib.nullcontext() as figures:
+    with (
+        ChildCalls() if early else contextlib.nullcontext() as figures,
+        fewer_collections(),  # here and in the input process (it inherits the thresholds)
+    ):
         from fuzzyslam.slam.stage import run
 
         summary = stage_call(
