@@ -17,6 +17,7 @@ import time
 import numpy as np
 import pytest
 from test_prefetch import reaped, refused_fork  # noqa: F401
+from test_robust_logs import tiny  # noqa: F401
 
 from fuzzyslam.forked import ChildCalls, ChildTraceback
 
@@ -132,3 +133,109 @@ def test_a_refused_fork_makes_the_calls_here(refused_fork: list[int]) -> None:  
         assert where == os.getpid() and np.all(total == 2.0)
         assert job.result()[1] is total  # made once
     assert len(os.listdir("/proc/self/fd")) == before and refused == [1]
+
+
+def test_a_child_started_early_imports_what_it_is_told_later() -> None:
+    """``start`` before ``with`` forks once (``with`` keeps that child); ``preload`` has
+    the child import more modules while this process goes on, not this process."""
+    name = "wave"  # not imported by this test process (checked)
+    if name in sys.modules:
+        pytest.skip(f"{name} is already imported here")
+    calls = ChildCalls(warm=())
+    calls.start()
+    pid = calls.pid
+    assert pid is not None
+    with calls:
+        assert calls.pid == pid  # not forked again
+        calls.preload(name, "no_such_module_at_all")
+        assert calls.submit(imported, name).result()
+    assert name not in sys.modules and calls.pid is None and reaped(pid)
+
+
+# a pose run, noting whether the stage's modules were loaded when the first figure
+# process was started, and the figure process's pid against the pids that drew
+EARLY_SCRIPT = """
+import os, sys
+from fuzzyslam import forked
+from fuzzyslam.fixes import changes
+
+starts = []
+real_start, real_draw = forked.ChildCalls.start, changes.draw_changes
+
+def start(self):
+    if self.pid is None and not starts:
+        starts.append("fuzzyslam.slam.stage" in sys.modules)
+    real_start(self)
+    if len(starts) == 1:
+        starts.append(self.pid)
+
+def draw(*args):
+    sys.stderr.write(f"drawn by {os.getpid()}\\n")
+    real_draw(*args)
+
+forked.ChildCalls.start = start
+changes.draw_changes = draw
+from fuzzyslam.cli import main
+try:
+    main(sys.argv[1:])
+except SystemExit as exc:
+    code = exc.code
+sys.stderr.write(f"starts {starts}\\n")
+"""
+
+
+def test_a_pose_run_forks_its_figure_process_before_its_imports(tmp_path, tiny) -> None:  # noqa: F811
+    """``run --fix pose`` forks the figure process before it imports the stage (its
+    matplotlib imported while this process starts: cli/run.py), and that process draws
+    changes.png; with the change detection off in the config it is closed, nothing
+    drawn."""
+    import ast
+    import subprocess
+
+    from fuzzyslam.slam.prefetch import wanted
+
+    if not wanted(True):
+        pytest.skip("no second CPU: no figure process")
+    # fuzzyslam.fixes.changes imported by the script, not fuzzyslam.slam.stage
+    env = {**os.environ, "FUZZYSLAM_NO_PROGRESS": "1"}
+    off = tmp_path / "no_changes.yaml"
+    off.write_text(f"extends: {tiny.config}\nfixes:\n  detect_changes: false\n", encoding="utf-8")
+    outs = {}
+    for name, config in (("changes", tiny.config), ("none", off)):
+        outs[name] = tmp_path / name
+        p = subprocess.run(
+            [sys.executable, "-c", EARLY_SCRIPT, "run", str(tiny.log), "-o", str(outs[name]),
+             "--config", str(config), "--map", str(tiny.dir / "fgm"), "--fix", "pose",
+             "--fix-from", "0"],
+            env=env, capture_output=True, text=True, cwd=tmp_path, timeout=120,
+        )  # fmt: skip
+        assert p.returncode == 0, p.stderr
+        lines = p.stderr.splitlines()
+        stage_loaded, pid = ast.literal_eval(lines[-1].removeprefix("starts "))
+        assert stage_loaded is False and pid is not None
+        drawn = [ln for ln in lines if ln.startswith("drawn by")]
+        assert drawn == ([f"drawn by {pid}"] if name == "changes" else [])
+    assert (outs["changes"] / "changes.png").is_file()
+    assert not (outs["none"] / "changes.png").exists()
+
+
+def test_a_run_collects_its_young_generation_less_often(monkeypatch, tmp_path) -> None:
+    """``run`` runs its stage with the garbage collector's ``GC_THRESHOLD`` (its input
+    process forked meanwhile inherits it), and leaves the thresholds as they were."""
+    import gc
+
+    from test_robust_logs import cli
+
+    from fuzzyslam.slam import stage
+
+    seen = []
+    monkeypatch.setattr(stage, "run", lambda *a, **k: seen.append(gc.get_threshold()) or {})
+    outer = gc.get_threshold()  # (another test may have set reproduce's for this process)
+    gc.set_threshold(700, 10, 10)  # Python's default
+    try:
+        code, _, err = cli("run", tmp_path / "log.mcap", "-o", tmp_path / "out", "--no-prefetch")
+        after = gc.get_threshold()
+    finally:
+        gc.set_threshold(*outer)
+    assert code == 0, err
+    assert seen == [(10000, 10, 10)] and after == (700, 10, 10)

@@ -323,3 +323,40 @@ def test_junk_inputs_of_every_command(command: str, tmp_path: Path, tiny_log) ->
     assert code == 3, stderr
     assert len(lines) == 1 and lines[0].startswith(f"fuzzyslam: error: {named}: ")
     assert stdout == "" and not out.exists() and not leftovers(tmp_path)
+
+
+# fuzzyslam's entry with an exit handler that notes the interpreter's finalisation
+FINALISED = """
+import atexit, sys
+atexit.register(lambda: sys.stderr.write("FINALISED\\n"))
+from fuzzyslam.cli import entry
+sys.argv[0] = "fuzzyslam"
+entry()
+"""
+
+
+def test_a_run_leaves_without_the_interpreters_finalisation(tmp_path: Path, tiny_log) -> None:
+    """``run`` (cli.LEAVE_AT_ONCE) exits at once when done, its exit handlers not run,
+    with its summary written out in full, its outputs in place and its exit code kept
+    (0, or 3 for a missing log); other commands finalise as usual."""
+    import json
+
+    cfg, log = tiny_log
+    out, missing = tmp_path / "est", str(tmp_path / "missing.mcap")
+    cases = [
+        (["run", str(log), "-o", str(out), "--config", str(cfg)], errors.EXIT_OK, False),
+        (["run", missing, "-o", str(tmp_path / "x")], errors.EXIT_INPUT, False),
+        (["simulate", "--help"], errors.EXIT_OK, True),
+    ]  # fmt: skip
+    for args, code, finalised in cases:
+        p = subprocess.run(
+            [sys.executable, "-c", FINALISED, *args], capture_output=True, text=True,
+            cwd=tmp_path, env={**os.environ, "FUZZYSLAM_NO_PROGRESS": "1"}, timeout=120,
+        )  # fmt: skip
+        assert p.returncode == code, p.stderr
+        assert ("FINALISED" in p.stderr) == finalised, (args, p.stderr)
+        if args[0] == "run" and code == errors.EXIT_OK:
+            assert json.loads(p.stdout)["trajectory_rows"] > 0
+            assert (out / "trajectory.tum").is_file() and not leftovers(tmp_path)
+        elif args[0] == "run":
+            assert "missing.mcap" in p.stderr

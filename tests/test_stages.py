@@ -20,8 +20,9 @@ _register()
 RENAMED = {"map": {"no_figures": ("figures", lambda v: not v)}}
 # how a command runs, not what it computes (the outputs are the same byte for byte): run's
 # input process (slam/prefetch.py), the CLI's default, which reproduce's and sweep's pool
-# steps leave at the stage entry's (off: the pool already fills the cores)
-HOW = {"run": {"prefetch"}}
+# steps leave at the stage entry's (off: the pool already fills the cores), and the figure
+# process the CLI starts before its imports (fuzzyslam/forked.py; the pool's steps: none)
+HOW = {"run": {"prefetch", "figures"}}
 
 
 def _as_call(argv: tuple[str, ...]) -> dict:

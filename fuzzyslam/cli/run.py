@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import contextlib
 import math
 from pathlib import Path
 
@@ -161,23 +162,34 @@ def run_command(
     (a fix topic once a fix is formed).
     The JSON summary is also printed on stdout; progress goes to stderr.
     """
-    from fuzzyslam.slam.stage import run
+    from fuzzyslam.forked import ChildCalls, fewer_collections, wanted
 
-    summary = stage_call(
-        run,
-        log,
-        outdir,
-        config,
-        seed,
-        map_dir,
-        fix,
-        fix_from,
-        ranges,
-        start_pose,
-        adapt_noise,
-        calibration,
-        prefetch,
-    )
+    # a pose run draws changes.png in a figure process (slam/stage.py): forked now, before
+    # the imports below, it imports matplotlib on the second core, idle while this process
+    # starts (fuzzyslam/forked.py); closed by the stage if no aid draws
+    early = map_dir is not None and fix == "pose" and wanted(prefetch)
+    with (
+        ChildCalls() if early else contextlib.nullcontext() as figures,
+        fewer_collections(),  # here and in the input process (it inherits the thresholds)
+    ):
+        from fuzzyslam.slam.stage import run
+
+        summary = stage_call(
+            run,
+            log,
+            outdir,
+            config,
+            seed,
+            map_dir,
+            fix,
+            fix_from,
+            ranges,
+            start_pose,
+            adapt_noise,
+            calibration,
+            prefetch,
+            figures=figures,
+        )
     _tell_damage(log, summary.get("log_damage"))
     emit(summary)
 

@@ -37,6 +37,7 @@ from typing import Any
 from fuzzyslam.cpus import usable_cpus
 from fuzzyslam.errors import EXIT_INTERNAL, FuzzyslamError, InputError
 from fuzzyslam.fileio import guard_inputs
+from fuzzyslam.forked import GC_THRESHOLD
 from fuzzyslam.progress import PlanProgress
 from fuzzyslam.reproduce.plan import Step, critical_path, ready_order
 from fuzzyslam.summary import summary_text
@@ -111,13 +112,6 @@ PRELOAD = (
 )
 
 
-# Young-generation threshold of the cyclic garbage collector in a pool (Python's default
-# 700): a step allocates millions of objects (matplotlib's artists, decoded messages), so
-# the default collects hundreds of times a step, each older collection rescanning its
-# survivors
-GC_THRESHOLD = (10000, 10, 10)
-
-
 def preload() -> None:
     """Import every stage's entry and what its steps import on demand, and build the
     rosbags typestore, in this process. Called before a local pool forks its workers, so
@@ -127,10 +121,11 @@ def preload() -> None:
     The imported objects are then frozen out of the garbage collector's generations
     (``gc.freeze``, meant for a parent before it forks: a full collection of a worker
     would otherwise rescan the ~90 000 objects of the modules, 0.1 s each), and the
-    young generation collected every ``GC_THRESHOLD[0]`` allocations. Measured on a
-    map and two evaluate steps run twice in a warm process: 1.09 s of collections
-    without, 0.76 s frozen, 0.55 s frozen with the threshold (of ~13 s of steps). The
-    collector's timing changes nothing the steps compute."""
+    young generation collected every ``GC_THRESHOLD[0]`` allocations (``run``'s too:
+    ``fuzzyslam.forked.fewer_collections``). Measured on a map and two evaluate steps
+    run twice in a warm process: 1.09 s of collections without, 0.76 s frozen, 0.55 s
+    frozen with the threshold (of ~13 s of steps). The collector's timing changes
+    nothing the steps compute."""
     for module in (*STAGES.values(), *PRELOAD):
         importlib.import_module(module)
     from fuzzyslam.streams.typestore import typestore

@@ -37,26 +37,24 @@ A system that refuses the child (no process, pipe or memory to spare: ``fork`` o
 ``pipe`` failing with EAGAIN, EMFILE, ENOMEM) gets the one-process run, the same
 outputs.
 
-When: :func:`wanted` (``fuzzyslam run``'s default, ``--no-prefetch`` or
-``FUZZYSLAM_PREFETCH=0`` to turn it off): a platform with ``fork`` (Linux), at least
-two CPUs usable by this process (its affinity and its cgroup's CPU quota,
-``fuzzyslam.cpus.usable_cpus``: a container limited to one CPU gains nothing), not a
-daemonic process nor a
-Dask worker. ``reproduce`` and ``sweep`` steps never ask for it: their pool already
-keeps every core busy.
+When: :func:`wanted` (``fuzzyslam.forked.wanted``, which decides the figure process
+too; ``fuzzyslam run``'s default, ``--no-prefetch`` or ``FUZZYSLAM_PREFETCH=0`` to turn
+it off): a platform with ``fork`` (Linux), at least two CPUs usable by this process (its
+affinity and its cgroup's CPU quota, ``fuzzyslam.cpus.usable_cpus``: a container limited
+to one CPU gains nothing), not a daemonic process nor a Dask worker. ``reproduce`` and
+``sweep`` steps never ask for it: their pool already keeps every core busy.
 """
 
 from __future__ import annotations
 
 import contextlib
-import os
 import pickle
-import sys
 from collections.abc import Iterator, Sequence
 from typing import TYPE_CHECKING, Any
 
-from fuzzyslam.cpus import usable_cpus
+from fuzzyslam.forked import ENV as ENV  # FUZZYSLAM_PREFETCH=0: no input process
 from fuzzyslam.forked import TO_PARENT, fork_child, pickled_error, raise_child_error, reap
+from fuzzyslam.forked import wanted as wanted  # whether to fork (it lives with the forks)
 from fuzzyslam.slam.events import Event, RingEvent
 from fuzzyslam.streams.sonar import ring_mounts
 
@@ -74,42 +72,10 @@ FIRST_BATCH = 16
 # 5): paper log heading fixes 2.06 -> 2.04 s, pose 2.64 -> 2.60 s; Freiburg 079 sonar
 # heading fixes (4791 rings) 6.61 -> 6.44 s (3 runs each); outputs byte-identical
 AHEAD_BACKLOG = 2 * BATCH
-ENV = "FUZZYSLAM_PREFETCH"  # "0" (or off, no, false): never a child process
 # the pipe's buffer (Linux's default 64 KiB): 1 MiB lets the child run further ahead of a
 # parent whose steps come in bursts (a multi-ring fix, a relocalisation); paper log, in one
 # warm process, two cores: heading fixes 3.12 s wall with 64 KiB, 2.29 s with 1 MiB
 PIPE_BYTES = 1 << 20
-
-
-def wanted(requested: bool = True) -> bool:
-    """Whether a run reads its events in a child process (module docstring).
-
-    Parameters
-    ----------
-    requested : bool
-        The caller asks for it (``fuzzyslam run``'s ``--prefetch``, its default).
-
-    Returns
-    -------
-    bool
-        ``requested``, the environment does not turn it off, and the process may fork
-        a child onto a second CPU.
-    """
-    if not requested or os.environ.get(ENV, "1").strip().lower() in ("0", "off", "no", "false"):
-        return False
-    if not sys.platform.startswith("linux") or usable_cpus() < 2:
-        return False
-    mp = sys.modules.get("multiprocessing.process")  # not loaded: no pool's worker
-    if mp is not None and mp.current_process().daemon:
-        return False
-    dist = sys.modules.get("distributed")  # a Dask worker's tasks share its cores
-    if dist is not None:
-        try:
-            dist.get_worker()
-            return False
-        except ValueError:
-            pass
-    return True
 
 
 @contextlib.contextmanager

@@ -122,6 +122,7 @@ def run(
     adapt_noise: bool = False,
     calibration: str | os.PathLike | None = None,
     prefetch: bool = False,
+    figures: ChildCalls | None = None,
 ) -> dict:
     """The ``run`` stage on ``log`` into ``outdir``: the config ``config`` (a YAML path or
     an embedded name; default paper.yaml) with ``seed``; with ``map_dir``, the fixes
@@ -131,8 +132,10 @@ def run(
     map and ``slam.calibrate``: the map's, its calibration at the freeze time);
     ``prefetch``: the log's events made in a child process on a second core where
     ``slam.prefetch.wanted`` allows it (``fuzzyslam run``'s default; off for reproduce's
-    steps). Returns the JSON summary (:class:`RunSummary` as JSON); UsageError for
-    options that do not go together.
+    steps); ``figures``: a figure process the caller started (``cli/run.py`` forks it
+    before its imports), drawing the aids' figures if they draw, else closed at once.
+    Returns the JSON summary (:class:`RunSummary` as JSON); UsageError for options that
+    do not go together.
 
     Parameters
     ----------
@@ -160,6 +163,8 @@ def run(
         ``--calibration``.
     prefetch : bool
         ``--prefetch`` / ``--no-prefetch``.
+    figures : ChildCalls or None
+        A started figure process (``fuzzyslam.forked.ChildCalls``; the caller reaps it).
 
     Returns
     -------
@@ -197,6 +202,7 @@ def run(
         start_pose=start_pose,
         calibration=calibration,
         prefetch=prefetch_wanted(prefetch),
+        figures=figures,
     )
 
 
@@ -210,6 +216,7 @@ def run_stage(
     start_pose: tuple[float, float, float] | None = None,
     calibration: str | os.PathLike | None = None,
     prefetch: bool = False,
+    figures: ChildCalls | None = None,
 ) -> dict[str, Any]:
     """Run EKF-SLAM on ``log`` and write docs/contracts.md sec. 2 files into ``outdir``.
 
@@ -249,6 +256,9 @@ def run_stage(
         A calibration.yaml to start from.
     prefetch : bool
         Make the events in a child process (as decided: ``prefetch.wanted``).
+    figures : ChildCalls or None
+        A started figure process for the aids' figures (the caller reaps it); None: one
+        is forked here when an aid draws and ``prefetch``.
 
     Returns
     -------
@@ -276,7 +286,9 @@ def run_stage(
         summary = replace(summary, noise_adapted=est)
         _tell(summary)
         return as_json(summary)
-    once = _run_once(log, outdir, cfg, aids, False, ranges, start_pose, calibration, prefetch)
+    once = _run_once(
+        log, outdir, cfg, aids, False, ranges, start_pose, calibration, prefetch, figures=figures
+    )
     return as_json(once)
 
 
@@ -426,9 +438,11 @@ def _run_once(
     calibration: str | os.PathLike | None = None,
     prefetch: bool = False,
     tell: bool = True,
+    figures: ChildCalls | None = None,
 ) -> RunSummary:
     """One run of the filter over the log into ``outdir``; ``_quiet``: no notes on
-    stderr (a first pass), ``tell``: the summary's own notes after it (``_tell``)."""
+    stderr (a first pass), ``tell``: the summary's own notes after it (``_tell``);
+    ``figures``: a figure process the caller started (:func:`run`)."""
     aids = list(aids or [])
     wall0 = time.perf_counter()
     check_outputs([log], [outdir])
@@ -454,14 +468,22 @@ def _run_once(
     model = calibration_model(inputs, cfg, calibration)
     staged = OutputDir(outdir, owns=OPTIONAL_OUTPUTS)
     # the aids' figures drawn in a child that imports matplotlib while the filter runs
-    # (fuzzyslam/forked.py), where the events come from a child too (a second core)
-    drawing = any(getattr(a, "draws_figures", False) for a in aids)
-    figures = ChildCalls() if prefetch and drawing else contextlib.nullcontext()
+    # (fuzzyslam/forked.py), where the events come from a child too (a second core): the
+    # caller's, started before its imports, or one forked now; the modules that draw
+    # imported there meanwhile
+    drawing = [a for a in aids if getattr(a, "draws_figures", False)]
+    if not drawing and figures is not None:
+        figures.close()  # started early, nothing to draw
+        figures = None
+    elif drawing and figures is None and prefetch:
+        figures = ChildCalls()
     with (
         staged as tmp,
-        figures as drawer,  # reaped before the staging directory is removed or renamed
+        figures or contextlib.nullcontext() as drawer,  # reaped before the directory goes
         StreamingOutputs(tmp, cfg, inputs.start_pose, inputs.frames) as streamed,
     ):
+        if drawer is not None:
+            drawer.preload(*sorted({type(a).__module__ for a in drawing}))
         if aids:  # the map the fixes use first in estimates.mcap, at the log's start
             from fuzzyslam.fixes.viewer import map_messages
 
