@@ -61,8 +61,9 @@ def key(name: str) -> dict[str, str]:
 
 def path_text(path: str | bytes | os.PathLike) -> str:
     """A path as the text outputs show it (JSON summaries, report.md, CSV and YAML
-    headers, figure titles, stderr lines): its bytes on the file system decoded as UTF-8,
-    a byte sequence that is not UTF-8 as U+FFFD.
+    headers, figure titles, stderr lines): valid text unchanged; a name the locale could
+    not decode, its bytes on the file system decoded as UTF-8, a byte sequence that is
+    not UTF-8 as U+FFFD.
 
     Python gives a path or command-line argument that its locale's encoding cannot
     decode (``é/lög.mcap`` under ``LC_ALL=C`` without UTF-8 mode, or a Latin-1 name under
@@ -82,9 +83,16 @@ def path_text(path: str | bytes | os.PathLike) -> str:
     """
     raw = os.fspath(path)
     if isinstance(raw, str):
+        if raw.isascii():
+            return raw
+        try:
+            raw.encode("utf-8")
+            return raw  # valid text (whatever the locale: a Latin-1 one decoded it right)
+        except UnicodeEncodeError:  # lone surrogates: bytes the locale could not decode
+            pass
         try:
             raw = os.fsencode(raw)  # the bytes the system gave
-        except UnicodeEncodeError:  # characters the locale's encoding lacks: text already
+        except UnicodeEncodeError:  # characters the locale's encoding lacks beside them
             try:
                 raw = raw.encode("utf-8", "surrogateescape")
             except UnicodeEncodeError:
@@ -107,13 +115,9 @@ def valid_text(text: str) -> str:
     str
         Text that UTF-8 can hold.
     """
-    if text.isascii():
-        return text
-    try:
-        text.encode("utf-8")
-    except UnicodeEncodeError:
-        return path_text(text)
-    return text
+    if text.isascii():  # also bytes, returned as they are: a text stream refuses them,
+        return text  # which is how click tells a text stream from a binary one
+    return path_text(text)
 
 
 def as_json(obj: Any) -> Any:

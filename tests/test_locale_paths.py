@@ -104,6 +104,7 @@ def test_path_text_reads_the_bytes_as_utf8() -> None:
     assert str(exc) == f"{LOG}: log does not exist" and exc.path == broken
 
 
+@pytest.mark.slow  # end to end (sweeps or run + evaluate in subprocesses)
 def test_run_and_evaluate_under_the_c_locale(sample_dir: Path) -> None:
     """run and evaluate of a log under a non-ASCII directory, under the C locale: exit 0,
     run's summary (file and stdout), evaluate's metrics.json and report.md name the log in
@@ -181,3 +182,13 @@ def test_every_command_under_the_c_locale(tmp_path: Path) -> None:
     rows = [(r["label"], r["estimate"]) for r in metrics["comparison"]]
     assert rows == [("pöse", "é/pöse"), ("ötherl", "é/rün")]
     assert (tmp_path / "é/ëv/compare.png").is_file()
+
+
+def test_valid_names_stay_as_they_are_under_a_latin1_locale(monkeypatch) -> None:
+    """Under a Latin-1 locale Python decodes every name right: ``Café`` is valid text and
+    is shown as it is, by path_text, valid_text and an error line alike (re-encoding it
+    with the locale's Latin-1 and decoding as UTF-8 made it ``Caf\\ufffd``)."""
+    monkeypatch.setattr(os, "fsencode", lambda s: os.fspath(s).encode("latin-1", "surrogateescape"))
+    name = "Café/log.mcap"
+    assert path_text(name) == valid_text(name) == name
+    assert str(InputError(name, "log does not exist")) == f"{name}: log does not exist"

@@ -360,3 +360,21 @@ def test_a_run_leaves_without_the_interpreters_finalisation(tmp_path: Path, tiny
             assert (out / "trajectory.tum").is_file() and not leftovers(tmp_path)
         elif args[0] == "run":
             assert "missing.mcap" in p.stderr
+
+
+def test_a_profiled_run_writes_its_profile(tmp_path: Path, tiny_log) -> None:
+    """Under ``python -m cProfile -o`` a run is let finish as Python does, so that the
+    profile (written after the command returns) exists: the fast exit is only for runs
+    nothing watches."""
+    import pstats
+
+    cfg, log = tiny_log
+    prof = tmp_path / "run.prof"
+    p = subprocess.run(
+        [sys.executable, "-m", "cProfile", "-o", str(prof), "-m", "fuzzyslam", "run",
+         str(log), "-o", str(tmp_path / "est"), "--config", str(cfg)],
+        capture_output=True, text=True, cwd=tmp_path, timeout=120,
+        env={**os.environ, "FUZZYSLAM_NO_PROGRESS": "1"},
+    )  # fmt: skip
+    assert p.returncode == 0, p.stderr
+    assert pstats.Stats(str(prof)).total_calls > 0

@@ -189,9 +189,10 @@ def test_run_imports_neither_scipy_nor_rosbags(tmp_path) -> None:
 
     log = Path(__file__).resolve().parents[1] / "data" / "sample.mcap"
     code = (
-        "import runpy, sys\n"
+        # the CLI's main, not its process entry: that leaves a run's process at once
+        "import sys\nfrom fuzzyslam.cli import main\n"
         f"sys.argv = ['fuzzyslam', 'run', {str(log)!r}, '-o', {str(tmp_path / 'o')!r}]\n"
-        "try:\n    runpy.run_module('fuzzyslam', run_name='__main__')\n"
+        "try:\n    main()\n"
         "except SystemExit as e:\n    assert not e.code, e.code\n"
         "print(sorted(m for m in sys.modules if m.split('.')[0] in ('scipy', 'rosbags')))\n"
     )

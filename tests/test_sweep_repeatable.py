@@ -194,6 +194,7 @@ def _logs_in(folder: Path, log: Path) -> None:
     shutil.copyfile(log, folder / "runs" / "x" / "log.mcap")
 
 
+@pytest.mark.slow  # end to end (sweeps or run + evaluate in subprocesses)
 def test_a_sweep_over_logs_writes_the_same_files_wherever_it_runs(
     tmp_path: Path, micro_log: Path
 ) -> None:
@@ -225,6 +226,7 @@ def test_a_sweep_over_logs_writes_the_same_files_wherever_it_runs(
     assert est["log"] == "logs/log0_log/log.mcap"
 
 
+@pytest.mark.slow  # end to end (sweeps or run + evaluate in subprocesses)
 def test_a_moved_sweep_folder_goes_on_with_every_step_skipped(
     tmp_path: Path, micro_log: Path
 ) -> None:
@@ -254,6 +256,7 @@ def test_a_moved_sweep_folder_goes_on_with_every_step_skipped(
 # --- 3: the code in the step hash ---------------------------------------------------
 
 
+@pytest.mark.slow  # end to end (sweeps or run + evaluate in subprocesses)
 def test_a_step_runs_again_when_the_sources_or_a_library_changed(
     tmp_path: Path, micro_log: Path
 ) -> None:
@@ -298,3 +301,45 @@ def test_the_code_fingerprint_names_the_libraries_and_is_computed_once() -> None
     hits = sw._sources_hash.cache_info().hits
     assert sw.code_fingerprint() == sw.code_fingerprint()
     assert sw._sources_hash.cache_info().hits == hits + 2
+
+
+def test_a_folder_without_symbolic_links_gets_hard_links_or_one_line(
+    tmp_path: Path, monkeypatch: pytest.MonkeyPatch
+) -> None:
+    """On a file system without symbolic links (os.symlink refused, as on FAT) the
+    sweep's log links are hard links to the logs, left alone on a rerun; without hard
+    links either (another device), one InputError line naming the log."""
+    import fuzzyslam.reproduce.sweep as sw
+
+    runs = tmp_path / "runs" / "a"
+    runs.mkdir(parents=True)
+    (runs / "log.mcap").write_bytes(b"log bytes")
+    (runs / "truth.tum").write_text("0 0 0 0 0 0 0 1\n")
+    root = tmp_path / "sweep"
+    root.mkdir()
+
+    def no_symlinks(*args, **kwargs):
+        raise PermissionError(1, "Operation not permitted")
+
+    monkeypatch.setattr(os, "symlink", no_symlinks)
+    logs = [runs / "log.mcap"]
+    sw.link_logs(root, logs)
+    names = [name for pairs in sw.log_links(logs) for _, name in pairs]
+    assert len(names) == 2
+    for src, name in (p for pairs in sw.log_links(logs) for p in pairs):
+        link = root / name
+        assert not link.is_symlink() and os.path.samefile(link, src)
+    inode = (root / names[0]).stat().st_ino
+    sw.link_logs(root, logs)  # a rerun: the same links
+    assert (root / names[0]).stat().st_ino == inode
+    assert not list(root.rglob(".*.link"))
+
+    def no_links(*args, **kwargs):
+        raise OSError(18, "Invalid cross-device link")
+
+    monkeypatch.setattr(os, "link", no_links)
+    (tmp_path / "other").mkdir()
+    with pytest.raises(InputError) as info:
+        sw.link_logs(tmp_path / "other", logs)
+    msg = str(info.value)
+    assert "\n" not in msg and "no symbolic links" in msg and str(runs / "log.mcap") in msg

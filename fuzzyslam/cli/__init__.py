@@ -302,7 +302,9 @@ def entry() -> None:
     the interpreter's finalisation: a second KeyboardInterrupt raised there (a signal
     arriving late, or one left pending by a C extension) would otherwise turn the exit
     status into death by SIGINT (-2) after the one-line message was already written.
-    So does every exit of a command of :data:`LEAVE_AT_ONCE` (the finalisation's time).
+    So does every exit of a command of :data:`LEAVE_AT_ONCE` (the finalisation's time),
+    but under a profiler or a tracer (``python -m cProfile``, coverage), whose data are
+    written after the command returns.
     Every temporary output is removed before :func:`main` returns (context managers).
     Closed standard descriptors get the null device and a reader that goes away is not
     an error (:func:`fuzzyslam.cli.std.guard_streams`)."""
@@ -313,7 +315,10 @@ def entry() -> None:
     try:
         main()
     except SystemExit as exc:
-        if exc.code in (EXIT_INTERRUPTED, EXIT_TERMINATED) or command in LEAVE_AT_ONCE:
+        watched = sys.getprofile() is not None or sys.gettrace() is not None
+        if exc.code in (EXIT_INTERRUPTED, EXIT_TERMINATED) or (
+            command in LEAVE_AT_ONCE and not watched  # a profiler's or coverage's data
+        ):  # are written after main returns (or by an exit handler): let them be
             for f in (sys.stdout, sys.stderr):
                 with contextlib.suppress(Exception):
                     f.flush()

@@ -270,7 +270,9 @@ def link_logs(root: Path, logs: list[Path]) -> None:
     filesystem) the workers, which run each step in ``root`` at its absolute path, find
     the log as the client does; with ``--ship-files`` the client reads the log through
     its link and sends its bytes under the link's name. A moved sweep folder gets its
-    links pointed again on its next run; the steps' commands do not change.
+    links pointed again on its next run; the steps' commands do not change. On a file
+    system without symbolic links (FAT, exFAT, some SMB mounts) a link is a hard link
+    to the log; without either, InputError (one line) says so.
 
     Parameters
     ----------
@@ -286,9 +288,22 @@ def link_logs(root: Path, logs: list[Path]) -> None:
             target = relative_to_outdir(src, link.parent)
             if link.is_symlink() and os.readlink(link) == target:
                 continue
+            if not link.is_symlink() and link.exists() and os.path.samefile(link, src):
+                continue  # a hard link to the log (below)
             tmp = link.with_name(f".{link.name}.link")
             tmp.unlink(missing_ok=True)
-            os.symlink(target, tmp)
+            try:
+                os.symlink(target, tmp)
+            except OSError:  # no symbolic links here: a hard link, on the same device
+                try:
+                    os.link(src, tmp)
+                except OSError as exc:
+                    raise InputError(
+                        root,
+                        f"cannot link the log {src} into the sweep folder: its file "
+                        f"system has no symbolic links and the log is not on it for a "
+                        f"hard link ({exc.strerror}); write the sweep elsewhere",
+                    ) from None
             os.replace(tmp, link)
 
 
