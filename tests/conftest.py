@@ -1,9 +1,11 @@
-"""The test session's environment (no progress bars, Agg) and :func:`shared_dir`, for
-fixtures built once per test run rather than once per xdist worker."""
+"""The test session's environment (no progress bars, Agg), :func:`shared_dir`, for
+fixtures built once per test run rather than once per xdist worker, and :func:`run_cli`,
+the in-process ``fuzzyslam`` the end-to-end tests share."""
 
 from __future__ import annotations
 
 import fcntl
+import json
 import os
 import shutil
 from pathlib import Path
@@ -49,6 +51,36 @@ def shared_dir(factory: pytest.TempPathFactory, name: str, build) -> Path:
             build(root)
             (root / ".built").write_text("")
     return root
+
+
+def run_cli(args: list[str], capsys: pytest.CaptureFixture) -> tuple[int, dict, str]:
+    """``fuzzyslam ARGS`` in this process.
+
+    Parameters
+    ----------
+    args : list of str
+        The command line after ``fuzzyslam``.
+    capsys : CaptureFixture
+        pytest's, whose captured output is read (and reset).
+
+    Returns
+    -------
+    code : int
+        The exit code (0 unless ``SystemExit`` said otherwise).
+    summary : dict
+        The JSON summary on stdout; {} when the code is not 0.
+    err : str
+        The stderr.
+    """
+    from fuzzyslam.cli import main
+
+    try:
+        main(args)
+        code = 0
+    except SystemExit as exc:
+        code = int(exc.code or 0)
+    out = capsys.readouterr()
+    return code, (json.loads(out.out) if code == 0 else {}), out.err
 
 
 # The modules whose tests run whole ``reproduce`` or ``sweep`` plans (each step a process

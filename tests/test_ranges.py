@@ -7,7 +7,6 @@ Freiburg 079 log: real laser scans and the 9-sonar front ring cut from them.
 
 from __future__ import annotations
 
-import json
 import math
 import shutil
 from pathlib import Path
@@ -15,6 +14,7 @@ from types import SimpleNamespace
 
 import numpy as np
 import pytest
+from conftest import run_cli
 
 from fuzzyslam.config import load_config
 from fuzzyslam.errors import InputError
@@ -248,18 +248,6 @@ def test_tum_out_of_order_and_repeated_stamps_name_the_line(tmp_path):
 
 
 # --- real building excerpt ----------------------------------------------------------------
-
-
-def run_cli(args: list[str], capsys) -> tuple[int, dict, str]:
-    from fuzzyslam.cli import main
-
-    try:
-        main(args)
-        code = 0
-    except SystemExit as exc:
-        code = int(exc.code or 0)
-    out = capsys.readouterr()
-    return code, (json.loads(out.out) if code == 0 else {}), out.err
 
 
 def _errors(traj: Path, truth: Path) -> np.ndarray:

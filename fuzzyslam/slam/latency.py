@@ -77,16 +77,22 @@ DROP_Z = 3.0
 
 
 def delay_note(
-    estimate: float, configured: float, drop_z: float = math.inf, at_edge: bool = False
+    estimate: float,
+    configured: float,
+    drop_z: float = math.inf,
+    at_edge: bool = False,
+    grid: tuple[float, float] = (GRID_LO, GRID_HI),
 ) -> str:
     """The one-line advice when the estimated latency differs from the configured one.
 
-    A lag on the edge of the searched grid (``at_edge``: ``GRID_LO`` or ``GRID_HI``
-    about the configured delay) is a bound, not a measurement: the line says "at least"
-    (or "at most") and to check the clocks (a 1 s offset between the odometry's and the
-    camera's stamps gave the grid's edge, 0.8 s, on MRCLAM robot 3). A lag inside the
-    grid is advised only when its residuals are significantly smaller than the
-    configured delay's: the paired drop of the clipped squared residuals more than
+    A lag on the edge of the searched grid (``at_edge``: its first or last lag, ``grid``,
+    about the configured delay) is a bound, not a measurement: the line says how far the
+    odometry leads the motion (or, estimated below 0, lags it) as a bound on the side
+    the search ended (at the upper edge, at least that lead; at the lower edge, at most
+    that lead or at least that lag) and to check the clocks (a 1 s offset between the
+    odometry's and the camera's stamps gave the grid's edge, 0.8 s, on MRCLAM robot 3).
+    A lag inside the grid is advised only when its residuals are significantly smaller
+    than the configured delay's: the paired drop of the clipped squared residuals more than
     ``DROP_Z`` standard errors (``drop_z``, :func:`paired_drop_z`); else the line says
     the fit barely changes and advises nothing (MRCLAM robot 2 with that 1 s offset:
     0.03 s, 1.7 standard errors).
@@ -100,6 +106,10 @@ def delay_note(
         errors (default: significant).
     at_edge : bool
         The estimate is on the searched grid's edge.
+    grid : (float, float)
+        The first and last lags searched (s, about ``configured``): the grid
+        :meth:`MotionTap.estimate` was given (``DelayEstimate.grid``); default
+        ``GRID_LO``, ``GRID_HI``.
 
     Returns
     -------
@@ -110,10 +120,14 @@ def delay_note(
         return ""
     head = "odometry_delay_estimate: the detections' bearings say the odometry"
     if at_edge:
-        bound = "at least" if estimate > configured else "at most"
+        # beyond the upper edge the lead is larger, beyond the lower one smaller; a
+        # negative lead is a lag, and its bound the other way round
+        upper = estimate > configured
+        verb, size = ("leads", estimate) if estimate >= 0 else ("lags", -estimate)
+        bound = "at least" if upper == (estimate >= 0) else "at most"
         return (
-            f"{head} leads the motion by {bound} {max(estimate, 0.0):.3f} s, the edge of "
-            f"the lags searched ({GRID_LO:+g} to {GRID_HI:+g} s about slam.odometry_delay_s "
+            f"{head} {verb} the motion by {bound} {size:.3f} s, the edge of "
+            f"the lags searched ({grid[0]:+g} to {grid[1]:+g} s about slam.odometry_delay_s "
             f"= {configured:g}): not a measurement; check the clocks of the odometry and "
             "the detections (an offset between their stamps)"
         )
@@ -142,6 +156,8 @@ class DelayEstimate:
     # errors (paired_drop_z), and whether the estimate is on the searched grid's edge
     drop_z: float = math.nan
     at_edge: bool = False
+    # the first and last lags searched (s, about the configured delay)
+    grid: tuple[float, float] = (GRID_LO, GRID_HI)
 
     def as_dict(self) -> dict:
         """The summary's ``odometry_delay_estimate``.
@@ -180,7 +196,9 @@ class MotionTap:
                 frames.append((ev.t, ev.z))
             yield ev
 
-    def estimate(self, configured: float, min_pairs: int = MIN_PAIRS) -> DelayEstimate | None:
+    def estimate(
+        self, configured: float, min_pairs: int = MIN_PAIRS, lags: np.ndarray | None = None
+    ) -> DelayEstimate | None:
         """``estimate_odometry_delay`` on what passed (stamps as the filter saw them, so
         the lag found is added to ``configured``).
 
@@ -190,6 +208,9 @@ class MotionTap:
             The delay (s) the events were restamped with.
         min_pairs : int
             Fewest pairs of consecutive sightings to give an estimate.
+        lags : ndarray (g,), optional
+            The lags searched (``estimate_odometry_delay``'s default grid when None); the
+            estimate is ``at_edge`` within a fifth of their step of the first or last.
 
         Returns
         -------
@@ -203,10 +224,13 @@ class MotionTap:
         if len(pairs) < min_pairs:
             return None
         cum_trans, cum_rot = np.cumsum(d_trans), np.cumsum(d_rot)
-        lag, scale, scale0 = estimate_odometry_delay(t, cum_trans, cum_rot, pairs)
+        grid = _grid(lags)
+        lag, scale, scale0 = estimate_odometry_delay(t, cum_trans, cum_rot, pairs, grid)
         z = paired_drop_z(t, cum_trans, cum_rot, pairs, lag)
-        edge = min(abs(lag - GRID_LO), abs(lag - GRID_HI)) < 0.2 * GRID_STEP
-        return DelayEstimate(configured + lag, len(pairs), scale, scale0, z, edge)
+        lo, hi = float(grid.min()), float(grid.max())
+        step = (hi - lo) / (len(grid) - 1) if len(grid) > 1 else GRID_STEP
+        edge = min(abs(lag - lo), abs(lag - hi)) < 0.2 * step
+        return DelayEstimate(configured + lag, len(pairs), scale, scale0, z, edge, (lo, hi))
 
 
 def consecutive_sightings(frames: list[tuple[float, np.ndarray]]) -> np.ndarray:
@@ -313,6 +337,23 @@ def paired_drop_z(
     return math.inf if mean > 0 else 0.0
 
 
+def _grid(lags: np.ndarray | None) -> np.ndarray:
+    """The lags searched: ``lags`` as floats, or the default grid (``GRID_LO`` to
+    ``GRID_HI`` by ``GRID_STEP``) when None.
+
+    Parameters
+    ----------
+    lags : ndarray (g,) or None
+
+    Returns
+    -------
+    ndarray (g,)
+    """
+    if lags is None:
+        return np.arange(GRID_LO, GRID_HI + 1e-9, GRID_STEP)
+    return np.asarray(lags, float)
+
+
 def estimate_odometry_delay(
     t: np.ndarray,
     cum_trans: np.ndarray,
@@ -357,10 +398,7 @@ def estimate_odometry_delay(
     scale_at_zero : float
         The same at lag 0 (deg): the improvement the lag brings.
     """
-    if lags is None:
-        grid = np.arange(GRID_LO, GRID_HI + 1e-9, GRID_STEP)
-    else:
-        grid = np.asarray(lags, float)
+    grid = _grid(lags)
     loss = _clipped_loss(t, cum_trans, cum_rot, pairs)
 
     def scale(lag: np.ndarray) -> np.ndarray:
