@@ -19,10 +19,13 @@ import pytest
 from conftest import shared_dir
 from test_robust_logs import JOINTS, Tiny, cli, error_lines, keep, load_tum, rewrite, tiny  # noqa: F401
 
+from fuzzyslam.config import load_config
+from fuzzyslam.slam.log_setup import odom_cut_short
 from fuzzyslam.streams.reader import LogMessage, LogReader
 
 ROOT = Path(__file__).resolve().parents[1]
 ODOM, TF = "/odom", "/tf"
+IMAGE = "/ceiling_camera/image_raw"  # dropped from sample.mcap's copies (their size)
 
 
 def cut(stop: dict[str, float], drop: tuple[str, ...] = (JOINTS,)):
@@ -85,6 +88,9 @@ def test_a_partial_odom_is_passed_over_for_the_whole_tf(
     "stop",
     [
         {ODOM: 37.0},  # /odom ends 0.55 s before the log: within a gap (1 s) of its end
+        # ... 2.55 s before: over a gap, under a tenth of the log (3.75 s): a shutdown
+        {ODOM: 35.0},
+        {ODOM: 20.0, TF: 22.0},  # /tf goes on 2 s after /odom: under a tenth of the log
         {ODOM: 20.0, TF: 20.5},  # /tf stops with it: no whole odometry to read instead
         {ODOM: 20.0, TF: -5.0},  # /tf's starts 5 s late: it would lose the start
     ],
@@ -94,13 +100,40 @@ def test_odom_is_kept_unless_tf_covers_markedly_more(
     tmp_path: Path,
     stop: dict[str, float],
 ) -> None:
-    """/odom is read when it reaches within a gap of the log's end, when /tf's odometry
-    stops as early, or when /tf's starts later than /odom's by more than a gap."""
+    """/odom is read when it reaches within max(a gap, a tenth of the log's span) of the
+    log's end, when /tf's odometry goes on less than that after /odom's end, or when
+    /tf's starts later than /odom's by more than a gap. (The gap alone passed the
+    whole run over to /tf for an /odom 2.55 s short of the log's end.)"""
     log = rewrite(tiny.log, tmp_path / "log.mcap", cut(stop))
     code, out, err = cli("run", log, "-o", tmp_path / "est", "--config", tiny.config)
     assert code == 0, err
     assert json.loads(out)["odometry_source"] == "odom (/odom)"
     assert "falls silent at" not in err
+
+
+def test_tf_need_not_reach_the_end(tiny: Tiny, tmp_path: Path) -> None:  # noqa: F811
+    """/odom stops at 20 s, /tf's odometry at 30 s of the 37.55 s log: /tf goes on for
+    10 s more than /odom (over a tenth of the log), so it is read, though it too stops
+    before the log's end (``odom_cut_short`` directly: the choice, not the run)."""
+    log = rewrite(tiny.log, tmp_path / "log.mcap", cut({ODOM: 20.0, TF: 30.0}))
+    got = odom_cut_short(LogReader(log), load_config(tiny.config))
+    assert got is not None and got[0].base == "base_link"
+    assert "/odom falls silent at 20.00 s of the log's 37.55 s" in got[1]
+
+
+def test_the_reviewers_shortfall_of_sample_is_no_cut(tmp_path: Path) -> None:
+    """The reviewer's case: data/sample.mcap without its encoders and /odom's last 2 s
+    (of 121 s): /odom is read (the gap rule alone said "/odom falls silent at 119.05 s
+    of the log's 121.05 s" and read the whole run from /tf); with /odom's last 20 s
+    dropped (over a tenth of the log), /tf is."""
+    src = ROOT / "data" / "sample.mcap"
+    end = LogReader(src).end
+    cfg = load_config("sample.yaml")
+    two = rewrite(src, tmp_path / "two.mcap", cut({ODOM: end - 2.0}, drop=(JOINTS, IMAGE)))
+    assert odom_cut_short(LogReader(two), cfg) is None
+    twenty = rewrite(src, tmp_path / "twenty.mcap", cut({ODOM: end - 20.0}, drop=(JOINTS, IMAGE)))
+    got = odom_cut_short(LogReader(twenty), cfg)
+    assert got is not None and "falls silent at 101.0" in got[1]
 
 
 def test_last_time_is_the_last_message_of_the_topic(tiny: Tiny, tmp_path: Path) -> None:  # noqa: F811

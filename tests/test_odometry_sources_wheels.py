@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import copy
 import json
+import math
 from pathlib import Path
 
 import numpy as np
@@ -21,9 +22,12 @@ import pytest
 from test_odometry_sources_cut import tiny_odom  # noqa: F401
 from test_robust_logs import JOINTS, Tiny, cli, error_lines, keep, load_tum, rewrite, tiny  # noqa: F401
 
-from fuzzyslam.streams.reader import LogMessage
+from fuzzyslam.config import load_config
+from fuzzyslam.slam.log_setup import reversed_wheels
+from fuzzyslam.streams.reader import LogMessage, LogReader
 
 LEFT, RIGHT = "wheel_left_joint", "wheel_right_joint"
+ODOM = "/odom"
 
 
 def joints(change, drop: tuple[str, ...] = ()):
@@ -113,6 +117,67 @@ def test_a_reversed_wheel_is_checked_against_tf_without_odom(
         load_tum(tiny_odom / "est" / "trajectory.tum"),
     )
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
+
+
+def in_place(robot, change):
+    """A ``rewrite`` fault: a robot that oscillates in place, theta = 0.6 sin(2 pi t / 4)
+    at log time t (s), on /odom (pose (0, 0, theta)) and on its encoders (left -b theta /
+    2r, right +b theta / 2r), the joints then changed by ``change(names, positions)``;
+    the other topics as they are."""
+    k = 0.5 * robot.wheel_base / robot.wheel_radius
+
+    def fault(m: LogMessage):
+        theta = 0.6 * math.sin(0.5 * math.pi * m.t)
+        if m.topic == ODOM:
+            msg = copy.deepcopy(m.msg)
+            p, q = msg.pose.pose.position, msg.pose.pose.orientation
+            p.x = p.y = p.z = q.x = q.y = 0.0
+            q.z, q.w = math.sin(0.5 * theta), math.cos(0.5 * theta)
+            return [(m.topic, m.typename, msg, m.t)]
+        if m.topic != JOINTS:
+            return keep(m)
+        msg = copy.deepcopy(m.msg)
+        names, pos = list(msg.name), np.asarray(msg.position, dtype=np.float64).copy()
+        pos[names.index(LEFT)], pos[names.index(RIGHT)] = -k * theta, k * theta
+        names, pos = change(names, pos)
+        msg.name, msg.position = names, np.asarray(pos, dtype=np.float64)
+        return [(m.topic, m.typename, msg, m.t)]
+
+    return fault
+
+
+def both(names, pos):
+    return negate(RIGHT)(*negate(LEFT)(names, pos))
+
+
+def test_swapped_joints_on_a_start_in_place_are_named_first(tiny: Tiny, tmp_path: Path) -> None:  # noqa: F811
+    """Swapped joints and a start that turns in place: both wheels run against /odom
+    (each follows the other's motion), which also two reversed wheels would do; the line
+    names the swapped joints and the config keys first, reversed motors after (the
+    unchecked line said "both wheels look reversed (a mirrored motor ...)" first). As
+    recorded, the encoders pass."""
+    cfg = load_config(tiny.config)
+    said = {}
+    for name, change in (("swapped", swap), ("both reversed", both), ("as recorded", None)):
+        fault = in_place(cfg.robot, change or (lambda n, p: (n, p)))
+        log = rewrite(tiny.log, tmp_path / f"{name}.mcap", fault)
+        said[name] = reversed_wheels(LogReader(log), cfg)
+    assert said["as recorded"] == ""
+    for name in ("swapped", "both reversed"):  # the same angles: the same line
+        line = said[name]
+        assert f"{LEFT} and {RIGHT} look swapped (check robot.left_wheel_joint" in line, line
+        assert line.index("look swapped") < line.index("reversed"), line
+        assert "both wheels look reversed" not in line, line
+
+
+def test_both_wheels_reversed_while_driving_are_said_so(tiny: Tiny, tmp_path: Path) -> None:  # noqa: F811
+    """Both angles negated on the tiny log's start, which drives forwards: swapped joints
+    would agree with /odom's forward motion, so the line says both wheels look reversed
+    and not that the joints look swapped."""
+    cfg = load_config(tiny.config)
+    log = rewrite(tiny.log, tmp_path / "l.mcap", joints(both))
+    line = reversed_wheels(LogReader(log), cfg)
+    assert "both wheels look reversed" in line and "look swapped" not in line, line
 
 
 @pytest.mark.parametrize(

@@ -183,7 +183,9 @@ class LogInputs:
 
     def restart_line(self) -> str:
         """The one line on the odometry driver's restarts read (:meth:`_restarted`),
-        '' for none: when (the new stream's first stamps, s) and what was done.
+        '' for none: when (the new stream's first stamps, in seconds into the log: from
+        :attr:`start` on the stamps' clock, as the filter_health line's
+        ``diverged_after_start_s``) and what was done.
 
         Returns
         -------
@@ -192,12 +194,13 @@ class LogInputs:
         at = self.odometry_restarts
         if not at:
             return ""
-        when = ", ".join(f"{t:.3f}" for t in at[:5]) + (", ..." if len(at) > 5 else "")
-        times = "" if len(at) == 1 else f" {len(at)} times"
+        t0 = self.start + self.clock_offset  # the log's start on the stamps' clock
+        when = ", ".join(f"{t - t0:.2f}" for t in at[:5]) + (", ..." if len(at) > 5 else "")
+        times = "" if len(at) == 1 else f" {len(at)} times, at"
         return (
-            f"{self.reader.path}: {self.odom_topic}'s driver restarted{times} at t = {when} s "
-            "(its pose jumped to near (0, 0, 0) and went on from there): read on from the "
-            "new origin, the motion since the restart kept (warnings.odometry_restarts)"
+            f"{self.reader.path}: {self.odom_topic}'s driver restarted{times} {when} s into "
+            "the log (its pose jumped to near (0, 0, 0) and went on from there): read on "
+            "from the new origin, the motion since the restart kept (warnings.odometry_restarts)"
         )
 
     def read_state(self) -> dict[str, Any]:

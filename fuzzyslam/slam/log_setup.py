@@ -31,6 +31,9 @@ from fuzzyslam.streams.tf import Rigid, TfProblem, locate, static_tree
 
 ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
 GAP_PERIODS = 3.0  # ... or for this many of its periods (the median step), whichever is longer
+# /odom silent for at least this share of the log's span (and a gap) while /tf's
+# odom -> base goes on: read /tf instead (odom_cut_short; a shorter end is a shutdown)
+CUT_SHORT_FRAC = 0.1
 SLOW_ODOMETRY_S = 0.5  # odometry slower than this (its median step): a note (slam/stage.py)
 # (CARMEN logs at 4.6 and 5.4 Hz localise as well as faster ones; ACES cut to 1.1 Hz not)
 PERIOD_SAMPLES = 500  # odometry messages its period and clock are measured on
@@ -210,7 +213,8 @@ def odometry_source(reader: LogReader, cfg: Config) -> OdometrySource:
     ``slam.use_encoders`` and the log has it and its wheels can be read
     (:func:`joint_state_problem`) and agree with the log's other odometry
     (:func:`reversed_wheels`), else ``topics.odom`` (\"odom\", nav_msgs/Odometry),
-    unless it falls silent long before /tf's odom -> base does (:func:`odom_cut_short`),
+    unless it falls silent for a substantial part of the log (a gap and a tenth of it)
+    while /tf's odom -> base goes on (:func:`odom_cut_short`),
     else the odom -> base transforms of ``topics.tf`` (\"tf\", as slam_toolbox and
     gmapping read it: a log of /scan and /tf alone; :func:`tf_odometry_frames`, read as
     Odometry poses by :func:`tf_odometry`). Decided once, for the whole run.
@@ -274,14 +278,21 @@ def odom_cut_short(reader: LogReader, cfg: Config) -> tuple[TfFrames, str] | Non
     while its /tf broadcaster, or another node's, went on), with the reason in one line;
     None to read /odom.
 
-    The rule is the odometry's own gap (:func:`odometry_clock`): /odom is silent for
-    longer than gap = max(``ODOM_GAP_S``, ``GAP_PERIODS`` periods) after its last message
-    while /tf carries an odom -> base transform logged later than that, and /tf's
+    The rule is a substantial loss: /odom is silent for at least
+    loss = max(gap, ``CUT_SHORT_FRAC`` of the log's span) after its last message, gap
+    being the odometry's own (:func:`odometry_clock`: max(``ODOM_GAP_S``,
+    ``GAP_PERIODS`` periods)), while /tf carries an odom -> base transform logged at
+    least that long after /odom's last (it need not reach the log's end), and /tf's
     odometry starts no later than /odom's first message + gap (it loses nothing at the
     start). Read as /odom, such a run holds still from /odom's end on ("fell silent").
-    Cheap: /odom's last message comes from its last chunks (``LogReader.last_time``), and
-    /tf is read from then on only until its first odom -> base; a log whose /odom reaches
-    within ``ODOM_GAP_S`` of the log's end is not looked at further.
+    A shorter shortfall is the end of a recording, not a lost driver: at shutdown the
+    wheel driver often stops seconds before the node that broadcasts odom -> base (an
+    EKF, robot_localization), and swapping the whole run's odometry for those seconds
+    gains nothing (the run says the silence as "fell silent" instead). Cheap: /odom's
+    last message comes from its last chunks (``LogReader.last_time``), and /tf is read
+    from then on only until its first odom -> base; a log whose /odom reaches within
+    max(``ODOM_GAP_S``, ``CUT_SHORT_FRAC`` of the span) of the log's end is not looked
+    at further.
 
     Parameters
     ----------
@@ -299,19 +310,23 @@ def odom_cut_short(reader: LogReader, cfg: Config) -> tuple[TfFrames, str] | Non
     if not reader.has(tp.tf):
         return None
     last = reader.last_time(tp.odom)
-    if last is None or last >= reader.end - ODOM_GAP_S:
-        return None  # /odom reaches the log's end (or has no message: not this rule)
+    share = CUT_SHORT_FRAC * (reader.end - reader.start)
+    if last is None or last > reader.end - max(ODOM_GAP_S, share):
+        return None  # /odom reaches (near) the log's end (or has no message: not this rule)
     frames = tf_odometry_frames(reader, cfg)
     if frames is None:
         return None
     pair = (frames.odom, frames.base)
     period = odometry_clock(reader, tp.odom)[0]
     gap = max(ODOM_GAP_S, GAP_PERIODS * period)
+    loss = max(gap, share)
+    if last > reader.end - loss:
+        return None
     first_odom = next(iter(reader.messages([tp.odom])), None)
     first_tf = next(odometry_messages(reader, tp.tf, pair), None)
     if first_odom is None or first_tf is None or first_tf.t > first_odom.t + gap:
         return None
-    later = tf_odometry(reader.messages([tp.tf], last + gap), tp.tf, pair)
+    later = tf_odometry(reader.messages([tp.tf], last + loss), tp.tf, pair)
     if next(later, None) is None:
         return None
     t0 = reader.start
@@ -347,7 +362,11 @@ def reversed_wheels(reader: LogReader, cfg: Config) -> str:
     d_implied^2) (+1: the same motion, -1: reversed; an error of r only scales the
     implied increments, one of b shifts them little). A wheel with c < -``CHECK_AGREE``
     is reversed; both wheels agreeing (c > ``CHECK_AGREE``) while the turns
-    anti-correlate are the two joints swapped. No verdict (''), when either source or
+    anti-correlate are the two joints swapped; both wheels reversed while each agrees
+    with the other wheel's implied increments are named as swapped joints first (a
+    start that turns in place, dL = -dR, where the two cannot be told apart and a wrong
+    joint name is the likelier slip), then as two mirrored motors. No verdict (''), when
+    either source or
     either wheel moves less than ``CHECK_WHEEL_RAD`` or the log has no other odometry.
     With a verdict :func:`odometry_source` reads the other odometry: the driver's own,
     which the robot drove by (a driver that applies its sign flip to its odometry but
@@ -453,6 +472,17 @@ def _wheel_verdict(
     tp = cfg.topics
     left, right = robot.wheel_joints
     bad = [w for w, c in ((left, c_l), (right, c_r)) if c < -CHECK_AGREE]
+    if len(bad) == 2 and min(corr(got_l, want_r), corr(got_r, want_l)) > CHECK_AGREE:
+        # each wheel follows the other's motion: on a start that turns in place (dL = -dR)
+        # swapped joints read exactly as both wheels reversed; a wrong joint name is the
+        # likelier slip than two mirrored motors
+        return (
+            f"{tp.joint_states}: both wheels' angles run against the motion {other} records "
+            f"({said}) and each follows the other wheel's: {left} and {right} look swapped "
+            "(check robot.left_wheel_joint and right_wheel_joint first; if they are right, "
+            "both wheels are reversed: mirrored motors whose sign the driver does not flip, "
+            "check their direction / invert setting)"
+        )
     if bad:
         which = " and ".join(bad)
         return (

@@ -32,12 +32,19 @@ A driver restart (``restarts``) is told from both as soon as it is unambiguous: 
 jumps to near the odometry's origin (0, 0, 0), where a robot that restarted its
 odometry is, and then goes on smoothly from there. A refused pose that the robot can
 have reached from the origin since the last accepted pose (the arc test above, from
-(0, 0, 0) over that time) is a candidate; ``RESTART_CONFIRM`` poses after it, each a
-plausible increment from the one before and none a plausible one from the last accepted
-pose (the stream did not come back), confirm it (``"restart"``: the candidate and the
-poses after it, :attr:`OdomGate.restarted`, are the new stream, read from the origin
-on). A single stray pose at the origin, or one that the stream then leaves, is refused
-as any other.
+(0, 0, 0) over that time) is a candidate; ``RESTART_CONFIRM`` or more poses after it,
+each a plausible increment from the one before and none a plausible one from the last
+accepted pose (the stream did not come back), the last of them moved away from the
+candidate by more than ``RESTART_MOVED_M`` or turned by more than
+``RESTART_MOVED_RAD``, confirm it (``"restart"``: the candidate and the poses after it,
+:attr:`OdomGate.restarted`, are the new stream, read from the origin on). A pose at the
+origin always passes the test from the origin, and identical poses always go on
+"smoothly" from each other: without the motion a burst of placeholder zeros (a converter
+or a driver that publishes (0, 0, 0) while it has no pose) would confirm a restart and
+throw the stream's position away. So a single stray pose at the origin, one that the
+stream then leaves, and a burst of poses that do not move are refused as any other; a
+driver that restarts while the robot stands still ends in the ``"reset"`` above after
+``reset_after`` refusals (the robot stood: no motion to lose).
 """
 
 from __future__ import annotations
@@ -51,6 +58,14 @@ SPEED_MARGIN = 3.0  # increments over this many times the robot's top speed: ref
 SLACK_S = 0.2  # s of top speed always allowed (stamp jitter, a first message)
 REANCHOR = 5  # after this many refusals in a row, restart from the latest reading
 RESTART_CONFIRM = 2  # poses that go on from a pose at the origin: a driver restart
+# ... and move away from it by more than this: a standing robot's odometry does not.
+# Wheel odometry at rest changes by at most a tick of encoder jitter (a coarse 500
+# ticks per turn on a 0.08 m wheel: 1 mm, 0.2 deg of heading on a 0.3 m base) and a
+# gyro-fused heading drifts by its bias (0.1 deg/s: 0.05 deg in the half second the
+# gate can wait, ``reset_after`` poses at 20 Hz); 1 cm and 1 deg are five to ten ticks,
+# and what a robot moving at 2 cm/s or turning at 2 deg/s covers in that half second.
+RESTART_MOVED_M = 0.01
+RESTART_MOVED_RAD = math.radians(1.0)
 ORIGIN = (0.0, 0.0, 0.0)  # where a restarted driver's odometry starts (its odom frame's)
 
 
@@ -136,7 +151,7 @@ class OdomGate:
         Returns
         -------
         str
-            first, ok, jump or reset.
+            first, ok, jump, reset or restart.
         """
         if self._pose is None:
             self._pose, self._t = pose, t
@@ -164,7 +179,7 @@ class OdomGate:
             t_last, last = pend[-1]
             if self.plausible(last, pose, t - t_last):
                 pend.append((t, pose))
-                return len(pend) > RESTART_CONFIRM
+                return len(pend) > RESTART_CONFIRM and moved(pend[0][1], pose)
         # since the last accepted pose, could the robot have come here from the origin?
         self._pending = [(t, pose)] if self.plausible(ORIGIN, pose, t - self._t) else []
         return False
@@ -195,6 +210,25 @@ class OdomGate:
         # lateral offset of the chord from the arc's direction d_rot / 2 (either sense)
         lateral = abs(-rel[0] * math.sin(0.5 * d_rot) + rel[1] * math.cos(0.5 * d_rot))
         return lateral <= self.lateral_tol + self.lateral_frac * chord
+
+
+def moved(a, b) -> bool:
+    """Whether pose ``b`` is more than ``RESTART_MOVED_M`` from pose ``a`` or turned by
+    more than ``RESTART_MOVED_RAD`` from it: motion a standing robot's odometry does not
+    show (its noise is below both).
+
+    Parameters
+    ----------
+    a, b : array_like, shape (3,)
+        The poses (x, y, theta).
+
+    Returns
+    -------
+    bool
+    """
+    d = math.hypot(float(b[0]) - float(a[0]), float(b[1]) - float(a[1]))
+    turn = abs(math.remainder(float(b[2]) - float(a[2]), math.tau))
+    return d > RESTART_MOVED_M or turn > RESTART_MOVED_RAD
 
 
 def first_plausible_pose(
