@@ -184,6 +184,7 @@ sys.stderr.write(f"starts {starts}\\n")
 """
 
 
+@pytest.mark.slow  # end to end in subprocesses (the fast tier's minute)
 def test_a_pose_run_forks_its_figure_process_before_its_imports(tmp_path, tiny) -> None:  # noqa: F811
     """``run --fix pose`` forks the figure process before it imports the stage (its
     matplotlib imported while this process starts: cli/run.py), and that process draws

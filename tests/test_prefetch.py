@@ -151,6 +151,7 @@ def test_real_excerpt_outputs_are_the_same(tmp_path: Path, forks) -> None:
     assert "noise_estimate" in s and "odometry_delay_estimate" in s
 
 
+@pytest.mark.slow  # end to end in subprocesses (the fast tier's minute)
 def test_glitches_and_damage_come_back_from_the_child(tmp_path: Path, forks) -> None:
     """The child's reading state (glitch counts, first problem, the reader's damage) is
     the summary's: a glitched log, a log with a corrupt chunk (its index intact) and a

@@ -191,6 +191,7 @@ def test_the_style_starts_from_matplotlibs_defaults() -> None:
         assert dict(matplotlib.rcParams) == before
 
 
+@pytest.mark.slow  # end to end in subprocesses (the fast tier's minute)
 def test_a_users_matplotlibrc_changes_no_evaluation_or_map_figure(tmp_path) -> None:
     """evaluate's Fig. 1 and Fig. 3 and map's conflict.png drawn with a user's matplotlibrc
     in MPLCONFIGDIR are byte for byte those of a default environment (every figure of the
@@ -202,6 +203,7 @@ def test_a_users_matplotlibrc_changes_no_evaluation_or_map_figure(tmp_path) -> N
     assert_same_pngs(outs, {"fig1_paths.png", "fig3_errors.png", "conflict.png"})
 
 
+@pytest.mark.slow  # end to end in subprocesses (the fast tier's minute)
 def test_a_users_matplotlibrc_changes_no_simulate_preview(tmp_path) -> None:
     """``fuzzyslam simulate --preview``'s PNG with a user's matplotlibrc is byte for byte
     the default environment's."""

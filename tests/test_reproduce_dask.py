@@ -107,6 +107,7 @@ def test_rerun_refuses_a_directory_that_is_not_a_reproduce_output(tmp_path):
     assert (out / "thesis.tex").read_text() == "keep me"
 
 
+@pytest.mark.slow  # end to end in subprocesses (the fast tier's minute)
 def test_scheduler_unreachable_is_one_line(tmp_path):
     """One line, nothing written; Dask's connect timeout is taken from the environment."""
     p = cli("reproduce", "--quick", "--seeds", "1", "-o", tmp_path / "o",
