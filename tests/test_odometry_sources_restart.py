@@ -82,6 +82,13 @@ def runs(tiny: Tiny, tiny_odom: Path, tmp_path_factory) -> Path:  # noqa: F811
     return d
 
 
+
+def _run_mrclam(log, out) -> tuple[dict, str]:
+    """``run`` of an MRCLAM log with its preset: (the summary, stderr)."""
+    code, stdout, err = cli("run", log, "-o", out, "--config", "real_detections.yaml")
+    assert code == 0, err
+    return json.loads(stdout), err
+
 def test_the_built_restart_jumps_to_the_origin_and_goes_on(runs: Path) -> None:
     """The premise: the rewritten /odom jumps metres back to near (0, 0, 0) at 15.25 s
     (one period of motion from it) and goes on from there by the recorded increments."""
@@ -124,13 +131,7 @@ def test_a_restart_in_a_real_log_is_read_on_from_the_origin(tmp_path: Path) -> N
     at = reader.start + 75.0
     first = next(m.t for m in reader.messages([ODOM]) if m.t >= at) - reader.start
     logs = {"clean": MRCLAM, "restart": rewrite(MRCLAM, tmp_path / "r.mcap", restarted(at, ()))}
-    out = {}
-    for name, log in logs.items():
-        code, stdout, err = cli(
-            "run", log, "-o", tmp_path / name, "--config", "real_detections.yaml"
-        )
-        assert code == 0, err
-        out[name] = (json.loads(stdout), err)
+    out = {name: _run_mrclam(log, tmp_path / name) for name, log in logs.items()}
     s, err = out["restart"]
     assert s["warnings"].get("odometry_restarts") == 1 and "odometry_jumps" not in s["warnings"]
     said = [ln for ln in error_lines(err) if "driver restarted" in ln]
@@ -268,13 +269,7 @@ def test_a_burst_of_zeros_in_a_real_log_is_refused(tmp_path: Path) -> None:
         "clean": MRCLAM,
         "zeros": rewrite(MRCLAM, tmp_path / "z.mcap", zeroed(odo[len(odo) // 2], 4)),
     }
-    out = {}
-    for name, log in logs.items():
-        code, stdout, err = cli(
-            "run", log, "-o", tmp_path / name, "--config", "real_detections.yaml"
-        )
-        assert code == 0, err
-        out[name] = (json.loads(stdout), err)
+    out = {name: _run_mrclam(log, tmp_path / name) for name, log in logs.items()}
     s, err = out["zeros"]
     want = dict(out["clean"][0]["warnings"], odometry_jumps=4)
     assert s["warnings"] == want, s["warnings"]
