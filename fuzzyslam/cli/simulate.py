@@ -51,7 +51,9 @@ def simulate(
       /sim/events                JSON of run starts/ends, lamp failures, bumps
       /sim/world                 walls and lamps as markers (Foxglove), at t=0
     MCAP metadata 'fuzzyslam.world' and 'fuzzyslam.scenario' (written first) hold
-    the world and the scenario with its events and resolved config.
+    the world and the scenario with its events and resolved config. The messages
+    follow ROS 2 Humble's definitions, or Jazzy's with output.ros_distro: jazzy in
+    the config (Range then carries its variance); so do run's and map's MCAPs.
 
     --truth-tum FILE also writes the true trajectory (the poses of /ground_truth/odom)
     as TUM, for evo (evo_ape tum FILE OUTDIR/trajectory.tum).
