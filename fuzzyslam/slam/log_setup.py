@@ -104,10 +104,11 @@ def first_message(reader: LogReader, topic: str):
 
 
 def base_frame(reader: LogReader, cfg: Config) -> str:
-    """The robot's base frame, in which the sensors' /tf_static mounts are expressed: the
-    child frame of the log's nav_msgs/Odometry when the filter reads it (no encoders, or
-    ``slam.use_encoders`` false), the base frame of /tf's odom -> base when the odometry
-    is read from it (:func:`tf_odometry_frames`), else ``base_link`` (REP 105).
+    """The robot's base frame, in which the sensors' /tf_static mounts are expressed: that
+    of the odometry a run of the log reads (:func:`odometry_source`, the one decision:
+    the child frame of its nav_msgs/Odometry, the base frame of /tf's odom -> base, or
+    ``base_link`` (REP 105) for the encoders), ``base_link`` for a log without odometry
+    (a map built from a trajectory needs none).
 
     Parameters
     ----------
@@ -120,13 +121,12 @@ def base_frame(reader: LogReader, cfg: Config) -> str:
     -------
     str
     """
-    tp = cfg.topics
-    if encoders_readable(reader, cfg):
+    try:
+        source = odometry_source(reader, cfg)
+    except InputError:
         return TfFrames().base
-    if reader.has(tp.odom):
-        return tf_frames(reader, cfg, tp.odom, series=False).base
-    tf = tf_odometry_frames(reader, cfg)
-    return tf.base if tf is not None else TfFrames().base
+    odom = source.topic if source.kind == "odom" else None
+    return tf_frames(reader, cfg, odom, series=False, names=source.tf).base
 
 
 JOINT_LOOK = 50  # JointState messages looked at for the wheels (joint_state_problem)
@@ -171,29 +171,6 @@ def joint_state_problem(
     return (
         f"names no joints {both} (it names: {', '.join(seen) or 'none'}; "
         "robot.left_wheel_joint / right_wheel_joint name them)"
-    )
-
-
-def encoders_readable(reader: LogReader, cfg: Config) -> bool:
-    """Whether the filter reads the wheel encoders: ``slam.use_encoders``, the log has
-    ``topics.joint_states`` and its wheels can be read (:func:`joint_state_problem`).
-
-    Parameters
-    ----------
-    reader : LogReader
-        The log.
-    cfg : Config
-        The config (``topics``, ``slam.use_encoders``).
-
-    Returns
-    -------
-    bool
-    """
-    tp = cfg.topics
-    return (
-        cfg.slam.use_encoders
-        and reader.has(tp.joint_states)
-        and not joint_state_problem(reader, tp.joint_states, cfg.robot.wheel_joints)
     )
 
 
