@@ -26,10 +26,11 @@ from fuzzyslam.maps.grid import BeliefMap, Grid
 T0 = 1.6e9  # a real log's Unix stamps
 
 
-def _capture(monkeypatch, module) -> list:
-    """The figures ``module`` draws, kept open (its ``_save`` still writes the PNG)."""
+def _capture(monkeypatch, module, name: str = "_save") -> list:
+    """The figures ``module`` draws, kept open (its saving function ``name`` still writes
+    the PNG)."""
     figs: list = []
-    real = module._save
+    real = getattr(module, name)
 
     def keep(fig, path, *args, **kwargs):
         figs.append(fig)
@@ -41,7 +42,7 @@ def _capture(monkeypatch, module) -> list:
         finally:
             monkeypatch.setattr(plt, "close", real_close)
 
-    monkeypatch.setattr(module, "_save", keep)
+    monkeypatch.setattr(module, name, keep)
     return figs
 
 
@@ -234,14 +235,7 @@ def test_sweep_ticks_at_the_swept_values_on_a_log_axis(tmp_path, monkeypatch) ->
     rows = [{"values": {"robot.wheel_noise": v},
              "measures": {m: {"mean": 1.0 + v, "min": 0.5, "max": 2.0, "n": 2}
                           for m in ("a (cm)", "b (cm)", "c (deg)")}} for v in values]  # fmt: skip
-    figs: list = []
-    real = sweep_plot.save_png
-
-    def keep(fig, path, *a, **k):
-        figs.append(fig)
-        real(fig, path, *a, **k)
-
-    monkeypatch.setattr(sweep_plot, "save_png", keep)
+    figs = _capture(monkeypatch, sweep_plot, "save_png")
     sweep_plot.plot_sweep(tmp_path, rows, ["robot.wheel_noise"], 2, "seeds")
     fig = figs[0]
     assert fig.get_size_inches()[0] <= figsave.WIDE_W + 1e-9
@@ -272,26 +266,13 @@ def test_sweep_labels_its_evaluations_with_the_grid_value_and_seed() -> None:
     assert "robot.wheel_noise=0.005, seed 1" in ev.argv
 
 
-def test_changes_time_colour_bar_from_the_logs_start(tmp_path) -> None:
+def test_changes_time_colour_bar_from_the_logs_start(tmp_path, monkeypatch) -> None:
     from fuzzyslam.fixes import changes
 
     cs = [changes.Change(T0 + 100.0 + k, 0.5 * k, 1.0, 0.3, 4, 0.5) for k in range(5)]
-    seen: list = []
-    real = changes.save_png if hasattr(changes, "save_png") else None
-    assert real is None  # imported inside the drawing function
-    import fuzzyslam.figsave as fs
-
-    orig = fs.save_png
-
-    def keep(fig, path, *a, **k):
-        seen.append(fig)
-        orig(fig, path, *a, **k)
-
-    fs.save_png = keep
-    try:
-        changes.draw_changes(tmp_path / "changes.png", _fgm(), cs, t0=T0)
-    finally:
-        fs.save_png = orig
+    assert not hasattr(changes, "save_png")  # imported inside the drawing function
+    seen = _capture(monkeypatch, figsave, "save_png")
+    changes.draw_changes(tmp_path / "changes.png", _fgm(), cs, t0=T0)
     fig = seen[0]
     sc = fig.axes[0].collections[0]
     assert np.asarray(sc.get_array()).min() == pytest.approx(100.0)
@@ -316,14 +297,7 @@ def test_preview_bumps_have_a_legend_entry_over_the_lamps(tmp_path, monkeypatch)
                 SimpleNamespace(kind="lamp_failure", t=2.0, lamps=[1])],
         start_pose=pose[0],
     )  # fmt: skip
-    figs: list = []
-    real = preview.save_png
-
-    def keep(fig, path, *a, **k):
-        figs.append(fig)
-        real(fig, path, *a, **k)
-
-    monkeypatch.setattr(preview, "save_png", keep)
+    figs = _capture(monkeypatch, preview, "save_png")
     preview.save_preview(plan, tmp_path / "p.png", title="t")  # type: ignore[arg-type]
     ax = figs[0].axes[0]
     texts = [x.get_text() for x in ax.get_legend().get_texts()]
