@@ -294,6 +294,8 @@ def bench_building(
                 "real_time_factor_cpu": round(s["log_duration_s"] / s["_cpu"], 1),
                 "cpu_ms_per_log_s": round(1e3 * s["_cpu"] / s["log_duration_s"], 2),
                 "real_time_factor_in_process": s["real_time_factor"],
+                "odometry_turn_check": s.get("odometry_turn_check"),
+                "filter_health_reasons": s["filter_health"]["reasons"],
             }
             if fix == "heading":
                 row[fix]["fixes"] = heading_fix_errors(rdir, truth)

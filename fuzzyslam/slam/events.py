@@ -266,6 +266,7 @@ class SlamResult:
     noise_estimate: DetectionNoiseEstimate | None = None
     delay_estimate: DelayEstimate | None = None  # the odometry latency (slam/latency.py)
     calibration: Any = None  # the summary's entry, calibration.CalibrationEntry (slam/stage.py)
+    turn_check: Any = None  # the odometry's turns against the estimate's (slam/turn_check.py)
 
     def mean_nis(self, kind: str = "lamp") -> float:
         """Mean NIS of the accepted updates of ``kind`` (expected value: their dof).

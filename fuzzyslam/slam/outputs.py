@@ -198,6 +198,8 @@ class StreamingOutputs:
         # at or before the last row written)
         self._dr_t = np.zeros(0)
         self._dr_p = np.zeros((0, 3))
+        # per block of rows: (t, the estimate's heading, the dead reckoning's) (k, 3)
+        self._headings: list[np.ndarray] = []
 
     def __enter__(self) -> StreamingOutputs:
         def text(name: str):
@@ -275,6 +277,7 @@ class StreamingOutputs:
         cdr = iter(encode_pose_with_covariance_block(t, poses, cov, self.frames.map))
         self._flush_odometry()  # every increment up to the rows' times (runner: rows lag)
         odo = dead_reckoning_at(t, self._dr_t, self._dr_p)
+        self._headings.append(np.column_stack([t, poses[:, 2], odo[:, 2]]))
         tf = iter(tf_payloads(t, poses, odo, self.frames))
         if len(t):
             keep = max(int(np.searchsorted(self._dr_t, t[-1], "right")) - 1, 0)
@@ -310,6 +313,18 @@ class StreamingOutputs:
         self._odo_first = False
         self._odo_t.clear()
         self._odo_u.clear()
+
+    def headings(self) -> np.ndarray:
+        """The rows written so far: their times, the estimate's headings and the dead
+        reckoning's at those times (the odometry's turns against the filter's,
+        slam/turn_check.py).
+
+        Returns
+        -------
+        ndarray (n, 3)
+            t (s), the estimate's heading and the dead reckoning's (rad).
+        """
+        return np.concatenate(self._headings) if self._headings else np.zeros((0, 3))
 
     def write_messages(self, messages) -> None:
         """Write ``messages`` (topic, type name, message or its CDR bytes, t) into

@@ -8,7 +8,7 @@ a counter or health figure left out is a ``TypeError`` where it is made."""
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 import numpy as np
@@ -182,6 +182,7 @@ REASON_CAUSES = {
     "pose_matches_ambiguous": "too few range sensors or a featureless place for the map",
     "pose_matches_refused": "odometry scale, the range sensor's mount, a clock offset",
     "events_lost": "stamps on another clock or back in time, a driver that stopped",
+    "odometry_turn_scale": "the odometry's turn scale (wheel base, driver), not the noise",
 }
 
 
@@ -293,6 +294,39 @@ def filter_health(
         odometry_gap_s=round(gap_s, 3),
         orphan_landmarks=orphans,
         **motion,
+        diverged_after_start_s=after,
+    )
+
+
+def with_finding(
+    health: FilterHealth, reason: str, at: float, start: float | None = None
+) -> FilterHealth:
+    """``health`` with one more reason found after the run (the odometry's turns against
+    the estimate's, slam/turn_check.py): flagged, from the earlier of ``at`` and the
+    time it was flagged from.
+
+    Parameters
+    ----------
+    health : FilterHealth
+        :func:`filter_health`'s answer.
+    reason : str
+        The reason (a key of ``REASON_CAUSES``).
+    at : float
+        From when (s, on the stamps' clock).
+    start : float, optional
+        The log's start on the stamps' clock (``diverged_after_start_s``).
+
+    Returns
+    -------
+    FilterHealth
+    """
+    t = at if health.diverged_at is None else min(health.diverged_at, at)
+    after = round(float(t) - float(start), 3) if start is not None else OMIT
+    return replace(
+        health,
+        diverged=True,
+        reasons=[*health.reasons, reason],
+        diverged_at=t,
         diverged_after_start_s=after,
     )
 

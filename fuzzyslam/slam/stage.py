@@ -34,9 +34,10 @@ from fuzzyslam.slam.noise import DetectionNoiseEstimate, corroborated, suggestio
 from fuzzyslam.slam.outputs import StreamingOutputs, write_outputs, write_summary
 from fuzzyslam.slam.prefetch import input_events
 from fuzzyslam.slam.prefetch import wanted as prefetch_wanted
-from fuzzyslam.slam.run_results import filter_health, lost_events, reason_causes
+from fuzzyslam.slam.run_results import filter_health, lost_events, reason_causes, with_finding
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
 from fuzzyslam.slam.summary import RunSummary
+from fuzzyslam.slam.turn_check import rotation_factor, turn_note, turn_ratio
 from fuzzyslam.summary import OMIT, as_json
 
 # message types that could carry lamps or landmarks under topics the config does not name
@@ -103,6 +104,7 @@ def make_summary(
             else OMIT
         ),
         calibration=res.calibration if res.calibration is not None else OMIT,
+        odometry_turn_check=res.turn_check.as_dict() if res.turn_check is not None else None,
         aids={type(a).__name__: a.summary() for a in aids} if aids else OMIT,
         rings=inputs.ring_stats.as_dict() if aids else OMIT,
         range_sensor=(inputs.ranges.describe() if aids and inputs.ranges is not None else OMIT),
@@ -393,6 +395,9 @@ def _tell(summary: RunSummary, cfg: Config | None = None) -> None:
             f"({reason_causes(health.reasons) or 'NIS or association windows'}; see "
             "the summary's filter_health): do not trust this estimate"
         )
+    turns = summary.odometry_turn_check
+    if turns and turns["flagged"]:
+        note(turn_note(turns))
     stale = summary.counts.frames_stale_odometry
     if stale:  # the driver stopped (or paused): say which stream, not only that frames were lost
         limit = f" over slam.odometry_stale_s = {cfg.slam.odometry_stale_s:g} s" if cfg else ""
@@ -507,6 +512,16 @@ def _run_once(
             m for aid in aids if hasattr(aid, "messages") for m in aid.messages(cfg.topics, None)
         ]  # fmt: skip
         write_outputs(tmp, streamed, res, extra)
+        # the odometry's turns against the estimate's, from the rows written: a turn
+        # scale that the innovations hide (slam/turn_check.py)
+        calib = res.calibration
+        expected = rotation_factor(calib.names, calib.factors) if calib is not None else 1.0
+        res.turn_check = turn_ratio(*streamed.headings().T, expected=expected)
+        if res.turn_check is not None and res.turn_check.flagged:
+            start = inputs.start + inputs.clock_offset
+            res.health = with_finding(
+                res.health, "odometry_turn_scale", res.turn_check.flagged_at, start
+            )
         for drawing in drawings:
             drawing.result()
         summary = make_summary(res, inputs, time.perf_counter() - wall0, aids, streamed)

@@ -44,6 +44,7 @@ class RunSummary:
     first_warning: str = OMIT
     noise_estimate: dict[str, Any] | None = OMIT
     odometry_delay_estimate: dict[str, Any] | None = OMIT
+    odometry_turn_check: dict[str, Any] | None = None
     calibration: CalibrationEntry = OMIT
     aids: dict[str, Any] = OMIT  # class name -> summary() (a fixes/summaries.py dataclass)
     rings: dict[str, Any] = OMIT
