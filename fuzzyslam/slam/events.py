@@ -18,6 +18,7 @@ import numpy as np
 
 from fuzzyslam.slam.ekf import EkfSlam, UpdateResult
 from fuzzyslam.slam.noise import DetectionNoiseEstimate
+from fuzzyslam.slam.turn_check import TurnCheck
 from fuzzyslam.streams.sonar import Ring
 
 if TYPE_CHECKING:  # slam/latency.py reads the events defined here
@@ -266,7 +267,7 @@ class SlamResult:
     noise_estimate: DetectionNoiseEstimate | None = None
     delay_estimate: DelayEstimate | None = None  # the odometry latency (slam/latency.py)
     calibration: Any = None  # the summary's entry, calibration.CalibrationEntry (slam/stage.py)
-    turn_check: Any = None  # the odometry's turns against the estimate's (slam/turn_check.py)
+    turn_check: TurnCheck | None = None  # the odometry's turns against the estimate's
 
     def mean_nis(self, kind: str = "lamp") -> float:
         """Mean NIS of the accepted updates of ``kind`` (expected value: their dof).

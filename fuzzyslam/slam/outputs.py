@@ -23,7 +23,7 @@ from fuzzyslam.rundir import (
     UPDATES,
     write_landmarks,
 )
-from fuzzyslam.se2 import compose, interpolate_poses, inverse
+from fuzzyslam.se2 import compose, interpolate_poses, inverse, wrap_angle
 from fuzzyslam.slam.events import SlamResult, TfFrames, UpdateRow
 from fuzzyslam.slam.markers import lamp_markers_cdr
 from fuzzyslam.stamps import TIME_FORMAT, format_time
@@ -57,15 +57,16 @@ def dead_reckoning_at(t: np.ndarray, odo_t: np.ndarray, odo_poses: np.ndarray) -
         Query times (s).
     odo_t : ndarray, shape (K,)
         Times of the dead-reckoning poses (sorted).
-    odo_poses : ndarray, shape (K, 3)
-        The dead-reckoning poses.
+    odo_poses : ndarray, shape (K, 3) or (K, m)
+        The dead-reckoning poses (or any other rows at those times).
 
     Returns
     -------
-    ndarray, shape (N, 3)
+    ndarray, shape (N, 3) or (N, m)
     """
     idx = np.searchsorted(np.asarray(odo_t, dtype=float), np.asarray(t, dtype=float), "right")
-    return np.asarray(odo_poses, dtype=float).reshape(-1, 3)[np.maximum(idx - 1, 0)]
+    a = np.asarray(odo_poses, dtype=float)
+    return (a if a.ndim == 2 else a.reshape(-1, 3))[np.maximum(idx - 1, 0)]
 
 
 def log_odom_at(t: np.ndarray, log_odom: tuple[np.ndarray, np.ndarray]) -> np.ndarray:
@@ -198,7 +199,12 @@ class StreamingOutputs:
         # at or before the last row written)
         self._dr_t = np.zeros(0)
         self._dr_p = np.zeros((0, 3))
-        # per block of rows: (t, the estimate's heading, the dead reckoning's) (k, 3)
+        # the dead reckoning's continuous heading and distance travelled at _dr_t (K, 2),
+        # and their running sums (for slam/turn_check.py; the poses' headings are wrapped)
+        self._dr_c = np.zeros((0, 2))
+        self._dist = 0.0
+        # per block of rows (k, 4): t, the estimate's heading less the dead reckoning's
+        # (wrapped), the dead reckoning's continuous heading and distance; 32 bytes a row
         self._headings: list[np.ndarray] = []
 
     def __enter__(self) -> StreamingOutputs:
@@ -277,11 +283,14 @@ class StreamingOutputs:
         cdr = iter(encode_pose_with_covariance_block(t, poses, cov, self.frames.map))
         self._flush_odometry()  # every increment up to the rows' times (runner: rows lag)
         odo = dead_reckoning_at(t, self._dr_t, self._dr_p)
-        self._headings.append(np.column_stack([t, poses[:, 2], odo[:, 2]]))
+        cont = dead_reckoning_at(t, self._dr_t, self._dr_c)
+        rel = wrap_angle(poses[:, 2] - odo[:, 2])
+        self._headings.append(np.column_stack([t, rel, cont]))
         tf = iter(tf_payloads(t, poses, odo, self.frames))
         if len(t):
             keep = max(int(np.searchsorted(self._dr_t, t[-1], "right")) - 1, 0)
             self._dr_t, self._dr_p = self._dr_t[keep:], self._dr_p[keep:]
+            self._dr_c = self._dr_c[keep:]
         pose_tf = [tp.slam_pose, tp.tf], [M.POSE_COV_STAMPED, M.TF_MESSAGE]
         mcap = self._mcap
         for lamps, tm, a, b in self._messages:  # in the order they came
@@ -303,28 +312,42 @@ class StreamingOutputs:
         if not self._odo_t:
             return
         u = np.asarray(self._odo_u, dtype=float).reshape(-1, 2)
+        rot0 = self._carry[0]
         poses, self._carry = integrate_from(self.start_pose, u[:, 0], u[:, 1], self._carry)
+        heading = self.start_pose[2] + np.cumsum(np.concatenate([[rot0], u[:, 1]]))
+        dist = np.cumsum(np.concatenate([[self._dist], u[:, 0]]))
+        self._dist = float(dist[-1])
+        cont = np.column_stack([heading, dist])
         if not self._odo_first:
             poses = poses[1:]  # the previous block's last pose, already written
+            cont = cont[1:]
         odo_t = np.asarray(self._odo_t, dtype=float)
         self._odo.write(_tum_lines(odo_t, poses))
         self._dr_t = np.concatenate([self._dr_t, odo_t])
         self._dr_p = np.concatenate([self._dr_p, poses])
+        self._dr_c = np.concatenate([self._dr_c, cont])
         self._odo_first = False
         self._odo_t.clear()
         self._odo_u.clear()
 
     def headings(self) -> np.ndarray:
-        """The rows written so far: their times, the estimate's headings and the dead
-        reckoning's at those times (the odometry's turns against the filter's,
-        slam/turn_check.py).
+        """The rows written so far: their times, the estimate's heading and the dead
+        reckoning's, both continuous, and the dead reckoning's distance travelled at those
+        times (the odometry's turns against the filter's, slam/turn_check.py). The dead
+        reckoning's heading is its start plus the sum of its turns; the estimate's is that
+        plus their difference, unwrapped from row to row (the filter's correction between
+        two rows is far below pi, however far the robot turned between them).
 
         Returns
         -------
-        ndarray (n, 3)
-            t (s), the estimate's heading and the dead reckoning's (rad).
+        ndarray (n, 4)
+            t (s), the estimate's heading and the dead reckoning's (rad), the dead
+            reckoning's distance (m, signed).
         """
-        return np.concatenate(self._headings) if self._headings else np.zeros((0, 3))
+        if not self._headings:
+            return np.zeros((0, 4))
+        t, rel, heading, dist = np.concatenate(self._headings).T
+        return np.column_stack([t, heading + np.unwrap(rel), heading, dist])
 
     def write_messages(self, messages) -> None:
         """Write ``messages`` (topic, type name, message or its CDR bytes, t) into

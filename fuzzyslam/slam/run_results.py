@@ -278,14 +278,10 @@ def filter_health(
             findings.append(found)
     if lost is not None:
         findings.append(lost)
-    for reason, t in findings:
-        reasons.append(reason)
-        diverged_at = t if diverged_at is None else min(diverged_at, t)
-    diverged = diverged or bool(findings)
     after = OMIT
     if diverged_at is not None and start is not None:
         after = round(float(diverged_at) - float(start), 3)
-    return FilterHealth(
+    health = FilterHealth(
         **guards,
         **windows,
         diverged=diverged,
@@ -296,14 +292,18 @@ def filter_health(
         **motion,
         diverged_after_start_s=after,
     )
+    for reason, t in findings:
+        health = with_finding(health, reason, t, start)
+    return health
 
 
 def with_finding(
     health: FilterHealth, reason: str, at: float, start: float | None = None
 ) -> FilterHealth:
-    """``health`` with one more reason found after the run (the odometry's turns against
-    the estimate's, slam/turn_check.py): flagged, from the earlier of ``at`` and the
-    time it was flagged from.
+    """``health`` with one more reason (the aids' findings, orphan landmarks, lost events
+    in :func:`filter_health`; the odometry's turns against the estimate's, found once
+    the rows are written, slam/turn_check.py): flagged, from the earlier of ``at`` and
+    the time it was flagged from.
 
     Parameters
     ----------

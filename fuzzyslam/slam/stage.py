@@ -517,6 +517,8 @@ def _run_once(
         calib = res.calibration
         expected = rotation_factor(calib.names, calib.factors) if calib is not None else 1.0
         res.turn_check = turn_ratio(*streamed.headings().T, expected=expected)
+        if res.turn_check is not None and calib is not None:
+            res.turn_check = replace(res.turn_check, calibrated=True)
         if res.turn_check is not None and res.turn_check.flagged:
             start = inputs.start + inputs.clock_offset
             res.health = with_finding(

@@ -19,7 +19,8 @@ class RunSummary:
     ``first_warning`` (no input problem), ``noise_estimate`` and
     ``odometry_delay_estimate`` (lamps from frames), ``calibration`` (off), ``aids``,
     ``rings``, ``range_sensor`` (no fixes),
-    ``noise_adapted`` (without ``--adapt-noise``)."""
+    ``noise_adapted`` (without ``--adapt-noise``). ``odometry_turn_check`` is always
+    there, null for a log too short or turning too little (slam/turn_check.py)."""
 
     command: str = "run"
     log: str
