@@ -9,9 +9,11 @@ from pathlib import Path
 import numpy as np
 import pytest
 from conftest import run_cli
+from test_robust_logs import Out, keep, rewrite
 
 from fuzzyslam.slam import turn_check as tc
 from fuzzyslam.slam.turn_check import rotation_factor, turn_note, turn_ratio
+from fuzzyslam.streams.reader import LogMessage
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
 
@@ -290,34 +292,28 @@ def test_a_wrong_wheel_base_is_flagged_unless_calibrated(tmp_path, capsys) -> No
 def _scale_turns(src: Path, dst: Path, scale: float) -> None:
     """The log with its /odom poses integrated again from their increments, each turn
     times ``scale`` (a driver with a wrong angular scale)."""
-    from fuzzyslam.streams.reader import LogReader
-    from fuzzyslam.streams.writer import LogWriter
+    state = {}
 
-    reader = LogReader(src)
-    prev = cur = None
-    with LogWriter(dst) as w:
-        for name in sorted(reader.metadata):
-            w.metadata(name, reader.metadata[name])
-        for m in reader.messages():
-            msg = m.msg
-            if m.topic == "/odom":
-                p, q = msg.pose.pose.position, msg.pose.pose.orientation
-                pose = (p.x, p.y, 2.0 * math.atan2(q.z, q.w))
-                if prev is None:
-                    cur = pose
-                else:
-                    dx, dy = pose[0] - prev[0], pose[1] - prev[1]
-                    c, s = math.cos(prev[2]), math.sin(prev[2])
-                    bx, by = c * dx + s * dy, -s * dx + c * dy
-                    dth = math.remainder(pose[2] - prev[2], math.tau) * scale
-                    c, s = math.cos(cur[2]), math.sin(cur[2])
-                    cur = (cur[0] + c * bx - s * by, cur[1] + s * bx + c * by, cur[2] + dth)
-                prev = pose
-                p.x, p.y = cur[0], cur[1]
-                q.x = q.y = 0.0
-                q.z, q.w = math.sin(cur[2] / 2), math.cos(cur[2] / 2)
-                msg.twist.twist.angular.z *= scale
-            w.write(m.topic, m.typename, msg, m.t)
+    def fault(m: LogMessage) -> list[Out]:
+        if m.topic == "/odom":
+            p, q = m.msg.pose.pose.position, m.msg.pose.pose.orientation
+            pose = (p.x, p.y, 2.0 * math.atan2(q.z, q.w))
+            prev, cur = state.get("prev"), state.get("cur", pose)
+            if prev is not None:  # the increment in the previous pose's frame, turn scaled
+                dx, dy = pose[0] - prev[0], pose[1] - prev[1]
+                c, s = math.cos(prev[2]), math.sin(prev[2])
+                bx, by = c * dx + s * dy, -s * dx + c * dy
+                dth = math.remainder(pose[2] - prev[2], math.tau) * scale
+                c, s = math.cos(cur[2]), math.sin(cur[2])
+                cur = (cur[0] + c * bx - s * by, cur[1] + s * bx + c * by, cur[2] + dth)
+            state.update(prev=pose, cur=cur)
+            p.x, p.y = cur[0], cur[1]
+            q.x = q.y = 0.0
+            q.z, q.w = math.sin(cur[2] / 2), math.cos(cur[2] / 2)
+            m.msg.twist.twist.angular.z *= scale
+        return keep(m)
+
+    rewrite(src, dst, fault)
 
 
 @pytest.mark.slow
