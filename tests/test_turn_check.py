@@ -236,6 +236,8 @@ def test_the_note_says_which_way_and_against_what() -> None:
     assert "19 % more than the odometry as calibrated (0.800)" in line
     line = turn_note({**check, "expected": 1.0, "calibrated": True})  # learnt 0.99996
     assert "as calibrated (1.000)" in line and "learns it" not in line
+    line = turn_note(check, wheel_base=0.4)  # turns 0.796 of the odometry's: base 0.4 / 0.796
+    assert line.endswith("; robot.wheel_base: 0.503 (now 0.4) would make them agree, at least")
 
 
 def _world(tmp: Path, base_scale: float, calibrate: bool) -> Path:
@@ -270,6 +272,7 @@ def test_a_wrong_wheel_base_is_flagged_unless_calibrated(tmp_path, capsys) -> No
     assert s["filter_health"]["reasons"] == ["odometry_turn_scale"]
     lines = [x for x in err.splitlines() if "odometry_turn_check" in x]
     assert len(lines) == 1 and "20 % less than the odometry" in lines[0]
+    assert "robot.wheel_base: 0.50" in lines[0]  # the true base: 0.40 x 1.25
     calibrated = _world(tmp_path, 1.25, True)
     code, s, err = run_cli(
         ["run", str(log), "--config", str(calibrated), "-o", str(tmp_path / "b")], capsys

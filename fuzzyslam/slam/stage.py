@@ -397,7 +397,8 @@ def _tell(summary: RunSummary, cfg: Config | None = None) -> None:
         )
     turns = summary.odometry_turn_check
     if turns and turns["flagged"]:
-        note(turn_note(turns))
+        encoders = cfg is not None and summary.odometry_source.startswith("encoders")
+        note(turn_note(turns, cfg.robot.wheel_base if encoders else None))
     stale = summary.counts.frames_stale_odometry
     if stale:  # the driver stopped (or paused): say which stream, not only that frames were lost
         limit = f" over slam.odometry_stale_s = {cfg.slam.odometry_stale_s:g} s" if cfg else ""

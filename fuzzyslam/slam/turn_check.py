@@ -84,14 +84,18 @@ class TurnCheck:
         }
 
 
-def turn_note(check: dict) -> str:
+def turn_note(check: dict, wheel_base: float | None = None) -> str:
     """The flagged run's cause for the notes: which way the odometry's turns are off
-    and by how much at least.
+    and by how much at least; for wheel encoders without calibration, the wheel base
+    that would make them agree (a turn is (d_R - d_L) / b: the base b / k; a bound, as
+    the ratio is).
 
     Parameters
     ----------
     check : dict
         The summary's ``odometry_turn_check`` (:meth:`TurnCheck.as_dict`).
+    wheel_base : float, optional
+        ``robot.wheel_base`` (m) when the odometry is the wheel encoders.
 
     Returns
     -------
@@ -107,6 +111,12 @@ def turn_note(check: dict) -> str:
         f"{check['sd']:.3f}): the odometry's turns are off by at least that (a wheel base, "
         "the driver's angular scale, a gyro's scale"
         + (")" if calibrated else "; slam.calibrate: true learns it)")
+        + (
+            f"; robot.wheel_base: {wheel_base / ratio:.3f} (now {wheel_base:g}) would make"
+            " them agree, at least"
+            if wheel_base is not None and not calibrated
+            else ""
+        )
     )
 
 
