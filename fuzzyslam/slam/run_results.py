@@ -177,8 +177,14 @@ REASON_CAUSES = {
     "association": "an odometry scale or turn error, a detector mount's yaw",
     "orphan_landmarks": "detection noise too small, a mount or time error",
     "map_motion": "an odometry delay or clock offset, bearing noise too small",
-    "position_unresolved": "fixes too sparse for the odometry noise, fixes.junction_margin",
-    "pose_off_map": "heading fixes on the wrong walls (start pose, map)",
+    "position_unresolved": (
+        "fixes too sparse for the odometry noise, an odometry turn or scale error, "
+        "fixes.junction_margin"
+    ),
+    "pose_off_map": (
+        "heading fixes on the wrong walls: a start pose off, an odometry scale or turn "
+        "error, a range sensor's mount yaw, odometry noise set too small"
+    ),
     "pose_matches_ambiguous": "too few range sensors or a featureless place for the map",
     "pose_matches_refused": "odometry scale, the range sensor's mount, a clock offset",
     "events_lost": "stamps on another clock or back in time, a driver that stopped",
