@@ -125,3 +125,12 @@ def test_read_ahead_taken_once(tmp_path: Path, monkeypatch) -> None:
     monkeypatch.setattr(tf_ahead, "MIN_CHUNK_BYTES", os.path.getsize(SAMPLE) * 100)
     with tf_ahead.read_ahead(SAMPLE):
         assert not tf_ahead._PENDING
+
+
+def test_payload_bound_gives_no_answer(tmp_path: Path, monkeypatch) -> None:
+    """Past ``MAX_PAYLOAD_BYTES`` of payloads: no answer (the child's memory bounded)."""
+    log = tmp_path / "mixed.mcap"
+    _mixed_log(log)
+    assert tf_ahead.read_transforms(log) is not None
+    monkeypatch.setattr(tf_ahead, "MAX_PAYLOAD_BYTES", 1000)
+    assert tf_ahead.read_transforms(log) is None

@@ -20,7 +20,7 @@ counts: a damaged chunk, an undecodable message, an index that does not match): 
 answer is used only if the child's read changed none of it, every payload decoded, and
 the file is the one the run opened (size, modification time, inode); else ``tf_frames``
 reads the topic itself, as without this process. The child's memory is bounded
-(``MAX_TRANSFORMS``: past it, no answer). The child is reaped once taken, when the log's
+(``MAX_PAYLOAD_BYTES``: past it, no answer). The child is reaped once taken, when the log's
 inputs are opened (:func:`discard`) and on every path out of :func:`read_ahead`. Where the
 run forks no input process (``fuzzyslam.forked.wanted``: one CPU, ``--no-prefetch``),
 none is forked here either: ``tf_frames`` reads as before.
@@ -35,7 +35,9 @@ from collections.abc import Iterator
 from pathlib import Path
 from typing import Any
 
-MAX_TRANSFORMS = 1_000_000  # transforms kept at most (8 floats each: 64 MB): else no answer
+# payload bytes kept at most (the paper log's /tf: 1.5 MB), past which no answer: the
+# child's memory stays within a few times this (a transform takes at least 40 bytes)
+MAX_PAYLOAD_BYTES = 32 << 20
 # chunks (decompressed) holding the TFMessage topics from which a process reads them: the
 # paper log's 100 MB take 0.2 s to read, data/sample.mcap's 9 MB 0.02 s, less than the
 # process's start
@@ -79,7 +81,7 @@ def read_transforms(path: str | os.PathLike, reader=None) -> dict[str, Any] | No
     """Every tf2_msgs/TFMessage topic of the log, read as ``tf_frames`` reads one
     (module docstring); None if reading changed the reader's damage counts, if the file
     is read by a walk of its records (:meth:`LogReader.payloads`), or past
-    ``MAX_TRANSFORMS`` transforms.
+    ``MAX_PAYLOAD_BYTES`` of payloads.
 
     Parameters
     ----------
@@ -111,21 +113,21 @@ def read_transforms(path: str | os.PathLike, reader=None) -> dict[str, Any] | No
         return None
     times: dict[str, list[float]] = {tp: [] for tp in topics}
     bufs: dict[str, list[bytes]] = {tp: [] for tp in topics}
+    kept = 0
     for topic, t, payload in read:
         times[topic].append(t)
         bufs[topic].append(bytes(payload))
+        kept += len(payload)
+        if kept > MAX_PAYLOAD_BYTES:
+            return None
     if reader.damage_state() != before:
         return None
     out: dict[str, Any] = {"identity": identity}
-    kept = 0
     for tp in topics:
         got = decode_transforms(bufs[tp])
         if got is None:
             return None
         msg, names, stamp, xyq = got
-        kept += len(msg)
-        if kept > MAX_TRANSFORMS:
-            return None
         msg_t = np.array(times[tp], dtype=float)
         pairs = {}
         for k, pair in enumerate(names):
