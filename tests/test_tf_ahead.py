@@ -15,6 +15,7 @@ from fuzzyslam.config import load_config
 from fuzzyslam.slam import log_setup, tf_ahead
 from fuzzyslam.slam.log_setup import _pair_transforms, _read_pair, tf_frames
 from fuzzyslam.streams import messages as M
+from fuzzyslam.streams.cdr import decode_tf_messages
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.writer import LogWriter
 
@@ -87,9 +88,9 @@ def test_layouts_and_late_pairs(tmp_path: Path, monkeypatch) -> None:
 
 def test_not_little_endian_gives_no_answer() -> None:
     """A payload that is not little-endian CDR: no answer (tf_frames reads it itself)."""
-    assert tf_ahead.decode_transforms([b"\x00\x00\x00\x00\x00\x00\x00\x00"]) is None
-    assert tf_ahead.decode_transforms([b"\x00\x01\x00\x00\xff\xff\xff\xff"]) is None
-    msg, names, (stamps, pair), xyq = tf_ahead.decode_transforms([])
+    assert decode_tf_messages([b"\x00\x00\x00\x00\x00\x00\x00\x00"]) is None
+    assert decode_tf_messages([b"\x00\x01\x00\x00\xff\xff\xff\xff"]) is None
+    msg, names, (stamps, pair), xyq = decode_tf_messages([])
     assert not len(stamps) and not len(pair)
     assert not len(msg) and not names and xyq.shape == (0, 6)
 
