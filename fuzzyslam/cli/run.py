@@ -163,14 +163,17 @@ def run_command(
     The JSON summary is also printed on stdout; progress goes to stderr.
     """
     from fuzzyslam.forked import ChildCalls, fewer_collections, wanted
+    from fuzzyslam.slam.tf_ahead import read_ahead
 
     # a pose run draws changes.png in a figure process (slam/stage.py): forked now, before
     # the imports below, it imports matplotlib on the second core, idle while this process
     # starts (fuzzyslam/forked.py); closed by the stage if no aid draws
-    early = map_dir is not None and fix == "pose" and wanted(prefetch)
+    forks = wanted(prefetch)
+    early = map_dir is not None and fix == "pose" and forks
     with (
         ChildCalls() if early else contextlib.nullcontext() as figures,
         fewer_collections(),  # here and in the input process (it inherits the thresholds)
+        read_ahead(log, forks),  # the log's /tf read meanwhile (slam/tf_ahead.py)
     ):
         from fuzzyslam.slam.stage import run
 

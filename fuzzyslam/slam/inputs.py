@@ -59,6 +59,7 @@ import numpy as np
 from fuzzyslam.camera import IDENTITY_AXES, CeilingCamera, floor_mount
 from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
+from fuzzyslam.slam import tf_ahead
 from fuzzyslam.slam.deskew import deskewed
 from fuzzyslam.slam.events import Event, Frame, Odom, RingEvent, TfFrames
 from fuzzyslam.slam.latency import delay_odometry
@@ -825,6 +826,7 @@ def open_inputs(
         notes=notes,
         names=names,
     )
+    tf_ahead.discard(path)  # the /tf read ahead, if tf_frames did not take it
     camera, detection_mount = None, None
     to_grey = M.image_to_array
     image_topic = frame_topic(reader, tp.image)

@@ -22,6 +22,7 @@ from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.robot import WHEEL_NAMES, odometry_to_wheel_increments
 from fuzzyslam.se2 import between, interpolate_poses, quaternion_to_yaw
+from fuzzyslam.slam import tf_ahead
 from fuzzyslam.slam.events import TfFrames
 from fuzzyslam.slam.odom_gate import SPEED_MARGIN, OdomGate, first_plausible_pose
 from fuzzyslam.streams import messages as M
@@ -642,30 +643,15 @@ def tf_frames(
     if not reader.has(cfg.topics.tf):
         return frames
     pair = (frames.odom, frames.base)
-    found = False
-    t: list[float] = []
-    xyq: list[tuple[float, ...]] = []  # x, y, qx, qy, qz, qw
-    logged: list[float] = []  # their messages' log times
-    t_first = None
-    for m in reader.messages([cfg.topics.tf]):
-        t_first = m.t if t_first is None else t_first
-        for ts in m.msg.transforms:
-            if (str(ts.header.frame_id).lstrip("/"), str(ts.child_frame_id).lstrip("/")) != pair:
-                continue
-            found = True
-            if not series:
-                break
-            tr, q = ts.transform.translation, ts.transform.rotation
-            t.append(M.stamp_to_sec(ts.header.stamp))
-            logged.append(m.t)
-            xyq.append((tr.x, tr.y, q.x, q.y, q.z, q.w))
-        if found and not series:
-            break
-        if not found and names is None and m.t - t_first > TF_SEARCH_S:
-            break  # (the odometry's own transforms are on /tf: found, however late)
+    # read ahead by a forked process while the run started (slam/tf_ahead.py)
+    ahead = tf_ahead.take(reader.path, cfg.topics.tf) if series else None
+    if ahead is not None:
+        found, t, logged, xyq = _pair_transforms(ahead, pair, names is None)
+    else:
+        found, t, logged, xyq = _read_pair(reader, cfg.topics.tf, pair, series, names is None)
     if not found:
         return frames
-    offset = float(np.median(np.subtract(t, logged))) if t else 0.0
+    offset = float(np.median(np.subtract(t, logged))) if len(t) else 0.0
     if clock is not None and abs(offset - clock[0]) > clock[1]:
         line = (
             f"{reader.path}: {cfg.topics.tf} odom -> base is stamped {offset:+.3f} s from its "
@@ -680,11 +666,55 @@ def tf_frames(
     )
 
 
-def _odom_series(t: list[float], xyq: list[tuple[float, ...]]):
+def _read_pair(reader: LogReader, topic: str, pair: tuple[str, str], series: bool, search: bool):
+    """``tf_frames``' read of ``topic``: (found, stamps (s), their messages' log times (s),
+    (x, y, qx, qy, qz, qw) of each) of the transforms of ``pair``; ``search``: the pair
+    looked for in the topic's first ``TF_SEARCH_S`` only; without ``series``, found only."""
+    found = False
+    t: list[float] = []
+    xyq: list[tuple[float, ...]] = []  # x, y, qx, qy, qz, qw
+    logged: list[float] = []  # their messages' log times
+    t_first = None
+    for m in reader.messages([topic]):
+        t_first = m.t if t_first is None else t_first
+        for ts in m.msg.transforms:
+            if (str(ts.header.frame_id).lstrip("/"), str(ts.child_frame_id).lstrip("/")) != pair:
+                continue
+            found = True
+            if not series:
+                break
+            tr, q = ts.transform.translation, ts.transform.rotation
+            t.append(M.stamp_to_sec(ts.header.stamp))
+            logged.append(m.t)
+            xyq.append((tr.x, tr.y, q.x, q.y, q.z, q.w))
+        if found and not series:
+            break
+        if not found and search and m.t - t_first > TF_SEARCH_S:
+            break  # (the odometry's own transforms are on /tf: found, however late)
+    return found, t, logged, xyq
+
+
+def _pair_transforms(ahead, pair: tuple[str, str], search: bool):
+    """:func:`_read_pair`'s answer (with its series) from the topic read ahead
+    (``tf_ahead.TopicTransforms``): the pair's transforms if it is found, that is if its
+    first message comes before any message logged over ``TF_SEARCH_S`` after the first
+    (``search``; the read stops there otherwise), with the same floats."""
+    got = ahead.pairs.get(pair)
+    if got is None:
+        return False, [], [], []
+    first, t, logged, xyq = got
+    if search:
+        late = np.flatnonzero(ahead.msg_t - ahead.msg_t[0] > TF_SEARCH_S)
+        if len(late) and late[0] < first:
+            return False, [], [], []
+    return True, t, logged, xyq
+
+
+def _odom_series(t, xyq):
     """(t (N,), poses (N, 3)) of transforms (x, y, quaternion): finite ones, sorted by
     stamp, the last one of each stamp, the heading unwrapped (continuous over the whole
     series: ``outputs.log_odom_at`` interpolates slices of it); None when none is left."""
-    if not t:
+    if not len(t):
         return None
     tt = np.asarray(t, dtype=float)
     a = np.asarray(xyq, dtype=float).reshape(-1, 6)

@@ -386,6 +386,83 @@ def decode_tf_message(buf: bytes | memoryview) -> TFMessage:
     return TFMessage(out)
 
 
+def decode_tf_messages(bufs: list[bytes]):
+    """The transforms of little-endian CDR tf2_msgs/TFMessage payloads, as
+    :func:`decode_tf_message` reads them (and ``log_setup.tf_frames`` takes them), at once
+    for the payloads of one layout (the same length, transform count, frame names; a
+    constant-rate /tf has one): each payload of a layout is checked against the first,
+    which that decoder reads; their stamps and floats are read with numpy, the same
+    bits. None if a payload is not little-endian or does not decode (``tf_frames``
+    would count it undecodable), or past 64 layouts.
+
+    Parameters
+    ----------
+    bufs : list of bytes
+        The payloads, in log-time order.
+
+    Returns
+    -------
+    (msg, names, (stamps, pair), xyq) or None
+        Per transform, in order (message, then transform): its message's index (T,),
+        the frame pairs (parent, child; slashes stripped) in order of first sight, the
+        stamp sec + nanosec 1e-9 (T,) and the index of its pair in ``names`` (T,), and
+        (x, y, qx, qy, qz, qw) (T, 6).
+    """
+    left = np.arange(len(bufs))
+    lengths = np.fromiter((len(b) for b in bufs), dtype=np.int64, count=len(bufs))
+    parts = []  # (message indices, transform index, pair, sec, nsec, values (n, 7))
+    names: dict[tuple[str, str], int] = {}
+    for _ in range(64):
+        if not len(left):
+            break
+        first = bufs[left[0]]
+        if first[:2] != b"\x00\x01":
+            return None
+        try:
+            msg = decode_tf_message(first)
+        except Exception:
+            return None
+        same = left[lengths[left] == len(first)]
+        rows = np.frombuffer(b"".join(bufs[i] for i in same), np.uint8).reshape(len(same), -1)
+        keep = np.all(rows[:, :8] == rows[0, :8], axis=1)  # encapsulation, count
+        a = 8
+        fields = []
+        for ts in msg.transforms:  # decode_tf_message's offsets, its strings compared
+            a += (4 - a) % 4
+            stamp = a
+            a += 8  # sec, nanosec
+            for name in (ts.header.frame_id, ts.child_frame_id):
+                a += (4 - a) % 4
+                end = a + 4 + len(name.encode()) + 1
+                keep &= np.all(rows[:, a:end] == rows[0, a:end], axis=1)
+                a = end
+            a += (4 - a) % 8
+            fields.append((stamp, a, ts))
+            a += 56
+        same, rows = same[keep], rows[keep]
+        for j, (stamp, at, ts) in enumerate(fields):
+            pair = (str(ts.header.frame_id).lstrip("/"), str(ts.child_frame_id).lstrip("/"))
+            sec = np.ascontiguousarray(rows[:, stamp : stamp + 4]).view("<i4").ravel()
+            nsec = np.ascontiguousarray(rows[:, stamp + 4 : stamp + 8]).view("<u4").ravel()
+            v = np.ascontiguousarray(rows[:, at : at + 56]).view("<f8")
+            parts.append((same, j, names.setdefault(pair, len(names)), sec, nsec, v))
+        left = np.setdiff1d(left, same, assume_unique=True)
+    else:
+        if len(left):
+            return None
+    if not parts:
+        return np.zeros(0, int), [], (np.zeros(0), np.zeros(0, int)), np.zeros((0, 6))
+    msg = np.concatenate([p[0] for p in parts])
+    slot = np.concatenate([np.full(len(p[0]), p[1]) for p in parts])
+    order = np.lexsort((slot, msg))  # message order, then the transforms' order
+    pair = np.concatenate([np.full(len(p[0]), p[2]) for p in parts])[order]
+    sec = np.concatenate([p[3] for p in parts])[order].astype(float)
+    nsec = np.concatenate([p[4] for p in parts])[order].astype(float)
+    v = np.concatenate([p[5] for p in parts])[order]
+    stamps = sec + nsec * 1e-9  # messages.stamp_to_sec
+    return msg[order], list(names), (stamps, pair), v[:, [0, 1, 3, 4, 5, 6]]
+
+
 DECODERS: dict[str, Callable[[Any], Any]] = {
     "nav_msgs/msg/Odometry": decode_odometry,
     "geometry_msgs/msg/PoseArray": decode_pose_array,

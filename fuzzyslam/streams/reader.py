@@ -359,6 +359,58 @@ class LogReader:
         finally:  # the mismatch is one damaged record, unless the walk counted it
             self._damage.record(mismatch.offset, 0)
 
+    def chunk_bytes(self, topics: Iterable[str]) -> int | None:
+        """The decompressed bytes of the chunks that hold messages of ``topics`` (what
+        reading them through the index decompresses); None for a file read by a walk of
+        its records (no summary, or chunks without one).
+
+        Parameters
+        ----------
+        topics : iterable of str
+            The topics.
+
+        Returns
+        -------
+        int or None
+        """
+        s = self._summary
+        if s is None or not s.chunks:
+            return None
+        wanted = set(topics)
+        ids = {cid for cid, (topic, _schema) in s.channels.items() if topic in wanted}
+        return sum(
+            c.size for c in s.chunks if not c.message_indexes or ids & c.message_indexes.keys()
+        )
+
+    def payloads(self, topics: Iterable[str]) -> Iterator[tuple[str, float, Any]] | None:
+        """The undecoded messages of ``topics`` as :meth:`messages` reads them through the
+        file's index: (topic, log time s, CDR payload), in log-time order; None for a file
+        read by a walk of its records (no summary, or chunks without one). Damaged chunks
+        are counted and skipped as :meth:`messages` does; a chunk that does not match the
+        index raises ``IndexMismatch`` (:meth:`messages` walks on from there instead).
+
+        Parameters
+        ----------
+        topics : iterable of str
+            The topics.
+
+        Returns
+        -------
+        iterator of (str, float, memoryview) or None
+        """
+        s = self._summary
+        if s is None or not s.chunks:
+            return None
+        wanted = set(topics)
+        chans = {cid: topic for cid, (topic, _schema) in s.channels.items() if topic in wanted}
+        return self._payloads(s, chans)
+
+    def _payloads(self, s: Summary, chans: dict[int, str]) -> Iterator[tuple[str, float, Any]]:
+        with open(self.path, "rb") as f:
+            for batch in indexed_messages(f, s, set(chans), -1, self._damage, {}):
+                for t_ns, cid, _seq, payload in batch:
+                    yield chans[cid], t_ns / 1e9, payload
+
     def _walk_messages(
         self,
         wanted: set[str] | None,
