@@ -263,6 +263,7 @@ def test_preintegrated_jacobians_bit_for_bit_against_the_chain_rule_written_out(
     assert 0 < inst_steps
 
 
+@pytest.mark.slow  # end to end, 1-3 s: the fast tier stays under a minute
 def test_encoder_noise_does_not_bias_the_base_factor():
     """The errors-in-variables bias (CalibratedPreintegrator docstring): heading noise of
     3 cm/sqrt(m) on straight corridors and precise lamps at every step. With F at the

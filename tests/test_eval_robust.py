@@ -201,6 +201,7 @@ def test_empty_landmarks_accepted_for_a_run_refused_for_the_truth(tmp_path: Path
 # --- stderr ---------------------------------------------------------------------------
 
 
+@pytest.mark.slow  # end to end, 1-3 s: the fast tier stays under a minute
 def test_progress_and_warnings_on_stderr(tmp_path: Path, monkeypatch) -> None:
     """With progress on (stderr not a terminal): the start and end lines of the work;
     an overconfident estimate's warning as a one-line note, also in the JSON. With

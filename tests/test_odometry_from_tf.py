@@ -195,6 +195,7 @@ def test_carmen_excerpt_with_odometry_on_tf(excerpt_logs: Path) -> None:
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
 
 
+@pytest.mark.slow  # end to end, 1-3 s: the fast tier stays under a minute
 def test_unreadable_encoders_without_odom_fall_back_to_tf(tmp_path: Path) -> None:
     """Wheel joints under other names and no /odom: /tf's odom -> base_link is read, one
     note saying why (the joints passed over, no /odom), the trajectory that of /odom."""

@@ -514,6 +514,7 @@ def test_frames_on_another_clock_are_not_used_and_said(tiny: Tiny, tmp_path: Pat
     assert "no usable camera frame" in line and "another clock" in line
 
 
+@pytest.mark.slow  # end to end, 1-3 s: the fast tier stays under a minute
 def test_frames_stamped_before_the_log_starts_keep_the_trajectory_in_order(
     tiny: Tiny, tmp_path: Path
 ) -> None:
