@@ -121,6 +121,7 @@ def test_tf_need_not_reach_the_end(tiny: Tiny, tmp_path: Path) -> None:  # noqa:
     assert "/odom falls silent at 20.00 s of the log's 37.55 s" in got[1]
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_the_reviewers_shortfall_of_sample_is_no_cut(tmp_path: Path) -> None:
     """The reviewer's case: data/sample.mcap without its encoders and /odom's last 2 s
     (of 121 s): /odom is read (the gap rule alone said "/odom falls silent at 119.05 s
@@ -136,6 +137,7 @@ def test_the_reviewers_shortfall_of_sample_is_no_cut(tmp_path: Path) -> None:
     assert got is not None and "falls silent at 101.0" in got[1]
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_last_time_is_the_last_message_of_the_topic(tiny: Tiny, tmp_path: Path) -> None:  # noqa: F811
     """``LogReader.last_time`` from the chunk indexes equals a full read's last log time
     for every topic of the small-chunk copy of the tiny log (many chunks), of a copy

@@ -215,6 +215,7 @@ def test_the_child_waits_for_a_parent_that_lags(monkeypatch) -> None:
     assert reaped(pid)
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_progress_sees_the_same_times(tmp_path: Path, forks, monkeypatch) -> None:
     """The progress bar (stderr) is driven by the events the filter takes, in the parent:
     the same sequence of updates either way, to the end of the log."""
@@ -448,6 +449,7 @@ def test_error_after_the_events_uses_the_childs_first_problem(tmp_path: Path, fo
     assert len(forks) == 1 and reaped(forks[0])
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_parent_exception_and_ctrl_c_reap_the_child(tmp_path: Path, forks, monkeypatch) -> None:
     """The filter (in the parent) failing mid-run, or Ctrl-C there: the error as without
     the child, no output, the child killed and reaped."""

@@ -429,6 +429,7 @@ def test_frame_glitches_are_counted_and_skipped(tiny: Tiny, tmp_path: Path) -> N
     assert s["lamps"] == tiny.run["lamps"]
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_stamps_back_in_time_and_repeated_are_counted(tiny: Tiny, tmp_path: Path) -> None:
     """Header stamps that go back in time and repeated messages (same stamp) are dropped
     and counted once each; the final pose barely moves (wheel angles are cumulative: the
@@ -688,6 +689,7 @@ def test_a_clock_step_is_followed_and_a_glitched_stamp_skipped(tiny: Tiny, tmp_p
     assert np.hypot(*d) < 0.05
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_stamps_from_zero_in_a_unix_time_log_give_increasing_tum_rows(
     tiny: Tiny, tmp_path: Path
 ) -> None:
@@ -713,6 +715,7 @@ def test_stamps_from_zero_in_a_unix_time_log_give_increasing_tum_rows(
     assert code == 0, err
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_frames_before_the_odometry_starts_are_not_used(tiny: Tiny, tmp_path: Path) -> None:
     """The odometry's first 5 s not logged (a driver started late): the camera frames
     stamped more than odometry_stale_s before its first message were taken where the
@@ -745,6 +748,7 @@ def test_frames_before_the_odometry_starts_are_not_used(tiny: Tiny, tmp_path: Pa
     assert first_odometry - 1.0 <= t[0] < first_odometry
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_a_ros2_bag_folder_is_read_and_a_split_bag_is_said(tiny: Tiny, tmp_path: Path) -> None:
     """The folder ``ros2 bag record -s mcap`` writes (metadata.yaml and NAME_0.mcap) is
     read as its one MCAP file; a bag split into two files, or a folder without one, is
@@ -772,6 +776,7 @@ def test_a_ros2_bag_folder_is_read_and_a_split_bag_is_said(tiny: Tiny, tmp_path:
     assert code == 3 and "no .mcap file" in err
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_a_run_folder_is_not_taken_for_a_bag(tiny: Tiny, tmp_path: Path) -> None:
     """A run's output folder (its trajectory.tum, its estimates.mcap) given as the log is
     one line saying so, not read as a bag of its estimates; a bag folder without
