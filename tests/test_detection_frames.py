@@ -180,6 +180,7 @@ def _twist_only(idle_until: float = -np.inf, silent: tuple[float, float] | None 
     return fault
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_twist_only_odometry_after_an_idle_start_and_over_a_gap(tmp_path: Path) -> None:
     """A robot that waits 40 s (640 messages of zero twist) before it drives is still
     read from its twist; a 15 s silence of the twist-only odometry is not bridged with

@@ -146,6 +146,7 @@ def test_the_shared_style_sizes_text_for_print() -> None:
     assert figsave.WIDE_W <= 7.2 and figsave.PRINT_DPI >= 300
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_evaluation_figures_are_print_sized(tmp_path, monkeypatch) -> None:
     """Every figure of evaluate: at most double-column wide (single column for Fig. 1, 3,
     4), its text 8-9 pt, written at 300 dpi."""

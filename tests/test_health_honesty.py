@@ -260,6 +260,7 @@ def _pose_run_args(tmp_path: Path, capsys, extra_config: Path | None = None) -> 
 # -- B: a configured odometry delay nothing checks ------------------------------------------
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_an_odometry_delay_the_frames_cannot_check_is_said(tmp_path, capsys) -> None:
     """The sample's lamps are camera frames: the delay estimate (PoseArray detections
     only) cannot check real_detections' 0.2 s, which takes its APE from 0.16 to 0.77 m:

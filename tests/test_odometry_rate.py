@@ -29,6 +29,7 @@ def every(n: int):
     return fault
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_slow_encoders_are_slow_not_silent(tiny: Tiny, tmp_path) -> None:  # noqa: F811
     """Encoders cut from 20 Hz to 1 Hz: no odometry gap is reported (each 1 s interval
     was one before: 'silent for 1.00 s'), the period is measured from the log, and stderr

@@ -122,6 +122,7 @@ def test_a_driver_restart_is_read_on_from_the_origin(runs: Path) -> None:
     np.testing.assert_allclose(got[:, :3], want[:, :3], rtol=0, atol=TUM_ATOL)
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_a_restart_in_a_real_log_is_read_on_from_the_origin(tmp_path: Path) -> None:
     """The same on the MRCLAM excerpt (a real robot's /odom at 16 Hz, landmark
     detections): the restart 75 s in is said, in seconds into the log as the filter_health

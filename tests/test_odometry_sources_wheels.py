@@ -150,6 +150,7 @@ def both(names, pos):
     return negate(RIGHT)(*negate(LEFT)(names, pos))
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_swapped_joints_on_a_start_in_place_are_named_first(tiny: Tiny, tmp_path: Path) -> None:  # noqa: F811
     """Swapped joints and a start that turns in place: both wheels run against /odom
     (each follows the other's motion), which also two reversed wheels would do; the line

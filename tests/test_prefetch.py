@@ -127,6 +127,7 @@ def refused_fork(monkeypatch) -> list[int]:
     return refused
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_a_refused_fork_is_the_one_process_run(
     tmp_path: Path, monkeypatch, refused_fork: list[int]
 ) -> None:
@@ -142,6 +143,7 @@ def test_a_refused_fork_is_the_one_process_run(
     assert len(os.listdir("/proc/self/fd")) == before and refused == [1]
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_real_excerpt_outputs_are_the_same(tmp_path: Path, forks) -> None:
     """A real log's PoseArray detections (odometry latency tap, noise estimate, own
     covariances) and Odometry poses (the glitch gate): the same files either way."""

@@ -362,6 +362,7 @@ def test_a_run_leaves_without_the_interpreters_finalisation(tmp_path: Path, tiny
             assert "missing.mcap" in p.stderr
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_a_profiled_run_writes_its_profile(tmp_path: Path, tiny_log) -> None:
     """Under ``python -m cProfile -o`` a run is let finish as Python does, so that the
     profile (written after the command returns) exists: the fast exit is only for runs

@@ -658,6 +658,7 @@ def test_map_ring_table_keeps_every_reading_exactly(tiny: Tiny, monkeypatch) -> 
     assert not offsets.any()  # rings stamped alike: every reading at its ring's time
 
 
+@pytest.mark.slow  # end to end, about 1 s: the fast tier stays under a minute
 def test_a_clock_step_is_followed_and_a_glitched_stamp_skipped(tiny: Tiny, tmp_path: Path) -> None:
     """Every stamp from 15 s on 10 s back (the robot's clock corrected while the recorder
     kept its own): the step is followed, said once, and no stream is taken for another
