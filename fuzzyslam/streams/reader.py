@@ -373,13 +373,13 @@ class LogReader:
         -------
         int or None
         """
-        s = self._summary
-        if s is None or not s.chunks:
+        chans = self._indexed_channels(topics)
+        if chans is None:
             return None
-        wanted = set(topics)
-        ids = {cid for cid, (topic, _schema) in s.channels.items() if topic in wanted}
         return sum(
-            c.size for c in s.chunks if not c.message_indexes or ids & c.message_indexes.keys()
+            c.size
+            for c in self._summary.chunks
+            if not c.message_indexes or chans.keys() & c.message_indexes.keys()
         )
 
     def payloads(self, topics: Iterable[str]) -> Iterator[tuple[str, float, Any]] | None:
@@ -398,12 +398,17 @@ class LogReader:
         -------
         iterator of (str, float, memoryview) or None
         """
+        chans = self._indexed_channels(topics)
+        return None if chans is None else self._payloads(self._summary, chans)
+
+    def _indexed_channels(self, topics: Iterable[str]) -> dict[int, str] | None:
+        """Channel id -> topic of the channels of ``topics``, for a file read through its
+        index; None for one read by a walk of its records (no summary, or no chunks)."""
         s = self._summary
         if s is None or not s.chunks:
             return None
         wanted = set(topics)
-        chans = {cid: topic for cid, (topic, _schema) in s.channels.items() if topic in wanted}
-        return self._payloads(s, chans)
+        return {cid: topic for cid, (topic, _schema) in s.channels.items() if topic in wanted}
 
     def _payloads(self, s: Summary, chans: dict[int, str]) -> Iterator[tuple[str, float, Any]]:
         with open(self.path, "rb") as f:
