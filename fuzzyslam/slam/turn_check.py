@@ -57,7 +57,7 @@ class TurnCheck:
     sd: float  # its standard error
     windows: int  # windows used (outliers left out)
     turn_rad: float  # the odometry's turning summed over the windows used (rad)
-    flagged: bool  # |k - expected| > TOLERANCE and > Z standard errors
+    flagged: bool  # |k / expected - 1| > TOLERANCE and |k - expected| > Z standard errors
     flagged_at: float | None  # the end of the first window from which the test holds (s)
     expected: float = 1.0  # the ratio the filter's odometry model implies (calibration)
     drift: float = 0.0  # the estimate's heading drift against the odometry's (rad / m)
