@@ -115,12 +115,13 @@ def test_divergence_needs_consecutive_windows() -> None:
 
 def test_perfect_measurement_of_a_known_state_is_handled() -> None:
     """S = H P H^T + R = 0 (P_rr = 0, R = 0): no exception, the update is applied
-    (counted), P stays finite and symmetric positive semi-definite."""
+    (counted once: the gate's NIS and the gain share one factorisation of S), P stays
+    finite and symmetric positive semi-definite."""
     ekf = EkfSlam([1.0, 2.0, math.pi], np.zeros((3, 3)), ALPHA)
     ekf.add_lamp([1.0, 0.0], np.eye(2) * 0.01)
     res = ekf.update_robot([math.pi], [[0.0]], [2])
-    assert np.isfinite(res.nis)
-    assert ekf.guards["s_regularised"] >= 1
+    assert res.accepted and np.isfinite(res.nis)
+    assert ekf.guards["s_regularised"] == 1
     p = ekf.P
     assert np.all(np.isfinite(p)) and np.array_equal(p, p.T)
     assert np.linalg.eigvalsh(p).min() > -1e-12

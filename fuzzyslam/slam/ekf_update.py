@@ -123,15 +123,43 @@ class EkfUpdates:
         dx[2] = wrap_angle(dx[2])
         return lin, dx
 
+    def _innovate(
+        self, cols: np.ndarray, hc: np.ndarray, v: np.ndarray, r: np.ndarray
+    ) -> tuple[float, np.ndarray, np.ndarray, np.ndarray]:
+        """The gate's NIS and the gain's factors for H nonzero only on columns ``cols``,
+        S factored once for both (filterpy's ``KalmanFilter.update`` order):
+
+        P H^T,  S = H (P H^T) + R,  [w | K^T] = S^-1 [v | (P H^T)^T],  NIS = v^T w,
+
+        a near-singular S regularised (``health.solve_spd``) and counted once.
+
+        Returns
+        -------
+        nis : float
+        s : ndarray, shape (d, d)
+            S, symmetrised.
+        pht : ndarray, shape (n, d)
+            P H^T.
+        kt : ndarray, shape (d, n)
+            K^T = S^-1 (P H^T)^T.
+        """
+        n = self.dim
+        pht = self._p[:n, cols] @ hc.T
+        s = hc @ pht[cols] + r
+        s = 0.5 * (s + s.T)
+        sol, reg = solve_spd(s, np.concatenate((v[:, None], pht.T), axis=1))
+        self.guards["s_regularised"] += reg
+        return float(v @ sol[:, 0]), s, pht, sol[:, 1:]
+
     def _correct(
         self,
-        cols: np.ndarray,
-        hc: np.ndarray,
         v: np.ndarray,
-        r: np.ndarray,
+        s: np.ndarray,
+        pht: np.ndarray,
+        kt: np.ndarray,
         frozen: np.ndarray | None = None,
     ) -> None:
-        """Kalman correction with H nonzero only on columns ``cols`` (H[:, cols] = hc).
+        """Kalman correction from :meth:`_innovate`'s S, P H^T and K^T.
 
         K = P H^T S^-1,  x' = x + K v,
         P' = (I - K H) P (I - K H)^T + K R K^T      (Joseph form)
@@ -146,11 +174,6 @@ class EkfUpdates:
         """
         n = self.dim
         p = self._p[:n, :n]
-        pht = p[:, cols] @ hc.T
-        s = hc @ pht[cols] + r
-        s = 0.5 * (s + s.T)
-        kt, reg = solve_spd(s, pht.T)  # S near-singular: regularised (and counted)
-        self.guards["s_regularised"] += reg
         k = kt.T
         if frozen is not None and len(frozen):
             from fuzzyslam.slam.calibration import freeze_gain
@@ -179,12 +202,6 @@ class EkfUpdates:
             self._p[: self.dim, : self.dim] = p
             self.guards["p_repaired"] += 1
         return repaired
-
-    def _nis(self, s: np.ndarray, v: np.ndarray) -> float:
-        """v^T S^-1 v, with a near-singular S regularised (and counted)."""
-        w, reg = solve_spd(s, v)
-        self.guards["s_regularised"] += reg
-        return float(v @ w)
 
     def innovation_cov(self, cols: np.ndarray, hc: np.ndarray, r: np.ndarray) -> np.ndarray:
         """S = H P H^T + R for H nonzero only on ``cols``.
@@ -273,11 +290,10 @@ class EkfUpdates:
         """
         h, cols, hc = self.predict_lamps(ids)
         v = np.asarray(z, dtype=float).reshape(-1) - h
-        s = self.innovation_cov(cols, hc, r)
-        nis = self._nis(s, v)
+        nis, s, pht, kt = self._innovate(cols, hc, v, r)
         if gate_chi2 is not None and not nis <= gate_chi2:
             return UpdateResult(False, nis, v, s)
-        self._correct(cols, hc, v, r)
+        self._correct(v, s, pht, kt)
         return UpdateResult(True, nis, v, s)
 
     def update_lamp(self, i: int, z, r, gate_chi2: float | None = None) -> UpdateResult:
@@ -330,13 +346,12 @@ class EkfUpdates:
         v = z - self._x[cols]
         v[cols == 2] = wrap_angle(v[cols == 2])
         hc = np.eye(len(cols))
-        s = self.innovation_cov(cols, hc, r)
-        nis = self._nis(s, v)
+        nis, s, pht, kt = self._innovate(cols, hc, v, r)
         if gate_chi2 is not None and not nis <= gate_chi2:
             res = UpdateResult(False, nis, v)
         else:
             heading_only = bool(np.all(cols == 2))
-            self._correct(cols, hc, v, r, self.heading_frozen if heading_only else None)
+            self._correct(v, s, pht, kt, self.heading_frozen if heading_only else None)
             res = UpdateResult(True, nis, v)
         self.robot_updates.append((tuple(int(c) for c in cols), res))
         return res
