@@ -128,14 +128,27 @@ def seed_option(f):
     )(f)
 
 
-def config_option(f):
-    return click.option(
-        "--config",
-        "config",
-        type=str,
-        default=None,
-        help="Config YAML path or embedded name (default: the paper scenario, paper.yaml).",
-    )(f)
+PRESET_DEFAULT = (
+    "the preset for the log's streams: paper (lamps, or a simulated log), real_detections "
+    "(landmark detections), real_building_sonar (a sonar ring, no lamps) or "
+    "real_building_scan (a laser scan, no lamps); said on stderr and in the summary's config"
+)
+
+
+def config_option(f=None, *, default: str = "the paper scenario, paper.yaml"):
+    """``--config``, its default as ``default`` says (``@config_option`` or
+    ``@config_option(default=...)``)."""
+
+    def deco(g):
+        return click.option(
+            "--config",
+            "config",
+            type=str,
+            default=None,
+            help=f"Config YAML path or embedded name (default: {default}).",
+        )(g)
+
+    return deco(f) if f is not None else deco
 
 
 def ranges_option(f):

@@ -4,7 +4,15 @@ from __future__ import annotations
 
 import click
 
-from fuzzyslam.cli import LOG_TIME, cli, config_option, emit, ranges_option, stage_call
+from fuzzyslam.cli import (
+    LOG_TIME,
+    PRESET_DEFAULT,
+    cli,
+    config_option,
+    emit,
+    ranges_option,
+    stage_call,
+)
 
 
 @cli.command("map")
@@ -64,7 +72,7 @@ from fuzzyslam.cli import LOG_TIME, cli, config_option, emit, ranges_option, sta
     help="Sort the trajectory's poses by time and drop repeated stamps (counted in the "
     "summary) instead of failing on the first one out of order.",
 )
-@config_option
+@config_option(default=PRESET_DEFAULT)
 def map_cmd(
     log: str,
     trajectory: str,

@@ -10,6 +10,7 @@ import click
 
 from fuzzyslam.cli import (
     LOG_TIME,
+    PRESET_DEFAULT,
     cli,
     config_option,
     emit,
@@ -58,7 +59,7 @@ def _start_pose_bounds() -> tuple[float, float]:
     type=click.Path(readable=False, path_type=Path),
     help="Output directory (created; files in it are replaced only when the run succeeds).",
 )
-@config_option
+@config_option(default="the map's config with --map, else " + PRESET_DEFAULT)
 @click.option(
     "--map",
     "map_dir",

@@ -56,6 +56,8 @@ class MapOptions:
     sort: bool = False
     # the trajectory's run's calibration.csv (default: beside the trajectory, when there)
     calibration: Path | None = None
+    # the config's name, source and why (the summary's ``config``: fuzzyslam/presets.py)
+    config: dict[str, str] | None = None
 
 
 def covered(tq: np.ndarray, t: np.ndarray, max_gap: float) -> np.ndarray:
@@ -419,6 +421,7 @@ def build_map(
     calib = calibration_files.at_time(calib_csv, t_end)
     summary = MapSummary(
         log=path_text(log_path),
+        config=opts.config if opts.config is not None else OMIT,
         trajectory=path_text(traj_path),
         output=path_text(outdir),
         log_id=log_id,

@@ -11,6 +11,8 @@ from fuzzyslam.config import load_config
 from fuzzyslam.errors import InputError, UsageError
 from fuzzyslam.fileio import check_input_file
 from fuzzyslam.maps.build import MapOptions, build_map
+from fuzzyslam.presets import chosen_note
+from fuzzyslam.presets import resolve as resolve_config
 from fuzzyslam.stamps import LogTime
 
 
@@ -68,7 +70,9 @@ def run(
     """
     if until is not None and until_run is not None:
         raise UsageError("give at most one of --until-run and --until")
-    cfg = load_config(config)
+    choice = resolve_config(config, log, None, ranges)
+    cfg = load_config(choice.source)
+    chosen_note(log, choice, cfg.name)
     opts = MapOptions(
         until_run=until_run,
         until=until,
@@ -79,6 +83,7 @@ def run(
         ranges=ranges,
         sort=sort,
         calibration=Path(calibration) if calibration else None,
+        config=choice.as_dict(cfg.name, outdir),
     )
     # the optional inputs checked before the work (a FIFO: not a regular file, at once)
     if opts.calibration is not None and not opts.calibration.exists():

@@ -48,6 +48,7 @@ class MapSummary:
     trajectory's run had no odometry calibration."""
 
     log: str
+    config: dict[str, str] = OMIT  # name, source, chosen_by (fuzzyslam/presets.py)
     trajectory: str
     output: str
     log_id: str

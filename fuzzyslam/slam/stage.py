@@ -22,6 +22,8 @@ from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, check_outputs
 from fuzzyslam.forked import ChildCalls
+from fuzzyslam.presets import ConfigChoice, chosen_note
+from fuzzyslam.presets import resolve as resolve_config
 from fuzzyslam.progress import Progress, note
 from fuzzyslam.rundir import OPTIONAL_OUTPUTS, RUN_OUTPUTS
 from fuzzyslam.slam import calibration as cal
@@ -127,7 +129,8 @@ def run(
     figures: ChildCalls | None = None,
 ) -> dict:
     """The ``run`` stage on ``log`` into ``outdir``: the config ``config`` (a YAML path or
-    an embedded name; default paper.yaml) with ``seed``; with ``map_dir``, the fixes
+    an embedded name; default the map's, else the preset of the log's streams:
+    fuzzyslam/presets.py) with ``seed``; with ``map_dir``, the fixes
     ``fix`` (heading|pose|none; default the config's ``fixes.mode``) from ``fix_from``
     (``fixes.aids.aids_for_log``, the plug-ins loaded on demand); ``calibration``: a
     run's calibration.yaml to start the odometry self-calibration from (default with a
@@ -178,7 +181,9 @@ def run(
 
     if fix_from is not None and map_dir is None:  # it would be ignored
         raise UsageError("--fix-from needs --map FGMDIR (a frozen map from 'map')")
-    cfg = load_config(config, seed)
+    choice = resolve_config(config, log, map_dir, ranges)
+    cfg = load_config(choice.source, seed)
+    chosen_note(log, choice, cfg.name)
     if map_dir is not None:  # the map's directory is an input: a run never writes into it
         check_outputs([map_dir], [outdir])
     if calibration is not None and Path(outdir).is_dir():  # refused now, not after the run
@@ -205,6 +210,7 @@ def run(
         calibration=calibration,
         prefetch=prefetch_wanted(prefetch),
         figures=figures,
+        choice=choice,
     )
 
 
@@ -219,6 +225,7 @@ def run_stage(
     calibration: str | os.PathLike | None = None,
     prefetch: bool = False,
     figures: ChildCalls | None = None,
+    choice: ConfigChoice | None = None,
 ) -> dict[str, Any]:
     """Run EKF-SLAM on ``log`` and write docs/contracts.md sec. 2 files into ``outdir``.
 
@@ -261,6 +268,9 @@ def run_stage(
     figures : ChildCalls or None
         A started figure process for the aids' figures (the caller reaps it); None: one
         is forked here when an aid draws and ``prefetch``.
+    choice : ConfigChoice or None
+        Where ``cfg`` came from (:func:`fuzzyslam.presets.resolve`; the summary's
+        ``config``); None: given as it is.
 
     Returns
     -------
@@ -270,7 +280,9 @@ def run_stage(
     if adapt_noise:
         if aids:
             raise ValueError("adapt_noise: the aids of a first pass cannot be reused")
-        first = _run_once(log, outdir, cfg, [], True, ranges, start_pose, calibration, prefetch)
+        first = _run_once(
+            log, outdir, cfg, [], True, ranges, start_pose, calibration, prefetch, choice=choice
+        )
         est = first.noise_estimate or None
         if est:
             cfg = copy.deepcopy(cfg)
@@ -283,14 +295,16 @@ def run_stage(
                     setattr(cfg.slam, key, float(est[key]))
         # the second pass says what it finds in the log (once), its summary told below
         summary = _run_once(
-            log, outdir, cfg, [], False, ranges, start_pose, calibration, prefetch, tell=False
-        )
+            log, outdir, cfg, [], False, ranges, start_pose, calibration, prefetch,
+            tell=False, choice=choice,
+        )  # fmt: skip
         summary = replace(summary, noise_adapted=est)
         _tell(summary)
         return as_json(summary)
     once = _run_once(
-        log, outdir, cfg, aids, False, ranges, start_pose, calibration, prefetch, figures=figures
-    )
+        log, outdir, cfg, aids, False, ranges, start_pose, calibration, prefetch,
+        figures=figures, choice=choice,
+    )  # fmt: skip
     return as_json(once)
 
 
@@ -445,9 +459,11 @@ def _run_once(
     prefetch: bool = False,
     tell: bool = True,
     figures: ChildCalls | None = None,
+    choice: ConfigChoice | None = None,
 ) -> RunSummary:
     """One run of the filter over the log into ``outdir``; ``_quiet``: no notes on
     stderr (a first pass), ``tell``: the summary's own notes after it (``_tell``);
+    ``choice``: the config's source and why (the summary's ``config``);
     ``figures``: a figure process the caller started (:func:`run`)."""
     aids = list(aids or [])
     wall0 = time.perf_counter()
@@ -528,6 +544,9 @@ def _run_once(
         for drawing in drawings:
             drawing.result()
         summary = make_summary(res, inputs, time.perf_counter() - wall0, aids, streamed)
+        summary = replace(
+            summary, config=(choice or ConfigChoice(cfg.name, "given")).as_dict(cfg.name)
+        )
         write_summary(tmp, as_json(summary))
     restarts = inputs.restart_line()  # found while reading the events
     if restarts and not _quiet:

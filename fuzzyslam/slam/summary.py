@@ -24,6 +24,7 @@ class RunSummary:
 
     command: str = "run"
     log: str
+    config: dict[str, str] = OMIT  # name, source, chosen_by (fuzzyslam/presets.py)
     odometry_source: str
     lamp_source: str
     start_pose: list[float]
