@@ -210,3 +210,43 @@ def chosen_note(log: str | os.PathLike, choice: ConfigChoice, name: str) -> None
     from fuzzyslam.progress import note
 
     note(f"{log}: no --config: {name}, from {choice.why} (--config NAME for another)")
+
+
+# the sensor streams a preset reads, by message type: (preset, its topics key)
+READS = {
+    "geometry_msgs/msg/PoseArray": (DETECTED, "detections"),
+    "vision_msgs/msg/Detection3DArray": (DETECTED, "detections"),
+    "sensor_msgs/msg/Image": (PAPER, "image"),
+    LASER_SCAN: (SCAN, "scan"),
+}
+
+
+def unread_streams(topics: Mapping[str, str], read: object) -> list[str]:
+    """The log's sensor streams that the config does not read, each with the config
+    that would: a preset that reads it (``--config real_detections``), or one extended
+    with its topic (``extends: real_detections`` and ``topics: {detections: /markers}``).
+
+    Parameters
+    ----------
+    topics : mapping of str to str
+        The log's topics and their message types.
+    read : Topics
+        The config's ``topics`` (``fuzzyslam.streams.topics.Topics``).
+
+    Returns
+    -------
+    list of str
+        One text per stream, in topic order (empty: every such stream is read).
+    """
+    out = []
+    for topic, kind in sorted(topics.items()):
+        if kind in READS and topic != getattr(read, READS[kind][1]):
+            preset, key = READS[kind]
+            own = getattr(load_config(preset).topics, key) == topic
+            how = (
+                f"--config {preset}"
+                if own
+                else f"a config with 'extends: {preset}' and 'topics: {{{key}: {topic}}}'"
+            )
+            out.append(f"{topic} ({kind.rsplit('/', 1)[-1]}: {how} reads it)")
+    return out

@@ -195,3 +195,39 @@ def test_the_help_says_how_the_default_is_chosen(capsys) -> None:
         text = " ".join(capsys.readouterr().out.split())
         for w in words:
             assert w in text, (cmd, w)
+
+
+@pytest.mark.slow
+def test_streams_under_other_names_are_named_with_the_config_that_reads_them(
+    tmp_path, capsys
+) -> None:
+    """The MRCLAM excerpt with its detections on /markers: no preset reads it, so the run
+    is dead reckoning, and the note names the stream and the config that reads it; that
+    config, written as the note says, gives the trajectory of the original log with
+    real_detections, byte for byte."""
+    import re
+
+    from test_robust_logs import rewrite
+
+    log = tmp_path / "renamed.mcap"
+
+    def rename(m):
+        topic = "/markers" if m.topic == "/landmark_detections" else m.topic
+        return [(topic, m.typename, m.msg, m.t)]
+
+    rewrite(MRCLAM, log, rename)
+    code, s, err = run_cli(["run", str(log), "-o", str(tmp_path / "dr")], capsys)
+    assert code == 0 and s["lamp_source"].startswith("none"), err
+    (line,) = [x for x in err.splitlines() if "dead reckoning" in x]
+    extends, topics = re.search(r"'(extends: \w+)' and '(topics: \{[^}]+\})'", line).groups()
+    assert "/markers (PoseArray" in line
+    (tmp_path / "mine.yaml").write_text(f"{extends}\n{topics}\n")
+    code, s, err = run_cli(
+        ["run", str(log), "--config", str(tmp_path / "mine.yaml"), "-o", str(tmp_path / "m")],
+        capsys,
+    )
+    assert code == 0 and s["lamp_source"] == "detections (/markers)", err
+    args = ["run", str(MRCLAM), "--config", "real_detections", "-o", str(tmp_path / "orig")]
+    assert run_cli(args, capsys)[0] == 0
+    orig = (tmp_path / "orig" / "trajectory.tum").read_bytes()
+    assert (tmp_path / "m" / "trajectory.tum").read_bytes() == orig

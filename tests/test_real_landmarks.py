@@ -473,4 +473,4 @@ def test_a_wrong_preset_names_the_landmarks_it_did_not_read(tmp_path):
     )
     assert code == 0, err
     (line,) = [ln for ln in err.splitlines() if "dead reckoning" in ln]
-    assert "/landmark_detections, not read" in line
+    assert "not read: /landmark_detections (PoseArray: --config real_detections reads it)" in line

@@ -22,7 +22,7 @@ from fuzzyslam.config import Config
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, check_outputs
 from fuzzyslam.forked import ChildCalls
-from fuzzyslam.presets import ConfigChoice, chosen_note
+from fuzzyslam.presets import ConfigChoice, chosen_note, unread_streams
 from fuzzyslam.presets import resolve as resolve_config
 from fuzzyslam.progress import Progress, note
 from fuzzyslam.rundir import OPTIONAL_OUTPUTS, RUN_OUTPUTS
@@ -41,10 +41,6 @@ from fuzzyslam.slam.runner import SlamResult, SlamRunner
 from fuzzyslam.slam.summary import RunSummary
 from fuzzyslam.slam.turn_check import rotation_factor, turn_note, turn_ratio
 from fuzzyslam.summary import OMIT, as_json
-
-# message types that could carry lamps or landmarks under topics the config does not name
-LAMP_TYPES = ("geometry_msgs/msg/PoseArray", "sensor_msgs/msg/Image")
-
 
 TWIST = ("", " twist")  # an Odometry whose twist alone is read (LogInputs.odom_twist)
 
@@ -473,12 +469,12 @@ def _run_once(
         for line in inputs.notes:  # said once, also when the log is opened twice
             note(line)
     if inputs.lamp_source == "none" and not aids and not _quiet:
-        unread = sorted(t for t, ty in inputs.reader.topics.items() if ty in LAMP_TYPES)
+        unread = unread_streams(inputs.reader.topics, cfg.topics)
         note(
             f"{log}: no lamps (topics.image {cfg.topics.image}, "
             f"topics.detections {cfg.topics.detections}) and no map: the estimate is dead "
             "reckoning (give --map FGMDIR --fix pose|heading"
-            + (f"; the log has {', '.join(unread)}, not read: a config for it?" if unread else "")
+            + (f"; not read: {'; '.join(unread)}" if unread else "")
             + ")"
         )
     slow = slow_odometry_note(inputs.odom_topic, inputs.odom_period_s)
