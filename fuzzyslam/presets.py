@@ -35,10 +35,9 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from fuzzyslam.config import embedded_names, load_config
+from fuzzyslam.streams.messages import DETECTION3D_ARRAY, IMAGE, LASER_SCAN, POSE_ARRAY, RANGE
 
-RANGE = "sensor_msgs/msg/Range"
-LASER_SCAN = "sensor_msgs/msg/LaserScan"
-DETECTIONS = ("geometry_msgs/msg/PoseArray", "vision_msgs/msg/Detection3DArray")
+DETECTIONS = (POSE_ARRAY, DETECTION3D_ARRAY)
 SIMULATED = ("fuzzyslam.scenario", "fuzzyslam.world")  # streams/logmeta.py's records
 PAPER, DETECTED, SCAN, SONAR = (
     "paper",
@@ -214,9 +213,9 @@ def chosen_note(log: str | os.PathLike, choice: ConfigChoice, name: str) -> None
 
 # the sensor streams a preset reads, by message type: (preset, its topics key)
 READS = {
-    "geometry_msgs/msg/PoseArray": (DETECTED, "detections"),
-    "vision_msgs/msg/Detection3DArray": (DETECTED, "detections"),
-    "sensor_msgs/msg/Image": (PAPER, "image"),
+    POSE_ARRAY: (DETECTED, "detections"),
+    DETECTION3D_ARRAY: (DETECTED, "detections"),
+    IMAGE: (PAPER, "image"),
     LASER_SCAN: (SCAN, "scan"),
 }
 
