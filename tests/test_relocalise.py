@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import copy
+
 import numpy as np
 
 from fuzzyslam.se2 import inverse_transform_points
@@ -164,3 +166,32 @@ def test_window_relocalises_a_pose_seen_one_or_two_landmarks_at_a_time():
     e = ekf.pose - true
     assert abs(np.degrees(e[2])) < 2.0
     assert e @ np.linalg.solve(ekf.pose_cov, e) < 16.27  # consistent again
+
+
+def test_a_young_map_of_min_pairs_lamps_is_not_relocalised_on_landmarks_not_yet_mapped():
+    # the map holds three lamps; the robot, where the filter says it is, sees three
+    # landmarks not yet mapped that stand like them, 0.8 m and 40 deg off (a disturbance
+    # of 1.6 and 1.3 sigma of Q): the test pairs the whole map with them and turns the
+    # filter 40 deg. With min_lamps = 4 it waits for a map with a lamp more than the
+    # pairings it needs; the detections stay unexplained (new landmarks)
+    true = np.array([0.5, 0.5, 0.3])
+    ekf = EkfSlam(true, np.diag([1e-4, 1e-4, np.radians(2.0) ** 2]), NOISE, capacity=8)
+    for lamp in LAMPS[:3]:
+        ekf.add_lamp(inverse_transform_points(true, lamp[None])[0], np.eye(2) * 1e-8)
+    z = inverse_transform_points(true, LAMPS[:3])
+    c, s = np.cos(np.radians(40.0)), np.sin(np.radians(40.0))
+    z = z @ np.array([[c, s], [-s, c]]) + [0.8, 0.0]  # the look-alikes, in the robot frame
+    r = np.repeat(np.diag([0.1**2, 0.05**2])[None], 3, axis=0)
+    d2 = ekf.individual_compatibility(z, r)
+    _, test = relocalisation_test(copy.deepcopy(ekf), z, r, d2, GATE, 4.0, Q)
+    assert test is not None and test.accepted and test.pairs_before == 0  # without min_lamps
+    p0, x0 = ekf.P.copy(), ekf.x.copy()
+    out, test = relocalisation_test(ekf, z, r, d2, GATE, 4.0, Q, min_lamps=4)
+    assert test is None and out is d2
+    assert np.array_equal(ekf.P, p0) and np.array_equal(ekf.x, x0)
+    rel = Relocaliser(Q, GATE, 4.0, window_s=2.0, min_lamps=4)
+    assert rel.update_if_explained(ekf, z, r, d2) is None
+    out, known, lin = rel(ekf, z, r, d2, 0.0)
+    assert out is d2 and known is None and lin is None
+    assert rel.counts() == {"relocalisation_tests": 0, "relocalisations": 0}
+    assert np.array_equal(ekf.x, x0)

@@ -91,6 +91,10 @@ class SlamParams:
     # its own): 3 (two landmarks fix a pose, a third checks it); 2 where the disturbance's
     # sigmas are small against the landmarks' spacing, so the prior tells them apart
     relocalise_min_pairs: int = field(default=3, metadata={"min": 2, "max": 100})
+    # lamps the map must hold before the test runs (at least relocalise_min_pairs): with
+    # just relocalise_min_pairs lamps an accepted hypothesis pairs the whole map, and
+    # landmarks not yet mapped that stand like the mapped ones pass it; 0: min_pairs
+    relocalise_min_lamps: int = field(default=0, metadata={"min": 0, "max": 1000})
     # frames with fewer than relocalise_min_pairs detections: their unexplained ones are
     # pooled over this window (s) of odometry and the test run on the pool; 0: each
     # frame on its own

@@ -52,6 +52,7 @@ def relocalisation_test(
     q: np.ndarray,
     min_gain: int = 2,
     min_pairs: int = 3,
+    min_lamps: int = 0,
 ) -> tuple[np.ndarray, Relocalisation | None]:
     """Test whether an unmodelled disturbance explains a frame better [ours].
 
@@ -69,7 +70,11 @@ def relocalisation_test(
     ``min_pairs`` (redundant pairings: two landmarks fix a pose, a third checks it; two
     check each other's distance and the prior ``q``). The test runs only on frames whose
     best hypothesis leaves ``min_gain`` detections unexplained and that have
-    ``min_pairs`` detections.
+    ``min_pairs`` detections, and only once the map holds ``min_lamps`` lamps (at least
+    ``min_pairs``): on a map of just ``min_pairs`` lamps an accepted hypothesis must pair
+    every lamp, so the test cannot tell a disturbance from ``min_pairs`` landmarks not
+    yet mapped that stand like the mapped ones (the likelier explanation while the map
+    holds few of the landmarks in view) [ours].
 
     Parameters
     ----------
@@ -91,6 +96,8 @@ def relocalisation_test(
         Extra pairings needed to accept.
     min_pairs : int
         Pairings needed to accept.
+    min_lamps : int
+        Lamps the map needs before the test runs (at least ``min_pairs`` in any case).
 
     Returns
     -------
@@ -100,12 +107,12 @@ def relocalisation_test(
     test : Relocalisation or None
         The test's outcome (``tested`` False when the best hypothesis explained the frame
         well enough, with ``before`` its JCBB association); None when the frame had too
-        few detections or the map too few lamps. Accepted, the filter's lamp update must
-        be linearised at its ``lin`` (``EkfSlam.linearised_at``): the iterated EKF's
-        update.
+        few detections or the map too few lamps (``min_pairs``, ``min_lamps``). Accepted,
+        the filter's lamp update must be linearised at its ``lin``
+        (``EkfSlam.linearised_at``): the iterated EKF's update.
     """
     m = len(z)
-    if m < min_pairs or ekf.n_lamps < min_pairs:
+    if m < min_pairs or ekf.n_lamps < max(min_pairs, min_lamps):
         return d2, None
     assoc = jcbb(ekf, z, r, d2, gate_chi2, ambiguity_margin)
     before = len(assoc.best)
@@ -215,6 +222,8 @@ class Relocaliser:
         The pooling window (s); 0: each frame on its own.
     min_pairs : int
         Pairings needed to accept (and detections to test a frame on its own).
+    min_lamps : int
+        Lamps the map needs before the test runs (:func:`relocalisation_test`).
     """
 
     q: np.ndarray
@@ -223,6 +232,7 @@ class Relocaliser:
     min_gain: int = 2
     window_s: float = 0.0
     min_pairs: int = 3
+    min_lamps: int = 0
     tests: int = 0
     accepted: int = 0
     # accepted on the last call: the frame's detections the filter explained as it stood.
@@ -257,6 +267,7 @@ class Relocaliser:
             p.relocalise_min_gain,
             p.relocalise_window_s,
             p.relocalise_min_pairs,
+            p.relocalise_min_lamps,
         )
 
     def moved(self, delta: np.ndarray) -> None:
@@ -303,7 +314,7 @@ class Relocaliser:
         (Association, UpdateResult or None) or None
         """
         m = len(z)
-        if m < self.min_pairs or ekf.n_lamps < self.min_pairs:
+        if m < self.min_pairs or ekf.n_lamps < max(self.min_pairs, self.min_lamps):
             return None  # the test would not run on the frame alone: its window might
         pairs = unique_hypothesis(candidates(d2, self.gate_chi2))
         if pairs is None or m - len(pairs) >= self.min_gain:
@@ -342,7 +353,14 @@ class Relocaliser:
             Accepted: the pose to linearise the frame's lamp update at
             (``EkfSlam.linearised_at``; the iterate of :func:`iterated_association`).
         """
-        args = (self.gate_chi2, self.ambiguity_margin, self.q, self.min_gain, self.min_pairs)
+        args = (
+            self.gate_chi2,
+            self.ambiguity_margin,
+            self.q,
+            self.min_gain,
+            self.min_pairs,
+            self.min_lamps,
+        )
         self.explained_before = None
         d2_new, test = relocalisation_test(ekf, z, r, d2, *args)
         self._count(test)
