@@ -106,6 +106,7 @@ ENCODINGS = {
 }
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("name", sorted(ENCODINGS))
 def test_frames_of_any_encoding_give_the_mono8_run(tiny: Tiny, tmp_path: Path, name: str) -> None:
     """The same grey image in another encoding or as a PNG CompressedImage on the

@@ -88,6 +88,7 @@ def test_detections_in_a_mounted_frame_give_the_same_run(
     assert json.loads(out)["counts"]["detections"] > 100
 
 
+@pytest.mark.slow
 def test_detections_in_a_frame_tf_static_does_not_place_are_refused(tmp_path: Path) -> None:
     """Detections in 'camera_link' with a /tf_static that places only a laser: one line
     naming the frame and what to publish (before, they were used as if in base_link);

@@ -141,6 +141,7 @@ def _case(root: Path, cov_scale: float = 1.0) -> tuple[Path, Path]:
     return root / "truth.tum", run
 
 
+@pytest.mark.slow
 def test_two_updates_and_nan_lamp_error_evaluated_as_strict_json(tmp_path: Path) -> None:
     """A lamp-less run (its landmarks.yaml empty, accepted) with two accepted updates,
     against a true landmark far from any estimate: exit 0, the consistency figure drawn,

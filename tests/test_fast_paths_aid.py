@@ -25,6 +25,7 @@ def _refs(rng: np.random.Generator, n: int) -> list[Reference]:
     return refs
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("seed", [0, 1])
 def test_corridors_near_equals_plain(seed):
     rng = np.random.default_rng(seed)

@@ -77,6 +77,7 @@ def _line(ax, label: str):
     return np.column_stack([np.asarray(v, dtype=float) for v in lines[0].get_data()])
 
 
+@pytest.mark.slow
 def test_fig1_draws_the_estimate_in_the_truth_frame_with_the_evaluations_alignment(
     tmp_path, monkeypatch
 ) -> None:

@@ -533,6 +533,7 @@ def test_pose_fixes_pull_toy_filter_to_truth_clean_walls(room, tmp_path):
     assert len(ups) >= aid.summary().accepted and all(u["dof"] == 3 for u in ups)
 
 
+@pytest.mark.slow
 def test_pose_fixes_on_sonar_rings_bounded_and_consistent(room):
     """Sonar rings only (no lamps), four drives: position error within the 15 cm target of
     issue 8 and the filter consistent on average (mean NEES below the 3-dof 95 % point)."""

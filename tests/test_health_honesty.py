@@ -382,6 +382,7 @@ def test_a_delay_on_the_lower_search_edge_and_the_grid_searched() -> None:
 # -- D: noise advice only when the health windows agree -------------------------------------
 
 
+@pytest.mark.slow
 def test_noise_advice_needs_the_health_windows(tmp_path, capsys) -> None:
     """Clean MRCLAM robot 3 with real_detections: the innovations imply 2.05 deg of
     bearing noise against 1 configured, but every NIS and association window is in its

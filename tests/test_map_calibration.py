@@ -26,6 +26,7 @@ def sample_run(tmp_path_factory) -> Path:
     return out
 
 
+@pytest.mark.slow
 def test_named_calibration_equals_the_one_beside_the_trajectory(sample_run, tmp_path):
     elsewhere = tmp_path / "elsewhere"
     elsewhere.mkdir()

@@ -223,6 +223,7 @@ def test_unreadable_encoders_without_odom_fall_back_to_tf(tmp_path: Path) -> Non
     np.testing.assert_allclose(got, np.loadtxt(tmp_path / "want" / "trajectory.tum"), atol=1e-9)
 
 
+@pytest.mark.slow
 def test_odometry_on_tf_that_starts_late_is_found(tmp_path: Path) -> None:
     """A bag recorded before the robot's driver came up: /tf's odom -> base_link starts
     40 s in, another frame's transform on /tf from the start (the sample without its

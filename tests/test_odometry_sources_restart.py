@@ -259,6 +259,7 @@ def test_a_slow_restart_is_confirmed_once_it_has_moved() -> None:
     assert len(gate.restarted) == need + 1 and gate.restarted[0][0] == pytest.approx(t[20])
 
 
+@pytest.mark.slow
 def test_a_burst_of_zeros_in_a_real_log_is_refused(tmp_path: Path) -> None:
     """The reviewer's case: four /odom poses of the MRCLAM excerpt halfway in set to
     (0, 0, 0). The four are refused as jumps and nothing else is said or counted: no

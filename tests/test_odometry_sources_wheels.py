@@ -181,6 +181,7 @@ def test_both_wheels_reversed_while_driving_are_said_so(tiny: Tiny, tmp_path: Pa
     assert "both wheels look reversed" in line and "look swapped" not in line, line
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize(
     ("name", "fault", "source"),
     [

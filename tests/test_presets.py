@@ -124,6 +124,7 @@ def test_a_simulated_log_keeps_the_paper_config(tmp_path, capsys) -> None:
                            "chosen_by": "the log's streams: a simulated log"}  # fmt: skip
 
 
+@pytest.mark.slow
 def test_a_landmark_log_runs_as_with_its_preset(tmp_path, capsys) -> None:
     """The MRCLAM excerpt without --config: real_detections (said on stderr, in the
     summary), the same trajectory byte for byte as with --config real_detections; with

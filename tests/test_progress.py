@@ -62,6 +62,7 @@ def test_off_when_disabled_or_not_shown(monkeypatch):
     assert out.getvalue() == ""
 
 
+@pytest.mark.slow
 def test_run_with_stderr_in_a_file_says_when_it_is_done(tmp_path):
     """`fuzzyslam run` with stderr redirected to a file: its label, then ``done in``."""
     env = {k: v for k, v in os.environ.items() if k != "FUZZYSLAM_NO_PROGRESS"}

@@ -258,6 +258,7 @@ def test_encoder_systematic_errors_analytic():
 # --- driver ------------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_drive_runs_alternate_and_bump_is_corrected(paper):
     centre = centreline_array(paper.world)
     scen = ScenarioParams(

@@ -202,6 +202,7 @@ def _turn_camera(src: Path, dst: Path) -> None:
     assert turned == 1
 
 
+@pytest.mark.slow
 def test_a_camera_turned_by_pi_sees_the_same_lamps(log_dir, tmp_path) -> None:
     """The log with its images rotated 180 deg and the camera's mount yaw pi gives the
     same lamps (count, positions to 1 mm) as the log itself (needs slam/inputs.py to
@@ -219,6 +220,7 @@ def test_a_camera_turned_by_pi_sees_the_same_lamps(log_dir, tmp_path) -> None:
     assert d.min(axis=1).max() < 1e-3 and d.min(axis=0).max() < 1e-3
 
 
+@pytest.mark.slow
 def test_map_odom_against_a_driver_that_starts_late(log_dir, tmp_path) -> None:
     """/tf also carries base_link -> wheel at every step, and the driver's odom ->
     base_link only from 8 s on (after 300 /tf messages): the pair is still found, so
@@ -274,6 +276,7 @@ def test_a_tf_on_another_clock_is_not_used(log_dir, tmp_path) -> None:
         assert est[:2] == pytest.approx(p[:2], abs=1e-9)
 
 
+@pytest.mark.slow
 def test_a_camera_under_a_root_that_is_not_the_base_is_placed_and_said(log_dir, tmp_path) -> None:
     """/tf_static hangs everything under 'chassis', a name the odometry never uses: the
     camera is placed under that root (the same lamps as the plain log) and a note says
