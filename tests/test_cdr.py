@@ -152,6 +152,7 @@ def test_range(h, kind, f) -> None:
     roundtrip(msg, M.RANGE)
 
 
+@pytest.mark.slow
 @settings(max_examples=80, deadline=None)
 @given(HEADERS, st.integers(0, 255), st.lists(F32, min_size=5, max_size=5))
 def test_range_of_iron_and_later_with_its_variance(h, kind, f) -> None:

@@ -111,6 +111,7 @@ def test_detections_in_a_frame_tf_static_does_not_place_are_refused(tmp_path: Pa
     assert code == 0 and "no /tf_static: the detections' frame 'camera_link'" in err
 
 
+@pytest.mark.slow
 def test_odometry_with_its_twist_alone_is_integrated(plain: Path, tmp_path: Path) -> None:
     """An Odometry stream whose pose stays at zero while its twist carries the motion (a
     driver that fills only the velocities; this excerpt's twist is the robot's logged

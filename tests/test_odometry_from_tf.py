@@ -87,6 +87,7 @@ def test_the_sample_carries_the_same_poses_on_odom_and_tf() -> None:
     assert len(odom) > 1000 and odom == tf
 
 
+@pytest.mark.slow
 def test_a_log_of_tf_alone_runs_as_its_odom(sample_logs: Path) -> None:
     """No /joint_states, no /odom: the odometry comes from /tf's odom -> base_link, said
     once, and the summary names it; every output but the summary equals the run of the

@@ -93,6 +93,7 @@ def test_a_reversed_wheel_is_named_and_odom_read_instead(
     np.testing.assert_allclose(got, want, rtol=0, atol=1e-9)
 
 
+@pytest.mark.slow
 def test_swapped_wheel_joints_are_said(tiny: Tiny, tmp_path: Path) -> None:  # noqa: F811
     """The left and right joints' names swapped: the encoders turn against /odom; one
     line says the joints look swapped and names the config keys; /odom is read."""

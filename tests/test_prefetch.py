@@ -107,6 +107,7 @@ def assert_same_outputs(a: Path, b: Path) -> dict:
 # -- the same outputs ---------------------------------------------------------------------
 
 
+@pytest.mark.slow
 def test_sample_log_outputs_are_the_same(tmp_path: Path, forks) -> None:
     """data/sample.mcap (camera frames, encoders): the same files either way."""
     a, b, _ = run_both(tmp_path, forks, SAMPLE)

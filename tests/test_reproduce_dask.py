@@ -171,6 +171,7 @@ def test_stale_temporary_outputs_are_removed(tmp_path):
     assert left == ["seed0", "seed0/D", "seed0/D/trajectory.tum"]
 
 
+@pytest.mark.slow
 def test_sweep_logs_bad_arguments_are_one_line(tmp_path):
     """--logs with --seeds (a usage error: exit 2), a glob matching nothing, or a ros2 bag
     folder split in two files (exit 3): one line, nothing written."""

@@ -335,6 +335,7 @@ entry()
 """
 
 
+@pytest.mark.slow
 def test_a_run_leaves_without_the_interpreters_finalisation(tmp_path: Path, tiny_log) -> None:
     """``run`` (cli.LEAVE_AT_ONCE) exits at once when done, its exit handlers not run,
     with its summary written out in full, its outputs in place and its exit code kept

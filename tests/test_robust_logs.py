@@ -190,6 +190,7 @@ def chunk_offsets(path: Path) -> list[int]:
     return [c.chunk_start_offset for c in chunk_index(path)]
 
 
+@pytest.mark.slow
 def test_reader_reads_a_cut_log_as_far_as_it_is_intact(tiny: Tiny) -> None:
     """At a cut inside a chunk the whole records of the chunk's intact part are kept
     (salvaged); the messages read are exactly the first ones of the intact log, and
@@ -485,6 +486,7 @@ def test_frames_logged_late_are_put_back_in_stamp_order(tiny: Tiny, tmp_path: Pa
         assert (tmp_path / "est" / name).read_bytes() == (tiny.est / name).read_bytes(), name
 
 
+@pytest.mark.slow
 def test_frames_on_another_clock_are_not_used_and_said(tiny: Tiny, tmp_path: Path) -> None:
     """From 15 s on, the camera's frames are logged 7 s after their stamps (a pipeline
     that stalls, or a camera clock 7 s behind): beyond the 5 s window they cannot be

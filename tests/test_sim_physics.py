@@ -84,6 +84,7 @@ def test_corridor_axes_and_lamps(paper):
 QUIET = SonarParams(noise_frac=0.0, quantization=0.0, crosstalk_prob=0.0)
 
 
+@pytest.mark.slow
 def test_sonar_head_on_reads_the_distance():
     walls = np.array([[3.0, -10.0, 3.0, 10.0]])
     mounts = np.array([[0.225, 0.0, 0.0]])
