@@ -191,24 +191,26 @@ def resolve(
     return ConfigChoice(name, f"the log's streams: {why}")
 
 
-def chosen_note(log: str | os.PathLike, choice: ConfigChoice, name: str) -> None:
+def chosen_note(log: str | os.PathLike, config: dict[str, str]) -> None:
     """One line on stderr when a stage runs with a config it chose other than the default
-    ``paper``: which, and from what.
+    ``paper``: which, and from what. Said once the log has opened and its streams are
+    found, so that a failing command still says one line.
 
     Parameters
     ----------
     log : path
         The log.
-    choice : ConfigChoice
-        The choice (:func:`resolve`).
-    name : str
-        The loaded config's ``name``.
+    config : dict
+        The summary's ``config`` (:meth:`ConfigChoice.as_dict`).
     """
-    if choice.why == "--config" or choice.source == PAPER:
+    if config["chosen_by"] == "--config" or config["source"] == PAPER:
         return  # given, or what a stage without --config has always used
     from fuzzyslam.progress import note
 
-    note(f"{log}: no --config: {name}, from {choice.why} (--config NAME for another)")
+    note(
+        f"{log}: no --config: {config['name']}, from {config['chosen_by']} "
+        "(--config NAME for another)"
+    )
 
 
 # the sensor streams a preset reads, by message type: (preset, its topics key)

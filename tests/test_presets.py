@@ -232,3 +232,30 @@ def test_streams_under_other_names_are_named_with_the_config_that_reads_them(
     assert run_cli(args, capsys)[0] == 0
     orig = (tmp_path / "orig" / "trajectory.tum").read_bytes()
     assert (tmp_path / "m" / "trajectory.tum").read_bytes() == orig
+
+
+@pytest.mark.slow
+def test_a_failing_command_still_says_one_line(tmp_path) -> None:
+    """The chosen preset is said once the log and its sensors are found: ``map`` on the
+    landmark excerpt (real_detections chosen, no range sensor) and ``run`` on it with
+    its odometry renamed fail with the error alone; the same ``map`` on the building
+    excerpt says its preset."""
+    from test_robust_logs import cli, rewrite
+
+    traj = tmp_path / "t.tum"
+    traj.write_text("0 0 0 0 0 0 0 1\n1e10 0 0 0 0 0 0 1\n")
+    code, out, err = cli("map", MRCLAM, "--trajectory", traj, "-o", tmp_path / "m")
+    assert code == 3 and out == "", err
+    (line,) = err.splitlines()
+    assert "missing stream(s)" in line and "no --config" not in line
+    log = tmp_path / "odom.mcap"
+    rewrite(MRCLAM, log, lambda m: [("/wheel" if m.topic == "/odom" else m.topic,
+                                     m.typename, m.msg, m.t)])  # fmt: skip
+    code, out, err = cli("run", log, "-o", tmp_path / "r")
+    assert code == 3 and out == "", err
+    (line,) = err.splitlines()
+    assert "missing stream(s) /odom" in line
+    code, _, err = cli("map", CARMEN / "log.mcap", "--trajectory", CARMEN / "truth.tum",
+                       "--no-figures", "-o", tmp_path / "b")  # fmt: skip
+    assert code == 0, err
+    assert "no --config: real_building_sonar, from the log's streams: 9 sonars" in err

@@ -29,6 +29,7 @@ from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.quality import wall_quality
 from fuzzyslam.maps.references import Reference, extract_references
 from fuzzyslam.maps.summary import MapSummary, ReferenceEntry, ReferenceTruth, WallQuality
+from fuzzyslam.presets import chosen_note
 from fuzzyslam.progress import Progress, note
 from fuzzyslam.se2 import interpolate_poses, wrap_angle_period
 from fuzzyslam.slam import calibration_files
@@ -342,6 +343,8 @@ def build_map(
     t_traj, p_traj, tum_dropped = read_tum(traj_path, sort=opts.sort, report=True)
     t_end, how = freeze_time(reader, cfg, opts)
     sensor = open_ranges(reader, cfg, opts.ranges, base=base_frame(reader, cfg))
+    if opts.config is not None:  # the log and its range sensor found (an error: one line)
+        chosen_note(log_path, opts.config)
     what = "laser scans" if sensor.kind == "scan" else "sonar rings"
     times, ranges, rmax, fov, mounts, stats, offsets = read_rings_compact(
         reader, cfg, t_end, sensor=sensor

@@ -11,7 +11,6 @@ from fuzzyslam.config import load_config
 from fuzzyslam.errors import InputError, UsageError
 from fuzzyslam.fileio import check_input_file
 from fuzzyslam.maps.build import MapOptions, build_map
-from fuzzyslam.presets import chosen_note
 from fuzzyslam.presets import resolve as resolve_config
 from fuzzyslam.stamps import LogTime
 
@@ -72,7 +71,6 @@ def run(
         raise UsageError("give at most one of --until-run and --until")
     choice = resolve_config(config, log, None, ranges)
     cfg = load_config(choice.source)
-    chosen_note(log, choice, cfg.name)
     opts = MapOptions(
         until_run=until_run,
         until=until,

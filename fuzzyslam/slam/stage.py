@@ -179,7 +179,6 @@ def run(
         raise UsageError("--fix-from needs --map FGMDIR (a frozen map from 'map')")
     choice = resolve_config(config, log, map_dir, ranges)
     cfg = load_config(choice.source, seed)
-    chosen_note(log, choice, cfg.name)
     if map_dir is not None:  # the map's directory is an input: a run never writes into it
         check_outputs([map_dir], [outdir])
     if calibration is not None and Path(outdir).is_dir():  # refused now, not after the run
@@ -466,6 +465,8 @@ def _run_once(
     check_outputs([log], [outdir])
     inputs = open_inputs(log, cfg, bool(aids), ranges, start_pose)
     if not _quiet:
+        if choice is not None:  # once the log is known to open (an error: one line)
+            chosen_note(log, choice.as_dict(cfg.name))
         for line in inputs.notes:  # said once, also when the log is opened twice
             note(line)
     if inputs.lamp_source == "none" and not aids and not _quiet:
