@@ -32,10 +32,12 @@ import json
 import os
 from collections.abc import Mapping
 from dataclasses import dataclass
+from functools import lru_cache
 from pathlib import Path
 
 from fuzzyslam.config import embedded_names, load_config
 from fuzzyslam.streams.messages import DETECTION3D_ARRAY, IMAGE, LASER_SCAN, POSE_ARRAY, RANGE
+from fuzzyslam.streams.topics import Topics
 
 DETECTIONS = (POSE_ARRAY, DETECTION3D_ARRAY)
 SIMULATED = ("fuzzyslam.scenario", "fuzzyslam.world")  # streams/logmeta.py's records
@@ -82,6 +84,22 @@ class ConfigChoice:
         return out
 
 
+@lru_cache(maxsize=8)
+def preset_topics(name: str) -> Topics:
+    """An embedded preset's ``topics`` (its YAML parsed once per process; read only).
+
+    Parameters
+    ----------
+    name : str
+        The preset's name.
+
+    Returns
+    -------
+    Topics
+    """
+    return load_config(name).topics
+
+
 def _sonar_topics(topics: Mapping[str, str], prefix: str) -> list[str]:
     """``prefix`` + digits topics carrying sensor_msgs/Range."""
     from fuzzyslam.streams.sonar import present_sonar_topics
@@ -112,14 +130,14 @@ def choose(
     """
     if simulated:
         return PAPER, "a simulated log"
-    paper = load_config(PAPER).topics
+    paper = preset_topics(PAPER)
     lamps = [t for t in (paper.image, paper.image + "/compressed", paper.detections) if t in topics]
     if lamps:
         return PAPER, f"lamps on {', '.join(lamps)}"
-    det = load_config(DETECTED).topics.detections
+    det = preset_topics(DETECTED).detections
     if topics.get(det) in DETECTIONS:
         return DETECTED, f"landmark detections on {det}, no lamps"
-    sonar_cfg, scan_cfg = load_config(SONAR).topics, load_config(SCAN).topics
+    sonar_cfg, scan_cfg = preset_topics(SONAR), preset_topics(SCAN)
     sonars = _sonar_topics(topics, sonar_cfg.sonar_prefix)
     scan = topics.get(scan_cfg.scan) == LASER_SCAN
     ring = f"{len(sonars)} sonars on {sonar_cfg.sonar_prefix}NN"
@@ -243,7 +261,7 @@ def unread_streams(topics: Mapping[str, str], read: object) -> list[str]:
     for topic, kind in sorted(topics.items()):
         if kind in READS and topic != getattr(read, READS[kind][1]):
             preset, key = READS[kind]
-            own = getattr(load_config(preset).topics, key) == topic
+            own = getattr(preset_topics(preset), key) == topic
             how = (
                 f"--config {preset}"
                 if own

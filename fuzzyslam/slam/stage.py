@@ -46,7 +46,12 @@ TWIST = ("", " twist")  # an Odometry whose twist alone is read (LogInputs.odom_
 
 
 def make_summary(
-    res: SlamResult, inputs, wall: float, aids: list, streamed: StreamingOutputs
+    res: SlamResult,
+    inputs,
+    wall: float,
+    aids: list,
+    streamed: StreamingOutputs,
+    config: dict[str, str] = OMIT,
 ) -> RunSummary:
     """The run's summary (stdout and summary.json); row statistics from ``streamed``.
 
@@ -62,6 +67,8 @@ def make_summary(
         The fix plug-ins (their ``summary()`` under ``aids``).
     streamed : StreamingOutputs
         The written rows (trajectory rows, the lamps' mean NIS).
+    config : dict, optional
+        The summary's ``config`` (``fuzzyslam.presets.ConfigChoice.as_dict``).
 
     Returns
     -------
@@ -71,6 +78,7 @@ def make_summary(
     est = res.noise_estimate
     return RunSummary(
         log=str(inputs.reader.path),
+        config=config,
         odometry_source=_odometry_source(inputs),
         lamp_source=f"{inputs.lamp_source} ({inputs.lamp_topic})",
         start_pose=[float(v) for v in inputs.start_pose],
@@ -540,10 +548,8 @@ def _run_once(
             )
         for drawing in drawings:
             drawing.result()
-        summary = make_summary(res, inputs, time.perf_counter() - wall0, aids, streamed)
-        summary = replace(
-            summary, config=(choice or ConfigChoice(cfg.name, "given")).as_dict(cfg.name)
-        )
+        config = (choice or ConfigChoice(cfg.name, "given")).as_dict(cfg.name)
+        summary = make_summary(res, inputs, time.perf_counter() - wall0, aids, streamed, config)
         write_summary(tmp, as_json(summary))
     restarts = inputs.restart_line()  # found while reading the events
     if restarts and not _quiet:
