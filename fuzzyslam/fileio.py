@@ -12,15 +12,14 @@ import errno
 import fnmatch
 import os
 import shutil
-import signal
 import stat
 import sys
 import tempfile
-import threading
 from collections.abc import Iterable, Iterator
 from pathlib import Path
 
 from fuzzyslam.errors import InputError
+from fuzzyslam.interrupts import deferred
 
 # Inputs of the current command: every file checked by ``check_input_file`` or named as
 # an input of ``check_outputs`` while guarding is on (the CLI turns it on for each
@@ -243,7 +242,7 @@ def atomic_paths(paths: Iterable[str | os.PathLike]) -> Iterator[list[Path]]:
             with contextlib.suppress(OSError):  # mkstemp made it private
                 os.chmod(tmp, 0o666 & ~_umask())
             _fsync_path(tmp)
-        with _deferred_interrupts():
+        with deferred():
             for tmp, dest in zip(tmps, dests, strict=True):
                 os.replace(tmp, dest)
         for parent in dict.fromkeys(d.parent if str(d.parent) else Path(".") for d in dests):
@@ -310,7 +309,7 @@ class OutputDir:
                     for d in dests:
                         check_output_target(d, "file")
                     self._complete()
-                    with _deferred_interrupts():
+                    with deferred():
                         self._move(items)
                 except BaseException as err:
                     mapped = _user_error(err, self.tmp, self.path)
@@ -419,27 +418,3 @@ def _exchange(a: Path, b: Path) -> bool:
     rc = fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE)
     return rc == 0
 
-
-@contextlib.contextmanager
-def _deferred_interrupts() -> Iterator[None]:
-    """Hold SIGINT/SIGTERM while outputs are moved into place, then deliver them, so an
-    interruption never leaves a mix of new and old files (main thread only)."""
-    if threading.current_thread() is not threading.main_thread():
-        yield
-        return
-    caught: list[tuple[int, object]] = []
-    old = {}
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        old[sig] = signal.getsignal(sig)
-        signal.signal(sig, lambda signum, frame: caught.append((signum, frame)))
-    try:
-        yield
-    finally:
-        for sig, handler in old.items():
-            signal.signal(sig, handler)
-        for signum, frame in caught[:1]:
-            handler = old[signum]
-            if callable(handler):
-                handler(signum, frame)
-            elif handler == signal.SIG_DFL:
-                os.kill(os.getpid(), signum)

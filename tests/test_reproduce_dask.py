@@ -495,8 +495,11 @@ def test_sweep_killed_halfway_goes_on_and_skips_the_finished_steps(tmp_path):
         if finished == 4:
             proc.send_signal(signal.SIGTERM)
             break
-    proc.communicate(timeout=120)
+    _, rest = proc.communicate(timeout=120)
     assert proc.returncode == 143
+    # the idle pool worker leaves quietly: the one line of a termination ends stderr
+    assert "Traceback" not in rest
+    assert rest.splitlines()[-1] == "fuzzyslam: terminated; no partial outputs were kept"
     recorded = len(list((out / ".sweep").glob("*.json")))
     assert recorded >= 4
     assert not (out / "sweep.md").exists()
@@ -542,6 +545,38 @@ def test_sweep_killed_halfway_goes_on_and_skips_the_finished_steps(tmp_path):
     p = cli(*SWEEP, "-o", out)
     assert json.loads(p.stdout)["skipped"] == STEPS
     assert (out / "sweep.md").read_text().splitlines()[4:] == table[4:]
+
+
+@pytest.mark.slow
+def test_ctrl_c_to_a_sweeps_process_group_is_one_line_and_leaves_nothing(tmp_path):
+    """Ctrl-C at a terminal reaches every process of the group: the sweep (one seed: a
+    chain of 3 steps on 2 workers, so one worker is always idle) stops its running step,
+    which removes its temporary outputs; exit 130, stderr ends with the one line, no
+    traceback, no process of the group left and no temporary file."""
+    out = tmp_path / "sw"
+    env = {k: v for k, v in os.environ.items() if k != "FUZZYSLAM_NO_PROGRESS"}
+    args = ("sweep", "sample.yaml", "--set", "robot.wheel_noise=0.01", "--seeds", "1")
+    proc = subprocess.Popen([sys.executable, "-m", "fuzzyslam", *args, "-j", "2", "-o", str(out)],
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                            env={**env, "MPLBACKEND": "Agg"}, start_new_session=True)  # fmt: skip
+    assert proc.stderr is not None
+    for line in proc.stderr:
+        if " done in " in line:  # the log is simulated; the run step has started
+            os.killpg(proc.pid, signal.SIGINT)
+            break
+    _, rest = proc.communicate(timeout=60)
+    assert proc.returncode == 130, rest
+    assert "Traceback" not in rest
+    assert rest.splitlines()[-1] == "fuzzyslam: interrupted; no partial outputs were kept"
+    deadline = time.monotonic() + 10
+    while True:  # the pool's workers are reaped by the sweep before it exits
+        try:
+            os.killpg(proc.pid, 0)
+        except ProcessLookupError:
+            break
+        assert time.monotonic() < deadline, "a process of the sweep's group outlived it"
+        time.sleep(0.05)
+    assert not [p for p in tmp_path.rglob("*") if ".part" in p.name]
 
 
 @pytest.mark.slow

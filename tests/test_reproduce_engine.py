@@ -40,3 +40,70 @@ def test_a_forked_pool_runs_its_steps_locally(tmp_path) -> None:
     done = execute(steps, tmp_path, jobs=2)
     assert sorted(done) == ["v0", "v1", "v2"]
     assert all(r.ok and r.worker == "local" and "version" in r.summary for r in done.values())
+
+
+def test_a_signal_during_the_wait_is_raised_after_it(tmp_path, monkeypatch) -> None:
+    """SIGTERM arriving inside ``concurrent.futures.wait`` (which holds the futures' locks
+    while it installs its waiter) is held until the loop's own point: the wait returns,
+    then Terminated is raised, and the pool's workers are gone. A SIGTERM raised inside
+    the wait once left a future's lock held and the sweep's shutdown hung."""
+    import multiprocessing
+    import os
+    import signal
+
+    import fuzzyslam.reproduce.execute as ex
+    from fuzzyslam.interrupts import Terminated, raise_terminated
+
+    real_wait, reached = ex.wait, []
+
+    def wait_hit_by_sigterm(*args, **kwargs):
+        if not reached:
+            os.kill(os.getpid(), signal.SIGTERM)
+            reached.append("after the signal")
+        return real_wait(*args, **kwargs)
+
+    monkeypatch.setattr(ex, "wait", wait_hit_by_sigterm)
+    before = signal.signal(signal.SIGTERM, raise_terminated)
+    try:
+        steps = [Step(f"v{i}", ("--version",), kind="version") for i in range(4)]
+        try:
+            execute(steps, tmp_path, jobs=2)
+        except Terminated:
+            raised = True
+        else:
+            raised = False
+        assert signal.getsignal(signal.SIGTERM) is raise_terminated  # restored
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    assert reached == ["after the signal"] and raised
+    assert multiprocessing.active_children() == []
+
+
+def test_an_idle_pool_worker_ends_quietly_on_sigterm() -> None:
+    """A pool worker waiting for a step leaves with status 143 and says nothing (the
+    pool's queue raised Terminated there, a traceback per idle worker); inside a step,
+    SIGTERM raises Terminated so that the step removes its temporary outputs."""
+    code = (
+        "import multiprocessing as mp, os, signal, time\n"
+        "from concurrent.futures import ProcessPoolExecutor\n"
+        "from fuzzyslam import interrupts\n"
+        "def in_step():\n"
+        "    with interrupts.in_step():\n"
+        "        try:\n"
+        "            os.kill(os.getpid(), signal.SIGTERM); time.sleep(5)\n"
+        "        except interrupts.Terminated:\n"
+        "            return 'Terminated'\n"
+        "interrupts.install()\n"
+        "pool = ProcessPoolExecutor(2, mp_context=mp.get_context('fork'),\n"
+        "                           initializer=interrupts.worker_init)\n"
+        "print(pool.submit(in_step).result())\n"
+        "kids = mp.active_children()\n"
+        "for k in kids: k.terminate()\n"
+        "for k in kids: k.join(10)\n"
+        "print(sorted(k.exitcode for k in kids))\n"
+        "pool.shutdown()\n"
+    )
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
+    assert p.returncode == 0, p.stderr
+    assert p.stdout.split("\n")[:2] == ["Terminated", "[143, 143]"]
+    assert p.stderr == ""

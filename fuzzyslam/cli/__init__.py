@@ -9,7 +9,6 @@ from __future__ import annotations
 import contextlib
 import math
 import os
-import signal
 import sys
 import traceback
 from typing import Any
@@ -27,6 +26,8 @@ from fuzzyslam.errors import (
     UsageError,
 )
 from fuzzyslam.fileio import WRITE_ERRNOS, guard_inputs, write_error
+from fuzzyslam.interrupts import Terminated
+from fuzzyslam.interrupts import install as install_interrupts
 from fuzzyslam.summary import summary_text
 
 # One BLAS/OpenMP thread per process, set before numpy loads (none of the imports above
@@ -206,14 +207,6 @@ def _register(args: list[str] | None = None) -> None:
 _NO_ARGS_IS_HELP: Any = getattr(click.exceptions, "NoArgsIsHelpError", ())
 
 
-class Terminated(KeyboardInterrupt):
-    """SIGTERM, raised like Ctrl-C so that temporary outputs are removed on the way out."""
-
-
-def _on_sigterm(signum: int, frame: object) -> None:
-    raise Terminated()
-
-
 def _one_line(text: str) -> str:
     return " ".join(text.split()) if text else ""
 
@@ -230,8 +223,7 @@ def main(argv: list[str] | None = None) -> None:
     debug = "--debug" in args
     if debug:
         args = ["--debug", *(a for a in args if a != "--debug")]
-    if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
-        signal.signal(signal.SIGTERM, _on_sigterm)
+    install_interrupts()
     code = EXIT_OK
     try:
         _register(args)

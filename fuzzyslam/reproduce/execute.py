@@ -34,6 +34,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
+from fuzzyslam import interrupts
 from fuzzyslam.cpus import usable_cpus
 from fuzzyslam.errors import EXIT_INTERNAL, FuzzyslamError, InputError
 from fuzzyslam.fileio import guard_inputs
@@ -184,6 +185,7 @@ def run_step(kind: str, call: tuple[tuple[str, Any], ...], root: str) -> tuple:
         t0 = time.perf_counter()
         try:
             with (
+                interrupts.in_step(),
                 threadpool_limits(limits=1),
                 contextlib.redirect_stdout(out),
                 contextlib.redirect_stderr(err),
@@ -232,7 +234,9 @@ class Engine:
             ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
             if ctx.get_start_method() == "fork":
                 preload()  # the workers, forked at the first step, inherit the imports
-            self.pool: Executor = ProcessPoolExecutor(self.jobs, mp_context=ctx)
+            self.pool: Executor = ProcessPoolExecutor(
+                self.jobs, mp_context=ctx, initializer=interrupts.worker_init
+            )
             self.where = f"a local pool of {self.jobs} processes"
             return
         try:
@@ -418,6 +422,14 @@ def _task_key(step: Step) -> str:
     return f"fuzzyslam {step.key} {time.time_ns()}"
 
 
+# Longest wait for a step before a held Ctrl-C or SIGTERM is raised (interrupts.deferred)
+POLL_S = 0.1
+
+
+def _poll(timeout: float | None) -> float:
+    return POLL_S if timeout is None else min(timeout, POLL_S)
+
+
 def execute(
     steps: list[Step],
     root: Path,
@@ -470,45 +482,54 @@ def execute(
         moved = f" (moved to {final} when every step succeeded)" if final else ""
         bar.line(f"{len(steps)} steps on {engine.where}; writing into {root}{moved}")
         try:
-            while pending or running:
-                if failure is None:
-                    ready = [s for s in pending.values() if all(d in done for d in s.deps)]
-                    ready = ready_order(ready, prio)
-                    for s in ready[: max(engine.jobs - len(running), 0)]:
-                        del pending[s.key]
-                        running[engine.submit(s, root)] = s
-                        started[s.key] = time.monotonic()
-                elif not running:
-                    break
-                if not running:
-                    raise RuntimeError("plan is stuck: steps wait on steps that never ran")
-                finished, _ = wait(running, timeout=bar.timeout(), return_when=FIRST_COMPLETED)
-                if not finished:
-                    now = time.monotonic()
-                    bar.heartbeat(
-                        len(done), [(s.key, now - started[s.key]) for s in running.values()]
+            with interrupts.deferred() as held:
+                while pending or running:
+                    if failure is None:
+                        ready = [s for s in pending.values() if all(d in done for d in s.deps)]
+                        ready = ready_order(ready, prio)
+                        for s in ready[: max(engine.jobs - len(running), 0)]:
+                            del pending[s.key]
+                            running[engine.submit(s, root)] = s
+                            started[s.key] = time.monotonic()
+                    elif not running:
+                        break
+                    if not running:
+                        raise RuntimeError("plan is stuck: steps wait on steps that never ran")
+                    finished, _ = wait(
+                        running, timeout=_poll(bar.timeout()), return_when=FIRST_COMPLETED
                     )
-                for fut in finished:
-                    s = running.pop(fut)
-                    try:
-                        res = StepResult(s.key, *engine.result(fut, root))
-                    except Exception as exc:  # the step's own failures are in its result
-                        if scheduler is None:
-                            raise
-                        raise ClusterFailed(scheduler, s.key, exc) from exc
-                    if res.ok:
-                        done[s.key] = res
-                        if on_done is not None:
-                            on_done(s, res)
-                        bar.step_done(
-                            s.key, res.seconds, len(done), res.worker, sum(costs[k] for k in done)
+                    if not finished:
+                        now = time.monotonic()
+                        bar.heartbeat(
+                            len(done), [(s.key, now - started[s.key]) for s in running.values()]
                         )
-                    elif failure is None:
-                        failure = res
+                    for fut in finished:
+                        s = running.pop(fut)
+                        try:
+                            res = StepResult(s.key, *engine.result(fut, root))
+                        except Exception as exc:  # the step's own failures are in its result
+                            if scheduler is None:
+                                raise
+                            raise ClusterFailed(scheduler, s.key, exc) from exc
+                        if res.ok:
+                            done[s.key] = res
+                            if on_done is not None:
+                                on_done(s, res)
+                            bar.step_done(
+                                s.key,
+                                res.seconds,
+                                len(done),
+                                res.worker,
+                                sum(costs[k] for k in done),
+                            )
+                        elif failure is None:
+                            failure = res
+                    held.deliver()  # Ctrl-C or SIGTERM, raised here: no lock is held
         except BaseException:
-            for fut in running:
-                fut.cancel()
-            engine.close(cancel=True)
+            with interrupts.deferred():  # a second Ctrl-C waits for the steps' clean-up
+                for fut in running:
+                    fut.cancel()
+                engine.close(cancel=True)
             raise
     engine.close()
     if failure is not None:
