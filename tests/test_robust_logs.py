@@ -216,6 +216,89 @@ def test_reader_reads_a_cut_log_as_far_as_it_is_intact(tiny: Tiny) -> None:
     assert got[3][2] == 0 and got[2][1] == got[3][1]
 
 
+def _counted_walks(monkeypatch) -> list:
+    """The record walks of logs without a summary from here on (their paths)."""
+    from fuzzyslam.streams import reader as R
+
+    walks = []
+    real_walk = R.LogReader._walk_stream
+
+    def counted(self):
+        walks.append(self.path)
+        return real_walk(self)
+
+    monkeypatch.setattr(R.LogReader, "_walk_stream", counted)
+    return walks
+
+
+def test_readers_in_a_command_share_the_walk_of_a_log_without_summary(
+    tiny: Tiny, tmp_path: Path, monkeypatch
+) -> None:
+    """Two readers of a log cut short (no summary) in one command: one record walk, and
+    each reader its own damage count; a file that changed is walked again; outside a
+    command every reader walks."""
+    import os
+
+    from fuzzyslam.streams import reader as R
+
+    data = tiny.small_chunks.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) * 9 // 10])
+    walks = _counted_walks(monkeypatch)
+    # two readers in one command: one walk; each its own damage count, equal
+    with R.shared_walks():
+        a, b = R.LogReader(cut), R.LogReader(cut)
+        assert len(walks) == 1 and a.damage() == b.damage() and a.damage()["truncated"]
+        assert a.damage_state() is not b.damage_state()
+        assert (a.topics, a.counts, a.start, a.end) == (b.topics, b.counts, b.start, b.end)
+        st = cut.stat()
+        os.utime(cut, ns=(st.st_atime_ns, st.st_mtime_ns + 10**9))  # the file changed
+        R.LogReader(cut)
+        assert len(walks) == 2
+    R.LogReader(cut)  # outside a command: a walk per reader
+    assert len(walks) == 3
+
+
+@pytest.mark.slow  # two commands and the same two stage calls: 3-5 s
+def test_a_command_walks_a_log_without_summary_once(
+    tiny: Tiny, tmp_path: Path, monkeypatch
+) -> None:
+    """``run`` and ``map`` open their log several times (the preset's or the map's
+    config, the aids, the inputs): a log cut short (no summary) was walked each time.
+    Now one walk serves the command, and the outputs are byte for byte those of the
+    stages called outside a command (a walk per reader)."""
+    from fuzzyslam.maps.stage import run as map_stage
+    from fuzzyslam.slam.stage import run as run_stage
+
+    data = tiny.small_chunks.read_bytes()
+    cut = tmp_path / "cut.mcap"
+    cut.write_bytes(data[: len(data) * 9 // 10])
+    walks = _counted_walks(monkeypatch)
+    # run with a map (its config, the fixes' aids, the inputs) and map without --config
+    # (the preset's choice, the rings): two walks each outside a command
+    fgm, traj = tiny.dir / "fgm", tiny.est / "trajectory.tum"
+    for name, argv, stage, kwargs, files in [
+        ("run", ("run", cut, "-o", tmp_path / "run", "--map", fgm, "--fix", "pose",
+                 "--no-prefetch"),
+         run_stage, {"log": cut, "outdir": tmp_path / "run_2", "map_dir": fgm, "fix": "pose"},
+         ("trajectory.tum", "covariance.csv", "landmarks.yaml")),
+        ("map", ("map", cut, "--trajectory", traj, "-o", tmp_path / "map", "--no-figures"),
+         map_stage, {"log": cut, "trajectory": traj, "outdir": tmp_path / "map_2",
+                     "figures": False},
+         ("fgm.npz", "fgm.pgm", "references.yaml")),
+    ]:  # fmt: skip
+        walks.clear()
+        code, out, err = cli(*argv)
+        assert code == 0, err
+        assert len(walks) == 1, name
+        walks.clear()
+        summary = stage(**kwargs)
+        assert len(walks) == 2, name  # what the command did before
+        assert json.loads(out)["log_damage"] == summary["log_damage"]
+        for f in files:
+            assert (tmp_path / name / f).read_bytes() == (tmp_path / f"{name}_2" / f).read_bytes()
+
+
 def test_damaged_chunk_in_the_middle_is_skipped_and_counted(tiny: Tiny, tmp_path: Path) -> None:
     """Bytes overwritten inside one chunk's compressed data and the summary gone: the
     chunk is counted as damaged, the chunks after it are still read."""

@@ -165,9 +165,14 @@ def ranges_option(f):
 
 
 def stage_call(entry: Any, *args: Any, **kwargs: Any) -> Any:
-    """Call a stage's entry; its UsageError is shown as click's usage errors are."""
+    """Call a stage's entry, its reads of a log sharing one record walk (a log without a
+    summary: ``streams.reader.shared_walks``); its UsageError is shown as click's usage
+    errors are."""
+    from fuzzyslam.streams.reader import shared_walks  # the stages import it anyway
+
     try:
-        return entry(*args, **kwargs)
+        with shared_walks():
+            return entry(*args, **kwargs)
     except UsageError as exc:
         raise click.UsageError(str(exc)) from None
 

@@ -174,6 +174,7 @@ def run_command(
     with (
         ChildCalls() if early else contextlib.nullcontext() as figures,
         fewer_collections(),  # here and in the input process (it inherits the thresholds)
+        _shared_walks(),  # one record walk of a log without a summary serves every reader
         read_ahead(log, forks),  # the log's /tf read meanwhile (slam/tf_ahead.py)
     ):
         from fuzzyslam.slam.stage import run
@@ -196,6 +197,13 @@ def run_command(
         )
     _tell_damage(log, summary.get("log_damage"))
     emit(summary)
+
+
+def _shared_walks() -> contextlib.AbstractContextManager[None]:
+    """``streams.reader.shared_walks``, imported once the figure process is forked."""
+    from fuzzyslam.streams.reader import shared_walks
+
+    return shared_walks()
 
 
 def _tell_damage(log: Path, damage: dict | None) -> None:

@@ -169,6 +169,8 @@ def run_step(kind: str, call: tuple[tuple[str, Any], ...], root: str) -> tuple:
     """
     from threadpoolctl import threadpool_limits
 
+    from fuzzyslam.streams.reader import shared_walks
+
     where, host, pid = _where(), socket.gethostname(), os.getpid()
     if not os.path.isdir(root):
         msg = (
@@ -186,6 +188,7 @@ def run_step(kind: str, call: tuple[tuple[str, Any], ...], root: str) -> tuple:
         try:
             with (
                 interrupts.in_step(),
+                shared_walks(),
                 threadpool_limits(limits=1),
                 contextlib.redirect_stdout(out),
                 contextlib.redirect_stderr(err),

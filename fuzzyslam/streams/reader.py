@@ -15,9 +15,12 @@ decoded by ``streams/cdr.py`` (the frequent types) or rosbags (the rest).
 
 from __future__ import annotations
 
+import contextlib
+import copy
 import json
 import os
 from collections.abc import Callable, Iterable, Iterator
+from dataclasses import dataclass
 from pathlib import Path
 from typing import Any, NamedTuple
 
@@ -112,6 +115,46 @@ def bag_file(path: str | os.PathLike) -> Path:
     )
 
 
+@dataclass(frozen=True)
+class _Scan:
+    """What the record walk of a file without a summary found (read only)."""
+
+    topics: dict[str, str]
+    counts: dict[str, int]
+    metadata: dict[str, dict[str, str]]
+    attachments: dict[str, bytes]
+    span_ns: tuple[int, int]
+    damage: Damage
+
+
+# The record walks of files without a usable summary in the current command
+# (:func:`shared_walks`; None outside one), by the file's identity (device, inode, size,
+# modification time): a command opens its log several times (the config preset's choice,
+# the stage's set-up, its inputs), and a walk costs about 0.7 s per 40 MB. A file that
+# changed is walked again; the last few are kept.
+_SCANS: dict[tuple[int, int, int, int], _Scan] | None = None
+SCANS_KEPT = 4
+
+
+@contextlib.contextmanager
+def shared_walks() -> Iterator[None]:
+    """One command: in the block, the record walk of a log without a summary serves
+    every reader of the same unchanged file (``LogReader``); forgotten at the end.
+    Only within a command: a file rewritten in place with the same size within the
+    file system's clock tick (a few ms) would keep its identity.
+
+    Yields
+    ------
+    None
+    """
+    global _SCANS
+    before, _SCANS = _SCANS, {} if _SCANS is None else _SCANS
+    try:
+        yield
+    finally:
+        _SCANS = before
+
+
 class LogReader:
     """Read a ROS 2 MCAP recording (a file, or a ros2 bag folder holding one:
     :func:`bag_file`).
@@ -158,11 +201,32 @@ class LogReader:
 
     def _scan_stream(self) -> None:
         """Topics, counts, times, metadata and attachments of a file without a usable
-        summary, from a walk over its records (which counts the damage)."""
+        summary, from a walk over its records (which counts the damage), or from this
+        command's earlier walk of the same file (:func:`shared_walks`)."""
+        st = self.path.stat()
+        key = (st.st_dev, st.st_ino, st.st_size, st.st_mtime_ns)
+        kept = _SCANS if _SCANS is not None else {}
+        scan = kept.get(key)
+        if scan is None:
+            scan = kept[key] = self._walk_stream()
+            while len(kept) > SCANS_KEPT:
+                del kept[next(iter(kept))]  # the oldest walk
+        self.topics, self.counts = dict(scan.topics), dict(scan.counts)
+        self.metadata, self.attachments = dict(scan.metadata), dict(scan.attachments)
+        self._span_ns = scan.span_ns
+        self.start, self.end = scan.span_ns[0] / 1e9, scan.span_ns[1] / 1e9
+        self._damage = copy.deepcopy(scan.damage)  # this reader's own count from here on
+
+    def _walk_stream(self) -> _Scan:
+        """:meth:`_scan_stream`'s walk over the records."""
+        topics: dict[str, str] = {}
+        counts: dict[str, int] = {}
+        metadata: dict[str, dict[str, str]] = {}
+        attachments: dict[str, bytes] = {}
         schemas: dict[int, str] = {}
         t0, t1, n = None, None, 0
         channels: dict[int, str] = {}
-        dmg = self._damage
+        dmg = Damage()
         with open(self.path, "rb") as f:
             for rec in walk(f, self.size, dmg):
                 if isinstance(rec, Schema):
@@ -170,24 +234,22 @@ class LogReader:
                 elif isinstance(rec, Channel):
                     channels[rec.id] = rec.topic
                     if rec.schema_id in schemas:
-                        self.topics[rec.topic] = schemas[rec.schema_id]
+                        topics[rec.topic] = schemas[rec.schema_id]
                 elif isinstance(rec, Message):
                     topic = channels.get(rec.channel_id)
                     if topic is not None:
-                        self.counts[topic] = self.counts.get(topic, 0) + 1
+                        counts[topic] = counts.get(topic, 0) + 1
                     t0 = rec.log_time if t0 is None else min(t0, rec.log_time)
                     t1 = rec.log_time if t1 is None else max(t1, rec.log_time)
                     n += 1
                 elif isinstance(rec, Metadata):
-                    self.metadata[rec.name] = dict(rec.metadata)
+                    metadata[rec.name] = dict(rec.metadata)
                 elif isinstance(rec, Attachment):
-                    self.attachments[rec.name] = bytes(rec.data)
+                    attachments[rec.name] = bytes(rec.data)
         dmg.truncated = True  # no usable summary: the file is damaged even if all parsed
-        self._span_ns = (int(t0 or 0), int(t1 or 0))
-        self.start = (t0 or 0) / 1e9
-        self.end = (t1 or 0) / 1e9
-        if n == 0 and not self.topics:
+        if n == 0 and not topics:
             raise InputError(self.path, "MCAP file holds no readable messages (damaged or empty)")
+        return _Scan(topics, counts, metadata, attachments, (int(t0 or 0), int(t1 or 0)), dmg)
 
     # -- queries ------------------------------------------------------------------
 
