@@ -92,19 +92,23 @@ def deferred() -> Iterator[Held]:
         held.deliver()
 
 
-_stepping = False
+_stepping = False  # a step runs (in_step)
+_terminated = False  # this worker was sent SIGTERM
 
 
 def worker_init() -> None:
     """A pool worker's signal set-up (the pool's ``initializer``): Ctrl-C ignored (the
     parent stops its workers with SIGTERM, :meth:`Engine.close`), and SIGTERM raises
     :class:`Terminated` inside a step, so that the step removes its temporary outputs,
-    and ends an idle worker quietly (exit status 143, no traceback)."""
+    and ends an idle worker quietly (exit status 143, no traceback). A step the worker
+    takes from its queue after that does not start (:func:`in_step`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _worker_sigterm)
 
 
 def _worker_sigterm(signum: int, frame: FrameType | None) -> None:
+    global _terminated
+    _terminated = True
     if _stepping:
         raise Terminated()
     raise SystemExit(128 + signum)
@@ -112,8 +116,12 @@ def _worker_sigterm(signum: int, frame: FrameType | None) -> None:
 
 @contextlib.contextmanager
 def in_step() -> Iterator[None]:
-    """Mark the block as a step's work: a pool worker's SIGTERM raises there."""
+    """Mark the block as a step's work: a pool worker's SIGTERM raises there, and a
+    worker already sent SIGTERM raises at once (a step queued for it before it was
+    stopped does not run)."""
     global _stepping
+    if _terminated:
+        raise Terminated()
     before, _stepping = _stepping, True
     try:
         yield

@@ -106,3 +106,41 @@ def test_an_idle_pool_worker_ends_quietly_on_sigterm() -> None:
     assert p.returncode == 0, p.stderr
     assert p.stdout.split("\n")[:2] == ["Terminated", "[143, 143]"]
     assert p.stderr == ""
+
+
+def _long_step() -> None:
+    """A step of 30 s (as run_step marks one)."""
+    import time
+
+    from fuzzyslam import interrupts
+
+    with interrupts.in_step():
+        time.sleep(30)
+
+
+def test_an_interrupted_pool_ends_every_step_without_an_error_in_its_thread(
+    monkeypatch,
+) -> None:
+    """Engine.close(cancel=True), as at Ctrl-C, with one step running, one queued for the
+    worker and one still pending: every future ends at once (the queued step does not
+    start), the workers are gone, and the pool's manager thread raises nothing (a future
+    cancelled by the caller once made it raise InvalidStateError: a traceback on
+    stderr)."""
+    import multiprocessing
+    import threading
+    import time
+
+    from fuzzyslam.reproduce.execute import Engine
+
+    raised = []
+    monkeypatch.setattr(threading, "excepthook", lambda args: raised.append(args.exc_value))
+    for _ in range(3):
+        engine = Engine(jobs=1)
+        futures = [engine.pool.submit(_long_step) for _ in range(3)]
+        time.sleep(0.05)
+        t0 = time.monotonic()
+        engine.close(cancel=True)
+        assert time.monotonic() - t0 < 10
+        assert all(f.done() for f in futures)
+        assert multiprocessing.active_children() == []
+    assert raised == []

@@ -294,7 +294,12 @@ class Engine:
         """Stop the pool (or leave the cluster); with ``cancel`` (an interrupt), queued steps
         are cancelled and the local pool's running steps terminated (their temporary
         outputs removed by their own SIGTERM handling), so that Ctrl-C or SIGTERM does not
-        wait for them."""
+        wait for them.
+
+        The queued steps are cancelled by the pool itself (``cancel_futures``), never by
+        the caller: a future cancelled from outside stays in the local pool's queue, and a
+        pool that then finds its terminated workers gone sets an exception on it, which
+        raises in its manager thread (a traceback on stderr, one killed sweep in ~450)."""
         if self._client is None:
             if cancel:  # interrupted: stop the running steps now instead of waiting for them
                 for child in multiprocessing.active_children():  # the pool's workers
@@ -530,8 +535,6 @@ def execute(
                     held.deliver()  # Ctrl-C or SIGTERM, raised here: no lock is held
         except BaseException:
             with interrupts.deferred():  # a second Ctrl-C waits for the steps' clean-up
-                for fut in running:
-                    fut.cancel()
                 engine.close(cancel=True)
             raise
     engine.close()
