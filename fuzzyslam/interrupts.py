@@ -9,8 +9,7 @@ the sweep shut its pool down (one killed sweep in about twenty hung so).
 
 So the parent of a process pool holds the signals (:func:`deferred`) and raises them at
 points of its own (:meth:`Held.deliver`), and the pool's workers (:func:`worker_init`)
-raise SIGTERM only inside a step (:func:`in_step`): an idle worker leaves quietly, not
-with a traceback from the pool's queue.
+raise SIGTERM only inside a step (:func:`in_step`), never in the pool's queue.
 """
 
 from __future__ import annotations
@@ -99,9 +98,13 @@ _terminated = False  # this worker was sent SIGTERM
 def worker_init() -> None:
     """A pool worker's signal set-up (the pool's ``initializer``): Ctrl-C ignored (the
     parent stops its workers with SIGTERM, :meth:`Engine.close`), and SIGTERM raises
-    :class:`Terminated` inside a step, so that the step removes its temporary outputs,
-    and ends an idle worker quietly (exit status 143, no traceback). A step the worker
-    takes from its queue after that does not start (:func:`in_step`)."""
+    :class:`Terminated` inside a step, so that the step removes its temporary outputs.
+    Outside a step it raises nothing: an exception there would land in the pool's
+    queue read, and a read cut between a message's length and its body leaves the rest
+    in the pipe that the other workers share (the next reader unpickled garbage: a
+    traceback on stderr, one killed sweep in ~270). The worker leaves when the pool
+    shuts down, and a step it takes from its queue after SIGTERM does not start
+    (:func:`in_step`)."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     signal.signal(signal.SIGTERM, _worker_sigterm)
 
@@ -111,7 +114,6 @@ def _worker_sigterm(signum: int, frame: FrameType | None) -> None:
     _terminated = True
     if _stepping:
         raise Terminated()
-    raise SystemExit(128 + signum)
 
 
 @contextlib.contextmanager

@@ -80,9 +80,11 @@ def test_a_signal_during_the_wait_is_raised_after_it(tmp_path, monkeypatch) -> N
 
 
 def test_an_idle_pool_worker_ends_quietly_on_sigterm() -> None:
-    """A pool worker waiting for a step leaves with status 143 and says nothing (the
-    pool's queue raised Terminated there, a traceback per idle worker); inside a step,
-    SIGTERM raises Terminated so that the step removes its temporary outputs."""
+    """A pool worker waiting for a step raises nothing on SIGTERM (Terminated raised in
+    the pool's queue read was a traceback per idle worker, and a read cut mid-message
+    left garbage for the next reader): it leaves when the pool shuts down, saying
+    nothing. Inside a step, SIGTERM raises Terminated so that the step removes its
+    temporary outputs."""
     code = (
         "import multiprocessing as mp, os, signal, time\n"
         "from concurrent.futures import ProcessPoolExecutor\n"
@@ -94,17 +96,18 @@ def test_an_idle_pool_worker_ends_quietly_on_sigterm() -> None:
         "        except interrupts.Terminated:\n"
         "            return 'Terminated'\n"
         "interrupts.install()\n"
-        "pool = ProcessPoolExecutor(2, mp_context=mp.get_context('fork'),\n"
-        "                           initializer=interrupts.worker_init)\n"
-        "print(pool.submit(in_step).result())\n"
-        "kids = mp.active_children()\n"
-        "for k in kids: k.terminate()\n"
-        "pool.shutdown()  # its manager thread reaps them (a second reaper would race it)\n"
+        "with interrupts.deferred():  # as execute forks its workers\n"
+        "    pool = ProcessPoolExecutor(2, mp_context=mp.get_context('fork'),\n"
+        "                               initializer=interrupts.worker_init)\n"
+        "    print(pool.submit(in_step).result())\n"
+        "    kids = mp.active_children()\n"
+        "    for k in kids: k.terminate()\n"
+        "    pool.shutdown()  # its manager thread reaps them (a second reaper races it)\n"
         "print(sorted(k.exitcode for k in kids))\n"
     )
     p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=60)
     assert p.returncode == 0, p.stderr
-    assert p.stdout.split("\n")[:2] == ["Terminated", "[143, 143]"]
+    assert p.stdout.split("\n")[:2] == ["Terminated", "[0, 0]"]
     assert p.stderr == ""
 
 
