@@ -227,14 +227,17 @@ def atomic_paths(paths: Iterable[str | os.PathLike]) -> Iterator[list[Path]]:
     tmps: list[Path] = []
     try:
         for dest in dests:
-            try:
-                fd, tmp = tempfile.mkstemp(
-                    prefix=f".{dest.name}.", suffix=".part", dir=dest.parent or "."
-                )
-            except OSError as exc:  # a read-only or full directory: the user's name
-                raise write_error(dest, exc) from exc
-            os.close(fd)
-            tmps.append(Path(tmp))
+            # Ctrl-C held from the file's making until its name is kept (in tmps: removed
+            # on the way out); an interruption between the two left the file behind
+            with deferred():
+                try:
+                    fd, tmp = tempfile.mkstemp(
+                        prefix=f".{dest.name}.", suffix=".part", dir=dest.parent or "."
+                    )
+                except OSError as exc:  # a read-only or full directory: the user's name
+                    raise write_error(dest, exc) from exc
+                os.close(fd)
+                tmps.append(Path(tmp))
         yield list(tmps)
         _refuse_inputs(dests)
         for tmp, dest in zip(tmps, dests, strict=True):
@@ -292,9 +295,19 @@ class OutputDir:
         # inside itself: its files are then renamed within one file system
         where = real if real.is_dir() and _in_place_only(real) else parent
         try:
-            self.tmp = Path(tempfile.mkdtemp(prefix=f".{real.name}.", suffix=".part", dir=where))
+            # Ctrl-C held from the folder's making until its name is kept; __exit__ does
+            # not run for an exception raised here, so a held one removes the folder
+            with deferred():
+                self.tmp = Path(
+                    tempfile.mkdtemp(prefix=f".{real.name}.", suffix=".part", dir=where)
+                )
         except OSError as exc:  # read-only or full: the user's name, not the temporary one
             raise write_error(self.path, exc) from exc
+        except BaseException:
+            if self.tmp is not None:
+                shutil.rmtree(self.tmp, ignore_errors=True)
+                self.tmp = None
+            raise
         return self.tmp
 
     def __exit__(self, exc_type, exc, tb) -> None:
@@ -417,4 +430,3 @@ def _exchange(a: Path, b: Path) -> bool:
     at_fdcwd = -100
     rc = fn(at_fdcwd, os.fsencode(a), at_fdcwd, os.fsencode(b), _RENAME_EXCHANGE)
     return rc == 0
-

@@ -114,6 +114,39 @@ def test_output_dir_commits_only_on_success(tmp_path):
     assert (out / "a.txt").read_text() == "x" and len(list(tmp_path.iterdir())) == 1
 
 
+@pytest.mark.parametrize("maker", ["mkdtemp", "mkstemp"])
+def test_a_signal_just_after_the_temporary_is_made_leaves_nothing(
+    tmp_path, monkeypatch, maker: str
+) -> None:
+    """SIGTERM arriving right after OutputDir's (or atomic_path's) temporary folder (file)
+    is made, before its name is kept: Terminated is raised and nothing is left. An
+    interrupted sweep had left an empty ``.eval.*.part`` folder so (the exception raised
+    in __enter__, where __exit__ does not run)."""
+    import os
+    import signal
+    import tempfile
+
+    from fuzzyslam.interrupts import Terminated, raise_terminated
+
+    real = getattr(tempfile, maker)
+
+    def hit(*args, **kwargs):
+        made = real(*args, **kwargs)
+        os.kill(os.getpid(), signal.SIGTERM)
+        return made
+
+    monkeypatch.setattr(tempfile, maker, hit)
+    out = tmp_path / "res"
+    before = signal.signal(signal.SIGTERM, raise_terminated)
+    try:
+        with pytest.raises(Terminated):
+            with OutputDir(out) if maker == "mkdtemp" else atomic_path(out) as tmp:
+                tmp.joinpath("a.txt").write_text("x") if tmp.is_dir() else tmp.write_text("x")
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    assert list(tmp_path.iterdir()) == []
+
+
 def test_check_outputs_refuses_input(tmp_path):
     inp = tmp_path / "in.mcap"
     inp.write_text("x")
