@@ -30,14 +30,26 @@ class Terminated(KeyboardInterrupt):
     """SIGTERM, raised like Ctrl-C so that temporary outputs are removed on the way out."""
 
 
+_terminating = False  # this command raised Terminated already
+
+
 def raise_terminated(signum: int, frame: FrameType | None) -> None:
-    """SIGTERM's handler in a command: raise :class:`Terminated`."""
+    """SIGTERM's handler in a command: raise :class:`Terminated`, once. A second SIGTERM
+    (a supervisor's, or one sent to the whole process group and again by a parent to its
+    workers) is not raised: it would cut the first one's clean-up short and leave a
+    temporary output behind. SIGKILL is the way to stop a command at once."""
+    global _terminating
+    if _terminating:
+        return
+    _terminating = True
     raise Terminated()
 
 
 def install() -> None:
     """Handle SIGTERM like Ctrl-C (:func:`raise_terminated`) unless the process was
-    given another handler (an embedding program's, or SIG_IGN)."""
+    given another handler (an embedding program's, or SIG_IGN); a new command."""
+    global _terminating
+    _terminating = False
     if signal.getsignal(signal.SIGTERM) is signal.SIG_DFL:
         signal.signal(signal.SIGTERM, raise_terminated)
 
@@ -98,7 +110,8 @@ _terminated = False  # this worker was sent SIGTERM
 def worker_init() -> None:
     """A pool worker's signal set-up (the pool's ``initializer``): Ctrl-C ignored (the
     parent stops its workers with SIGTERM, :meth:`Engine.close`), and SIGTERM raises
-    :class:`Terminated` inside a step, so that the step removes its temporary outputs.
+    :class:`Terminated` inside a step, so that the step removes its temporary outputs
+    (once: a second SIGTERM, the parent's after the process group's, lets it finish).
     Outside a step it raises nothing: an exception there would land in the pool's
     queue read, and a read cut between a message's length and its body leaves the rest
     in the pipe that the other workers share (the next reader unpickled garbage: a
@@ -111,8 +124,8 @@ def worker_init() -> None:
 
 def _worker_sigterm(signum: int, frame: FrameType | None) -> None:
     global _terminated
-    _terminated = True
-    if _stepping:
+    first, _terminated = not _terminated, True
+    if _stepping and first:  # a second SIGTERM: the step's clean-up goes on
         raise Terminated()
 
 

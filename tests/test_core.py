@@ -126,7 +126,7 @@ def test_a_signal_just_after_the_temporary_is_made_leaves_nothing(
     import signal
     import tempfile
 
-    from fuzzyslam.interrupts import Terminated, raise_terminated
+    from fuzzyslam.interrupts import Terminated, install, raise_terminated
 
     real = getattr(tempfile, maker)
 
@@ -138,10 +138,41 @@ def test_a_signal_just_after_the_temporary_is_made_leaves_nothing(
     monkeypatch.setattr(tempfile, maker, hit)
     out = tmp_path / "res"
     before = signal.signal(signal.SIGTERM, raise_terminated)
+    install()  # a new command: its first SIGTERM raises
     try:
         with pytest.raises(Terminated):
             with OutputDir(out) if maker == "mkdtemp" else atomic_path(out) as tmp:
                 tmp.joinpath("a.txt").write_text("x") if tmp.is_dir() else tmp.write_text("x")
+    finally:
+        signal.signal(signal.SIGTERM, before)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_a_second_sigterm_does_not_cut_the_clean_up_short(tmp_path, monkeypatch) -> None:
+    """SIGTERM inside a command, then a second one while its temporary output is being
+    removed (a process group's SIGTERM, then its parent's to the workers): the first
+    raises Terminated, the second is not raised, and nothing is left."""
+    import os
+    import signal
+
+    import fuzzyslam.fileio as fileio
+    from fuzzyslam.interrupts import Terminated, install, raise_terminated
+
+    real = fileio.shutil.rmtree
+
+    def hit(*args, **kwargs):
+        os.kill(os.getpid(), signal.SIGTERM)
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(fileio.shutil, "rmtree", hit)
+    out = tmp_path / "res"
+    before = signal.signal(signal.SIGTERM, raise_terminated)
+    install()
+    try:
+        with pytest.raises(Terminated), OutputDir(out) as tmp:
+            (tmp / "a.txt").write_text("x")
+            os.kill(os.getpid(), signal.SIGTERM)
+            (tmp / "b.txt").write_text("never")
     finally:
         signal.signal(signal.SIGTERM, before)
     assert list(tmp_path.iterdir()) == []

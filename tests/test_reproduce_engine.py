@@ -52,7 +52,7 @@ def test_a_signal_during_the_wait_is_raised_after_it(tmp_path, monkeypatch) -> N
     import signal
 
     import fuzzyslam.reproduce.execute as ex
-    from fuzzyslam.interrupts import Terminated, raise_terminated
+    from fuzzyslam.interrupts import Terminated, install, raise_terminated
 
     real_wait, reached = ex.wait, []
 
@@ -64,6 +64,7 @@ def test_a_signal_during_the_wait_is_raised_after_it(tmp_path, monkeypatch) -> N
 
     monkeypatch.setattr(ex, "wait", wait_hit_by_sigterm)
     before = signal.signal(signal.SIGTERM, raise_terminated)
+    install()  # a new command: its first SIGTERM raises
     try:
         steps = [Step(f"v{i}", ("--version",), kind="version") for i in range(4)]
         try:
@@ -84,7 +85,8 @@ def test_an_idle_pool_worker_ends_quietly_on_sigterm() -> None:
     the pool's queue read was a traceback per idle worker, and a read cut mid-message
     left garbage for the next reader): it leaves when the pool shuts down, saying
     nothing. Inside a step, SIGTERM raises Terminated so that the step removes its
-    temporary outputs."""
+    temporary outputs, once: a second SIGTERM (the parent's, after one sent to the
+    process group) does not cut that clean-up short."""
     code = (
         "import multiprocessing as mp, os, signal, time\n"
         "from concurrent.futures import ProcessPoolExecutor\n"
@@ -94,6 +96,8 @@ def test_an_idle_pool_worker_ends_quietly_on_sigterm() -> None:
         "        try:\n"
         "            os.kill(os.getpid(), signal.SIGTERM); time.sleep(5)\n"
         "        except interrupts.Terminated:\n"
+        "            os.kill(os.getpid(), signal.SIGTERM)  # a second: the clean-up goes on\n"
+        "            time.sleep(0.05)\n"
         "            return 'Terminated'\n"
         "interrupts.install()\n"
         "with interrupts.deferred():  # as execute forks its workers\n"
