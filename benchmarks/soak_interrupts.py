@@ -7,10 +7,12 @@ Each trial starts ``fuzzyslam`` in its own process group and sends SIGTERM or SI
 to the whole group (as a terminal's Ctrl-C reaches every process of it) at a random
 moment, then checks what the CLI promises: the command ends within 60 s (else: a
 hang, the processes' states printed and the soak stopped), with exit 0 (it finished
-first), 130 or 143, or death by SIGTERM's default action (a signal in the interpreter's
-first ~0.2 s, before the CLI's handler is set: a shell reports 143 as well); no
-traceback on stderr; no process of the group left; no temporary ``.part`` output. The
-counts tell the exit codes apart.
+first), 130 or 143; no traceback on stderr; no process of the group left; no temporary
+``.part`` output. A signal in the interpreter's own start-up (its first ~0.2 s, before
+any fuzzyslam code runs or the CLI's SIGTERM handler is set) ends Python as Python
+ends: by the signal's default action (a shell reports 130 or 143 as well), or, for
+Ctrl-C during its ``site`` import, its fatal error and exit 1; such a trial passes if
+nothing was written, and is counted apart.
 
 - ``sweep``: 2 values x 2 seeds of sample.yaml (12 steps on the local pool, the test
   suite's sweep), the signal at 0-12 s: before the pool, while steps run and wait,
@@ -88,9 +90,16 @@ def trial(argv: list[str], window: tuple[float, float], rng: random.Random, work
     left = subprocess.run(["pgrep", "-g", str(p.pid)], capture_output=True, text=True).stdout
     parts = [str(x) for x in d.rglob("*.part*")]
     what = f"{sig.name} at {at:.2f} s: exit {p.returncode}"
-    # -SIGTERM: killed by the signal's default action while Python was still starting,
-    # before the CLI handles SIGTERM (a shell reports it as 143 too)
-    if p.returncode not in (0, 130, 143, -signal.SIGTERM):
+    # in the interpreter's own start-up, before any fuzzyslam code runs: killed by the
+    # signal's default action (a shell reports 130 or 143 too), or Python's fatal error
+    # of an interrupted ``site`` import (exit 1); nothing written either way
+    starting = p.returncode in (-signal.SIGTERM, -signal.SIGINT) or (
+        p.returncode == 1 and "Fatal Python error: init_import_site" in err
+    )
+    if starting and not any(d.iterdir()):
+        subprocess.run(["rm", "-rf", str(d)], check=False)
+        return "ok, interrupted while Python starts"
+    if p.returncode not in (0, 130, 143):
         return f"exit {p.returncode} ({what}): {err.strip().splitlines()[-1:]}"
     if "Traceback" in err:
         (work / f"traceback_{p.pid}.txt").write_text(err)
@@ -100,7 +109,7 @@ def trial(argv: list[str], window: tuple[float, float], rng: random.Random, work
     if parts:
         return f"temporary outputs left ({what}): {parts}"
     subprocess.run(["rm", "-rf", str(d)], check=False)
-    return "ok" if p.returncode >= 0 else "ok, killed by SIGTERM while starting"
+    return "ok"
 
 
 def main() -> None:
