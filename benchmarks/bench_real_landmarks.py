@@ -10,7 +10,12 @@ MRCLAM logs; skipped when absent). For each log it runs ``fuzzyslam run`` and
 over after the one-to-one matching, NEES mean (3 dof, against the aligned truth),
 time with NEES above 100, what filter_health says, the real-time factor (log duration over
 wall time, as the summary gives it, and over the process's CPU time: the figure to read
-on a loaded machine), and the odometry latency the bearings imply.
+on a loaded machine), the odometry latency the bearings imply, and the odometry checks
+of filter_health: the estimate's turns and displacements over the odometry's (``*`` when
+flagged, ``c`` when the distances are confounded by the turns), with the displacements'
+ratio the motion capture gives (truth over dead reckoning, the same windows and fit:
+what the estimate's ratio should be). ``log_variants.py --odometry-scale`` makes the
+logs with their odometry rescaled that the README's figures for those checks come from.
 
 With ``--baseline REV`` it instead times ``fuzzyslam run`` of the old code (git revision
 REV) and of this code side by side on each log, alternating, ``--repeat`` times each
@@ -50,6 +55,8 @@ def main() -> None:
     ap.add_argument("--adapt-noise", action="store_true")
     ap.add_argument("--baseline", metavar="REV", default=None)
     ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--config", default="real_detections.yaml",
+                    help="the config (a name or a YAML path; not with --baseline)")
     a = ap.parse_args()
     logs = sorted(p for p in Path(a.data).glob("*") if (p / "landmarks_truth.yaml").is_file())
     if not logs:
@@ -59,14 +66,14 @@ def main() -> None:
         side_by_side_runs(logs, a.baseline, a.repeat)
         return
     print(f"{'log':16s} {'APE m':>6s} {'DR m':>6s} {'found':>5s} {'left':>4s} {'NEES':>6s} "
-          f"{'NEES>100 s':>10s} {'diverged':>8s} {'RTF':>6s} {'CPU RTF':>7s} {'lag s':>6s}")
+          f"{'NEES>100 s':>10s} {'diverged':>8s} {'RTF':>6s} {'CPU RTF':>7s} {'lag s':>6s} "
+          f"{'turn k':>7s} {'dist k':>7s} {'true':>6s}")  # fmt: skip
     with tempfile.TemporaryDirectory() as tmp:
         for log in logs:
             run = Path(tmp) / log.name
             extra = ["--adapt-noise"] if a.adapt_noise else []
             c0 = resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime
-            s = fuzzyslam("run", log / "log.mcap", "--config", "real_detections.yaml",
-                          "-o", run, *extra)
+            s = fuzzyslam("run", log / "log.mcap", "--config", a.config, "-o", run, *extra)
             cpu = resource.getrusage(resource.RUSAGE_CHILDREN).ru_utime - c0
             lag = (s.get("odometry_delay_estimate") or {}).get("delay_s")
             ev = Path(tmp) / f"{log.name}_ev"
@@ -82,7 +89,32 @@ def main() -> None:
                   f"{h['nees_mean']:6.2f} "
                   f"{'' if over is None else f'{over * (cov[-1, 0] - cov[0, 0]):.0f}':>10s} "
                   f"{s['filter_health']['diverged']!s:>8s} {s['real_time_factor']:6.1f} "
-                  f"{s['log_duration_s'] / cpu:7.1f} {'' if lag is None else f'{lag:.3f}':>6s}")
+                  f"{s['log_duration_s'] / cpu:7.1f} {'' if lag is None else f'{lag:.3f}':>6s} "
+                  f"{_check(s['odometry_turn_check']):>7s} "
+                  f"{_check(s['odometry_distance_check']):>7s} "
+                  f"{_true_distance_ratio(run, log / 'truth.tum'):6.3f}")  # fmt: skip
+
+
+def _check(c: dict | None) -> str:
+    """An odometry check's ratio, ``*`` when flagged, ``c`` when confounded."""
+    if c is None:
+        return "-"
+    mark = "*" if c["flagged"] else "c" if c.get("confounded_by_turns") else ""
+    return f"{c['ratio']:.3f}{mark}"
+
+
+def _true_distance_ratio(run: Path, truth: Path) -> float:
+    """The ratio of the truth's displacements to the dead reckoning's (odometry.tum) over
+    the distance check's windows and fit (``turn_check.distance_ratio``)."""
+    from fuzzyslam.slam.turn_check import distance_ratio
+    from fuzzyslam.streams.tum import read_tum
+
+    to, po = read_tum(run / "odometry.tum")[:2]
+    tt, pt = read_tum(truth)[:2]
+    inside = (to >= tt[0]) & (to <= tt[-1])
+    xy = np.column_stack([np.interp(to, tt, pt[:, k]) for k in (0, 1)])
+    c = distance_ratio(to[inside], xy[inside], po[inside, :2])
+    return float("nan") if c is None else c.ratio
 
 
 def side_by_side_runs(logs: list[Path], rev: str, repeat: int) -> None:

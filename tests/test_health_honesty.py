@@ -146,6 +146,7 @@ def test_the_flagged_line_gives_seconds_into_the_log_and_causes(capsys) -> None:
     summary = SimpleNamespace(
         filter_health=h, counts=SimpleNamespace(frames_stale_odometry=0),
         odometry_delay_estimate=None, noise_estimate=None, odometry_turn_check=None,
+        odometry_distance_check=None,
     )  # fmt: skip
     _tell(summary)
     err = capsys.readouterr().err

@@ -1,21 +1,30 @@
-"""The odometry's turns against the estimate's (slam/turn_check.py): a turn scale that
-the innovations hide is flagged in filter_health, never on runs whose odometry is right."""
+"""The odometry's turns and distances against the estimate's (slam/turn_check.py): a turn
+or distance scale that the innovations hide is flagged in filter_health, never on runs
+whose odometry is right."""
 
 from __future__ import annotations
 
 import math
+import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
 from conftest import run_cli
-from test_robust_logs import Out, keep, rewrite
 
 from fuzzyslam.slam import turn_check as tc
-from fuzzyslam.slam.turn_check import rotation_factor, turn_note, turn_ratio
-from fuzzyslam.streams.reader import LogMessage
+from fuzzyslam.slam.turn_check import (
+    distance_note,
+    distance_ratio,
+    rotation_factor,
+    translation_factor,
+    turn_note,
+    turn_ratio,
+)
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "data" / "real"
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "benchmarks"))
+from log_variants import write_variant  # noqa: E402  (the benchmarks' log variants)
 
 
 def _drive(
@@ -268,8 +277,10 @@ def test_a_wrong_wheel_base_is_flagged_unless_calibrated(tmp_path, capsys) -> No
     check = s["odometry_turn_check"]
     assert check["flagged"] and check["ratio"] == pytest.approx(0.8, abs=0.01)
     assert s["filter_health"]["diverged"]
-    # the only reason: the innovations' windows did not flag it
+    # the only reason: the innovations' windows did not flag it, and the distances are
+    # not judged against a dead reckoning bent by wrong turns
     assert s["filter_health"]["reasons"] == ["odometry_turn_scale"]
+    assert s["odometry_distance_check"]["confounded_by_turns"]
     lines = [x for x in err.splitlines() if "odometry_turn_check" in x]
     assert len(lines) == 1 and "20 % less than the odometry" in lines[0]
     assert "robot.wheel_base: 0.50" in lines[0]  # the true base: 0.40 x 1.25
@@ -292,33 +303,6 @@ def test_a_wrong_wheel_base_is_flagged_unless_calibrated(tmp_path, capsys) -> No
     assert s["odometry_turn_check"]["ratio"] == pytest.approx(1 / 1.01, abs=0.01)
 
 
-def _scale_turns(src: Path, dst: Path, scale: float) -> None:
-    """The log with its /odom poses integrated again from their increments, each turn
-    times ``scale`` (a driver with a wrong angular scale)."""
-    state = {}
-
-    def fault(m: LogMessage) -> list[Out]:
-        if m.topic == "/odom":
-            p, q = m.msg.pose.pose.position, m.msg.pose.pose.orientation
-            pose = (p.x, p.y, 2.0 * math.atan2(q.z, q.w))
-            prev, cur = state.get("prev"), state.get("cur", pose)
-            if prev is not None:  # the increment in the previous pose's frame, turn scaled
-                dx, dy = pose[0] - prev[0], pose[1] - prev[1]
-                c, s = math.cos(prev[2]), math.sin(prev[2])
-                bx, by = c * dx + s * dy, -s * dx + c * dy
-                dth = math.remainder(pose[2] - prev[2], math.tau) * scale
-                c, s = math.cos(cur[2]), math.sin(cur[2])
-                cur = (cur[0] + c * bx - s * by, cur[1] + s * bx + c * by, cur[2] + dth)
-            state.update(prev=pose, cur=cur)
-            p.x, p.y = cur[0], cur[1]
-            q.x = q.y = 0.0
-            q.z, q.w = math.sin(cur[2] / 2), math.cos(cur[2] / 2)
-            m.msg.twist.twist.angular.z *= scale
-        return keep(m)
-
-    rewrite(src, dst, fault)
-
-
 @pytest.mark.slow
 def test_a_real_log_with_its_turns_scaled_is_flagged(tmp_path, capsys) -> None:
     """MRCLAM robot 3 (whole log, ../shared) with its odometry's turns times 0.8: NEES
@@ -329,10 +313,155 @@ def test_a_real_log_with_its_turns_scaled_is_flagged(tmp_path, capsys) -> None:
     if not log.is_file():
         pytest.skip(f"{log} not here (the shared real logs)")
     scaled = tmp_path / "scaled.mcap"
-    _scale_turns(log, scaled, 0.8)
+    write_variant(log, scaled, odometry_scale=(1.0, 0.8))  # the turns times 0.8
     args = ["run", str(scaled), "--config", "real_detections", "-o", str(tmp_path / "r")]
     code, s, err = run_cli(args, capsys)
     assert code == 0, err
     assert s["odometry_turn_check"]["flagged"] and s["odometry_turn_check"]["ratio"] > 1.1
     assert "odometry_turn_scale" in s["filter_health"]["reasons"]
     assert s["filter_health"]["nis_windows_out_of_bounds"] == 0
+
+
+# -- the odometry's distances (distance_ratio) ---------------------------------------------
+
+
+def _wander(scale: float, seconds: float = 900.0, noise: float = 0.1, seed: int = 0, jumps=()):
+    """A robot wandering at 0.15 m/s (turning at random, 0.1 s samples): its true path,
+    the dead reckoning of its increments times ``scale`` (a distance scale; the turns
+    right), and an estimate: the true positions plus ``noise`` m of white noise, and a
+    jump of 3 m at each time of ``jumps`` that lasts 30 s (a relocalisation's stretch)."""
+    rng = np.random.default_rng(seed)
+    t = np.arange(0.0, seconds, 0.1)
+    yaw = np.cumsum(np.repeat(rng.normal(0.0, 0.4, len(t) // 50 + 1), 50)[: len(t)] * 0.1)
+    step = 0.15 * 0.1 * np.column_stack([np.cos(yaw), np.sin(yaw)])
+    true = np.cumsum(step, axis=0)
+    odo = np.cumsum(scale * step, axis=0)
+    est = true + rng.normal(0.0, noise, true.shape)
+    for j in jumps:
+        est[(t >= j) & (t < j + 30.0)] += [3.0, 0.0]
+    return t, est, odo
+
+
+@pytest.mark.parametrize("scale", [0.8, 0.95, 1.0, 1.25])
+def test_the_ratio_of_displacements_is_recovered_within_its_error(scale) -> None:
+    """The estimate follows the true path; the dead reckoning is its shape times the
+    scale (turns within a window change nothing): the ratio is 1 / scale, within three
+    standard errors (the small bias of lengths of noisy displacements included)."""
+    c = distance_ratio(*_wander(scale))
+    assert c is not None and c.windows >= 25
+    assert abs(c.ratio - 1 / scale) < 3 * c.sd and c.sd < 0.02
+    assert c.flagged == (abs(1 / scale - 1) > tc.TOLERANCE)
+
+
+def test_a_stretch_of_jumps_is_left_out_of_the_distances() -> None:
+    """Three 30-s stretches of the estimate 3 m off (relocalisations, map corrections),
+    each over two windows: left out, stretch or not, so a right odometry is not flagged
+    and the ratio stays within 2 % of 1; kept, as the turn check keeps stretches, they
+    would move it by more."""
+    t, est, odo = _wander(1.0, jumps=(115.0, 415.0, 715.0))
+    c = distance_ratio(t, est, odo)
+    assert c is not None and not c.flagged and abs(c.ratio - 1) < 0.02
+    edges = np.arange(t[0], t[-1] + 1e-9, tc.WINDOW_S)
+    lengths = [
+        np.hypot(*np.diff(np.column_stack([np.interp(edges, t, a[:, 0]),
+                                           np.interp(edges, t, a[:, 1])]), axis=0).T)
+        for a in (est, odo)
+    ]  # fmt: skip
+    moved = lengths[1] >= tc.MIN_MOVE_M
+    kept = tc._robust_fit(lengths[0][moved], lengths[1][moved], None, edges[1:][moved],
+                          1.0, tc.MIN_DIST_M, keep_stretches=True)  # fmt: skip
+    assert abs(kept[0] - 1) > abs(c.ratio - 1)
+    assert c.windows < kept[3]
+
+
+def test_too_little_motion_gives_no_distance_ratio() -> None:
+    t = np.arange(0.0, 900.0, 0.1)
+    still = np.zeros((len(t), 2))
+    assert distance_ratio(t, still, still) is None  # no window moved
+    t, est, odo = _wander(1.0, seconds=tc.WINDOW_S * (tc.MIN_WINDOWS - 1))
+    assert distance_ratio(t, est, odo) is None
+
+
+def test_translation_factor_of_the_calibration_models() -> None:
+    """Wheels: a straight drive with nominal wheel angles a_L = a_R = a goes
+    (s_L + s_R) / 2 times the nominal distance (slam/calibration.py); Odometry: the
+    translation scale; none: 1."""
+    names = ["left_scale", "right_scale", "base_scale"]
+    assert translation_factor(names, [1.01, 0.97, 1.2]) == pytest.approx(0.99)
+    assert translation_factor(["trans_scale", "rot_scale"], [0.97, 1.12]) == 0.97
+    assert translation_factor([], []) == 1.0
+
+
+def test_the_distance_note_says_which_way_and_the_wheel_radius() -> None:
+    check = {"ratio": 0.876, "sd": 0.039, "windows": 25, "expected": 1.0, "calibrated": False}
+    line = distance_note(check)
+    assert "moved 12 % less far than the odometry over 25 windows" in line
+    assert "slam.calibrate: true learns it" in line
+    line = distance_note({**check, "ratio": 1.2, "expected": 0.99, "calibrated": True})
+    assert "21 % farther than the odometry as calibrated (0.990)" in line
+    assert "learns it" not in line
+    line = distance_note(check, wheel_radius=0.05)  # moved 0.876 of the odometry: r 0.0438
+    assert line.endswith("; robot.wheel_radius: 0.0438 (now 0.05) would make them agree, at least")
+
+
+@pytest.mark.slow
+def test_wrong_wheel_radii_are_flagged_by_distance_not_turns(tmp_path, capsys) -> None:
+    """The simulator's true wheels 20 % smaller than the robot's (both radii and, so that
+    the turns stay right, the base times 0.8): the odometry's distances are 25 % long.
+    The lamps keep the estimate on the true path, and the estimate moves 0.8 times the
+    odometry: flagged (reason odometry_distance_scale, one line naming the ratio and the
+    wheel radius that would agree), the turns not."""
+    cfg = tmp_path / "radii.yaml"
+    cfg.write_text(
+        "extends: quick.yaml\nname: radii\nscenario:\n  runs: 3\nrobot:\n  left_scale: 0.8\n"
+        "  right_scale: 0.8\n  base_scale: 0.8\nslam:\n  calibrate: false\n"
+    )
+    log = tmp_path / "radii.mcap"
+    code, _, err = run_cli(["simulate", str(cfg), "-o", str(log), "--seed", "1"], capsys)
+    assert code == 0, err
+    code, s, err = run_cli(["run", str(log), "--config", str(cfg), "-o", str(tmp_path / "a")],
+                           capsys)  # fmt: skip
+    assert code == 0, err
+    check = s["odometry_distance_check"]
+    assert check["flagged"] and check["ratio"] == pytest.approx(0.8, abs=0.02)
+    assert not s["odometry_turn_check"]["flagged"]
+    assert "odometry_distance_scale" in s["filter_health"]["reasons"]
+    lines = [x for x in err.splitlines() if "odometry_distance_check" in x]
+    assert len(lines) == 1 and "less far than the odometry" in lines[0]
+    assert "robot.wheel_radius: 0.04" in lines[0]  # the true radius: 0.05 x 0.8
+
+
+@pytest.mark.slow
+def test_a_real_log_with_its_distances_scaled_is_flagged(tmp_path, capsys) -> None:
+    """MRCLAM robot 3 (whole log, ../shared) with its odometry's translations times 1.25
+    (APE 2.1 m, NEES 494; every other check quiet): flagged, the estimate moving at least
+    10 % less far than the odometry (0.88; the motion capture's ratio is 0.74). The log
+    as recorded (its odometry 8 % long by the motion capture: ratio 0.95) flags nothing
+    (tests/test_real_landmarks_full.py)."""
+    log = REAL / "mrclam7-robot3" / "log.mcap"
+    if not log.is_file():
+        pytest.skip(f"{log} not here (the shared real logs)")
+    scaled = tmp_path / "scaled.mcap"
+    write_variant(log, scaled, odometry_scale=(1.25, 1.0))  # the distances times 1.25
+    args = ["run", str(scaled), "--config", "real_detections", "-o", str(tmp_path / "r")]
+    code, s, err = run_cli(args, capsys)
+    assert code == 0, err
+    check = s["odometry_distance_check"]
+    assert check["flagged"] and check["ratio"] < 0.9
+    assert s["filter_health"]["reasons"] == ["odometry_distance_scale"]
+
+
+def test_distances_are_not_judged_against_a_dead_reckoning_bent_by_wrong_turns() -> None:
+    """A turn ratio beyond the tolerance (flagged or explained by a calibration) bends
+    the dead reckoning's path: the distance check is then reported unflagged and marked
+    confounded; within the tolerance it stands as it is."""
+    c = distance_ratio(*_wander(1.25))
+    assert c.flagged
+    turns = tc.TurnCheck(ratio=0.8, sd=0.01, windows=20, turn_rad=30.0, flagged=False,
+                         flagged_at=None, expected=0.8, calibrated=True)  # fmt: skip
+    j = c.judged(turns)
+    assert not j.flagged and j.flagged_at is None and j.confounded_by_turns
+    assert j.as_dict()["confounded_by_turns"] and j.ratio == c.ratio
+    near = tc.TurnCheck(ratio=1.05, sd=0.01, windows=20, turn_rad=30.0, flagged=False,
+                        flagged_at=None)  # fmt: skip
+    assert c.judged(near) is c and c.judged(None) is c

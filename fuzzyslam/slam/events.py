@@ -18,7 +18,7 @@ import numpy as np
 
 from fuzzyslam.slam.ekf import EkfSlam, UpdateResult
 from fuzzyslam.slam.noise import DetectionNoiseEstimate
-from fuzzyslam.slam.turn_check import TurnCheck
+from fuzzyslam.slam.turn_check import DistanceCheck, TurnCheck
 from fuzzyslam.streams.sonar import Ring
 
 if TYPE_CHECKING:  # slam/latency.py reads the events defined here
@@ -268,6 +268,7 @@ class SlamResult:
     delay_estimate: DelayEstimate | None = None  # the odometry latency (slam/latency.py)
     calibration: Any = None  # the summary's entry, calibration.CalibrationEntry (slam/stage.py)
     turn_check: TurnCheck | None = None  # the odometry's turns against the estimate's
+    distance_check: DistanceCheck | None = None  # ... and its displacements
 
     def mean_nis(self, kind: str = "lamp") -> float:
         """Mean NIS of the accepted updates of ``kind`` (expected value: their dof).

@@ -203,8 +203,9 @@ class StreamingOutputs:
         # and their running sums (for slam/turn_check.py; the poses' headings are wrapped)
         self._dr_c = np.zeros((0, 2))
         self._dist = 0.0
-        # per block of rows (k, 4): t, the estimate's heading less the dead reckoning's
-        # (wrapped), the dead reckoning's continuous heading and distance; 32 bytes a row
+        # per block of rows (k, 8): t, the estimate's heading less the dead reckoning's
+        # (wrapped), the dead reckoning's continuous heading and distance, the estimate's
+        # and the dead reckoning's positions; 64 bytes a row
         self._headings: list[np.ndarray] = []
 
     def __enter__(self) -> StreamingOutputs:
@@ -285,7 +286,7 @@ class StreamingOutputs:
         odo = dead_reckoning_at(t, self._dr_t, self._dr_p)
         cont = dead_reckoning_at(t, self._dr_t, self._dr_c)
         rel = wrap_angle(poses[:, 2] - odo[:, 2])
-        self._headings.append(np.column_stack([t, rel, cont]))
+        self._headings.append(np.column_stack([t, rel, cont, poses[:, :2], odo[:, :2]]))
         tf = iter(tf_payloads(t, poses, odo, self.frames))
         if len(t):
             keep = max(int(np.searchsorted(self._dr_t, t[-1], "right")) - 1, 0)
@@ -346,8 +347,25 @@ class StreamingOutputs:
         """
         if not self._headings:
             return np.zeros((0, 4))
-        t, rel, heading, dist = np.concatenate(self._headings).T
+        t, rel, heading, dist = np.concatenate(self._headings)[:, :4].T
         return np.column_stack([t, heading + np.unwrap(rel), heading, dist])
+
+    def positions(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The rows written so far: their times, the estimate's positions and the dead
+        reckoning's at those times (the odometry's distances against the filter's,
+        slam/turn_check.py ``distance_ratio``).
+
+        Returns
+        -------
+        t : ndarray (n,)
+            Times (s).
+        xy_est, xy_odo : ndarray (n, 2)
+            The estimate's positions (map frame) and the dead reckoning's (odom frame), m.
+        """
+        if not self._headings:
+            return np.zeros(0), np.zeros((0, 2)), np.zeros((0, 2))
+        rows = np.concatenate(self._headings)
+        return rows[:, 0], rows[:, 4:6], rows[:, 6:8]
 
     def write_messages(self, messages) -> None:
         """Write ``messages`` (topic, type name, message or its CDR bytes, t) into

@@ -189,6 +189,9 @@ REASON_CAUSES = {
     "pose_matches_refused": "odometry scale, the range sensor's mount, a clock offset",
     "events_lost": "stamps on another clock or back in time, a driver that stopped",
     "odometry_turn_scale": "the odometry's turn scale (wheel base, driver), not the noise",
+    "odometry_distance_scale": (
+        "the odometry's distance scale (wheel radius, tyre wear, driver), not the noise"
+    ),
 }
 
 

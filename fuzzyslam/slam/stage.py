@@ -39,7 +39,14 @@ from fuzzyslam.slam.prefetch import wanted as prefetch_wanted
 from fuzzyslam.slam.run_results import filter_health, lost_events, reason_causes, with_finding
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
 from fuzzyslam.slam.summary import RunSummary
-from fuzzyslam.slam.turn_check import rotation_factor, turn_note, turn_ratio
+from fuzzyslam.slam.turn_check import (
+    distance_note,
+    distance_ratio,
+    rotation_factor,
+    translation_factor,
+    turn_note,
+    turn_ratio,
+)
 from fuzzyslam.summary import OMIT, as_json
 
 TWIST = ("", " twist")  # an Odometry whose twist alone is read (LogInputs.odom_twist)
@@ -111,6 +118,9 @@ def make_summary(
         ),
         calibration=res.calibration if res.calibration is not None else OMIT,
         odometry_turn_check=res.turn_check.as_dict() if res.turn_check is not None else None,
+        odometry_distance_check=(
+            res.distance_check.as_dict() if res.distance_check is not None else None
+        ),
         aids={type(a).__name__: a.summary() for a in aids} if aids else OMIT,
         rings=inputs.ring_stats.as_dict() if aids else OMIT,
         range_sensor=(inputs.ranges.describe() if aids and inputs.ranges is not None else OMIT),
@@ -413,9 +423,12 @@ def _tell(summary: RunSummary, cfg: Config | None = None) -> None:
             "the summary's filter_health): do not trust this estimate"
         )
     turns = summary.odometry_turn_check
+    encoders = cfg is not None and summary.odometry_source.startswith("encoders")
     if turns and turns["flagged"]:
-        encoders = cfg is not None and summary.odometry_source.startswith("encoders")
         note(turn_note(turns, cfg.robot.wheel_base if encoders else None))
+    moves = summary.odometry_distance_check
+    if moves and moves["flagged"]:
+        note(distance_note(moves, cfg.robot.wheel_radius if encoders else None))
     stale = summary.counts.frames_stale_odometry
     if stale:  # the driver stopped (or paused): say which stream, not only that frames were lost
         limit = f" over slam.odometry_stale_s = {cfg.slam.odometry_stale_s:g} s" if cfg else ""
@@ -545,6 +558,17 @@ def _run_once(
             start = inputs.start + inputs.clock_offset
             res.health = with_finding(
                 res.health, "odometry_turn_scale", res.turn_check.flagged_at, start
+            )
+        # and its distances: a distance scale (a wheel radius) hidden alike
+        expected = translation_factor(calib.names, calib.factors) if calib is not None else 1.0
+        res.distance_check = distance_ratio(*streamed.positions(), expected=expected)
+        if res.distance_check is not None:
+            res.distance_check = replace(res.distance_check, calibrated=calib is not None)
+            res.distance_check = res.distance_check.judged(res.turn_check)
+        if res.distance_check is not None and res.distance_check.flagged:
+            start = inputs.start + inputs.clock_offset
+            res.health = with_finding(
+                res.health, "odometry_distance_scale", res.distance_check.flagged_at, start
             )
         for drawing in drawings:
             drawing.result()

@@ -19,8 +19,9 @@ class RunSummary:
     ``first_warning`` (no input problem), ``noise_estimate`` and
     ``odometry_delay_estimate`` (lamps from frames), ``calibration`` (off), ``aids``,
     ``rings``, ``range_sensor`` (no fixes),
-    ``noise_adapted`` (without ``--adapt-noise``). ``odometry_turn_check`` is always
-    there, null for a log too short or turning too little (slam/turn_check.py)."""
+    ``noise_adapted`` (without ``--adapt-noise``). ``odometry_turn_check`` and
+    ``odometry_distance_check`` are always there, null for a log too short or turning
+    (moving) too little (slam/turn_check.py)."""
 
     command: str = "run"
     log: str
@@ -47,6 +48,7 @@ class RunSummary:
     noise_estimate: dict[str, Any] | None = OMIT
     odometry_delay_estimate: dict[str, Any] | None = OMIT
     odometry_turn_check: dict[str, Any] | None = None
+    odometry_distance_check: dict[str, Any] | None = None
     calibration: CalibrationEntry = OMIT
     aids: dict[str, Any] = OMIT  # class name -> summary() (a fixes/summaries.py dataclass)
     rings: dict[str, Any] = OMIT
