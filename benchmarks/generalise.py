@@ -230,7 +230,8 @@ def cut_window(log_dir: Path, out: Path, start: float, length: float) -> None:
     (out / "landmarks_truth.yaml").write_bytes((log_dir / "landmarks_truth.yaml").read_bytes())
 
 
-def mrclam(data: Path, out: Path, starts: list[float], length: float) -> list[dict]:
+def mrclam(data: Path, out: Path, starts: list[float], length: float,
+           config: str = "real_detections.yaml") -> list[dict]:
     logs = sorted(p for p in data.iterdir() if (p / "landmarks_truth.yaml").is_file())
     rows = []
     for d in logs:
@@ -239,7 +240,7 @@ def mrclam(data: Path, out: Path, starts: list[float], length: float) -> list[di
             if not (w / "log.mcap").is_file():
                 cut_window(d, w, st, length)
             run, ev = w / "run", w / "ev"
-            s = fuzzyslam("run", str(w / "log.mcap"), "--config", "real_detections.yaml",
+            s = fuzzyslam("run", str(w / "log.mcap"), "--config", config,
                           "-o", str(run))  # fmt: skip
             h = fuzzyslam("evaluate", str(w / "truth.tum"), str(run), "--landmarks-truth",
                           str(w / "landmarks_truth.yaml"), "-o", str(ev))  # fmt: skip
@@ -308,6 +309,8 @@ def main() -> None:
     ap.add_argument("--variants", nargs="*", default=VARIANTS, help="given or KIND-SEED")
     ap.add_argument("--starts", nargs="*", type=float, default=[0, 75, 150, 225, 300, 375, 450])
     ap.add_argument("--window", type=float, default=450.0)
+    ap.add_argument("--landmark-config", default="real_detections.yaml",
+                    help="the landmark logs' config (a name or a YAML path)")
     a = ap.parse_args()
     if not a.data.is_dir():
         print(f"no data under {a.data}: skipped")
@@ -315,7 +318,8 @@ def main() -> None:
     with tempfile.TemporaryDirectory() as tmp:
         out = a.out or Path(tmp)
         if "mrclam" in a.part:
-            print(mrclam_table(mrclam(a.data, out / "mrclam", a.starts, a.window)), flush=True)
+            rows = mrclam(a.data, out / "mrclam", a.starts, a.window, a.landmark_config)
+            print(mrclam_table(rows), flush=True)
         if "carmen" in a.part:
             print(carmen_table(carmen(a.data, out / "carmen", a.variants)), flush=True)
 

@@ -352,6 +352,7 @@ def predict_calibrated(ekf, delta: np.ndarray, q: np.ndarray, d: np.ndarray) -> 
     p = ekf.P  # views of the filter's arrays: updated in place
     x = ekf.x
     x[:3], ja, jb = compose_with_jacobians(x[:3], delta)
+    ja = ekf.first_estimate_motion(ja)  # J_a with first estimates (EkfSlam, FEJ)
     t = np.concatenate((ja, jb @ d), axis=1)  # (3, m0)
     ekf.odometry_pose = compose(ekf.odometry_pose, delta)
     rows = t @ p[:m0, :n]  # (3, n)

@@ -114,7 +114,14 @@ class EkfSlam(EkfUpdates):
     """EKF-SLAM state and covariance with O(n) prediction and Joseph-form updates."""
 
     def __init__(
-        self, pose, pose_cov, noise, capacity: int = 16, calib=None, calib_cov=None
+        self,
+        pose,
+        pose_cov,
+        noise,
+        capacity: int = 16,
+        calib=None,
+        calib_cov=None,
+        first_estimates: bool = False,
     ) -> None:
         k = 0 if calib is None else len(calib)
         self.k = k  # calibration factors, right after the pose
@@ -141,6 +148,12 @@ class EkfSlam(EkfUpdates):
         # dead reckoning of the same odometry, never corrected by updates: a smooth pose
         # whose differences are the robot's relative motion (multi-ring FLMs, fixes.heading)
         self.odometry_pose = self._x[:3].copy()
+        # first-estimates Jacobians (FEJ, :meth:`first_estimate_motion`): the lamps'
+        # positions when they were added, and the robot's position as last predicted,
+        # kept in a vector laid out as ``_x`` (its pose entries: the prior position)
+        self.first_estimates = bool(first_estimates)
+        self._xf = self._x.copy()
+        self._fej_restart = False
 
     # -- views ------------------------------------------------------------------------
 
@@ -232,7 +245,7 @@ class EkfSlam(EkfUpdates):
         m = motion_noise(d_trans, d_rot, self.noise)
         self._x[:3] = motion_step(pose, d_trans, d_rot)
         self.odometry_pose = motion_step(self.odometry_pose, d_trans, d_rot)
-        self._propagate(gx, gu, m)
+        self._propagate(self.first_estimate_motion(gx), gu, m)
 
     def _propagate(self, a: np.ndarray, b: np.ndarray, q: np.ndarray) -> None:
         """P_rr' = A P_rr A^T + B Q B^T;  P_rm' = A P_rm: the prediction's covariance, the
@@ -275,7 +288,59 @@ class EkfSlam(EkfUpdates):
             return
         self._x[:3], ja, jb = compose_with_jacobians(self._x[:3], delta)
         self.odometry_pose = compose(self.odometry_pose, delta)
-        self._propagate(ja, jb, q_delta)
+        self._propagate(self.first_estimate_motion(ja), jb, q_delta)
+
+    def first_estimate_motion(self, a: np.ndarray) -> np.ndarray:
+        """The motion's pose Jacobian with first estimates (FEJ), called once the state
+        holds the predicted pose p_(k+1|k).
+
+        A prediction x' = x (+) delta has the pose Jacobian A = [[I, J (p' - p)], [0, 1]]
+        (J the rotation by +90 deg) with p = p_(k|k), the pose the last update left. With
+        ``first_estimates`` its heading column is taken between the two predicted
+        positions instead (Huang, Mourikis and Roumeliotis, "Analysis and improvement of
+        the consistency of extended Kalman filter based SLAM", ICRA 2008):
+
+            A_FEJ = [[I, J (p_(k+1|k) - p_(k|k-1))], [0, 1]]
+
+        so that the products of these Jacobians and the lamps' first-estimate measurement
+        Jacobians (:meth:`predict_lamps`) keep the three unobservable directions of
+        SLAM (a translation and a rotation of the whole map and the robot) unobservable:
+        the standard EKF gains spurious heading information from every update and
+        becomes overconfident. Without an update since the last prediction p_(k|k) =
+        p_(k|k-1) and A is unchanged. After :meth:`inflate_robot` (an unmodelled
+        disturbance, whose update moves the pose by far more than its motion) the next
+        prediction takes the standard A and the lamps' current estimates become their
+        first ones: the linearisation restarts from there.
+
+        Parameters
+        ----------
+        a : ndarray, shape (3, 3)
+            The standard pose Jacobian (at p_(k|k)).
+
+        Returns
+        -------
+        ndarray, shape (3, 3)
+            ``a`` itself without ``first_estimates``, else the FEJ Jacobian (a copy).
+        """
+        if not self.first_estimates:
+            return a
+        p_new = self._x[:2]
+        if self._fej_restart:  # the lamps' linearisation restarts with the pose's
+            self._fej_restart = False
+            self._xf[self.m0 : self.dim] = self._x[self.m0 : self.dim]
+        else:
+            d = p_new - self._xf[:2]  # p_(k+1|k) - p_(k|k-1)
+            a = a.copy()
+            a[0, 2] = -d[1]
+            a[1, 2] = d[0]
+        self._xf[:2] = p_new
+        return a
+
+    def restart_linearisation(self) -> None:
+        """Take the state's position as the last predicted one (FEJ: the state was set
+        from outside, e.g. rewound to a snapshot taken with no update since)."""
+        self._xf[:2] = self._x[:2]
+        self._fej_restart = False
 
     def inflate_robot(self, q) -> None:
         """Add ``q`` (3, 3, symmetric PSD) to the robot block: P_rr' = P_rr + Q.
@@ -293,6 +358,7 @@ class EkfSlam(EkfUpdates):
         if not np.allclose(q, q.T) or np.linalg.eigvalsh(0.5 * (q + q.T)).min() < -1e-12:
             raise ValueError("inflate_robot: q must be symmetric positive semi-definite")
         self._p[:3, :3] += 0.5 * (q + q.T)
+        self._fej_restart = True  # FEJ: the next prediction's Jacobian restarts
 
     # -- augmentation -------------------------------------------------------------------
 
@@ -303,9 +369,11 @@ class EkfSlam(EkfUpdates):
         new = max(need, 2 * cap)
         x = np.zeros(new)
         p = np.zeros((new, new))
+        xf = np.zeros(new)
         x[:cap] = self._x
         p[:cap, :cap] = self._p
-        self._x, self._p = x, p
+        xf[:cap] = self._xf
+        self._x, self._p, self._xf = x, p, xf
 
     def add_lamp(self, z, r) -> int:
         """Append a lamp seen at robot-frame point z with covariance r; return its index.
@@ -336,6 +404,7 @@ class EkfSlam(EkfUpdates):
         pll = jr @ p[:3, :3] @ jr.T + jz @ np.asarray(r, dtype=float) @ jz.T
         p[n : n + 2, n : n + 2] = 0.5 * (pll + pll.T)
         self._x[n : n + 2] = lamp
+        self._xf[n : n + 2] = lamp  # its first estimate (FEJ)
         self.dim = n + 2
         return self.n_lamps - 1
 
@@ -372,7 +441,9 @@ class EkfSlam(EkfUpdates):
         rmat = np.array([[c, -s], [s, c]])
         m0, end = self.m0, self.dim
         d = x[m0:end].reshape(n, 2) - pose[:2]  # d_i = l_i - p  (n, 2)
-        dp = d[:, ::-1] * _PERP  # d^perp = (d_y, -d_x)
+        # H's heading column: at the lamps' first estimates with ``first_estimates``
+        df = self._xf[m0:end].reshape(n, 2) - pose[:2] if self.first_estimates else d
+        dp = df[:, ::-1] * _PERP  # d^perp = (d_y, -d_x)
         dpc = dp[:, :, None]  # (n, 2, 1)
         # G P_rr G^T = Pxx - (p_t dp^T + dp p_t^T) + q_tt dp dp^T
         pxx, pt, qtt = p[:2, :2], p[:2, 2], p[2, 2]

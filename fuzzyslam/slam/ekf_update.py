@@ -80,6 +80,10 @@ class EkfUpdates:
     P: np.ndarray  # the covariance's used part (EkfSlam.P)
     # the pose the lamp model is linearised at (None: the state's own; linearised_at)
     lin_pose: np.ndarray | None
+    # first-estimates Jacobians (EkfSlam.first_estimate_motion): the lamps' first
+    # estimates, laid out as _x
+    first_estimates: bool
+    _xf: np.ndarray
 
     @contextmanager
     def linearised_at(self, pose: np.ndarray | None) -> Iterator[None]:
@@ -256,8 +260,11 @@ class EkfUpdates:
         hc = np.zeros((2 * k, 3 + 2 * k))
         hv = hc.reshape(k, 2, 3 + 2 * k)
         hv[:, :, :2] = -rt
-        hv[:, 0, 2] = h[:, 1]
-        hv[:, 1, 2] = -h[:, 0]
+        # dh/dtheta = (h_y, -h_x), with first estimates at the lamps' first positions:
+        # H_FEJ (Huang, Mourikis and Roumeliotis, ICRA 2008; EkfSlam.first_estimate_motion)
+        hf = (self._xf[jj] - pose[:2]) @ rt.T if self.first_estimates else h
+        hv[:, 0, 2] = hf[:, 1]
+        hv[:, 1, 2] = -hf[:, 0]
         hv[_h_lamp_index(k)] = rt.T  # dh_a / dl_a = R^T in columns 3 + 2a, 4 + 2a
         cols = np.concatenate([_POSE_COLS, jj.reshape(-1)])
         if dx is not None:  # h_i(x) = h(x_i) + H_i (x - x_i) (lamps at their means)

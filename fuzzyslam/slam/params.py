@@ -49,6 +49,11 @@ class SlamParams:
     calib_rot_sigma: float = field(default=0.05, metadata={"min": 1e-6, "max": 0.5})
     calib_var_per_m: float = field(default=1e-9, metadata={"min": 0.0, "max": 1e-2})
     calib_var_per_rad: float = field(default=1e-9, metadata={"min": 0.0, "max": 1e-2})
+    # first-estimates Jacobians (FEJ; EkfSlam.first_estimate_motion): the motion's and the
+    # lamps' Jacobians taken at the first estimates, so that updates cannot make the
+    # unobservable global heading look observable (the standard EKF-SLAM grows
+    # overconfident in heading on a young map)
+    first_estimates: bool = False
     # start pose (x, y, theta) when the log carries none, and its standard deviation
     start_pose: list[float] = field(
         default_factory=lambda: [0.0, 0.0, 0.0], metadata={"min": -1e6, "max": 1e6, "len": 3}

@@ -98,6 +98,7 @@ class SlamRunner:
             p.odometry_noise,
             calib=None if cm is None else cm.factors,
             calib_cov=None if cm is None else cm.cov,
+            first_estimates=p.first_estimates,
         )
         if cm is None:
             self.preint = Preintegrator(p.odometry_noise)

@@ -89,6 +89,7 @@ class Snapshot:
         ekf.x[:] = self.x
         ekf.P[:, :] = self.p
         ekf.odometry_pose = self.odometry_pose.copy()
+        ekf.restart_linearisation()  # no update since: the last prediction's position
         pre = copy.deepcopy(self.preint)
         if isinstance(pre, CalibratedPreintegrator):
             pre.reset(ekf.calib)  # the factors as the anchor had them (no update since)
