@@ -10,6 +10,9 @@ Run: python benchmarks/log_variants.py SRC DST [--sonar-sequential DT] [--odomet
   placement of readings fired in sequence is tested on the simulator's
   (``sonar.firing_gap_s``), where each reading is taken at its stamp.
 - ``--odometry-every N``: odometry at 1/N of its rate (every N-th /odom message kept).
+- ``--detections-yaw DEG``: the landmark detections (PoseArray on
+  /landmark_detections, base_link) turned by DEG about the robot: a detector whose
+  mount yaw is off by that much.
 - ``--odometry-scale D,T``: the /odom poses integrated again from their increments, each
   translation (in the previous pose's frame) times D and each turn times T, the twist
   alike: a driver with a wrong linear or angular scale (a wheel radius, a wheel base).
@@ -77,6 +80,7 @@ def write_variant(
     sonar_dt: float = 0.0,
     odometry_every: int = 1,
     odometry_scale: tuple[float, float] = (1.0, 1.0),
+    detections_yaw_deg: float = 0.0,
 ) -> None:
     """Copy the log ``src`` to ``dst`` message by message (metadata first), changed as the
     options say (module docstring).
@@ -91,6 +95,8 @@ def write_variant(
         Keep every N-th /odom message (1: all).
     odometry_scale : (float, float)
         The /odom translations' and turns' factors (:class:`OdometryScale`).
+    detections_yaw_deg : float
+        The detections' turn about the robot (deg); 0: unchanged.
     """
     reader = LogReader(src)
     order = {
@@ -109,6 +115,13 @@ def write_variant(
                     continue
                 if scale is not None:
                     scale(m.msg)
+            if detections_yaw_deg and m.topic == "/landmark_detections":
+                c, s = math.cos(math.radians(detections_yaw_deg)), math.sin(
+                    math.radians(detections_yaw_deg)
+                )
+                for pose in m.msg.poses:
+                    x, y = pose.position.x, pose.position.y
+                    pose.position.x, pose.position.y = c * x - s * y, s * x + c * y
             if sonar_dt and m.topic in order:
                 shift = order[m.topic] * sonar_dt
                 m.msg.header.stamp = M.stamp(M.stamp_to_sec(m.msg.header.stamp) + shift)
@@ -123,12 +136,14 @@ def main() -> None:
     ap.add_argument("--sonar-sequential", type=float, default=0.0, metavar="DT")
     ap.add_argument("--odometry-every", type=int, default=1, metavar="N")
     ap.add_argument("--odometry-scale", default="1,1", metavar="D,T")
+    ap.add_argument("--detections-yaw", type=float, default=0.0, metavar="DEG")
     a = ap.parse_args()
     d, t = (float(v) for v in a.odometry_scale.split(","))
     a.dst.mkdir(parents=True, exist_ok=False)
     write_variant(
-        a.src / "log.mcap", a.dst / "log.mcap", a.sonar_sequential, a.odometry_every, (d, t)
-    )
+        a.src / "log.mcap", a.dst / "log.mcap", a.sonar_sequential, a.odometry_every, (d, t),
+        a.detections_yaw,
+    )  # fmt: skip
     for name in ("truth.tum", "landmarks_truth.yaml"):
         if (a.src / name).is_file():
             (a.dst / name).symlink_to((a.src / name).resolve())
