@@ -12,7 +12,7 @@ from conftest import shared_dir
 
 from fuzzyslam.cli import main
 from fuzzyslam.maps.mapio import load_fgm, load_references, read_pgm
-from fuzzyslam.streams.messages import pose_of, range_msg
+from fuzzyslam.streams.messages import pose_of, range_msg, stamp_to_sec
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.tum import read_tum, write_tum
 from fuzzyslam.streams.writer import LogWriter
@@ -197,3 +197,45 @@ def test_window_without_readings(tmp_path, capsys):
     )
     assert code == 3 and "--until 0.1 s is before the log's first message at 0.500 s" in err
     assert not out.exists()
+
+
+@pytest.mark.slow
+def test_a_trajectory_evo_exports_from_the_log_builds_the_same_map(tmp_path, capsys):
+    """The README's recipe for a map without truth.tum: ``evo_traj bag2 LOG.mcap TOPIC
+    --save_as_tum`` (evo, a test extra, reads our MCAP directly) on the sample log's
+    /ground_truth/odom gives the TUM file for ``map --trajectory``; its FGM equals the
+    one built along the same topic (its header stamps) read by fuzzyslam's own reader
+    and TUM writer (a second implementation), every mass within 1e-4 (our TUM rounds
+    positions to the micrometre, evo's keeps every digit)."""
+    import shutil
+    import subprocess
+    import sys
+
+    evo = Path(sys.executable).with_name("evo_traj")
+    if not evo.is_file():
+        evo = shutil.which("evo_traj")
+        if evo is None:
+            pytest.skip("evo_traj not installed (the test extras)")
+    log = Path(__file__).resolve().parents[1] / "data" / "sample.mcap"
+    done = subprocess.run(
+        [str(evo), "bag2", str(log), "/ground_truth/odom", "--save_as_tum"],
+        cwd=tmp_path, capture_output=True, text=True, timeout=300,
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    exported = tmp_path / "ground_truth_odom.tum"
+    msgs = list(LogReader(log).messages(topics=["/ground_truth/odom"]))
+    own = tmp_path / "own.tum"
+    poses = np.array([pose_of(m.msg.pose.pose) for m in msgs])
+    write_tum(own, np.array([stamp_to_sec(m.msg.header.stamp) for m in msgs]), poses)
+    maps = []
+    for name, traj in (("evo", exported), ("own", own)):
+        out = tmp_path / name
+        code, _, err = run_cli(
+            ["map", str(log), "--trajectory", str(traj), "--config", "sample", "-o", str(out),
+             "--no-figures"], capsys,
+        )  # fmt: skip
+        assert code == 0, err
+        maps.append(load_fgm(out / "fgm.npz").map)
+    for mass in ("m_e", "m_o", "m_t", "m_c"):  # 4e-5 measured
+        assert np.abs(getattr(maps[0], mass) - getattr(maps[1], mass)).max() < 1e-4, mass
+    assert maps[0].m_o.max() > 0.5  # walls were found
