@@ -124,22 +124,32 @@ def turn_note(check: dict, wheel_base: float | None = None) -> str:
     -------
     str
     """
+    fix = ""
+    if wheel_base is not None:
+        fix = f"robot.wheel_base: {wheel_base / check['ratio']:.3f} (now {wheel_base:g})"
+    return _scale_note(
+        check, "turn", "turned", ("more", "less"), "turns",
+        "a wheel base, the driver's angular scale, a gyro's scale", fix,
+    )  # fmt: skip
+
+
+def _scale_note(
+    check: dict, name: str, verb: str, ways: tuple[str, str], what: str, causes: str, fix: str
+) -> str:
+    """The line of :func:`turn_note` and :func:`distance_note`: ``verb`` (turned, moved)
+    ``ways`` (more or less) than the odometry (as calibrated), its ``what`` (turns,
+    distances) off by at least that for ``causes``, and the ``fix`` that would make them
+    agree (a config key and value; not with calibration)."""
     ratio, expected, calibrated = check["ratio"], check["expected"], check["calibrated"]
-    more = "more" if ratio > expected else "less"
+    more = ways[0] if ratio > expected else ways[1]
     off = abs(ratio / expected - 1) * 100
     model = f"the odometry as calibrated ({expected:.3f})" if calibrated else "the odometry"
     return (
-        f"odometry_turn_check: the estimate turned {off:.0f} % {more} than {model} over "
+        f"odometry_{name}_check: the estimate {verb} {off:.0f} % {more} than {model} over "
         f"{check['windows']} windows of {WINDOW_S:g} s (ratio {ratio:.3f} +- "
-        f"{check['sd']:.3f}): the odometry's turns are off by at least that (a wheel base, "
-        "the driver's angular scale, a gyro's scale"
+        f"{check['sd']:.3f}): the odometry's {what} are off by at least that ({causes}"
         + (")" if calibrated else "; slam.calibrate: true learns it)")
-        + (
-            f"; robot.wheel_base: {wheel_base / ratio:.3f} (now {wheel_base:g}) would make"
-            " them agree, at least"
-            if wheel_base is not None and not calibrated
-            else ""
-        )
+        + (f"; {fix} would make them agree, at least" if fix and not calibrated else "")
     )
 
 
@@ -498,20 +508,10 @@ def distance_note(check: dict, wheel_radius: float | None = None) -> str:
     -------
     str
     """
-    ratio, expected, calibrated = check["ratio"], check["expected"], check["calibrated"]
-    more = "farther" if ratio > expected else "less far"
-    off = abs(ratio / expected - 1) * 100
-    model = f"the odometry as calibrated ({expected:.3f})" if calibrated else "the odometry"
-    return (
-        f"odometry_distance_check: the estimate moved {off:.0f} % {more} than {model} over "
-        f"{check['windows']} windows of {WINDOW_S:g} s (ratio {ratio:.3f} +- "
-        f"{check['sd']:.3f}): the odometry's distances are off by at least that (a wheel "
-        "radius, tyre wear, the driver's linear scale"
-        + (")" if calibrated else "; slam.calibrate: true learns it)")
-        + (
-            f"; robot.wheel_radius: {wheel_radius * ratio:.4f} (now {wheel_radius:g}) would"
-            " make them agree, at least"
-            if wheel_radius is not None and not calibrated
-            else ""
-        )
-    )
+    fix = ""
+    if wheel_radius is not None:
+        fix = f"robot.wheel_radius: {wheel_radius * check['ratio']:.4f} (now {wheel_radius:g})"
+    return _scale_note(
+        check, "distance", "moved", ("farther", "less far"), "distances",
+        "a wheel radius, tyre wear, the driver's linear scale", fix,
+    )  # fmt: skip
