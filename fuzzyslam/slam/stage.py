@@ -547,29 +547,25 @@ def _run_once(
             m for aid in aids if hasattr(aid, "messages") for m in aid.messages(cfg.topics, None)
         ]  # fmt: skip
         write_outputs(tmp, streamed, res, extra)
-        # the odometry's turns against the estimate's, from the rows written: a turn
-        # scale that the innovations hide (slam/turn_check.py)
+        # the odometry's turns and distances against the estimate's, from the rows
+        # written: scales that the innovations hide (slam/turn_check.py), tested against
+        # the factors the filter's odometry model implies (1, or the calibration's)
         calib = res.calibration
-        expected = rotation_factor(calib.names, calib.factors) if calib is not None else 1.0
-        res.turn_check = turn_ratio(*streamed.headings().T, expected=expected)
-        if res.turn_check is not None and calib is not None:
-            res.turn_check = replace(res.turn_check, calibrated=True)
-        if res.turn_check is not None and res.turn_check.flagged:
-            start = inputs.start + inputs.clock_offset
-            res.health = with_finding(
-                res.health, "odometry_turn_scale", res.turn_check.flagged_at, start
-            )
-        # and its distances: a distance scale (a wheel radius) hidden alike
-        expected = translation_factor(calib.names, calib.factors) if calib is not None else 1.0
-        res.distance_check = distance_ratio(*streamed.positions(), expected=expected)
-        if res.distance_check is not None:
-            res.distance_check = replace(res.distance_check, calibrated=calib is not None)
-            res.distance_check = res.distance_check.judged(res.turn_check)
-        if res.distance_check is not None and res.distance_check.flagged:
-            start = inputs.start + inputs.clock_offset
-            res.health = with_finding(
-                res.health, "odometry_distance_scale", res.distance_check.flagged_at, start
-            )
+        names, factors = (calib.names, calib.factors) if calib is not None else ([], [])
+        turns = turn_ratio(*streamed.headings().T, expected=rotation_factor(names, factors))
+        moves = distance_ratio(*streamed.positions(), expected=translation_factor(names, factors))
+        if turns is not None and calib is not None:
+            turns = replace(turns, calibrated=True)
+        if moves is not None:  # not judged against a dead reckoning bent by wrong turns
+            moves = replace(moves, calibrated=calib is not None).judged(turns)
+        res.turn_check, res.distance_check = turns, moves
+        start = inputs.start + inputs.clock_offset
+        for check, reason in (
+            (res.turn_check, "odometry_turn_scale"),
+            (res.distance_check, "odometry_distance_scale"),
+        ):
+            if check is not None and check.flagged:
+                res.health = with_finding(res.health, reason, check.flagged_at, start)
         for drawing in drawings:
             drawing.result()
         config = (choice or ConfigChoice(cfg.name, "given")).as_dict(cfg.name)
