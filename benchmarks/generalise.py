@@ -1,6 +1,6 @@
 """Generalisation study: "other logs of the same kinds" made from the real logs we have.
 
-    python benchmarks/generalise.py [--data DIR] [--out DIR] [--part carmen mrclam]
+    python benchmarks/generalise.py [--data DIR] [--out DIR] [--part carmen mrclam live]
         [--variants NAME ...] [--starts 0 75 ...] [--window 450]
 
 ``DIR`` (default ``../shared/data/real``, as in bench_buildings.py) holds the building
@@ -26,6 +26,12 @@ once per building from truth.tum (they do not depend on /odom); each variant run
 bench_buildings.py: position error mean / max and heading error mean against truth
 (targets 0.3 / 1.0 m, 1 deg).
 
+**Live map** (``--part live``, ``--ranges scan sonar``). The same variants of the
+building logs, each run with ``--live-map`` (no map given: grid SLAM,
+docs/models.md sec. 10b) with both presets, and as dead reckoning: the position error
+mean after a rigid alignment to truth.tum (the map's frame is the start pose's) against
+the dead reckoning's, the aligned heading error, and the raw position error.
+
 **Landmark logs** (``--part mrclam``). Windows of ``--window`` s (to the log's end)
 starting at ``--starts`` seconds: each is a run that starts elsewhere, with other
 landmarks first, and whose odometry starts at whatever pose it had there. Scored as in
@@ -48,8 +54,10 @@ from pathlib import Path
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
-from bench_buildings import _default_data, _has_scan, errors, fuzzyslam
+from bench_buildings import _default_data, _has_scan, clean_truth, errors, fuzzyslam
 
+from fuzzyslam.evaluation.align import umeyama
+from fuzzyslam.evaluation.metrics import pose_errors
 from fuzzyslam.se2 import interpolate_poses, quaternion_to_yaw, yaw_to_quaternion
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.tum import read_tum
@@ -183,6 +191,60 @@ def carmen(data: Path, out: Path, variants: list[str]) -> list[dict]:
     return rows
 
 
+def aligned_errors(traj: Path, truth: Path) -> dict:
+    """Position error mean / max (m) and heading error mean (deg) against truth after
+    the rigid 2-D motion that best aligns the positions (Umeyama, as ``evo_ape -a``): a
+    map built by the run has the start pose's frame, whatever the truth's."""
+    t, est = read_tum(traj)
+    t_tr, p_tr, _ = clean_truth(truth)
+    tru = interpolate_poses(t_tr, p_tr, t)
+    ok = np.all(np.isfinite(tru), axis=1)
+    est, tru = est[ok], tru[ok]
+    moved = umeyama(est[:, :2], tru[:, :2]).apply_poses(est)
+    e = pose_errors(moved, tru)
+    pos = np.hypot(e[:, 0], e[:, 1])
+    return {
+        "aligned_position_mean_m": round(float(pos.mean()), 3),
+        "aligned_position_max_m": round(float(pos.max()), 3),
+        "aligned_heading_mean_deg": round(float(np.rad2deg(np.abs(e[:, 2]).mean())), 3),
+    }
+
+
+def live(data: Path, out: Path, variants: list[str], ranges: list[str]) -> list[dict]:
+    """``run --live-map`` (grid SLAM, no map given) on each building's odometry variants,
+    with both presets, against dead reckoning: position error mean / max and heading
+    error mean against truth.tum (the map's frame is the start pose's, the truth's)."""
+    names = sorted(p.name for p in data.iterdir() if (p / "truth.tum").is_file() and _has_scan(p))
+    rows = []
+    for name in names:
+        log, truth = data / name / "log.mcap", data / name / "truth.tum"
+        work = out / name
+        work.mkdir(parents=True, exist_ok=True)
+        for v in variants:
+            e = variant(v)
+            vlog = log if e is None else work / v / "log.mcap"
+            if e is not None and not vlog.is_file():
+                vlog.parent.mkdir(exist_ok=True)
+                resynthesise(log, vlog, e)
+            fuzzyslam("run", str(vlog), "-o", str(work / f"{v}_dr"))  # dead reckoning
+            dr_err = errors(work / f"{v}_dr" / "trajectory.tum", truth)
+            dr_al = aligned_errors(work / f"{v}_dr" / "trajectory.tum", truth)
+            for rs in ranges:
+                rdir = work / f"{v}_live_{rs}"
+                s = fuzzyslam("run", str(vlog), "--config", f"real_building_{rs}.yaml",
+                              "--live-map", "-o", str(rdir))  # fmt: skip
+                row = {"building": name, "variant": v, "ranges": rs, "fix": "live map",
+                       **errors(rdir / "trajectory.tum", truth),
+                       **aligned_errors(rdir / "trajectory.tum", truth),
+                       "dead_reckoning_mean_m": dr_err["position_mean_m"],
+                       "dead_reckoning_aligned_mean_m": dr_al["aligned_position_mean_m"],
+                       "filter_health": s["filter_health"]["reasons"],
+                       "cpu_s": round(s["_cpu"], 1)}  # fmt: skip
+                print(json.dumps(row), flush=True)
+                rows.append(row)
+    return rows
+
+
 def carmen_table(rows: list[dict]) -> str:
     """Per building, ranges and fix: each variant's figure, and how many meet the target."""
     out = ["| building | ranges | fix | figure (target) | " + " | ".join(
@@ -193,13 +255,19 @@ def carmen_table(rows: list[dict]) -> str:
         groups.setdefault((r["building"], r["ranges"], r["fix"]), []).append(r)
     for (b, rs, fix), rr in groups.items():
         figs = [("position_mean_m", 0.3, "mean m (0.3)"), ("position_max_m", 1.0, "max m (1.0)")]
+        if fix == "live map":  # no target: the live map against the dead reckoning, aligned
+            figs = [("aligned_position_mean_m", math.inf, "mean m, aligned"),
+                    ("dead_reckoning_aligned_mean_m", math.inf, "dead reckoning, aligned"),
+                    ("aligned_heading_mean_deg", math.inf, "heading deg, aligned"),
+                    ("position_mean_m", math.inf, "mean m")]  # fmt: skip
         if fix == "heading":
             figs = [("heading_mean_deg", 1.0, "heading deg (1)")]
         for key, target, label in figs:
             vals = [r[key] for r in rr]
             met = sum(v <= target for v in vals)
             cells = " | ".join(_bold(v <= target, f"{v:.2f}") for v in vals)
-            out.append(f"| {b} | {rs} | {fix} | {label} | {cells} | {met} of {len(vals)} |")
+            tally = f"{met} of {len(vals)}" if math.isfinite(target) else "-"
+            out.append(f"| {b} | {rs} | {fix} | {label} | {cells} | {tally} |")
     return "\n".join(out)
 
 
@@ -309,6 +377,8 @@ def main() -> None:
     ap.add_argument("--variants", nargs="*", default=VARIANTS, help="given or KIND-SEED")
     ap.add_argument("--starts", nargs="*", type=float, default=[0, 75, 150, 225, 300, 375, 450])
     ap.add_argument("--window", type=float, default=450.0)
+    ap.add_argument("--ranges", nargs="*", default=["scan", "sonar"],
+                    help="the range sensors of --part live (scan, sonar)")
     ap.add_argument("--landmark-config", default="real_detections.yaml",
                     help="the landmark logs' config (a name or a YAML path)")
     a = ap.parse_args()
@@ -322,6 +392,8 @@ def main() -> None:
             print(mrclam_table(rows), flush=True)
         if "carmen" in a.part:
             print(carmen_table(carmen(a.data, out / "carmen", a.variants)), flush=True)
+        if "live" in a.part:
+            print(carmen_table(live(a.data, out / "live", a.variants, a.ranges)), flush=True)
 
 
 if __name__ == "__main__":

@@ -68,6 +68,13 @@ def _start_pose_bounds() -> tuple[float, float]:
     help="Frozen fuzzy map directory (from 'fuzzyslam map') for heading or pose fixes.",
 )
 @click.option(
+    "--live-map",
+    is_flag=True,
+    help="Build the map while localising on it (grid SLAM for a log without lamps and "
+    "without a map: pose fixes against the keyframes before; not with --map). Its "
+    "trajectory.tum then builds the frozen map: 'fuzzyslam map LOG --trajectory ...'.",
+)
+@click.option(
     "--fix",
     type=click.Choice(["heading", "pose", "none"]),
     default=None,
@@ -129,6 +136,7 @@ def run_command(
     outdir: Path,
     config: str | None,
     map_dir,
+    live_map,
     fix,
     fix_from,
     ranges,
@@ -160,7 +168,9 @@ def run_command(
     with --map also heading_fixes.csv (heading fixes, or --fix pose with
     fixes.pose_with_heading), pose_fixes.csv (--fix pose), changes.csv and changes.png
     (--fix pose with fixes.detect_changes), and /map and the fixes in estimates.mcap
-    (a fix topic once a fix is formed).
+    (a fix topic once a fix is formed); with --live-map pose_fixes.csv (and
+    heading_fixes.csv with fixes.live_right_angles) and the map as it ended in
+    estimates.mcap.
     The JSON summary is also printed on stdout; progress goes to stderr.
     """
     from fuzzyslam.forked import ChildCalls, fewer_collections, wanted
@@ -194,6 +204,7 @@ def run_command(
             calibration,
             prefetch,
             figures=figures,
+            live_map=live_map,
         )
     _tell_damage(log, summary.get("log_damage"))
     emit(summary)

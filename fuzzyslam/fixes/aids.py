@@ -231,12 +231,41 @@ def aids_for_map(fm: FrozenMap, mode: str, cfg: Any, start_time: float | None = 
     return aids
 
 
+def aids_for_live_map(cfg: Any) -> list[Any]:
+    """The plug-ins of ``run --live-map`` (pure: no I/O): :class:`LiveMapPoseAid`, and
+    with ``fixes.live_right_angles`` first :class:`LiveRightAngleHeading`
+    (fixes/live_map.py).
+
+    Parameters
+    ----------
+    cfg : Config
+        The run's config (its ``fixes:`` and ``fgm:`` sections).
+
+    Returns
+    -------
+    list of FixAid
+    """
+    from fuzzyslam.fixes.heading import FlmSource
+    from fuzzyslam.fixes.live_map import LiveMapPoseAid, LiveRightAngleHeading
+    from fuzzyslam.maps.flm import build_flm
+
+    mp = cfg.fgm
+    source = FlmSource(
+        lambda ring, mounts: build_flm(ring.ranges, ring.max_range, ring.fov, mounts, mp)
+    )
+    aids: list[Any] = [LiveMapPoseAid(cfg.fixes, mp, source)]
+    if cfg.fixes.live_right_angles:
+        aids.insert(0, LiveRightAngleHeading(cfg.fixes))
+    return aids
+
+
 def aids_for_log(
     map_dir: Path | None,
     fix: str | None,
     cfg: Any,
     log: str | os.PathLike,
     fix_from: float | None = None,
+    live_map: bool = False,
 ) -> list[Any]:
     """The aids of ``run LOG [--map map_dir] [--fix fix] [--fix-from fix_from]``: the mode
     ``fix``, else the config's ``fixes.mode`` when a map is given, else none; the map must
@@ -256,11 +285,23 @@ def aids_for_log(
     fix_from : float, LogTime or None
         ``--fix-from`` (a plain number: the log's own stamp).
 
+    live_map : bool
+        ``--live-map``: the map built while localising (:func:`aids_for_live_map`);
+        UsageError with ``--map``, ``--fix-from`` or a fix other than pose.
+
     Returns
     -------
     list of FixAid
         Empty for no fixes.
     """
+    if live_map:
+        if map_dir is not None:
+            raise UsageError("--live-map builds its own map: it takes no --map")
+        if fix not in (None, "pose"):
+            raise UsageError(f"--live-map makes pose fixes; --fix {fix} needs --map FGMDIR")
+        if fix_from is not None:
+            raise UsageError("--fix-from needs --map FGMDIR; --live-map starts at the log's start")
+        return aids_for_live_map(cfg)
     mode = fix if fix is not None else ("none" if map_dir is None else cfg.fixes.mode)
     if mode == "none":
         return []

@@ -231,6 +231,33 @@ class FixParams:
     # match every n-th ring (amortises the cost)
     pose_every: int = field(default=1, metadata={"min": 1})
 
+    # --- the live map: grid SLAM without a map (run --live-map; docs/models.md sec. 10b) ---
+    # a narrow-beam ring's (a laser scan's) echo end points within this distance (m) are
+    # the match template; a sonar ring's is its FLM. Measured on the CARMEN logs (laser,
+    # mean position error against truth.tum, ACES / fr079, before the heading fixes of
+    # live_right_angles): 8 m 2.81 / 0.31, 12 m 1.90 / 0.30 (the default), 20 m 1.88 / -
+    # at twice the cost; the FLM's cells 3.06 / 0.22
+    live_reach: float = field(default=12.0, metadata={"min": 1.0, "max": 100.0})
+    # the match covariance's inflation in a live-map run, in place of pose_cov_scale and
+    # pose_corr_distance: a match against the keyframes before it measures the pose
+    # relative to them, its error independent of the next one's (the frozen map's error,
+    # the same ring after ring, is not there). Measured (as live_reach): 1 gives 1.90 /
+    # 0.30 m, the laser preset's coth inflation 3.94 / 0.48 m. 0: the frozen map's
+    # (pose_cov_scale, pose_corr_distance), for a sonar ring's FLM matches, whose own
+    # covariance is too small to be trusted so
+    live_cov_scale: float = field(default=1.0, metadata={"min": 0.0, "max": 1000.0})
+    # heading fixes from each scan's wall lines against the building's wall direction mod
+    # 90 deg, learnt over the first live_reference_m of travel (a building whose walls
+    # meet at right angles, seen by a laser; fixes.live_map.LiveRightAngleHeading)
+    live_right_angles: bool = False
+    live_reference_m: float = field(default=5.0, metadata={"min": 0.5, "max": 100.0})
+    # their wall window's least half-width (deg), in place of scan_line_gate_deg: the
+    # two families lie 90 deg apart, so a window of 10 deg takes walls back from a
+    # heading drifted that far (a frozen map's references may lie at any angle). Measured
+    # on ACES, laser, its odometry errors doubled (generalise.py double-4): 3 deg 2.57 m
+    # mean position error, 2.7 deg mean heading error; 10 deg 0.58 m, 1.6 deg
+    live_gate_deg: float = field(default=10.0, metadata={"min": 0.1, "max": 44.0})
+
     # --- change detection (docs/models.md sec. 10) ---
     detect_changes: bool = True
     # conflict m_O(FLM) * m_E(FGM) above which a cell contradicts the map

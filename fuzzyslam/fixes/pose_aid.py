@@ -38,7 +38,7 @@ import numpy as np
 
 from fuzzyslam.fixes.base import FixAid, FlmAhead
 from fuzzyslam.fixes.params import FixParams
-from fuzzyslam.fixes.pose_match import PoseMatch, PoseMatcher
+from fuzzyslam.fixes.pose_match import PoseMatch, PoseMatcher, flm_evidence
 from fuzzyslam.fixes.summaries import PoseSummary
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.se2 import between, compose, wrap_angle
@@ -245,6 +245,23 @@ class PoseFixAid(FlmAhead, FixAid):
         p = self.params
         return p.pose_every == 1 and p.pose_min_travel <= 0.0 and p.pose_min_turn_deg <= 0.0
 
+    def template(self, ring: Any, mounts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """What is matched of a ring: its FLM's cells with evidence, as points (N, 2) in
+        the robot's frame and their (m(O), m(E)) (N, 2) (``pose_match.flm_evidence``).
+
+        Parameters
+        ----------
+        ring : Ring
+            The ring.
+        mounts : ndarray, shape (M, 3)
+            The sensors' poses in base_link.
+
+        Returns
+        -------
+        pts, masses : ndarray, shape (N, 2)
+        """
+        return flm_evidence(self.flm_source(ring, mounts), self.params.pose_min_mass)
+
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
         """Match the ring's FLM against the FGM around the prediction; apply the match
         (module docstring).
@@ -284,19 +301,19 @@ class PoseFixAid(FlmAhead, FixAid):
             self.near_last += 1
             return  # too close to the last applied match to add information (params)
         scale = cov_inflation(travel, self.params.pose_corr_distance, self.params.pose_cov_scale)
-        flm = self.flm_source(ring, mounts)
-        m = self.matcher.match(flm, ekf.pose, cov, scale)
+        tmpl = self.template(ring, mounts)
+        m = self.matcher.match_points(*tmpl, ekf.pose, cov, scale)
         recover = self.params.pose_recover_after > 0
         if recover and m.reason == "edge":
             # the mode on the window's edge: first a search of the same size centred on
             # the lattice's best pose (a hill-climbing step, as cheap as the first)
-            m = self.matcher.match(flm, self.matcher.last_peak, cov, scale)
+            m = self.matcher.match_points(*tmpl, self.matcher.last_peak, cov, scale)
             self.recentred += 1
         widen = 1.0
         while recover and m.reason in ("edge", "no_match") and self._can_widen():
             # the mode lies on or beyond the window: search again 3 times wider
             widen *= 3.0
-            m = self.matcher.match(flm, ekf.pose, cov, scale, widen=widen)
+            m = self.matcher.match_points(*tmpl, ekf.pose, cov, scale, widen=widen)
             self.wide_searches += 1
         if not m.ok:
             self.decisions.append(

@@ -338,12 +338,43 @@ class PoseMatcher:
         -------
         PoseMatch
         """
+        pts, masses = flm_evidence(flm, self.params.pose_min_mass)
+        return self.match_points(pts, masses, pose0, cov0, scale, widen)
+
+    def match_points(
+        self,
+        pts: np.ndarray,
+        masses: np.ndarray,
+        pose0: np.ndarray,
+        cov0: np.ndarray,
+        scale: float | None = None,
+        widen: float = 1.0,
+    ) -> PoseMatch:
+        """:meth:`match` of a template given as points with masses (an FLM's cells,
+        :func:`flm_evidence`, or a laser scan's end points, ``fixes.live_map``).
+
+        Parameters
+        ----------
+        pts : ndarray, shape (N, 2)
+            The template's points (robot frame, m).
+        masses : ndarray, shape (N, 2)
+            Their (m(O), m(E)).
+        pose0, cov0 : ndarray
+            The prediction (3,) and its covariance (3, 3) (:meth:`match`).
+        scale : float, optional
+            The covariance inflation (default ``pose_cov_scale``).
+        widen : float
+            Factor on the windows (:meth:`match`).
+
+        Returns
+        -------
+        PoseMatch
+        """
         p = self.params
         scale = p.pose_cov_scale if scale is None else float(scale)
         pose0 = np.asarray(pose0, dtype=float)
         res = self.grid.resolution
         nan3 = np.full(3, np.nan)
-        pts, masses = flm_evidence(flm, p.pose_min_mass)
         if np.count_nonzero(masses[:, 0] > p.pose_min_mass) < p.pose_min_occupied_cells:
             return PoseMatch(False, "no_evidence", nan3, np.full((3, 3), np.nan))
         sig = np.sqrt(np.maximum(np.diag(np.asarray(cov0, float)), 0.0))

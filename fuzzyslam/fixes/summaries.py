@@ -27,6 +27,10 @@ class HeadingSummary:
     # when the corridor a fix is taken from is a guess (HeadingFixAid.trouble)
     position_sigma_max_m: float = OMIT
     position_unresolved_at: float | None = OMIT
+    # a live-map run's right-angle heading fixes (fixes.live_map.LiveRightAngleHeading):
+    # the building's wall direction mod 90 deg learnt (None: not yet) and when
+    reference_angle_deg: float | None = OMIT
+    reference_learnt_at: float | None = OMIT
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -43,6 +47,12 @@ class PoseSummary:
     wide_searches: int
     near_last_match: int
     recentred_searches: int
+    # a live-map run's map (fixes.live_map.LiveMapPoseAid): rings fused (keyframes), the
+    # grid's shape (rows, columns) and cell size (m), times it was grown
+    keyframes: int = OMIT
+    map_shape: list[int] = OMIT
+    map_resolution_m: float = OMIT
+    map_grown: int = OMIT
 
 
 @dataclass(frozen=True, kw_only=True)

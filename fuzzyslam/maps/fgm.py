@@ -166,15 +166,22 @@ class FgmBuilder:
             raise FrozenMapError("the FGM is frozen; it accepts no more readings")
         ev = rings_evidence(self.grid, poses, ranges, max_range, fov, mounts, self.params)
         m = self.map
-        work = np.stack([a.reshape(-1) for a in (m.m_e, m.m_o, m.m_t, m.m_c)])  # (4, cells)
+        # flat views of the four mass arrays: only the cells a ring touches are read and
+        # written (no copy of the whole map: the live map of fixes/live_map.py adds its
+        # rings one by one to a grid of a building)
+        arrays = (m.m_e, m.m_o, m.m_t, m.m_c)
+        flat = [a.reshape(-1) for a in arrays]
+        if any(not np.may_share_memory(f, a) for f, a in zip(flat, arrays, strict=True)):
+            raise ValueError("the map's mass arrays must be contiguous")
         gamma = self.params.forgetting_gamma
         for k in range(len(ev.ptr) - 1):  # sequential over rings, vectorised over cells
             a, b = int(ev.ptr[k]), int(ev.ptr[k + 1])
             if a < b:
                 idx = ev.cells[a:b]
-                work[:, idx] = _step(work[:, idx], tuple(x[a:b] for x in ev.masses), gamma)
-        for arr, row in zip((m.m_e, m.m_o, m.m_t, m.m_c), work, strict=True):
-            arr[...] = row.reshape(arr.shape)
+                stored = np.stack([f[idx] for f in flat])
+                new = _step(stored, tuple(x[a:b] for x in ev.masses), gamma)
+                for f, row in zip(flat, new, strict=True):
+                    f[idx] = row
         self.rings += len(ev.ptr) - 1
         self.readings += ev.readings
         self.cell_updates += ev.pairs

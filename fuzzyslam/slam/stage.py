@@ -141,6 +141,7 @@ def run(
     calibration: str | os.PathLike | None = None,
     prefetch: bool = False,
     figures: ChildCalls | None = None,
+    live_map: bool = False,
 ) -> dict:
     """The ``run`` stage on ``log`` into ``outdir``: the config ``config`` (a YAML path or
     an embedded name; default the map's, else the preset of the log's streams:
@@ -152,7 +153,9 @@ def run(
     ``prefetch``: the log's events made in a child process on a second core where
     ``slam.prefetch.wanted`` allows it (``fuzzyslam run``'s default; off for reproduce's
     steps); ``figures``: a figure process the caller started (``cli/run.py`` forks it
-    before its imports), drawing the aids' figures if they draw, else closed at once.
+    before its imports), drawing the aids' figures if they draw, else closed at once;
+    ``live_map``: pose fixes against a map built while localising (grid SLAM,
+    ``fixes/live_map.py``) instead of a frozen one.
     Returns the JSON summary (:class:`RunSummary` as JSON); UsageError for options that
     do not go together.
 
@@ -184,6 +187,8 @@ def run(
         ``--prefetch`` / ``--no-prefetch``.
     figures : ChildCalls or None
         A started figure process (``fuzzyslam.forked.ChildCalls``; the caller reaps it).
+    live_map : bool
+        ``--live-map``.
 
     Returns
     -------
@@ -201,12 +206,14 @@ def run(
         check_outputs([map_dir], [outdir])
     if calibration is not None and Path(outdir).is_dir():  # refused now, not after the run
         check_outputs([calibration], [Path(outdir) / n for n in RUN_OUTPUTS])
-    if map_dir is None and fix in (None, "none"):
+    if map_dir is None and fix in (None, "none") and not live_map:
         aids = []  # lamps only (aids_for_log's answer), the plug-ins not even imported
     else:
         from fuzzyslam.fixes.aids import aids_for_log  # the plug-ins (fixes/) sit above slam/
 
-        aids = aids_for_log(Path(map_dir) if map_dir is not None else None, fix, cfg, log, fix_from)
+        aids = aids_for_log(
+            Path(map_dir) if map_dir is not None else None, fix, cfg, log, fix_from, live_map
+        )
     if adapt_noise and aids:
         raise UsageError("--adapt-noise cannot be combined with heading or pose fixes")
     if calibration is None and map_dir is not None and cfg.slam.calibrate:

@@ -1,0 +1,551 @@
+"""Grid SLAM without lamps: pose fixes against the map of the keyframes before
+(``fuzzyslam run --live-map``; docs/models.md sec. 10b).
+
+A log without lamps and without a trajectory from elsewhere had only its dead reckoning
+to place the readings by. Here the FGM is built while the robot localises on it: the
+incremental scan-to-map scheme of Hector SLAM (Kohlbrecher, Meyer, von Stryk and
+Klingauf, "A flexible and scalable SLAM system with full 3D motion estimation", SSRR
+2011), with the fuzzy map's evidence and forgetting and the correlative match of the
+pose fixes (:class:`fuzzyslam.fixes.pose_aid.PoseFixAid`: its windows, gate and
+relocalisation). Per ring:
+
+1. once the robot has moved ``pose_min_travel`` or turned ``pose_min_turn_deg`` since
+   the last applied match, the ring is matched against the map around the filter's
+   prediction. The template is a laser scan's echo end points within ``live_reach``
+   (:func:`end_points`; its beams are narrow) or a sonar ring's FLM;
+2. the ring is then fused into the map at the filter's pose after that match: a
+   *keyframe*. A ring is never matched against itself, and a match refused as
+   disagreeing with the map (``gated``, ``edge``, ``no_match``) is not fused.
+
+Why keyframes only. Rings fused between matches sit at poses predicted by the odometry;
+the next match then finds the odometry's own drift in the map and corrects nothing
+(measured on Freiburg 079, laser: every scan fused, mean error 0.85-2.9 m by the match
+covariance and a heading that drifted -30 deg over the log with the odometry's bias;
+keyframes only: 0.30 m). The match covariance is inflated by ``live_cov_scale``, not by
+the frozen map's correlation model (``fixes/params.py``).
+
+The map grows with the robot (:class:`LiveFgm`: the grid re-allocated larger, its
+cells kept, when a ring reaches past its edge), and the matcher reads it as it is at
+each match (:class:`LiveMatcher`: the lookup maps of the searched patch only).
+
+With ``live_right_angles`` a laser's heading is also fixed against the building's own
+wall direction (:class:`LiveRightAngleHeading`), which bounds the heading's drift in a
+building whose walls meet at right angles.
+
+What it does not do: close loops. The map's frame is the start pose's; a match measures
+the pose against walls that earlier estimates placed, so their error stays in the map
+and the position drifts with the distance travelled through new places. A loop that
+comes back within the search window (or the relocalisation's widest) snaps onto the
+older walls; one that comes back farther off builds a second copy of them, which the
+forgetting factor thins where the two contradict. The filter's covariance is relative to
+the map, not to the world: its NEES against a true trajectory grows with the drift.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any
+
+import numpy as np
+
+from fuzzyslam.fixes.params import FixParams
+from fuzzyslam.fixes.pose_aid import PoseFixAid
+from fuzzyslam.fixes.pose_match import PoseMatcher, olson_blur
+from fuzzyslam.fixes.scan_heading import ScanLineHeadingAid, scan_segments
+from fuzzyslam.fixes.summaries import HeadingSummary, PoseSummary
+from fuzzyslam.maps.fgm import FgmBuilder
+from fuzzyslam.maps.grid import MAX_CELLS, BeliefMap, Grid
+from fuzzyslam.maps.params import MapParams
+from fuzzyslam.references import Reference
+from fuzzyslam.slam.events import FilterView
+
+# the map grows by at least this much (m) on a side it outgrows (amortised copies), and
+# the first grid reaches this far from the start
+GROW_STEP_M = 16.0
+# a ring whose cone is at most this wide (deg) has narrow beams (a laser): its end points
+# are its template and its wall lines measure the heading
+NARROW_BEAM_DEG = 5.0
+# the building's wall direction is learnt from at least this many metres of wall
+LEARN_MIN_WALL_M = 10.0
+# matches that leave the ring out of the map: they disagree with it
+NOT_FUSED = frozenset({"gated", "edge", "no_match"})
+
+
+def narrow_beams(fov: float) -> bool:
+    """Whether a ring's cone is a narrow beam's (at most NARROW_BEAM_DEG): a laser's.
+
+    Parameters
+    ----------
+    fov : float
+        The cone's full angle (rad).
+
+    Returns
+    -------
+    bool
+    """
+    return fov <= math.radians(NARROW_BEAM_DEG)
+
+
+def grown_grid(grid: Grid, lo: np.ndarray, hi: np.ndarray, step: float) -> Grid:
+    """The grid ``grid`` extended, by whole cells and at least ``step`` metres on each
+    side that must grow, so that it covers the box [lo, hi]; ``grid`` itself when it
+    does.
+
+    Parameters
+    ----------
+    grid : Grid
+        The current grid.
+    lo, hi : ndarray, shape (2,)
+        The box (x, y) to cover (m).
+    step : float
+        The least growth of a side that grows (m).
+
+    Returns
+    -------
+    Grid
+        Cells of the same size, its origin moved by whole cells: a cell of ``grid`` is a
+        cell of the result.
+    """
+    res = grid.resolution
+    ox, oy = grid.origin
+    ny, nx = grid.shape
+    g_lo = np.array([ox, oy])
+    g_hi = g_lo + res * np.array([nx, ny])
+    grow_lo = np.where(lo < g_lo, np.ceil((g_lo - lo + step) / res), 0).astype(int)
+    grow_hi = np.where(hi > g_hi, np.ceil((hi - g_hi + step) / res), 0).astype(int)
+    if not (grow_lo.any() or grow_hi.any()):
+        return grid
+    shape = (ny + int(grow_lo[1] + grow_hi[1]), nx + int(grow_lo[0] + grow_hi[0]))
+    origin = (ox - res * int(grow_lo[0]), oy - res * int(grow_lo[1]))
+    return Grid(origin, res, shape)
+
+
+def end_points(
+    ranges: np.ndarray, max_range: Any, mounts: np.ndarray, reach: float
+) -> tuple[np.ndarray, np.ndarray]:
+    """The echoes' end points of a ring of narrow beams, as a match template
+    (``PoseMatcher.match_points``): each an occupied point, m(O) = 1, m(E) = 0.
+
+    A laser's end point is where its beam met the wall, to a centimetre or two: matched
+    as points, they carry that precision, where an FLM raster of the same scan moves each
+    to its cell's centre (measured: a Freiburg scan matched against a map of itself at
+    its own pose, 40 scans: the FLM's mean error -1.7 cm, +0.8 cm, +0.14 deg, its spread
+    2.2 cm, 1.7 cm, 0.61 deg; the end points' -0.3 cm, -0.1 cm, +0.05 deg and 0.9 cm,
+    0.9 cm, 0.39 deg).
+
+    Parameters
+    ----------
+    ranges : ndarray, shape (M,)
+        The readings (NaN: none; at or beyond the maximum range: no echo).
+    max_range : ndarray, shape (M,), or float
+        The maximum ranges.
+    mounts : ndarray, shape (M, 3)
+        The beams' poses (x, y, direction) in the robot's frame.
+    reach : float
+        End points farther than this from the robot are left out (m).
+
+    Returns
+    -------
+    pts : ndarray, shape (N, 2)
+        The end points, robot frame (m).
+    masses : ndarray, shape (N, 2)
+        (m(O), m(E)) = (1, 0) each.
+    """
+    r = np.asarray(ranges, dtype=float)
+    rmax = np.broadcast_to(np.asarray(max_range, dtype=float), r.shape)
+    echo = np.isfinite(r) & (r > 0) & (~np.isfinite(rmax) | (r < rmax - 1e-6))
+    mo = np.asarray(mounts, dtype=float)[echo]
+    pts = mo[:, :2] + r[echo, None] * np.stack([np.cos(mo[:, 2]), np.sin(mo[:, 2])], axis=1)
+    pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= reach]
+    masses = np.zeros((len(pts), 2))
+    masses[:, 0] = 1.0
+    return pts, masses
+
+
+class LiveFgm:
+    """An FGM that grows with the robot: :class:`FgmBuilder` on a grid re-allocated
+    larger (:func:`grown_grid`) when a ring reaches past its edge.
+
+    Parameters
+    ----------
+    start : ndarray, shape (2,) or (3,)
+        The first position (m): the first grid reaches GROW_STEP_M around it.
+    params : MapParams
+        The evidence model and the cell size.
+    """
+
+    def __init__(self, start: np.ndarray, params: MapParams) -> None:
+        self.params = params
+        x, y = (float(v) for v in np.asarray(start, dtype=float)[:2])
+        h = GROW_STEP_M
+        self.builder = FgmBuilder(Grid.covering(x - h, y - h, x + h, y + h, params.resolution),
+                                  params)  # fmt: skip
+        self.grown = 0  # times the grid was re-allocated
+
+    @property
+    def map(self) -> BeliefMap:
+        """The map as it is now."""
+        return self.builder.map
+
+    def _cover(self, lo: np.ndarray, hi: np.ndarray) -> None:
+        """Grow the grid to cover [lo, hi], the masses kept cell for cell."""
+        old = self.builder.map
+        grid = grown_grid(old.grid, lo, hi, GROW_STEP_M)
+        if grid is old.grid:
+            return
+        if float(grid.shape[0]) * grid.shape[1] > MAX_CELLS:
+            raise ValueError(
+                f"the live map outgrew {MAX_CELLS} cells of {grid.resolution} m "
+                f"({grid.shape[1]} x {grid.shape[0]})"
+            )
+        new = BeliefMap.vacuous(grid)
+        r0 = round((old.grid.origin[1] - grid.origin[1]) / grid.resolution)
+        c0 = round((old.grid.origin[0] - grid.origin[0]) / grid.resolution)
+        ny, nx = old.grid.shape
+        for a, b in zip((new.m_e, new.m_o, new.m_t, new.m_c),
+                        (old.m_e, old.m_o, old.m_t, old.m_c), strict=True):  # fmt: skip
+            a[r0 : r0 + ny, c0 : c0 + nx] = b
+        self.builder.map = new
+        self.grown += 1
+
+    def add_ring(
+        self, pose: np.ndarray, ranges: np.ndarray, max_range: Any, fov: float, mounts: np.ndarray
+    ) -> None:
+        """Fuse one ring at ``pose`` (:meth:`FgmBuilder.add_ring`), the grid first grown
+        to hold every cell the ring's readings reach (an echo: its range plus the
+        tolerance; no echo: ``no_echo_reach``; ``maps.evidence.reading_masses``).
+
+        Parameters
+        ----------
+        pose : ndarray, shape (3,)
+            The robot's pose (map frame).
+        ranges : ndarray, shape (M,)
+            The readings (NaN: none).
+        max_range : ndarray, shape (M,), or float
+            The maximum ranges.
+        fov : float
+            The cone's full angle (rad).
+        mounts : ndarray, shape (M, 3)
+            The sensors' poses on the robot.
+        """
+        p = self.params
+        r = np.asarray(ranges, dtype=float)
+        rmax = np.broadcast_to(np.asarray(max_range, dtype=float), r.shape)
+        ok = np.isfinite(r) & (r > 0)
+        echo = ok & (~np.isfinite(rmax) | (r < rmax - 1e-6))
+        far = np.where(echo, r + p.range_tolerance, p.no_echo_reach)
+        mounts = np.asarray(mounts, dtype=float)
+        reach = float(np.max(far[ok], initial=0.0))
+        reach += float(np.max(np.hypot(mounts[..., 0], mounts[..., 1]), initial=0.0))
+        reach += 2.0 * p.resolution
+        xy = np.asarray(pose, dtype=float)[:2]
+        self._cover(xy - reach, xy + reach)
+        self.builder.add_ring(pose, ranges, max_range, fov, mounts)
+
+
+class LiveMatcher(PoseMatcher):
+    """:class:`PoseMatcher` on a map that changes between matches: the lookup maps are
+    computed for each searched patch from the live masses (with the blur's margin),
+    the same values as a PoseMatcher of a frozen copy of the map gives.
+
+    Parameters
+    ----------
+    live : LiveFgm
+        The map.
+    params : FixParams
+        The match's parameters.
+    """
+
+    def __init__(self, live: LiveFgm, params: FixParams) -> None:
+        self.live = live
+        self.params = params
+        self.last_window = (math.nan, math.nan)
+        self.last_peak = np.full(3, np.nan)
+
+    @property
+    def grid(self) -> Grid:  # type: ignore[override]
+        """The live map's grid (it grows)."""
+        return self.live.map.grid
+
+    def _patch(self, row0: int, col0: int, size: int) -> np.ndarray:
+        """PoseMatcher's lookup channels on rows row0 .. row0 + size and columns col0 ..
+        col0 + size of the live map, zeros outside it."""
+        p = self.params
+        m = self.live.map
+        sigma = p.pose_blur / m.grid.resolution
+        r = max(1, math.ceil(2.5 * sigma)) if sigma > 0 else 0
+        ny, nx = m.grid.shape
+        out = np.zeros((size, size, 2), dtype=np.float32)
+        r0, r1 = max(row0, 0), min(row0 + size, ny)
+        c0, c1 = max(col0, 0), min(col0 + size, nx)
+        if r1 <= r0 or c1 <= c0:
+            return out
+        # the patch within the map and the blur's margin around it
+        a0, a1 = max(r0 - r, 0), min(r1 + r, ny)
+        b0, b1 = max(c0 - r, 0), min(c1 + r, nx)
+        m_o = m.m_o[a0:a1, b0:b1]
+        m_e = m.m_e[a0:a1, b0:b1].astype(np.float32)
+        occ = olson_blur(m_o, sigma)
+        lookup = np.stack(
+            [
+                occ - p.pose_arc_conflict_weight * m_e,
+                p.pose_empty_weight * m_e - p.pose_conflict_weight * m_o.astype(np.float32),
+            ],
+            axis=-1,
+        )
+        out[r0 - row0 : r1 - row0, c0 - col0 : c1 - col0] = lookup[
+            r0 - a0 : r1 - a0, c0 - b0 : c1 - b0
+        ]
+        return out
+
+
+class LiveMapPoseAid(PoseFixAid):
+    """Plug-in of ``fuzzyslam run --live-map``: rings matched against the map of the
+    keyframes before them, then fused into it (module docstring).
+
+    Parameters
+    ----------
+    params : FixParams
+        The ``fixes:`` section: the pose fixes' settings, with ``live_reach`` and
+        ``live_cov_scale`` (``pose_map_sigma`` is not used: the filter's own error is in
+        this map, so a filter surer than the map still matches).
+    map_params : MapParams
+        The ``fgm:`` section (the evidence model and the cell size).
+    flm_source : callable
+        (ring, mounts) -> the ring's FLM (a sonar ring's template).
+    start_time : float
+        Log time (s) from which rings are matched and fused.
+    """
+
+    def __init__(
+        self, params: FixParams, map_params: MapParams, flm_source: Any, start_time: float = 0.0
+    ) -> None:
+        # the covariance inflation is live_cov_scale whatever the travel (0: the frozen
+        # map's, pose_cov_scale and pose_corr_distance)
+        params = dataclasses.replace(params, pose_map_sigma=0.0)
+        if params.live_cov_scale > 0:
+            params = dataclasses.replace(
+                params, pose_corr_distance=0.0, pose_cov_scale=params.live_cov_scale
+            )
+        self.map_params = map_params
+        self.live: LiveFgm | None = None
+        super().__init__(BeliefMap.vacuous(Grid((0.0, 0.0), 1.0, (1, 1))), params, flm_source,
+                         start_time)  # fmt: skip
+        self.keyframes = 0
+
+    def flm_every_ring(self) -> bool:
+        """A ring's FLM is built here, for the rings matched only (not ahead).
+
+        Returns
+        -------
+        bool
+            False.
+        """
+        return False
+
+    def template(self, ring: Any, mounts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """What is matched of a ring: a narrow-beam ring's echo end points within
+        ``live_reach`` (:func:`end_points`), a sonar ring's FLM (PoseFixAid.template).
+
+        Parameters
+        ----------
+        ring : Ring
+            The ring.
+        mounts : ndarray, shape (M, 3)
+            The sensors' poses in base_link.
+
+        Returns
+        -------
+        pts, masses : ndarray, shape (N, 2)
+        """
+        if not narrow_beams(ring.fov):
+            return super().template(ring, mounts)
+        return end_points(ring.ranges, ring.max_range, mounts, self.params.live_reach)
+
+    def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
+        """Match the ring against the map so far (PoseFixAid.on_ring); fuse a keyframe at
+        the filter's pose (module docstring).
+
+        Parameters
+        ----------
+        t : float
+            The ring's log time (s).
+        ring : Ring
+            The ring (ranges (M,), max ranges (M,), fov).
+        mounts : ndarray, shape (M, 3)
+            The sensors' poses in base_link.
+        ekf : FilterView
+            The filter.
+        """
+        if not self.started(t):
+            return
+        if self.live is None:  # the first ring starts the map
+            self.live = LiveFgm(ekf.pose, self.map_params)
+            self.matcher = LiveMatcher(self.live, self.params)
+        else:
+            n = len(self.decisions)
+            super().on_ring(t, ring, mounts, ekf)
+            if len(self.decisions) == n:
+                return  # not matched (too near the last applied match): not a keyframe
+            d = self.decisions[-1]
+            if not d.accepted and d.reason in NOT_FUSED:
+                return
+        self.live.add_ring(ekf.pose, ring.ranges, ring.max_range, ring.fov, mounts)
+        self.keyframes += 1
+
+    def summary(self) -> PoseSummary:
+        """PoseFixAid's entry with the map's: keyframes, grid shape, cell size, growths.
+
+        Returns
+        -------
+        PoseSummary
+        """
+        s = super().summary()
+        if self.live is None:
+            return dataclasses.replace(s, keyframes=0)
+        g = self.live.map.grid
+        return dataclasses.replace(
+            s,
+            keyframes=self.keyframes,
+            map_shape=[int(v) for v in g.shape],
+            map_resolution_m=float(g.resolution),
+            map_grown=self.live.grown,
+        )
+
+    def messages(self, topics: Any, start: float | None = None) -> list:
+        """The pose matches for estimates.mcap and the live map as it ended, stamped at
+        the last ring decided (PoseFixAid.messages).
+
+        Parameters
+        ----------
+        topics : Topics
+            The config's topics.
+        start : float or None
+            Unused: the map is stamped at its end.
+
+        Returns
+        -------
+        list of (str, str, message, float)
+        """
+        from fuzzyslam.fixes.viewer import map_messages
+
+        out = super().messages(topics, None)
+        if self.live is not None and self.decisions:
+            out = map_messages((self.live.map, []), topics, self.decisions[-1].t) + out
+        return out
+
+
+def building_direction(angles: np.ndarray, lengths: np.ndarray) -> float:
+    """The direction of a building's walls, mod pi/2, from wall segments that meet at
+    right angles: the length-weighted circular mean of 4 theta, divided by 4 (the
+    four-fold symmetry taken out, as for any axial data of period pi/2: Mardia and
+    Jupp, "Directional statistics", 2000, sec. 9.3.2).
+
+    Parameters
+    ----------
+    angles : ndarray, shape (S,)
+        The segments' directions (rad, map frame, any multiple of pi/2 apart).
+    lengths : ndarray, shape (S,)
+        Their lengths (m): the weights.
+
+    Returns
+    -------
+    float
+        The direction in [0, pi/2) (rad).
+    """
+    c = float(np.sum(lengths * np.cos(4.0 * angles)))
+    s = float(np.sum(lengths * np.sin(4.0 * angles)))
+    return float(np.mod(math.atan2(s, c) / 4.0, math.pi / 2))
+
+
+class LiveRightAngleHeading(ScanLineHeadingAid):
+    """Heading fixes of a live-map run from a laser scan's wall lines against the
+    building's own wall direction (``fixes.live_right_angles``).
+
+    Over the first ``live_reference_m`` of travel (dead reckoning) the scans' wall
+    segments are gathered in the map frame (their direction plus the filter's heading);
+    their direction mod 90 deg (:func:`building_direction`, at least LEARN_MIN_WALL_M of
+    wall) becomes the one reference, covering the whole map, of the scan-line heading
+    fixes (:class:`ScanLineHeadingAid` with right angles, its wall window at least
+    ``live_gate_deg`` wide): from then on every scan's walls along or across it measure
+    the heading, gated on the innovation (walls at other angles are not in the window).
+    The heading's error then stays bounded instead of growing with the odometry's drift
+    (measured on ACES, laser: mean heading error 0.9 deg against 3.1 deg without, mean
+    position error 0.57 m against 1.90 m).
+
+    The reference's own error (the scans' wall directions scatter by about 1.3 deg; the
+    heading drifts over the first metres) turns the whole map after the learning by that
+    much: a rotation of the map frame, which aligned errors (evo's ``-a``) do not see.
+    Rings with wide cones (sonars) are left alone: their echoes are not wall points.
+
+    Parameters
+    ----------
+    params : FixParams
+        The ``fixes:`` section (the scan-line constants; ``right_angles`` is taken on).
+    start_time : float
+        Log time (s) from which the aid acts.
+    """
+
+    def __init__(self, params: FixParams, start_time: float = 0.0) -> None:
+        p = dataclasses.replace(params, right_angles=True, scan_line_gate_deg=params.live_gate_deg)
+        super().__init__([], p, start_time)
+        self._angles: list[np.ndarray] = []
+        self._lengths: list[np.ndarray] = []
+        self._start: np.ndarray | None = None
+        self.reference_angle = math.nan
+        self.learnt_at: float | None = None
+
+    def _learn(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
+        """Gather one scan's segments in the map frame; set the reference once the robot
+        has travelled ``live_reference_m`` with enough wall seen."""
+        odo = np.asarray(ekf.odometry_pose, dtype=float)
+        if self._start is None:
+            self._start = odo.copy()
+        segs = scan_segments(ring, mounts, self.params)
+        self._angles.append(np.asarray(segs.angle) + float(ekf.pose[2]))
+        self._lengths.append(np.asarray(segs.length))
+        if float(np.hypot(*(odo[:2] - self._start[:2]))) < self.params.live_reference_m:
+            return
+        a, w = np.concatenate(self._angles), np.concatenate(self._lengths)
+        if float(w.sum()) < LEARN_MIN_WALL_M:
+            return
+        theta = building_direction(a, w)
+        big = 1e7  # one region covering any map
+        region = np.array([[-big, -big], [big, -big], [big, big], [-big, big]])
+        self.refs = [Reference(0, "building", theta, float(w.sum()), region)]
+        self.reference_angle, self.learnt_at = theta, t
+        self._angles, self._lengths = [], []
+
+    def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
+        """Learn the building's direction, then fix the heading (class docstring).
+
+        Parameters
+        ----------
+        t : float
+            The ring's log time (s).
+        ring : Ring
+            The scan read as a ring of narrow beams.
+        mounts : ndarray, shape (M, 3)
+            The beams' mounts in base_link.
+        ekf : FilterView
+            The filter.
+        """
+        if not self.started(t) or not narrow_beams(ring.fov):
+            return
+        if not self.refs:
+            self._learn(t, ring, mounts, ekf)
+            return
+        super().on_ring(t, ring, mounts, ekf)
+
+    def summary(self) -> HeadingSummary:
+        """ScanLineHeadingAid's entry with the reference learnt (deg, mod 90) and when.
+
+        Returns
+        -------
+        HeadingSummary
+        """
+        ref = None if math.isnan(self.reference_angle) else math.degrees(self.reference_angle)
+        return dataclasses.replace(
+            super().summary(), reference_angle_deg=ref, reference_learnt_at=self.learnt_at
+        )
