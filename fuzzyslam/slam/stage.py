@@ -502,7 +502,8 @@ def _run_once(
         note(
             f"{log}: no lamps (topics.image {cfg.topics.image}, "
             f"topics.detections {cfg.topics.detections}) and no map: the estimate is dead "
-            "reckoning (give --map FGMDIR --fix pose|heading"
+            "reckoning (give --map FGMDIR --fix pose|heading, or --live-map to build a map "
+            "from the range sensor while localising on it"
             + (f"; not read: {'; '.join(unread)}" if unread else "")
             + ")"
         )
