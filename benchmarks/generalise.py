@@ -154,6 +154,19 @@ def _q(o) -> np.ndarray:
     return np.array([o.x, o.y, o.z, o.w])
 
 
+def variant_log(log: Path, work: Path, name: str) -> Path:
+    """The log of variant ``name``: ``log`` itself for ``given``, else its copy with
+    /odom re-synthesised (:func:`resynthesise`), made once in ``work / name``."""
+    e = variant(name)
+    if e is None:
+        return log
+    vlog = work / name / "log.mcap"
+    if not vlog.is_file():
+        vlog.parent.mkdir(exist_ok=True)
+        resynthesise(log, vlog, e)
+    return vlog
+
+
 def carmen(data: Path, out: Path, variants: list[str]) -> list[dict]:
     names = sorted(p.name for p in data.iterdir() if (p / "truth.tum").is_file() and _has_scan(p))
     rows = []
@@ -167,12 +180,8 @@ def carmen(data: Path, out: Path, variants: list[str]) -> list[dict]:
                 fuzzyslam("map", str(log), "--trajectory", str(truth), "--config",
                           f"real_building_{rs}.yaml", "-o", str(fgm))  # fmt: skip
         for v in variants:
-            e = variant(v)
             # another recording of the building: its map is taken with --fix-from
-            vlog = log if e is None else work / v / "log.mcap"
-            if e is not None and not vlog.is_file():
-                vlog.parent.mkdir(exist_ok=True)
-                resynthesise(log, vlog, e)
+            vlog = variant_log(log, work, v)
             fuzzyslam("run", str(vlog), "-o", str(work / f"{v}_dr"))  # dead reckoning
             dr_err = errors(work / f"{v}_dr" / "trajectory.tum", truth)
             for rs in ("scan", "sonar"):
@@ -221,11 +230,7 @@ def live(data: Path, out: Path, variants: list[str], ranges: list[str]) -> list[
         work = out / name
         work.mkdir(parents=True, exist_ok=True)
         for v in variants:
-            e = variant(v)
-            vlog = log if e is None else work / v / "log.mcap"
-            if e is not None and not vlog.is_file():
-                vlog.parent.mkdir(exist_ok=True)
-                resynthesise(log, vlog, e)
+            vlog = variant_log(log, work, v)
             fuzzyslam("run", str(vlog), "-o", str(work / f"{v}_dr"))  # dead reckoning
             dr_err = errors(work / f"{v}_dr" / "trajectory.tum", truth)
             dr_al = aligned_errors(work / f"{v}_dr" / "trajectory.tum", truth)
