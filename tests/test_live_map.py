@@ -249,3 +249,14 @@ def test_live_map_on_whole_buildings(building, tmp_path, capsys):
     q = interpolate_poses(tt, pt, t[(t >= tt[0]) & (t <= tt[-1])])
     h = wrap_angle(p[(t >= tt[0]) & (t <= tt[-1]), 2] - q[:, 2])
     assert np.median(np.abs(np.degrees(h))) < 1.5
+
+
+def test_live_map_needs_a_range_sensor(tmp_path, capsys):
+    """A log without sonars or a laser (an MRCLAM excerpt: odometry and landmark
+    detections) has nothing to map: one line naming the missing streams, exit 3, no
+    output directory."""
+    log = ROOT / "data" / "real" / "mrclam6_excerpt" / "log.mcap"
+    code, _, err = run_cli(["run", str(log), "--live-map", "-o", str(tmp_path / "o")], capsys)
+    assert code == 3 and "missing stream" in err and "/scan" in err
+    assert len(err.strip().splitlines()) == 1
+    assert not (tmp_path / "o").exists()
