@@ -260,3 +260,31 @@ def test_live_map_needs_a_range_sensor(tmp_path, capsys):
     assert code == 3 and "missing stream" in err and "/scan" in err
     assert len(err.strip().splitlines()) == 1
     assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("fov_deg, laser", [(2.0, True), (25.0, False)])
+def test_only_a_lasers_matches_take_live_cov_scale(fov_deg, laser):
+    """The first ring decides: a laser's (narrow beams: end points) matches are inflated
+    by live_cov_scale whatever the travel; a sonar ring's FLM matches keep the frozen
+    map's pose_cov_scale and pose_corr_distance (docs/models.md sec. 10b)."""
+    from types import SimpleNamespace
+
+    from fuzzyslam.fixes.live_map import LiveMapPoseAid
+
+    cfg = load_config("real_building_scan")
+    aid = LiveMapPoseAid(cfg.fixes, cfg.fgm, flm_source=None)
+    ring = SimpleNamespace(
+        ranges=laser_ring([0, 0, 0], room_lines(-4, -3, 9, 2.5)), max_range=RMAX,
+        fov=math.radians(fov_deg),
+    )  # fmt: skip
+    aid.on_ring(1.0, ring, MOUNTS, SimpleNamespace(pose=np.zeros(3)))  # the first: fused only
+    assert aid.keyframes == 1 and aid.live is not None
+    p, given = aid.params, cfg.fixes
+    if laser:
+        assert (p.pose_cov_scale, p.pose_corr_distance) == (given.live_cov_scale, 0.0)
+    else:
+        assert (p.pose_cov_scale, p.pose_corr_distance) == (
+            given.pose_cov_scale,
+            given.pose_corr_distance,
+        )
+    assert p.pose_map_sigma == 0.0 and aid.matcher.params is p

@@ -21,8 +21,9 @@ Why keyframes only. Rings fused between matches sit at poses predicted by the od
 the next match then finds the odometry's own drift in the map and corrects nothing
 (measured on Freiburg 079, laser: every scan fused, mean error 0.85-2.9 m by the match
 covariance and a heading that drifted -30 deg over the log with the odometry's bias;
-keyframes only: 0.30 m). The match covariance is inflated by ``live_cov_scale``, not by
-the frozen map's correlation model (``fixes/params.py``).
+keyframes only: 0.30 m). A laser's match covariance is inflated by ``live_cov_scale``,
+not by the frozen map's correlation model (``fixes/params.py``); a sonar ring's FLM match
+keeps the latter (its own covariance is too small to build a map on).
 
 The map grows with the robot (:class:`LiveFgm`: the grid re-allocated larger, its
 cells kept, when a ring reaches past its edge), and the matcher reads it as it is at
@@ -307,9 +308,10 @@ class LiveMapPoseAid(PoseFixAid):
     Parameters
     ----------
     params : FixParams
-        The ``fixes:`` section: the pose fixes' settings, with ``live_reach`` and
-        ``live_cov_scale`` (``pose_map_sigma`` is not used: the filter's own error is in
-        this map, so a filter surer than the map still matches).
+        The ``fixes:`` section: the pose fixes' settings, with ``live_reach`` and, for a
+        laser, ``live_cov_scale`` in place of ``pose_cov_scale`` and
+        ``pose_corr_distance`` (``pose_map_sigma`` is not used: the filter's own error is
+        in this map, so a filter surer than the map still matches).
     map_params : MapParams
         The ``fgm:`` section (the evidence model and the cell size).
     flm_source : callable
@@ -321,13 +323,7 @@ class LiveMapPoseAid(PoseFixAid):
     def __init__(
         self, params: FixParams, map_params: MapParams, flm_source: Any, start_time: float = 0.0
     ) -> None:
-        # the covariance inflation is live_cov_scale whatever the travel (0: the frozen
-        # map's, pose_cov_scale and pose_corr_distance)
         params = dataclasses.replace(params, pose_map_sigma=0.0)
-        if params.live_cov_scale > 0:
-            params = dataclasses.replace(
-                params, pose_corr_distance=0.0, pose_cov_scale=params.live_cov_scale
-            )
         self.map_params = map_params
         self.live: LiveFgm | None = None
         super().__init__(BeliefMap.vacuous(Grid((0.0, 0.0), 1.0, (1, 1))), params, flm_source,
@@ -381,6 +377,11 @@ class LiveMapPoseAid(PoseFixAid):
         if not self.started(t):
             return
         if self.live is None:  # the first ring starts the map
+            if narrow_beams(ring.fov) and self.params.live_cov_scale > 0:
+                # end points' matches: inflated by live_cov_scale whatever the travel
+                self.params = dataclasses.replace(
+                    self.params, pose_corr_distance=0.0, pose_cov_scale=self.params.live_cov_scale
+                )
             self.live = LiveFgm(ekf.pose, self.map_params)
             self.matcher = LiveMatcher(self.live, self.params)
         else:

@@ -238,13 +238,14 @@ class FixParams:
     # live_right_angles): 8 m 2.81 / 0.31, 12 m 1.90 / 0.30 (the default), 20 m 1.88 / -
     # at twice the cost; the FLM's cells 3.06 / 0.22
     live_reach: float = field(default=12.0, metadata={"min": 1.0, "max": 100.0})
-    # the match covariance's inflation in a live-map run, in place of pose_cov_scale and
-    # pose_corr_distance: a match against the keyframes before it measures the pose
-    # relative to them, its error independent of the next one's (the frozen map's error,
-    # the same ring after ring, is not there). Measured (as live_reach): 1 gives 1.90 /
-    # 0.30 m, the laser preset's coth inflation 3.94 / 0.48 m. 0: the frozen map's
-    # (pose_cov_scale, pose_corr_distance), for a sonar ring's FLM matches, whose own
-    # covariance is too small to be trusted so
+    # a laser's match covariance inflation in a live-map run, in place of pose_cov_scale
+    # and pose_corr_distance: a match of end points against the keyframes before it
+    # measures the pose relative to them, its error independent of the next one's (the
+    # frozen map's error, the same ring after ring, is not there). Measured (as
+    # live_reach): 1 gives 1.90 / 0.30 m, the laser preset's coth inflation 3.94 / 0.48 m.
+    # A sonar ring's FLM match keeps pose_cov_scale and pose_corr_distance (with 1, the
+    # Freiburg sonar runs were lost: 0.56-5.5 m aligned, against 0.22-0.41 m); 0: the
+    # laser's keeps them too
     live_cov_scale: float = field(default=1.0, metadata={"min": 0.0, "max": 1000.0})
     # heading fixes from each scan's wall lines against the building's wall direction mod
     # 90 deg, learnt over the first live_reference_m of travel (a building whose walls
