@@ -30,7 +30,8 @@ bench_buildings.py: position error mean / max and heading error mean against tru
 building logs, each run with ``--live-map`` (no map given: grid SLAM,
 docs/models.md sec. 10b) with both presets, and as dead reckoning: the position error
 mean after a rigid alignment to truth.tum (the map's frame is the start pose's) against
-the dead reckoning's, the aligned heading error, and the raw position error.
+the dead reckoning's, the aligned heading error, and the raw position error, of the run's
+trajectory.tum and of its trajectory_closed.tum (the loops closed).
 
 **Landmark logs** (``--part mrclam``). Windows of ``--window`` s (to the log's end)
 starting at ``--starts`` seconds: each is a run that starts elsewhere, with other
@@ -238,9 +239,18 @@ def live(data: Path, out: Path, variants: list[str], ranges: list[str]) -> list[
                 rdir = work / f"{v}_live_{rs}"
                 s = fuzzyslam("run", str(vlog), "--config", f"real_building_{rs}.yaml",
                               "--live-map", "-o", str(rdir))  # fmt: skip
+                closed = rdir / "trajectory_closed.tum"
+                loops = {}
+                if closed.is_file():  # its loops closed (fixes.live_map.close_loops)
+                    c = aligned_errors(closed, truth)
+                    loops = {
+                        "closed_position_mean_m": errors(closed, truth)["position_mean_m"],
+                        "closed_aligned_mean_m": c["aligned_position_mean_m"],
+                        "closed_aligned_heading_deg": c["aligned_heading_mean_deg"],
+                    }
                 row = {"building": name, "variant": v, "ranges": rs, "fix": "live map",
                        **errors(rdir / "trajectory.tum", truth),
-                       **aligned_errors(rdir / "trajectory.tum", truth),
+                       **aligned_errors(rdir / "trajectory.tum", truth), **loops,
                        "dead_reckoning_mean_m": dr_err["position_mean_m"],
                        "dead_reckoning_aligned_mean_m": dr_al["aligned_position_mean_m"],
                        "filter_health": s["filter_health"]["reasons"],
@@ -262,13 +272,16 @@ def carmen_table(rows: list[dict]) -> str:
         figs = [("position_mean_m", 0.3, "mean m (0.3)"), ("position_max_m", 1.0, "max m (1.0)")]
         if fix == "live map":  # no target: the live map against the dead reckoning, aligned
             figs = [("aligned_position_mean_m", math.inf, "mean m, aligned"),
+                    ("closed_aligned_mean_m", math.inf, "loops closed: mean m, aligned"),
                     ("dead_reckoning_aligned_mean_m", math.inf, "dead reckoning, aligned"),
                     ("aligned_heading_mean_deg", math.inf, "heading deg, aligned"),
-                    ("position_mean_m", math.inf, "mean m")]  # fmt: skip
+                    ("closed_aligned_heading_deg", math.inf, "loops closed: heading deg, al."),
+                    ("position_mean_m", math.inf, "mean m"),
+                    ("closed_position_mean_m", math.inf, "loops closed: mean m")]  # fmt: skip
         if fix == "heading":
             figs = [("heading_mean_deg", 1.0, "heading deg (1)")]
         for key, target, label in figs:
-            vals = [r[key] for r in rr]
+            vals = [r.get(key, math.nan) for r in rr]
             met = sum(v <= target for v in vals)
             cells = " | ".join(_bold(v <= target, f"{v:.2f}") for v in vals)
             tally = f"{met} of {len(vals)}" if math.isfinite(target) else "-"

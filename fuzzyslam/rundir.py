@@ -28,8 +28,10 @@ SUMMARY = "summary.json"
 HEADING_FIXES = "heading_fixes.csv"
 POSE_FIXES = "pose_fixes.csv"
 CHANGES = "changes.csv"
+TRAJECTORY_CLOSED = "trajectory_closed.tum"  # run --live-map: its loops closed
 # files a run writes only with some options: an old one would be mixed with a new run
 OPTIONAL_OUTPUTS = (
+    TRAJECTORY_CLOSED,
     HEADING_FIXES,
     POSE_FIXES,
     CHANGES,

@@ -71,8 +71,9 @@ def _start_pose_bounds() -> tuple[float, float]:
     "--live-map",
     is_flag=True,
     help="Build the map while localising on it (grid SLAM for a log without lamps and "
-    "without a map: pose fixes against the keyframes before; not with --map). Its "
-    "trajectory.tum then builds the frozen map: 'fuzzyslam map LOG --trajectory ...'.",
+    "without a map: pose fixes against the keyframes before, loops closed after the run; "
+    "not with --map). Its trajectory_closed.tum then builds the frozen map: 'fuzzyslam "
+    "map LOG --trajectory OUTDIR/trajectory_closed.tum ...'.",
 )
 @click.option(
     "--fix",
@@ -169,7 +170,8 @@ def run_command(
     fixes.pose_with_heading), pose_fixes.csv (--fix pose), changes.csv and changes.png
     (--fix pose with fixes.detect_changes), and /map and the fixes in estimates.mcap
     (a fix topic once a fix is formed); with --live-map pose_fixes.csv (and
-    heading_fixes.csv with fixes.live_right_angles) and the map as it ended in
+    heading_fixes.csv with fixes.live_right_angles), trajectory_closed.tum (its loops
+    closed after the run, fixes.live_close_loops) and the map as it ended in
     estimates.mcap.
     The JSON summary is also printed on stdout; progress goes to stderr.
     """

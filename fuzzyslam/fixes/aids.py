@@ -253,9 +253,12 @@ def aids_for_live_map(cfg: Any) -> list[Any]:
     source = FlmSource(
         lambda ring, mounts: build_flm(ring.ranges, ring.max_range, ring.fov, mounts, mp)
     )
-    aids: list[Any] = [LiveMapPoseAid(cfg.fixes, mp, source)]
+    pose = LiveMapPoseAid(cfg.fixes, mp, source)
+    aids: list[Any] = [pose]
     if cfg.fixes.live_right_angles:
-        aids.insert(0, LiveRightAngleHeading(cfg.fixes))
+        heading = LiveRightAngleHeading(cfg.fixes)
+        pose.heading_aid = heading  # the loop closure holds the headings it fixed
+        aids.insert(0, heading)
     return aids
 
 

@@ -46,19 +46,24 @@ from __future__ import annotations
 
 import dataclasses
 import math
+from collections.abc import Callable
+from dataclasses import dataclass
+from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.pose_aid import PoseFixAid
-from fuzzyslam.fixes.pose_match import PoseMatcher, olson_blur
+from fuzzyslam.fixes.pose_graph import optimise
+from fuzzyslam.fixes.pose_match import PoseMatch, PoseMatcher, olson_blur
 from fuzzyslam.fixes.scan_heading import ScanLineHeadingAid, scan_segments
 from fuzzyslam.fixes.summaries import HeadingSummary, PoseSummary
 from fuzzyslam.maps.fgm import FgmBuilder
 from fuzzyslam.maps.grid import MAX_CELLS, BeliefMap, Grid
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.references import Reference
+from fuzzyslam.se2 import between, compose, inverse, wrap_angle
 from fuzzyslam.slam.events import FilterView
 
 # the map grows by at least this much (m) on a side it outgrows (amortised copies), and
@@ -71,6 +76,27 @@ NARROW_BEAM_DEG = 5.0
 LEARN_MIN_WALL_M = 10.0
 # matches that leave the ring out of the map: they disagree with it
 NOT_FUSED = frozenset({"gated", "edge", "no_match"})
+
+# the pose graph of the keyframes (close_loops). Odometry edges: 2 cm + 5 % of the
+# distance, 0.5 deg + 1 deg per root metre (1 sigma), looser than the filter's white
+# model to hold the systematic errors of real odometry (the development logs': 1 % of
+# scale, 0.05 deg/m of bias, 2 % random)
+ODO_SIGMA_M = (0.02, 0.05)
+ODO_SIGMA_DEG = (0.5, 1.0)
+# a keyframe is matched against the map of the SEQUENTIAL keyframes before it, and, as a
+# loop, against the map of an old keyframe (at least LOOP_MIN_GAP keyframes before, the
+# nearest within LOOP_RADIUS_M) and LOOP_SPAN on each side of it
+SEQUENTIAL = 4
+LOOP_MIN_GAP = 40
+LOOP_RADIUS_M = 2.0
+LOOP_SPAN = 2
+# the prior window of those matches (1 sigma): the estimate's relative poses are this good
+PAIR_SIGMA_M = 0.3
+PAIR_SIGMA_DEG = 5.0
+# with heading fixes against the building (live_right_angles), each keyframe's heading is
+# held to the run's within this (1 sigma): those fixes are absolute, the graph's edges
+# relative (measured heading error of the runs: 0.9-1.6 deg)
+HEADING_PRIOR_DEG = 2.0
 
 
 def narrow_beams(fov: float) -> bool:
@@ -301,6 +327,215 @@ class LiveMatcher(PoseMatcher):
         return out
 
 
+@dataclass
+class Keyframe:
+    """A ring fused into the live map: its index among the rings decided, its time, the
+    filter's pose after its match, the dead reckoning's pose, and the ring itself."""
+
+    ring: int
+    t: float
+    pose: np.ndarray
+    odometry: np.ndarray
+    ranges: np.ndarray
+    max_range: Any
+    fov: float
+    mounts: np.ndarray
+
+
+def keyframes_map(frames: list[Keyframe], anchor: np.ndarray, params: MapParams, reach: float):
+    """The FGM of ``frames`` placed at their poses relative to ``anchor`` (its frame), on
+    a grid covering each pose with ``reach`` around it.
+
+    Parameters
+    ----------
+    frames : list of Keyframe
+        The keyframes.
+    anchor : ndarray, shape (3,)
+        The map's frame (a keyframe's pose).
+    params : MapParams
+        The evidence model.
+    reach : float
+        How far around each pose the grid reaches (m).
+
+    Returns
+    -------
+    BeliefMap
+    """
+    rel = np.array([between(anchor, f.pose) for f in frames])
+    lo, hi = rel[:, :2].min(axis=0) - reach, rel[:, :2].max(axis=0) + reach
+    b = FgmBuilder(Grid.covering(lo[0], lo[1], hi[0], hi[1], params.resolution), params)
+    for f, p in zip(frames, rel, strict=True):
+        b.add_ring(p, f.ranges, f.max_range, f.fov, f.mounts)
+    return b.map
+
+
+def keyframe_edges(
+    frames: list[Keyframe],
+    template: Callable[[Keyframe], tuple[np.ndarray, np.ndarray]],
+    map_params: MapParams,
+    fix_params: FixParams,
+    reach: float,
+    heading_prior: bool,
+    tick: Callable[[int], None] | None = None,
+) -> tuple[list[tuple[int, int, np.ndarray, np.ndarray]], dict[str, int]]:
+    """The pose graph's edges (i, j, z_ij, W_ij) over the keyframes (:func:`close_loops`).
+
+    - odometry: consecutive keyframes, the dead reckoning's relative pose, sigmas
+      ODO_SIGMA_M and ODO_SIGMA_DEG;
+    - sequential: keyframe k's template matched against the map of the SEQUENTIAL before
+      it, in the frame of k - 1, around the estimate's relative pose;
+    - loop: against the map of the nearest old keyframe (LOOP_MIN_GAP before, within
+      LOOP_RADIUS_M in the estimate) and LOOP_SPAN on each side of it;
+    - heading priors (``heading_prior``): each keyframe's heading held to the estimate's
+      within HEADING_PRIOR_DEG (an edge from the first keyframe, fixed).
+
+    A match's W is the Cholesky factor of its inverse covariance (PoseMatcher's, not
+    inflated).
+
+    Parameters
+    ----------
+    frames : list of Keyframe
+        The keyframes, in time order.
+    template : callable
+        Keyframe -> (points (N, 2), masses (N, 2)), what is matched of it.
+    map_params : MapParams
+        The evidence model of the keyframes' maps.
+    fix_params : FixParams
+        The match's parameters.
+    reach : float
+        How far around each keyframe its map reaches (m).
+    heading_prior : bool
+        Hold the headings (the run had absolute heading fixes).
+    tick : callable, optional
+        Told the keyframes done (0 .. 2 K: the sequential pass, then the loops'), for a
+        progress display.
+
+    Returns
+    -------
+    edges : list of (int, int, ndarray (3,), ndarray (3, 3))
+    counts : dict
+        ``sequential`` and ``loops`` matched, ``loop_candidates`` tried.
+    """
+    x0 = np.array([f.pose for f in frames])
+    cov = np.diag([PAIR_SIGMA_M**2, PAIR_SIGMA_M**2, math.radians(PAIR_SIGMA_DEG) ** 2])
+    edges: list[tuple[int, int, np.ndarray, np.ndarray]] = []
+    counts = {"sequential": 0, "loops": 0, "loop_candidates": 0}
+
+    def matched(idx: range, anchor: int, k: int) -> PoseMatch:
+        fgm = keyframes_map([frames[i] for i in idx], x0[anchor], map_params, reach)
+        guess = between(x0[anchor], x0[k])
+        return PoseMatcher(fgm, fix_params).match_points(*template(frames[k]), guess, cov, 1.0)
+
+    def add(i: int, j: int, m: PoseMatch, key: str) -> None:
+        if m.ok:
+            w = np.linalg.cholesky(np.linalg.inv(m.cov)).T
+            edges.append((i, j, np.asarray(m.pose, dtype=float), w))
+            counts[key] += 1
+
+    for k in range(1, len(frames)):
+        z = between(frames[k - 1].odometry, frames[k].odometry)
+        d = float(np.hypot(z[0], z[1]))
+        s_xy = ODO_SIGMA_M[0] + ODO_SIGMA_M[1] * d
+        s_th = math.radians(ODO_SIGMA_DEG[0] + ODO_SIGMA_DEG[1] * math.sqrt(d))
+        sig = np.array([s_xy, s_xy, s_th])
+        edges.append((k - 1, k, z, np.diag(1.0 / sig)))
+        add(k - 1, k, matched(range(max(0, k - SEQUENTIAL), k), k - 1, k), "sequential")
+        if tick is not None:
+            tick(k)
+    for k in range(LOOP_MIN_GAP, len(frames)):
+        if tick is not None:
+            tick(len(frames) + k)
+        d = np.hypot(*(x0[: k - LOOP_MIN_GAP + 1, :2] - x0[k, :2]).T)
+        j = int(np.argmin(d))
+        if d[j] > LOOP_RADIUS_M:
+            continue
+        counts["loop_candidates"] += 1
+        add(j, k, matched(range(max(0, j - LOOP_SPAN), min(len(frames), j + LOOP_SPAN + 1)), j, k),
+            "loops")  # fmt: skip
+    if heading_prior:
+        w = np.diag([0.0, 0.0, 1.0 / math.radians(HEADING_PRIOR_DEG)])
+        edges += [(0, k, between(x0[0], x0[k]), w) for k in range(1, len(frames))]
+    return edges, counts
+
+
+def close_loops(
+    frames: list[Keyframe],
+    template: Callable[[Keyframe], tuple[np.ndarray, np.ndarray]],
+    map_params: MapParams,
+    fix_params: FixParams,
+    reach: float,
+    heading_prior: bool,
+    tick: Callable[[int], None] | None = None,
+) -> tuple[np.ndarray, dict]:
+    """The keyframes' poses with the live map's loops closed: the pose graph of
+    :func:`keyframe_edges` solved by robust least squares (:func:`fuzzyslam.fixes.
+    pose_graph.optimise`), the first keyframe held.
+
+    Parameters
+    ----------
+    frames : list of Keyframe
+        The keyframes, in time order (at least 2).
+    template : callable
+        Keyframe -> its match template.
+    map_params : MapParams
+        The evidence model.
+    fix_params : FixParams
+        The match's parameters.
+    reach : float
+        How far around each keyframe its map reaches (m).
+    heading_prior : bool
+        Hold the headings to the estimate's.
+    tick : callable, optional
+        Progress (:func:`keyframe_edges`).
+
+    Returns
+    -------
+    poses : ndarray, shape (K, 3)
+        The keyframes' poses after the graph's solution.
+    info : dict
+        The edges' counts and the solver's (``optimise``).
+    """
+    edges, counts = keyframe_edges(
+        frames, template, map_params, fix_params, reach, heading_prior, tick
+    )
+    x0 = np.array([f.pose for f in frames])
+    i = np.array([e[0] for e in edges])
+    j = np.array([e[1] for e in edges])
+    z = np.array([e[2] for e in edges])
+    w = np.array([e[3] for e in edges])
+    poses, info = optimise(x0, i, j, z, w)
+    return poses, {**counts, **info}
+
+
+def corrected_path(t: np.ndarray, path: np.ndarray, t_key: np.ndarray, before: np.ndarray,
+                   after: np.ndarray) -> np.ndarray:  # fmt: skip
+    """A path moved with its keyframes: each pose p(t) becomes C(t) (+) p(t), with C the
+    keyframes' corrections C_k = after_k (+) before_k^-1 interpolated in time (x, y and
+    heading linearly between keyframes; the first's before it, the last's after it).
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        The path's times.
+    path : ndarray, shape (N, 3)
+        Its poses.
+    t_key : ndarray, shape (K,)
+        The keyframes' times (increasing).
+    before, after : ndarray, shape (K, 3)
+        The keyframes' poses on the path and after the correction.
+
+    Returns
+    -------
+    ndarray, shape (N, 3)
+    """
+    corr = np.array([compose(a, inverse(b)) for a, b in zip(after, before, strict=True)])
+    corr[:, 2] = np.unwrap(corr[:, 2])
+    c = np.stack([np.interp(t, t_key, corr[:, k]) for k in range(3)], axis=1)
+    out = np.array([compose(ck, pk) for ck, pk in zip(c, path, strict=True)])
+    out[:, 2] = wrap_angle(out[:, 2])
+    return out
+
+
 class LiveMapPoseAid(PoseFixAid):
     """Plug-in of ``fuzzyslam run --live-map``: rings matched against the map of the
     keyframes before them, then fused into it (module docstring).
@@ -329,6 +564,15 @@ class LiveMapPoseAid(PoseFixAid):
         super().__init__(BeliefMap.vacuous(Grid((0.0, 0.0), 1.0, (1, 1))), params, flm_source,
                          start_time)  # fmt: skip
         self.keyframes = 0
+        # every ring's time and the filter's pose after it (the path the loop closure
+        # moves), and the keyframes (close_loops)
+        self._t: list[float] = []
+        self._path: list[np.ndarray] = []
+        self._frames: list[Keyframe] = []
+        # the run's heading fixes against the building (fixes/aids.py sets it with
+        # live_right_angles): once they were applied, the graph holds the headings
+        self.heading_aid: Any = None
+        self._closed: tuple[np.ndarray, dict] | None = None
 
     def flm_every_ring(self) -> bool:
         """A ring's FLM is built here, for the rings matched only (not ahead).
@@ -376,6 +620,14 @@ class LiveMapPoseAid(PoseFixAid):
         """
         if not self.started(t):
             return
+        try:
+            self._decide(t, ring, mounts, ekf)
+        finally:
+            self._t.append(float(t))
+            self._path.append(np.array(ekf.pose, dtype=float))
+
+    def _decide(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
+        """on_ring's work: the match and the keyframe."""
         if self.live is None:  # the first ring starts the map
             if narrow_beams(ring.fov) and self.params.live_cov_scale > 0:
                 # end points' matches: inflated by live_cov_scale whatever the travel
@@ -394,6 +646,74 @@ class LiveMapPoseAid(PoseFixAid):
                 return
         self.live.add_ring(ekf.pose, ring.ranges, ring.max_range, ring.fov, mounts)
         self.keyframes += 1
+        self._frames.append(
+            Keyframe(len(self._t), float(t), np.array(ekf.pose, dtype=float),
+                     np.array(ekf.odometry_pose, dtype=float), np.array(ring.ranges, dtype=float),
+                     ring.max_range, float(ring.fov), np.array(mounts, dtype=float))
+        )  # fmt: skip
+
+    def closed(self) -> tuple[np.ndarray, dict] | None:
+        """The keyframes' poses with the loops closed and the graph's figures
+        (:func:`close_loops`, computed once), or None (``live_close_loops`` off, fewer
+        than two keyframes).
+
+        Returns
+        -------
+        (ndarray (K, 3), dict) or None
+        """
+        if not self.params.live_close_loops or len(self._frames) < 2:
+            return None
+        if self._closed is None:
+
+            def template(f: Keyframe) -> tuple[np.ndarray, np.ndarray]:
+                ring = _RingView(f.t, f.ranges, f.max_range, f.fov)
+                return self.template(ring, f.mounts)
+
+            from fuzzyslam.progress import Progress
+
+            h = self.heading_aid
+            held = h is not None and any(d.accepted for d in h.decisions)
+            n = len(self._frames)
+            reach = self.params.live_reach + 1.0
+            with Progress(2 * n, f"run: closing the live map's loops ({n} keyframes)") as bar:
+                self._closed = close_loops(
+                    self._frames, template, self.map_params, self.params, reach, held,
+                    bar.update_to,
+                )  # fmt: skip
+        return self._closed
+
+    def closed_path(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Every ring's time and the filter's pose there, moved with the keyframes by the
+        loop closure (:func:`corrected_path`), or None without it.
+
+        Returns
+        -------
+        (ndarray (N,), ndarray (N, 3)) or None
+        """
+        found = self.closed()
+        if found is None:
+            return None
+        t = np.array(self._t)
+        before = np.array([f.pose for f in self._frames])
+        t_key = t[[f.ring for f in self._frames]]
+        return t, corrected_path(t, np.array(self._path), t_key, before, found[0])
+
+    def write(self, outdir: Path) -> None:
+        """pose_fixes.csv (PoseFixAid.write) and, with the loops closed,
+        trajectory_closed.tum: every ring's pose moved with its keyframes.
+
+        Parameters
+        ----------
+        outdir : Path
+            The run's directory (being written).
+        """
+        from fuzzyslam.rundir import TRAJECTORY_CLOSED
+        from fuzzyslam.streams.tum import write_tum
+
+        super().write(outdir)
+        path = self.closed_path()
+        if path is not None:
+            write_tum(Path(outdir) / TRAJECTORY_CLOSED, *path)
 
     def summary(self) -> PoseSummary:
         """PoseFixAid's entry with the map's: keyframes, grid shape, cell size, growths.
@@ -406,12 +726,28 @@ class LiveMapPoseAid(PoseFixAid):
         if self.live is None:
             return dataclasses.replace(s, keyframes=0)
         g = self.live.map.grid
+        loops = None
+        found = self.closed()
+        if found is not None:
+            poses, info = found
+            before = np.array([f.pose for f in self._frames])
+            moved = np.hypot(*(poses[:, :2] - before[:, :2]).T)
+            loops = {
+                "loops": info["loops"],
+                "loop_candidates": info["loop_candidates"],
+                "sequential": info["sequential"],
+                "downweighted": info["downweighted"],
+                "iterations": info["iterations"],
+                "keyframes_moved_mean_m": round(float(moved.mean()), 4),
+                "keyframes_moved_max_m": round(float(moved.max()), 4),
+            }
         return dataclasses.replace(
             s,
             keyframes=self.keyframes,
             map_shape=[int(v) for v in g.shape],
             map_resolution_m=float(g.resolution),
             map_grown=self.live.grown,
+            loop_closure=loops,
         )
 
     def messages(self, topics: Any, start: float | None = None) -> list:
@@ -435,6 +771,16 @@ class LiveMapPoseAid(PoseFixAid):
         if self.live is not None and self.decisions:
             out = map_messages((self.live.map, []), topics, self.decisions[-1].t) + out
         return out
+
+
+@dataclass(frozen=True)
+class _RingView:
+    """A keyframe's ring as ``template`` reads it (and an FLM source keys it)."""
+
+    t: float
+    ranges: np.ndarray
+    max_range: Any
+    fov: float
 
 
 def building_direction(angles: np.ndarray, lengths: np.ndarray) -> float:

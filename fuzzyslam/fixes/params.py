@@ -258,6 +258,11 @@ class FixParams:
     # on ACES, laser, its odometry errors doubled (generalise.py double-4): 3 deg 2.57 m
     # mean position error, 2.7 deg mean heading error; 10 deg 0.58 m, 1.6 deg
     live_gate_deg: float = field(default=10.0, metadata={"min": 0.1, "max": 44.0})
+    # close the live map's loops at the end of the run: a pose graph of its keyframes
+    # (odometry and scan-match edges, loop edges where a keyframe comes back near an old
+    # one) solved by least squares, written as trajectory_closed.tum
+    # (fixes.live_map.close_loops, fixes.pose_graph)
+    live_close_loops: bool = True
 
     # --- change detection (docs/models.md sec. 10) ---
     detect_changes: bool = True
