@@ -299,3 +299,29 @@ def test_only_a_lasers_matches_take_live_cov_scale(fov_deg, laser):
             given.pose_corr_distance,
         )
     assert p.pose_map_sigma == 0.0 and aid.matcher.params is p
+
+
+def test_only_a_lasers_keyframes_are_closed():
+    """closed(): None for a sonar ring's keyframes (their matches too loose for the
+    graph), for live_close_loops off, and for fewer than two keyframes."""
+    import dataclasses
+
+    from fuzzyslam.fixes.live_map import Keyframe, LiveMapPoseAid
+
+    cfg = load_config("real_building_scan")
+
+    def frames(fov_deg: float) -> list:
+        return [
+            Keyframe(k, float(k), np.array([k, 0.0, 0.0]), np.array([k, 0.0, 0.0]),
+                     np.full(90, 3.0), RMAX, math.radians(fov_deg), MOUNTS)
+            for k in range(2)
+        ]  # fmt: skip
+
+    aid = LiveMapPoseAid(cfg.fixes, cfg.fgm, flm_source=None)
+    aid._frames = frames(25.0)
+    assert aid.closed() is None
+    off = LiveMapPoseAid(dataclasses.replace(cfg.fixes, live_close_loops=False), cfg.fgm, None)
+    off._frames = frames(2.0)
+    assert off.closed() is None
+    aid._frames = frames(2.0)[:1]
+    assert aid.closed() is None

@@ -655,7 +655,9 @@ class LiveMapPoseAid(PoseFixAid):
     def closed(self) -> tuple[np.ndarray, dict] | None:
         """The keyframes' poses with the loops closed and the graph's figures
         (:func:`close_loops`, computed once), or None (``live_close_loops`` off, fewer
-        than two keyframes).
+        than two keyframes, or a sonar ring: measured on Freiburg's 9 sonars, 7 odometry
+        variants, its FLM matches' edges moved the aligned error by -0.06 to +0.05 m
+        and doubled the raw error of some runs, 0.32 -> 0.67 m).
 
         Returns
         -------
@@ -663,6 +665,8 @@ class LiveMapPoseAid(PoseFixAid):
         """
         if not self.params.live_close_loops or len(self._frames) < 2:
             return None
+        if not narrow_beams(self._frames[0].fov):
+            return None  # a sonar ring's matches are too loose for the graph (sec. 10b)
         if self._closed is None:
 
             def template(f: Keyframe) -> tuple[np.ndarray, np.ndarray]:

@@ -261,7 +261,8 @@ class FixParams:
     # close the live map's loops at the end of the run: a pose graph of its keyframes
     # (odometry and scan-match edges, loop edges where a keyframe comes back near an old
     # one) solved by least squares, written as trajectory_closed.tum
-    # (fixes.live_map.close_loops, fixes.pose_graph)
+    # (fixes.live_map.close_loops, fixes.pose_graph); a laser's only (a sonar ring's
+    # matches are too loose for it)
     live_close_loops: bool = True
 
     # --- change detection (docs/models.md sec. 10) ---
