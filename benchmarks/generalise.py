@@ -168,13 +168,19 @@ def variant_log(log: Path, work: Path, name: str) -> Path:
     return vlog
 
 
-def carmen(data: Path, out: Path, variants: list[str]) -> list[dict]:
+def buildings(data: Path, out: Path):
+    """Each building log under ``data`` (a truth.tum and a scan): (name, log, truth, its
+    working directory under ``out``, made)."""
     names = sorted(p.name for p in data.iterdir() if (p / "truth.tum").is_file() and _has_scan(p))
-    rows = []
     for name in names:
-        log, truth = data / name / "log.mcap", data / name / "truth.tum"
         work = out / name
         work.mkdir(parents=True, exist_ok=True)
+        yield name, data / name / "log.mcap", data / name / "truth.tum", work
+
+
+def carmen(data: Path, out: Path, variants: list[str]) -> list[dict]:
+    rows = []
+    for name, log, truth, work in buildings(data, out):
         for rs in ("scan", "sonar"):
             fgm = work / f"fgm_{rs}"
             if not (fgm / "fgm.npz").is_file():
@@ -224,12 +230,8 @@ def live(data: Path, out: Path, variants: list[str], ranges: list[str]) -> list[
     """``run --live-map`` (grid SLAM, no map given) on each building's odometry variants,
     with both presets, against dead reckoning: position error mean / max and heading
     error mean against truth.tum (the map's frame is the start pose's, the truth's)."""
-    names = sorted(p.name for p in data.iterdir() if (p / "truth.tum").is_file() and _has_scan(p))
     rows = []
-    for name in names:
-        log, truth = data / name / "log.mcap", data / name / "truth.tum"
-        work = out / name
-        work.mkdir(parents=True, exist_ok=True)
+    for name, log, truth, work in buildings(data, out):
         for v in variants:
             vlog = variant_log(log, work, v)
             fuzzyslam("run", str(vlog), "-o", str(work / f"{v}_dr"))  # dead reckoning
@@ -283,7 +285,8 @@ def carmen_table(rows: list[dict]) -> str:
         for key, target, label in figs:
             vals = [r.get(key, math.nan) for r in rr]
             met = sum(v <= target for v in vals)
-            cells = " | ".join(_bold(v <= target, f"{v:.2f}") for v in vals)
+            cells = " | ".join("-" if math.isnan(v) else _bold(v <= target, f"{v:.2f}")
+                               for v in vals)  # fmt: skip
             tally = f"{met} of {len(vals)}" if math.isfinite(target) else "-"
             out.append(f"| {b} | {rs} | {fix} | {label} | {cells} | {tally} |")
     return "\n".join(out)
