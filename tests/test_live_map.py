@@ -163,6 +163,7 @@ def test_live_map_on_a_real_building_beats_dead_reckoning(tmp_path, capsys):
          f"--start-pose={start}", "-o", str(out)], capsys,
     )  # fmt: skip
     assert code == 0, err
+    assert "trajectory_closed.tum has its loops closed" in err  # the run's note: what to map from
     live = s["aids"]["LiveMapPoseAid"]
     assert live["keyframes"] >= 20 and live["accepted"] >= 20
     assert live["map_resolution_m"] == 0.1 and len(live["map_shape"]) == 2

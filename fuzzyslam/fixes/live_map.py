@@ -702,6 +702,42 @@ class LiveMapPoseAid(PoseFixAid):
         t_key = t[[f.ring for f in self._frames]]
         return t, corrected_path(t, np.array(self._path), t_key, before, found[0])
 
+    def run_note(self, lamps: bool) -> str:
+        """One line for stderr: where the loops were closed and what to build the map
+        from, and how many matches the run's gate refused (a loop that comes back beyond
+        the search window is refused: filter_health's NIS findings of a live-map run
+        come from such matches, sec. 10b).
+
+        Parameters
+        ----------
+        lamps : bool
+            Whether the log has lamps (unused: the live map says the same either way).
+
+        Returns
+        -------
+        str
+            '' without a loop closure.
+        """
+        found = self.closed()
+        if found is None:
+            return ""
+        poses, info = found
+        before = np.array([f.pose for f in self._frames])
+        moved = float(np.hypot(*(poses[:, :2] - before[:, :2]).T).max())
+        gated = sum(d.reason == "gated" for d in self.decisions)
+        refused = (
+            f"; the run's gate refused {gated} of its matches (a loop that comes back "
+            "beyond the search window is refused there, and trajectory.tum and "
+            "filter_health keep it: docs/models.md sec. 10b)"
+            if gated
+            else ""
+        )
+        return (
+            f"live map: trajectory_closed.tum has its loops closed ({info['loops']} loop "
+            f"edges, keyframes moved up to {moved:.2f} m): build the map from it "
+            f"(map --trajectory){refused}"
+        )
+
     def write(self, outdir: Path) -> None:
         """pose_fixes.csv (PoseFixAid.write) and, with the loops closed,
         trajectory_closed.tum: every ring's pose moved with its keyframes.
