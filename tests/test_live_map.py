@@ -326,3 +326,19 @@ def test_only_a_lasers_keyframes_are_closed():
     assert off.closed() is None
     aid._frames = frames(2.0)[:1]
     assert aid.closed() is None
+
+
+def test_a_live_map_too_large_is_one_clear_error(monkeypatch):
+    """A path that would grow the grid past MAX_CELLS: a FuzzyslamError (one line, the
+    input's exit code) naming the size and the way out, not an internal error."""
+    from fuzzyslam.errors import FuzzyslamError
+    from fuzzyslam.fixes import live_map
+
+    monkeypatch.setattr(live_map, "MAX_CELLS", 200_000)
+    params = load_config("real_building_scan").fgm
+    live = LiveFgm(np.zeros(3), params)  # 32 x 32 m: 102 400 cells
+    lines = room_lines(-3.0, -2.0, 60.0, 3.0)
+    with pytest.raises(FuzzyslamError, match=r"fgm\.resolution"):
+        for x in np.arange(0.0, 55.0, 1.5):
+            p = np.array([x, 0.0, 0.0])
+            live.add_ring(p, laser_ring(p, lines), RMAX, FOV, MOUNTS)

@@ -53,6 +53,7 @@ from typing import Any
 
 import numpy as np
 
+from fuzzyslam.errors import FuzzyslamError
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.pose_aid import PoseFixAid
 from fuzzyslam.fixes.pose_graph import optimise
@@ -222,9 +223,10 @@ class LiveFgm:
         if grid is old.grid:
             return
         if float(grid.shape[0]) * grid.shape[1] > MAX_CELLS:
-            raise ValueError(
-                f"the live map outgrew {MAX_CELLS} cells of {grid.resolution} m "
-                f"({grid.shape[1]} x {grid.shape[0]})"
+            raise FuzzyslamError(
+                f"the live map would grow to {grid.shape[1]} x {grid.shape[0]} cells of "
+                f"{grid.resolution} m, more than {MAX_CELLS}: a coarser fgm.resolution "
+                "holds a path this long"
             )
         new = BeliefMap.vacuous(grid)
         r0 = round((old.grid.origin[1] - grid.origin[1]) / grid.resolution)
