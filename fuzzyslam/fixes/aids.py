@@ -290,7 +290,8 @@ def aids_for_log(
 
     live_map : bool
         ``--live-map``: the map built while localising (:func:`aids_for_live_map`);
-        UsageError with ``--map``, ``--fix-from`` or a fix other than pose.
+        UsageError with ``--map`` or a fix other than pose (``--fix-from`` without
+        ``--map`` is refused by the run stage before).
 
     Returns
     -------
@@ -302,8 +303,6 @@ def aids_for_log(
             raise UsageError("--live-map builds its own map: it takes no --map")
         if fix not in (None, "pose"):
             raise UsageError(f"--live-map makes pose fixes; --fix {fix} needs --map FGMDIR")
-        if fix_from is not None:
-            raise UsageError("--fix-from needs --map FGMDIR; --live-map starts at the log's start")
         return aids_for_live_map(cfg)
     mode = fix if fix is not None else ("none" if map_dir is None else cfg.fixes.mode)
     if mode == "none":

@@ -57,14 +57,16 @@ from fuzzyslam.errors import FuzzyslamError
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.pose_aid import PoseFixAid
 from fuzzyslam.fixes.pose_graph import optimise
-from fuzzyslam.fixes.pose_match import PoseMatch, PoseMatcher, olson_blur
+from fuzzyslam.fixes.pose_match import PoseMatch, PoseMatcher, lookup_channels
 from fuzzyslam.fixes.scan_heading import ScanLineHeadingAid, scan_segments
+from fuzzyslam.fixes.scan_lines import scan_end_points
 from fuzzyslam.fixes.summaries import HeadingSummary, PoseSummary
+from fuzzyslam.maps.evidence import reading_kinds
 from fuzzyslam.maps.fgm import FgmBuilder
 from fuzzyslam.maps.grid import MAX_CELLS, BeliefMap, Grid
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.references import Reference
-from fuzzyslam.se2 import between, compose, inverse, wrap_angle
+from fuzzyslam.se2 import between, compose, inverse
 from fuzzyslam.slam.events import FilterView
 
 # the map grows by at least this much (m) on a side it outgrows (amortised copies), and
@@ -180,12 +182,9 @@ def end_points(
     masses : ndarray, shape (N, 2)
         (m(O), m(E)) = (1, 0) each.
     """
-    r = np.asarray(ranges, dtype=float)
-    rmax = np.broadcast_to(np.asarray(max_range, dtype=float), r.shape)
-    echo = np.isfinite(r) & (r > 0) & (~np.isfinite(rmax) | (r < rmax - 1e-6))
-    mo = np.asarray(mounts, dtype=float)[echo]
-    pts = mo[:, :2] + r[echo, None] * np.stack([np.cos(mo[:, 2]), np.sin(mo[:, 2])], axis=1)
-    pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= reach]
+    pts = scan_end_points(ranges, max_range, mounts)  # NaN where a beam has no echo
+    with np.errstate(invalid="ignore"):
+        pts = pts[np.hypot(pts[:, 0], pts[:, 1]) <= reach]
     masses = np.zeros((len(pts), 2))
     masses[:, 0] = 1.0
     return pts, masses
@@ -259,11 +258,8 @@ class LiveFgm:
             The sensors' poses on the robot.
         """
         p = self.params
-        r = np.asarray(ranges, dtype=float)
-        rmax = np.broadcast_to(np.asarray(max_range, dtype=float), r.shape)
-        ok = np.isfinite(r) & (r > 0)
-        echo = ok & (~np.isfinite(rmax) | (r < rmax - 1e-6))
-        far = np.where(echo, r + p.range_tolerance, p.no_echo_reach)
+        ok, echo = reading_kinds(ranges, max_range)
+        far = np.where(echo, np.asarray(ranges, dtype=float) + p.range_tolerance, p.no_echo_reach)
         mounts = np.asarray(mounts, dtype=float)
         reach = float(np.max(far[ok], initial=0.0))
         reach += float(np.max(np.hypot(mounts[..., 0], mounts[..., 1]), initial=0.0))
@@ -302,7 +298,8 @@ class LiveMatcher(PoseMatcher):
         col0 + size of the live map, zeros outside it."""
         p = self.params
         m = self.live.map
-        sigma = p.pose_blur / m.grid.resolution
+        res = m.grid.resolution
+        sigma = p.pose_blur / res
         r = max(1, math.ceil(2.5 * sigma)) if sigma > 0 else 0
         ny, nx = m.grid.shape
         out = np.zeros((size, size, 2), dtype=np.float32)
@@ -313,16 +310,7 @@ class LiveMatcher(PoseMatcher):
         # the patch within the map and the blur's margin around it
         a0, a1 = max(r0 - r, 0), min(r1 + r, ny)
         b0, b1 = max(c0 - r, 0), min(c1 + r, nx)
-        m_o = m.m_o[a0:a1, b0:b1]
-        m_e = m.m_e[a0:a1, b0:b1].astype(np.float32)
-        occ = olson_blur(m_o, sigma)
-        lookup = np.stack(
-            [
-                occ - p.pose_arc_conflict_weight * m_e,
-                p.pose_empty_weight * m_e - p.pose_conflict_weight * m_o.astype(np.float32),
-            ],
-            axis=-1,
-        )
+        lookup = lookup_channels(m.m_o[a0:a1, b0:b1], m.m_e[a0:a1, b0:b1], res, p)
         out[r0 - row0 : r1 - row0, c0 - col0 : c1 - col0] = lookup[
             r0 - a0 : r1 - a0, c0 - b0 : c1 - b0
         ]
@@ -495,7 +483,8 @@ def close_loops(
     poses : ndarray, shape (K, 3)
         The keyframes' poses after the graph's solution.
     info : dict
-        The edges' counts and the solver's (``optimise``).
+        The edges' counts, the solver's (``optimise``), and how far the keyframes
+        moved (``moved_mean_m``, ``moved_max_m``).
     """
     edges, counts = keyframe_edges(
         frames, template, map_params, fix_params, reach, heading_prior, tick
@@ -506,7 +495,9 @@ def close_loops(
     z = np.array([e[2] for e in edges])
     w = np.array([e[3] for e in edges])
     poses, info = optimise(x0, i, j, z, w)
-    return poses, {**counts, **info}
+    moved = np.hypot(*(poses[:, :2] - x0[:, :2]).T)
+    return poses, {**counts, **info, "moved_mean_m": float(moved.mean()),
+                   "moved_max_m": float(moved.max())}  # fmt: skip
 
 
 def corrected_path(t: np.ndarray, path: np.ndarray, t_key: np.ndarray, before: np.ndarray,
@@ -530,12 +521,11 @@ def corrected_path(t: np.ndarray, path: np.ndarray, t_key: np.ndarray, before: n
     -------
     ndarray, shape (N, 3)
     """
-    corr = np.array([compose(a, inverse(b)) for a, b in zip(after, before, strict=True)])
+    corr = compose(np.asarray(after, dtype=float), inverse(np.asarray(before, dtype=float)))
+    corr = corr.reshape(-1, 3)
     corr[:, 2] = np.unwrap(corr[:, 2])
     c = np.stack([np.interp(t, t_key, corr[:, k]) for k in range(3)], axis=1)
-    out = np.array([compose(ck, pk) for ck, pk in zip(c, path, strict=True)])
-    out[:, 2] = wrap_angle(out[:, 2])
-    return out
+    return compose(c, np.asarray(path, dtype=float).reshape(-1, 3))
 
 
 class LiveMapPoseAid(PoseFixAid):
@@ -565,7 +555,6 @@ class LiveMapPoseAid(PoseFixAid):
         self.live: LiveFgm | None = None
         super().__init__(BeliefMap.vacuous(Grid((0.0, 0.0), 1.0, (1, 1))), params, flm_source,
                          start_time)  # fmt: skip
-        self.keyframes = 0
         # every ring's time and the filter's pose after it (the path the loop closure
         # moves), and the keyframes (close_loops)
         self._t: list[float] = []
@@ -575,6 +564,11 @@ class LiveMapPoseAid(PoseFixAid):
         # live_right_angles): once they were applied, the graph holds the headings
         self.heading_aid: Any = None
         self._closed: tuple[np.ndarray, dict] | None = None
+
+    @property
+    def keyframes(self) -> int:
+        """The rings fused into the map."""
+        return len(self._frames)
 
     def flm_every_ring(self) -> bool:
         """A ring's FLM is built here, for the rings matched only (not ahead).
@@ -647,7 +641,6 @@ class LiveMapPoseAid(PoseFixAid):
             if not d.accepted and d.reason in NOT_FUSED:
                 return
         self.live.add_ring(ekf.pose, ring.ranges, ring.max_range, ring.fov, mounts)
-        self.keyframes += 1
         self._frames.append(
             Keyframe(len(self._t), float(t), np.array(ekf.pose, dtype=float),
                      np.array(ekf.odometry_pose, dtype=float), np.array(ring.ranges, dtype=float),
@@ -723,9 +716,7 @@ class LiveMapPoseAid(PoseFixAid):
         found = self.closed()
         if found is None:
             return ""
-        poses, info = found
-        before = np.array([f.pose for f in self._frames])
-        moved = float(np.hypot(*(poses[:, :2] - before[:, :2]).T).max())
+        info = found[1]
         gated = sum(d.reason == "gated" for d in self.decisions)
         refused = (
             f"; the run's gate refused {gated} of its matches (a loop that comes back "
@@ -736,7 +727,7 @@ class LiveMapPoseAid(PoseFixAid):
         )
         return (
             f"live map: trajectory_closed.tum has its loops closed ({info['loops']} loop "
-            f"edges, keyframes moved up to {moved:.2f} m): build the map from it "
+            f"edges, keyframes moved up to {info['moved_max_m']:.2f} m): build the map from it "
             f"(map --trajectory){refused}"
         )
 
@@ -771,17 +762,15 @@ class LiveMapPoseAid(PoseFixAid):
         loops = None
         found = self.closed()
         if found is not None:
-            poses, info = found
-            before = np.array([f.pose for f in self._frames])
-            moved = np.hypot(*(poses[:, :2] - before[:, :2]).T)
+            info = found[1]
             loops = {
                 "loops": info["loops"],
                 "loop_candidates": info["loop_candidates"],
                 "sequential": info["sequential"],
                 "downweighted": info["downweighted"],
                 "iterations": info["iterations"],
-                "keyframes_moved_mean_m": round(float(moved.mean()), 4),
-                "keyframes_moved_max_m": round(float(moved.max()), 4),
+                "keyframes_moved_mean_m": round(info["moved_mean_m"], 4),
+                "keyframes_moved_max_m": round(info["moved_max_m"], 4),
             }
         return dataclasses.replace(
             s,

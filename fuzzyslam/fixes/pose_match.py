@@ -208,6 +208,36 @@ def flm_evidence(flm: BeliefMap, min_mass: float) -> tuple[np.ndarray, np.ndarra
     return pts, masses
 
 
+def lookup_channels(
+    m_o: np.ndarray, m_e: np.ndarray, resolution: float, params: FixParams
+) -> np.ndarray:
+    """The map's two lookup channels of the score (module docstring): channel 0, met by
+    the template's m(O), Olson's blurred m(O) minus ``pose_arc_conflict_weight`` m(E);
+    channel 1, met by its m(E), ``pose_empty_weight`` m(E) minus ``pose_conflict_weight``
+    m(O).
+
+    Parameters
+    ----------
+    m_o, m_e : ndarray, shape (H, W)
+        The map's (or a window's) occupied and empty masses.
+    resolution : float
+        The cell size (m): the blur ``pose_blur`` in cells.
+    params : FixParams
+        The weights and the blur.
+
+    Returns
+    -------
+    ndarray of float32, shape (H, W, 2)
+    """
+    occ = olson_blur(m_o, params.pose_blur / resolution)
+    e, o = m_e.astype(np.float32), m_o.astype(np.float32)
+    return np.stack(
+        [occ - params.pose_arc_conflict_weight * e,
+         params.pose_empty_weight * e - params.pose_conflict_weight * o],
+        axis=-1,
+    )  # fmt: skip
+
+
 def _extents(dth: np.ndarray) -> np.ndarray:
     """The rotation extent each sorted sample stands for (trapezoid rule weights)."""
     edges = np.concatenate([[dth[0]], 0.5 * (dth[1:] + dth[:-1]), [dth[-1]]])
@@ -222,16 +252,8 @@ class PoseMatcher:
         self.params = params
         self.last_window = (math.nan, math.nan)  # (xy m, heading rad) of the last search
         self.last_peak = np.full(3, np.nan)  # the lattice's best pose of the last "edge"
-        res = fgm.grid.resolution
-        lam = params.pose_conflict_weight
-        lam_o = params.pose_arc_conflict_weight
-        occ = olson_blur(fgm.m_o, params.pose_blur / res)
-        m_e = fgm.m_e.astype(np.float32)
-        m_o = fgm.m_o.astype(np.float32)
-        # channel 0 meets the FLM's m(O), channel 1 its m(E)
-        mu = params.pose_empty_weight
         self.lookup = np.ascontiguousarray(
-            np.stack([occ - lam_o * m_e, mu * m_e - lam * m_o], axis=-1)
+            lookup_channels(fgm.m_o, fgm.m_e, fgm.grid.resolution, params)
         )
 
     # -- lattice scores ---------------------------------------------------------------------

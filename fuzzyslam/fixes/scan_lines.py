@@ -39,6 +39,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fuzzyslam.maps.evidence import reading_kinds
+
 
 @dataclass(frozen=True)
 class Segments:
@@ -80,11 +82,8 @@ def scan_end_points(
     -------
     (M, 2) end points in beam order, NaN where a beam has no echo.
     """
-    r = np.asarray(ranges, dtype=float)
-    rmax = np.broadcast_to(np.asarray(max_range, dtype=float), r.shape)
-    with np.errstate(invalid="ignore"):
-        echo = np.isfinite(r) & (r < rmax)
-    r = np.where(echo, r, np.nan)
+    _, echo = reading_kinds(ranges, max_range)  # the evidence's rule (maps/evidence.py)
+    r = np.where(echo, np.asarray(ranges, dtype=float), np.nan)
     m = np.asarray(mounts, dtype=float)
     return np.column_stack([m[:, 0] + r * np.cos(m[:, 2]), m[:, 1] + r * np.sin(m[:, 2])])
 

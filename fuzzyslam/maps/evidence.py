@@ -42,6 +42,29 @@ class RingEvidence:
     readings: int
 
 
+def reading_kinds(ranges: np.ndarray, max_range) -> tuple[np.ndarray, np.ndarray]:
+    """Which readings count and which of them are echoes: a reading is valid when finite
+    and positive (NaN: missing or invalid), and an echo when also below its maximum range
+    (by more than 1e-6 m; an infinite maximum: every valid reading); a valid reading at
+    its maximum range is "no echo" (empty evidence up to ``no_echo_reach``).
+
+    Parameters
+    ----------
+    ranges : ndarray, shape (...)
+        The readings (m).
+    max_range : ndarray or float
+        The maximum ranges, broadcast to ``ranges``.
+
+    Returns
+    -------
+    valid, echo : ndarray of bool, shape of ``ranges``
+    """
+    r = np.asarray(ranges, dtype=float)
+    rmax = np.broadcast_to(np.asarray(max_range, dtype=float), r.shape)
+    valid = np.isfinite(r) & (r > 0)
+    return valid, valid & (~np.isfinite(rmax) | (r < rmax - 1e-6))
+
+
 def reading_masses(
     rho: np.ndarray,
     phi: np.ndarray,
@@ -276,9 +299,7 @@ def rings_evidence(
     ranges = np.asarray(ranges, dtype=float).reshape(k_rings, -1)
     if ranges.shape[1] != m:
         raise ValueError(f"{ranges.shape[1]} ranges per ring but {m} sonar mounts")
-    rmax = np.broadcast_to(np.asarray(max_range, dtype=float), ranges.shape)
-    ok = np.isfinite(ranges) & (ranges > 0)
-    echo_all = ok & (~np.isfinite(rmax) | (ranges < rmax - 1e-6))
+    ok, echo_all = reading_kinds(ranges, max_range)
     half = 0.5 * float(fov)
     ring_of, sensor_of = np.nonzero(ok)
     sensors = compose(poses[ring_of], mounts[ring_of, sensor_of] if per_ring else mounts[sensor_of])

@@ -20,6 +20,7 @@ from fuzzyslam.maps.evidence import (
     BatchEvidence,
     RingEvidence,
     combine_cells,
+    reading_kinds,
     readings_cells,
     ring_evidence,
     rings_evidence,
@@ -157,9 +158,7 @@ class _ReadingCells:
         if setup != self.setup:
             self.setup, self.pieces = setup, {}
             self.sensors = compose(np.zeros((len(mounts), 3)), mounts)
-        rmax = np.broadcast_to(np.asarray(max_range, dtype=float), r_all.shape)
-        ok = np.isfinite(r_all) & (r_all > 0)
-        echo_all = ok & (~np.isfinite(rmax) | (r_all < rmax - 1e-6))
+        ok, echo_all = reading_kinds(r_all, max_range)
         keys = [(i, float(r_all[i]), bool(echo_all[i])) for i in np.flatnonzero(ok).tolist()]
         if len(self.pieces) > 50000:  # bounded (a quantised sonar stays far below)
             self.pieces.clear()

@@ -46,6 +46,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from fuzzyslam.maps.evidence import reading_kinds
 from fuzzyslam.se2 import compose, wrap_angle
 
 
@@ -94,8 +95,7 @@ def readings_in_frame(
     per_ring = mounts.ndim == 3
     mounts = mounts.reshape(len(poses), -1, 3) if per_ring else mounts.reshape(-1, 3)
     ranges = np.asarray(ranges, dtype=float).reshape(len(poses), mounts.shape[-2])
-    rmax = np.broadcast_to(np.asarray(max_range, dtype=float), ranges.shape)
-    ok = np.isfinite(ranges) & (ranges > 0) & (~np.isfinite(rmax) | (ranges < rmax - 1e-6))
+    _, ok = reading_kinds(ranges, max_range)  # the echoes
     k, i = np.nonzero(ok)
     at = mounts[k, i] if per_ring else mounts[i]
     return RingReadings(compose(poses[k], at), ranges[ok], 0.5 * float(fov))
