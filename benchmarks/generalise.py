@@ -243,7 +243,7 @@ def live(data: Path, out: Path, variants: list[str], ranges: list[str]) -> list[
                               "--live-map", "-o", str(rdir))  # fmt: skip
                 closed = rdir / "trajectory_closed.tum"
                 loops = {}
-                if closed.is_file():  # its loops closed (fixes.live_map.close_loops)
+                if closed.is_file():  # its loops closed (fixes.live_map.KeyframeGraph)
                     c = aligned_errors(closed, truth)
                     loops = {
                         "closed_position_mean_m": errors(closed, truth)["position_mean_m"],

@@ -171,7 +171,8 @@ def run_command(
     (--fix pose with fixes.detect_changes), and /map and the fixes in estimates.mcap
     (a fix topic once a fix is formed); with --live-map pose_fixes.csv (and
     heading_fixes.csv with fixes.live_right_angles), trajectory_closed.tum (its loops
-    closed after the run, fixes.live_close_loops) and the map as it ended in
+    closed, during the run with fixes.live_close_online and again after it,
+    fixes.live_close_loops) and the map as it ended in
     estimates.mcap.
     The JSON summary is also printed on stdout; progress goes to stderr.
     """

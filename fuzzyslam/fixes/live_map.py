@@ -33,13 +33,18 @@ With ``live_right_angles`` a laser's heading is also fixed against the building'
 wall direction (:class:`LiveRightAngleHeading`), which bounds the heading's drift in a
 building whose walls meet at right angles.
 
-What it does not do: close loops. The map's frame is the start pose's; a match measures
-the pose against walls that earlier estimates placed, so their error stays in the map
-and the position drifts with the distance travelled through new places. A loop that
-comes back within the search window (or the relocalisation's widest) snaps onto the
-older walls; one that comes back farther off builds a second copy of them, which the
-forgetting factor thins where the two contradict. The filter's covariance is relative to
-the map, not to the world: its NEES against a true trajectory grows with the drift.
+Loops (a laser's, ``live_close_loops``). Each keyframe is also a node of a pose graph
+(:class:`KeyframeGraph`: odometry, scan-match and loop edges). With
+``live_close_online`` a keyframe whose loop edge moves the graph's solution by a cell or
+more closes the loop during the run: the keyframes take the solution's poses, the map is
+fused again from them (:meth:`LiveFgm.refill`) and the filter is moved onto the newest
+keyframe's (``LiveMapPoseAid._close_online``), so the walls the robot comes back to are
+where they were first seen, not a second copy. After the run the graph is solved once
+more and every ring's pose moved with its keyframes: trajectory_closed.tum. A loop that
+comes back beyond the search windows is refused as a match (``gated``) and not fused, so
+it adds no keyframe and closes nothing; the forgetting factor thins the second copy of
+its walls where the two contradict. The filter's covariance is relative to the map, not
+to the world: its NEES against a true trajectory grows with the drift.
 """
 
 from __future__ import annotations
@@ -66,7 +71,7 @@ from fuzzyslam.maps.fgm import FgmBuilder
 from fuzzyslam.maps.grid import MAX_CELLS, BeliefMap, Grid
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.references import Reference
-from fuzzyslam.se2 import between, compose, inverse
+from fuzzyslam.se2 import between, compose, inverse, jacobians_compose, wrap_angle_scalar
 from fuzzyslam.slam.events import FilterView
 
 # the map grows by at least this much (m) on a side it outgrows (amortised copies), and
@@ -79,8 +84,10 @@ NARROW_BEAM_DEG = 5.0
 LEARN_MIN_WALL_M = 10.0
 # matches that leave the ring out of the map: they disagree with it
 NOT_FUSED = frozenset({"gated", "edge", "no_match"})
+# an online loop closure fuses the keyframes again this many at a time
+REFILL_BATCH = 64
 
-# the pose graph of the keyframes (close_loops). Odometry edges: 2 cm + 5 % of the
+# the pose graph of the keyframes (KeyframeGraph). Odometry edges: 2 cm + 5 % of the
 # distance, 0.5 deg + 1 deg per root metre (1 sigma), looser than the filter's white
 # model to hold the systematic errors of real odometry (the development logs': 1 % of
 # scale, 0.05 deg/m of bias, 2 % random)
@@ -257,16 +264,53 @@ class LiveFgm:
         mounts : ndarray, shape (M, 3)
             The sensors' poses on the robot.
         """
+        xy = np.asarray(pose, dtype=float)[:2]
+        reach = self._reach(ranges, max_range, mounts)
+        self._cover(xy - reach, xy + reach)
+        self.builder.add_ring(pose, ranges, max_range, fov, mounts)
+
+    def _reach(self, ranges: np.ndarray, max_range: Any, mounts: np.ndarray) -> float:
+        """How far from the robot a ring's readings reach (m): add_ring's."""
         p = self.params
         ok, echo = reading_kinds(ranges, max_range)
         far = np.where(echo, np.asarray(ranges, dtype=float) + p.range_tolerance, p.no_echo_reach)
         mounts = np.asarray(mounts, dtype=float)
         reach = float(np.max(far[ok], initial=0.0))
         reach += float(np.max(np.hypot(mounts[..., 0], mounts[..., 1]), initial=0.0))
-        reach += 2.0 * p.resolution
-        xy = np.asarray(pose, dtype=float)[:2]
-        self._cover(xy - reach, xy + reach)
-        self.builder.add_ring(pose, ranges, max_range, fov, mounts)
+        return reach + 2.0 * p.resolution
+
+    def refill(self, frames: list[Keyframe]) -> None:
+        """Fuse the map again from nothing: each keyframe's ring at its pose (an online
+        loop closure moved them), on the grid as it is (grown where a ring needs it).
+
+        The same map as :meth:`add_ring` of each in turn: the rings are fused in time
+        order, REFILL_BATCH at a time (``FgmBuilder.add_rings``: one vectorised pass of
+        evidence per batch, bounding its memory).
+
+        Parameters
+        ----------
+        frames : list of Keyframe
+            The keyframes, in time order.
+        """
+        self.builder = FgmBuilder(self.builder.map.grid, self.params)
+        start = 0
+        while start < len(frames):
+            f0 = frames[start]
+            stop = start + 1  # a batch: the same sensors (cone and mounts)
+            while (stop < len(frames) and stop - start < REFILL_BATCH
+                   and frames[stop].fov == f0.fov
+                   and np.array_equal(frames[stop].mounts, f0.mounts)):  # fmt: skip
+                stop += 1
+            batch = frames[start:stop]
+            poses = np.array([f.pose for f in batch], dtype=float)
+            ranges = np.array([f.ranges for f in batch], dtype=float)
+            rmax = np.array([np.broadcast_to(np.asarray(f.max_range, dtype=float),
+                                             f.ranges.shape) for f in batch])  # fmt: skip
+            reach = np.array([self._reach(f.ranges, f.max_range, f.mounts) for f in batch])
+            self._cover((poses[:, :2] - reach[:, None]).min(axis=0),
+                        (poses[:, :2] + reach[:, None]).max(axis=0))  # fmt: skip
+            self.builder.add_rings(poses, ranges, rmax, f0.fov, f0.mounts)
+            start = stop
 
 
 class LiveMatcher(PoseMatcher):
@@ -359,16 +403,13 @@ def keyframes_map(frames: list[Keyframe], anchor: np.ndarray, params: MapParams,
     return b.map
 
 
-def keyframe_edges(
-    frames: list[Keyframe],
-    template: Callable[[Keyframe], tuple[np.ndarray, np.ndarray]],
-    map_params: MapParams,
-    fix_params: FixParams,
-    reach: float,
-    heading_prior: bool,
-    tick: Callable[[int], None] | None = None,
-) -> tuple[list[tuple[int, int, np.ndarray, np.ndarray]], dict[str, int]]:
-    """The pose graph's edges (i, j, z_ij, W_ij) over the keyframes (:func:`close_loops`).
+class KeyframeGraph:
+    """The pose graph of the keyframes, built as they come: each keyframe's edges are
+    found when it is added (:meth:`add`), from the poses the keyframes have then, and the
+    graph is solved whenever asked (:meth:`solve`: the live map's online closures
+    during the run, ``LiveMapPoseAid.closed`` after it).
+
+    Edges (i, j, z_ij, W_ij), W the Cholesky factor of the information:
 
     - odometry: consecutive keyframes, the dead reckoning's relative pose, sigmas
       ODO_SIGMA_M and ODO_SIGMA_DEG;
@@ -376,16 +417,13 @@ def keyframe_edges(
       it, in the frame of k - 1, around the estimate's relative pose;
     - loop: against the map of the nearest old keyframe (LOOP_MIN_GAP before, within
       LOOP_RADIUS_M in the estimate) and LOOP_SPAN on each side of it;
-    - heading priors (``heading_prior``): each keyframe's heading held to the estimate's
-      within HEADING_PRIOR_DEG (an edge from the first keyframe, fixed).
+    - heading priors (``solve(heading_prior=True)``): each keyframe's heading held to the
+      estimate's within HEADING_PRIOR_DEG (an edge from the first keyframe, fixed).
 
-    A match's W is the Cholesky factor of its inverse covariance (PoseMatcher's, not
-    inflated).
+    A match's W is from its covariance (PoseMatcher's, not inflated).
 
     Parameters
     ----------
-    frames : list of Keyframe
-        The keyframes, in time order.
     template : callable
         Keyframe -> (points (N, 2), masses (N, 2)), what is matched of it.
     map_params : MapParams
@@ -394,110 +432,125 @@ def keyframe_edges(
         The match's parameters.
     reach : float
         How far around each keyframe its map reaches (m).
-    heading_prior : bool
-        Hold the headings (the run had absolute heading fixes).
-    tick : callable, optional
-        Told the keyframes done (0 .. 2 K: the sequential pass, then the loops'), for a
-        progress display.
-
-    Returns
-    -------
-    edges : list of (int, int, ndarray (3,), ndarray (3, 3))
-    counts : dict
-        ``sequential`` and ``loops`` matched, ``loop_candidates`` tried.
     """
-    x0 = np.array([f.pose for f in frames])
-    cov = np.diag([PAIR_SIGMA_M**2, PAIR_SIGMA_M**2, math.radians(PAIR_SIGMA_DEG) ** 2])
-    edges: list[tuple[int, int, np.ndarray, np.ndarray]] = []
-    counts = {"sequential": 0, "loops": 0, "loop_candidates": 0}
 
-    def matched(idx: range, anchor: int, k: int) -> PoseMatch:
-        fgm = keyframes_map([frames[i] for i in idx], x0[anchor], map_params, reach)
-        guess = between(x0[anchor], x0[k])
-        return PoseMatcher(fgm, fix_params).match_points(*template(frames[k]), guess, cov, 1.0)
+    def __init__(
+        self,
+        template: Callable[[Keyframe], tuple[np.ndarray, np.ndarray]],
+        map_params: MapParams,
+        fix_params: FixParams,
+        reach: float,
+    ) -> None:
+        self.template = template
+        self.map_params = map_params
+        self.fix_params = fix_params
+        self.reach = reach
+        self.frames: list[Keyframe] = []
+        # the odometry and sequential edges, and the loops' (kept apart: solved in that order)
+        self.edges: list[tuple[int, int, np.ndarray, np.ndarray]] = []
+        self.loop_edges: list[tuple[int, int, np.ndarray, np.ndarray]] = []
+        self.counts = {"sequential": 0, "loops": 0, "loop_candidates": 0}
+        self._xy = np.empty((0, 2))  # the keyframes' positions (the loop candidates')
 
-    def add(i: int, j: int, m: PoseMatch, key: str) -> None:
+    def _matched(self, idx: range, anchor: int, k: int) -> PoseMatch:
+        """Keyframe k's template matched against the map of keyframes ``idx`` in the frame
+        of keyframe ``anchor``, around their relative pose (prior PAIR_SIGMA_*)."""
+        f = self.frames
+        a = f[anchor].pose
+        fgm = keyframes_map([f[i] for i in idx], a, self.map_params, self.reach)
+        cov = np.diag([PAIR_SIGMA_M**2, PAIR_SIGMA_M**2, math.radians(PAIR_SIGMA_DEG) ** 2])
+        guess = between(a, f[k].pose)
+        return PoseMatcher(fgm, self.fix_params).match_points(*self.template(f[k]), guess, cov, 1.0)
+
+    def _add(self, i: int, j: int, m: PoseMatch, key: str) -> bool:
+        """An edge of the match ``m`` of keyframe j in the frame of i, if it is one."""
         if m.ok:
             w = np.linalg.cholesky(np.linalg.inv(m.cov)).T
-            edges.append((i, j, np.asarray(m.pose, dtype=float), w))
-            counts[key] += 1
+            (self.loop_edges if key == "loops" else self.edges).append(
+                (i, j, np.asarray(m.pose, dtype=float), w)
+            )
+            self.counts[key] += 1
+        return bool(m.ok)
 
-    for k in range(1, len(frames)):
-        z = between(frames[k - 1].odometry, frames[k].odometry)
+    def add(self, frame: Keyframe) -> int | None:
+        """Add a keyframe and its edges (odometry, sequential, loop).
+
+        Parameters
+        ----------
+        frame : Keyframe
+            The newest keyframe (its pose: the estimate's now).
+
+        Returns
+        -------
+        int or None
+            The old keyframe its loop edge ties it to, or None (no loop edge).
+        """
+        f = self.frames
+        f.append(frame)
+        k = len(f) - 1
+        self._xy = np.vstack([self._xy, np.asarray(frame.pose, dtype=float)[None, :2]])
+        if k == 0:
+            return None
+        z = between(f[k - 1].odometry, frame.odometry)
         d = float(np.hypot(z[0], z[1]))
         s_xy = ODO_SIGMA_M[0] + ODO_SIGMA_M[1] * d
         s_th = math.radians(ODO_SIGMA_DEG[0] + ODO_SIGMA_DEG[1] * math.sqrt(d))
-        sig = np.array([s_xy, s_xy, s_th])
-        edges.append((k - 1, k, z, np.diag(1.0 / sig)))
-        add(k - 1, k, matched(range(max(0, k - SEQUENTIAL), k), k - 1, k), "sequential")
-        if tick is not None:
-            tick(k)
-    for k in range(LOOP_MIN_GAP, len(frames)):
-        if tick is not None:
-            tick(len(frames) + k)
-        d = np.hypot(*(x0[: k - LOOP_MIN_GAP + 1, :2] - x0[k, :2]).T)
-        j = int(np.argmin(d))
-        if d[j] > LOOP_RADIUS_M:
-            continue
-        counts["loop_candidates"] += 1
-        add(j, k, matched(range(max(0, j - LOOP_SPAN), min(len(frames), j + LOOP_SPAN + 1)), j, k),
-            "loops")  # fmt: skip
-    if heading_prior:
-        w = np.diag([0.0, 0.0, 1.0 / math.radians(HEADING_PRIOR_DEG)])
-        edges += [(0, k, between(x0[0], x0[k]), w) for k in range(1, len(frames))]
-    return edges, counts
+        self.edges.append((k - 1, k, z, np.diag(1.0 / np.array([s_xy, s_xy, s_th]))))
+        self._add(k - 1, k, self._matched(range(max(0, k - SEQUENTIAL), k), k - 1, k),
+                  "sequential")  # fmt: skip
+        if k < LOOP_MIN_GAP:
+            return None
+        d_old = np.hypot(*(self._xy[: k - LOOP_MIN_GAP + 1] - self._xy[k]).T)
+        j = int(np.argmin(d_old))
+        if d_old[j] > LOOP_RADIUS_M:
+            return None
+        self.counts["loop_candidates"] += 1
+        span = range(max(0, j - LOOP_SPAN), min(len(f), j + LOOP_SPAN + 1))
+        return j if self._add(j, k, self._matched(span, j, k), "loops") else None
 
+    def move(self, poses: np.ndarray) -> None:
+        """Set the keyframes' poses (an online closure's solution).
 
-def close_loops(
-    frames: list[Keyframe],
-    template: Callable[[Keyframe], tuple[np.ndarray, np.ndarray]],
-    map_params: MapParams,
-    fix_params: FixParams,
-    reach: float,
-    heading_prior: bool,
-    tick: Callable[[int], None] | None = None,
-) -> tuple[np.ndarray, dict]:
-    """The keyframes' poses with the live map's loops closed: the pose graph of
-    :func:`keyframe_edges` solved by robust least squares (:func:`fuzzyslam.fixes.
-    pose_graph.optimise`), the first keyframe held.
+        Parameters
+        ----------
+        poses : ndarray, shape (K, 3)
+            A pose per keyframe.
+        """
+        for f, p in zip(self.frames, poses, strict=True):
+            f.pose = np.array(p, dtype=float)
+        self._xy = np.array(poses, dtype=float)[:, :2].copy()
 
-    Parameters
-    ----------
-    frames : list of Keyframe
-        The keyframes, in time order (at least 2).
-    template : callable
-        Keyframe -> its match template.
-    map_params : MapParams
-        The evidence model.
-    fix_params : FixParams
-        The match's parameters.
-    reach : float
-        How far around each keyframe its map reaches (m).
-    heading_prior : bool
-        Hold the headings to the estimate's.
-    tick : callable, optional
-        Progress (:func:`keyframe_edges`).
+    def solve(self, heading_prior: bool) -> tuple[np.ndarray, dict]:
+        """The keyframes' poses that best explain the edges: robust least squares
+        (:func:`fuzzyslam.fixes.pose_graph.optimise`), the first keyframe held, from
+        the keyframes' poses.
 
-    Returns
-    -------
-    poses : ndarray, shape (K, 3)
-        The keyframes' poses after the graph's solution.
-    info : dict
-        The edges' counts, the solver's (``optimise``), and how far the keyframes
-        moved (``moved_mean_m``, ``moved_max_m``).
-    """
-    edges, counts = keyframe_edges(
-        frames, template, map_params, fix_params, reach, heading_prior, tick
-    )
-    x0 = np.array([f.pose for f in frames])
-    i = np.array([e[0] for e in edges])
-    j = np.array([e[1] for e in edges])
-    z = np.array([e[2] for e in edges])
-    w = np.array([e[3] for e in edges])
-    poses, info = optimise(x0, i, j, z, w)
-    moved = np.hypot(*(poses[:, :2] - x0[:, :2]).T)
-    return poses, {**counts, **info, "moved_mean_m": float(moved.mean()),
-                   "moved_max_m": float(moved.max())}  # fmt: skip
+        Parameters
+        ----------
+        heading_prior : bool
+            Hold the headings to the keyframes' (the run had absolute heading fixes).
+
+        Returns
+        -------
+        poses : ndarray, shape (K, 3)
+            The solution.
+        info : dict
+            The edges' counts, the solver's (``optimise``), and how far the keyframes
+            moved (``moved_mean_m``, ``moved_max_m``).
+        """
+        x0 = np.array([f.pose for f in self.frames])
+        edges = self.edges + self.loop_edges
+        if heading_prior:
+            w = np.diag([0.0, 0.0, 1.0 / math.radians(HEADING_PRIOR_DEG)])
+            edges += [(0, k, between(x0[0], x0[k]), w) for k in range(1, len(x0))]
+        i = np.array([e[0] for e in edges])
+        j = np.array([e[1] for e in edges])
+        z = np.array([e[2] for e in edges])
+        w = np.array([e[3] for e in edges])
+        poses, info = optimise(x0, i, j, z, w)
+        moved = np.hypot(*(poses[:, :2] - x0[:, :2]).T)
+        return poses, {**self.counts, **info, "moved_mean_m": float(moved.mean()),
+                       "moved_max_m": float(moved.max())}  # fmt: skip
 
 
 def corrected_path(t: np.ndarray, path: np.ndarray, t_key: np.ndarray, before: np.ndarray,
@@ -556,7 +609,7 @@ class LiveMapPoseAid(PoseFixAid):
         super().__init__(BeliefMap.vacuous(Grid((0.0, 0.0), 1.0, (1, 1))), params, flm_source,
                          start_time)  # fmt: skip
         # every ring's time and the filter's pose after it (the path the loop closure
-        # moves), and the keyframes (close_loops)
+        # moves), and the keyframes (KeyframeGraph)
         self._t: list[float] = []
         self._path: list[np.ndarray] = []
         self._frames: list[Keyframe] = []
@@ -564,6 +617,10 @@ class LiveMapPoseAid(PoseFixAid):
         # live_right_angles): once they were applied, the graph holds the headings
         self.heading_aid: Any = None
         self._closed: tuple[np.ndarray, dict] | None = None
+        # the keyframes' pose graph, built as they come with live_close_online (a laser's)
+        self.graph: KeyframeGraph | None = None
+        self.online_closures = 0  # loop edges that moved the keyframes, the map and the filter
+        self.online_moved_max = 0.0  # the farthest a keyframe moved in one of them (m)
 
     @property
     def keyframes(self) -> int:
@@ -641,18 +698,76 @@ class LiveMapPoseAid(PoseFixAid):
             if not d.accepted and d.reason in NOT_FUSED:
                 return
         self.live.add_ring(ekf.pose, ring.ranges, ring.max_range, ring.fov, mounts)
-        self._frames.append(
-            Keyframe(len(self._t), float(t), np.array(ekf.pose, dtype=float),
-                     np.array(ekf.odometry_pose, dtype=float), np.array(ring.ranges, dtype=float),
-                     ring.max_range, float(ring.fov), np.array(mounts, dtype=float))
-        )  # fmt: skip
+        frame = Keyframe(len(self._t), float(t), np.array(ekf.pose, dtype=float),
+                         np.array(ekf.odometry_pose, dtype=float),
+                         np.array(ring.ranges, dtype=float), ring.max_range, float(ring.fov),
+                         np.array(mounts, dtype=float))  # fmt: skip
+        self._frames.append(frame)
+        p = self.params
+        if p.live_close_loops and p.live_close_online and narrow_beams(ring.fov):
+            self._close_online(frame, ekf)
+
+    def _graph(self) -> KeyframeGraph:
+        """The keyframes' pose graph (made on first use), matching their rings'
+        templates with the loop's reach."""
+        if self.graph is None:
+
+            def template(f: Keyframe) -> tuple[np.ndarray, np.ndarray]:
+                ring = _RingView(f.t, f.ranges, f.max_range, f.fov)
+                return self.template(ring, f.mounts)
+
+            reach = self.params.live_reach + 1.0
+            self.graph = KeyframeGraph(template, self.map_params, self.params, reach)
+        return self.graph
+
+    def _heading_held(self) -> bool:
+        """Whether the run's heading fixes against the building were applied (the
+        graph then holds the headings)."""
+        h = self.heading_aid
+        return h is not None and any(d.accepted for d in h.decisions)
+
+    def _close_online(self, frame: Keyframe, ekf: FilterView) -> None:
+        """Add the newest keyframe to the graph; if it closes a loop that moves the
+        solution by a cell or more, move the keyframes there, fuse the map again from
+        them and move the filter onto the newest keyframe's pose.
+
+        The filter's move is a direct measurement of its pose, z = x_k* (the newest
+        keyframe's solved pose), with R the loop edge's covariance in the map frame,
+        after P_rr += diag(v^2) (v = z - x_r): the recovery of
+        :class:`~fuzzyslam.fixes.pose_aid.PoseFixAid`, the closure being an error of the
+        map the filter was relative to, not of the filter against it. The graph and its
+        solution: Grisetti, Kuemmerle, Stachniss and Burgard, "A tutorial on
+        graph-based SLAM", IEEE ITS Magazine 2010.
+        """
+        g = self._graph()
+        j = g.add(frame)
+        if j is None:
+            return
+        poses, _ = g.solve(self._heading_held())
+        x0 = np.array([f.pose for f in g.frames])
+        moved = float(np.max(np.hypot(*(poses[:, :2] - x0[:, :2]).T)))
+        if moved < self.map_params.resolution:
+            return
+        g.move(poses)
+        self.live.refill(g.frames)
+        _, _, z_jk, w = g.loop_edges[-1]
+        _, jb = jacobians_compose(poses[j], z_jk)
+        r = jb @ np.linalg.inv(w.T @ w) @ jb.T  # R = J_b Sigma_jk J_b^T, x_k = x_j (+) z_jk
+        z = poses[-1]
+        v = np.asarray(z, dtype=float) - np.asarray(ekf.pose, dtype=float)
+        v[2] = wrap_angle_scalar(float(v[2]))
+        ekf.inflate_robot(np.diag(v * v))  # P_rr += diag(v^2)
+        ekf.update_robot(z, 0.5 * (r + r.T), [0, 1, 2], gate_chi2=None)  # z = x_r + noise(R)
+        self.online_closures += 1
+        self.online_moved_max = max(self.online_moved_max, moved)
 
     def closed(self) -> tuple[np.ndarray, dict] | None:
         """The keyframes' poses with the loops closed and the graph's figures
-        (:func:`close_loops`, computed once), or None (``live_close_loops`` off, fewer
-        than two keyframes, or a sonar ring: measured on Freiburg's 9 sonars, 7 odometry
-        variants, its FLM matches' edges moved the aligned error by -0.06 to +0.05 m
-        and doubled the raw error of some runs, 0.32 -> 0.67 m).
+        (:class:`KeyframeGraph`, built during the run or now, solved once), or None
+        (``live_close_loops`` off, fewer than two keyframes, or a sonar ring: measured
+        on Freiburg's 9 sonars, 7 odometry variants, its FLM matches' edges moved the
+        aligned error by -0.06 to +0.05 m and doubled the raw error of some runs, 0.32
+        -> 0.67 m).
 
         Returns
         -------
@@ -662,23 +777,18 @@ class LiveMapPoseAid(PoseFixAid):
             return None
         if not narrow_beams(self._frames[0].fov):
             return None  # a sonar ring's matches are too loose for the graph (sec. 10b)
-        if self._closed is None:
-
-            def template(f: Keyframe) -> tuple[np.ndarray, np.ndarray]:
-                ring = _RingView(f.t, f.ranges, f.max_range, f.fov)
-                return self.template(ring, f.mounts)
-
+        if self._closed is None and self.graph is None:
+            # built after the run (live_close_online off): each keyframe's edges in turn
             from fuzzyslam.progress import Progress
 
-            h = self.heading_aid
-            held = h is not None and any(d.accepted for d in h.decisions)
+            g = self._graph()
             n = len(self._frames)
-            reach = self.params.live_reach + 1.0
-            with Progress(2 * n, f"run: closing the live map's loops ({n} keyframes)") as bar:
-                self._closed = close_loops(
-                    self._frames, template, self.map_params, self.params, reach, held,
-                    bar.update_to,
-                )  # fmt: skip
+            with Progress(n, f"run: closing the live map's loops ({n} keyframes)") as bar:
+                for k, f in enumerate(self._frames):
+                    g.add(f)
+                    bar.update_to(k + 1)
+        if self._closed is None:
+            self._closed = self.graph.solve(self._heading_held())
         return self._closed
 
     def closed_path(self) -> tuple[np.ndarray, np.ndarray] | None:
@@ -693,9 +803,10 @@ class LiveMapPoseAid(PoseFixAid):
         if found is None:
             return None
         t = np.array(self._t)
-        before = np.array([f.pose for f in self._frames])
+        path = np.array(self._path)
+        before = path[[f.ring for f in self._frames]]  # the keyframes' poses on the path
         t_key = t[[f.ring for f in self._frames]]
-        return t, corrected_path(t, np.array(self._path), t_key, before, found[0])
+        return t, corrected_path(t, path, t_key, before, found[0])
 
     def run_note(self, lamps: bool) -> str:
         """One line for stderr: where the loops were closed and what to build the map
@@ -725,10 +836,16 @@ class LiveMapPoseAid(PoseFixAid):
             if gated
             else ""
         )
+        online = (
+            f"{self.online_closures} loops closed during the run (keyframes moved up to "
+            f"{self.online_moved_max:.2f} m), "
+            if self.online_closures
+            else ""
+        )
         return (
-            f"live map: trajectory_closed.tum has its loops closed ({info['loops']} loop "
-            f"edges, keyframes moved up to {info['moved_max_m']:.2f} m): build the map from it "
-            f"(map --trajectory){refused}"
+            f"live map: {online}trajectory_closed.tum has its loops closed ({info['loops']} "
+            f"loop edges, keyframes moved up to {info['moved_max_m']:.2f} m after the run): "
+            f"build the map from it (map --trajectory){refused}"
         )
 
     def write(self, outdir: Path) -> None:
@@ -771,6 +888,8 @@ class LiveMapPoseAid(PoseFixAid):
                 "iterations": info["iterations"],
                 "keyframes_moved_mean_m": round(info["moved_mean_m"], 4),
                 "keyframes_moved_max_m": round(info["moved_max_m"], 4),
+                "online_closures": self.online_closures,
+                "online_moved_max_m": round(self.online_moved_max, 4),
             }
         return dataclasses.replace(
             s,

@@ -261,9 +261,14 @@ class FixParams:
     # close the live map's loops at the end of the run: a pose graph of its keyframes
     # (odometry and scan-match edges, loop edges where a keyframe comes back near an old
     # one) solved by least squares, written as trajectory_closed.tum
-    # (fixes.live_map.close_loops, fixes.pose_graph); a laser's only (a sonar ring's
+    # (fixes.live_map.KeyframeGraph, fixes.pose_graph); a laser's only (a sonar ring's
     # matches are too loose for it)
     live_close_loops: bool = True
+    # ... and during the run too: when a keyframe's loop edge moves the graph's solution
+    # by a cell or more, the keyframes take the solution's poses, the live map is fused
+    # again from them, and the filter is moved onto the newest keyframe's
+    # (fixes.live_map.LiveMapPoseAid; docs/models.md sec. 10b)
+    live_close_online: bool = True
 
     # --- change detection (docs/models.md sec. 10) ---
     detect_changes: bool = True

@@ -53,7 +53,7 @@ class PoseSummary:
     map_shape: list[int] = OMIT
     map_resolution_m: float = OMIT
     map_grown: int = OMIT
-    # its loop closure (fixes.live_map.close_loops; None: off): loop and sequential edges
+    # its loop closure (fixes.live_map.KeyframeGraph; None: off): loop and sequential edges
     # matched, loop candidates tried, edges the robust weights turned down, solver
     # iterations, how far the keyframes moved (mean, max, m)
     loop_closure: dict | None = OMIT
