@@ -450,7 +450,6 @@ class KeyframeGraph:
         self.edges: list[tuple[int, int, np.ndarray, np.ndarray]] = []
         self.loop_edges: list[tuple[int, int, np.ndarray, np.ndarray]] = []
         self.counts = {"sequential": 0, "loops": 0, "loop_candidates": 0}
-        self._xy = np.empty((0, 2))  # the keyframes' positions (the loop candidates')
 
     def _matched(self, idx: range, anchor: int, k: int) -> PoseMatch:
         """Keyframe k's template matched against the map of keyframes ``idx`` in the frame
@@ -488,7 +487,6 @@ class KeyframeGraph:
         f = self.frames
         f.append(frame)
         k = len(f) - 1
-        self._xy = np.vstack([self._xy, np.asarray(frame.pose, dtype=float)[None, :2]])
         if k == 0:
             return None
         z = between(f[k - 1].odometry, frame.odometry)
@@ -500,7 +498,8 @@ class KeyframeGraph:
                   "sequential")  # fmt: skip
         if k < LOOP_MIN_GAP:
             return None
-        d_old = np.hypot(*(self._xy[: k - LOOP_MIN_GAP + 1] - self._xy[k]).T)
+        old = np.array([o.pose[:2] for o in f[: k - LOOP_MIN_GAP + 1]], dtype=float)
+        d_old = np.hypot(*(old - np.asarray(frame.pose, dtype=float)[:2]).T)
         j = int(np.argmin(d_old))
         if d_old[j] > LOOP_RADIUS_M:
             return None
@@ -518,7 +517,6 @@ class KeyframeGraph:
         """
         for f, p in zip(self.frames, poses, strict=True):
             f.pose = np.array(p, dtype=float)
-        self._xy = np.array(poses, dtype=float)[:, :2].copy()
 
     def solve(self, heading_prior: bool) -> tuple[np.ndarray, dict]:
         """The keyframes' poses that best explain the edges: robust least squares
@@ -743,9 +741,8 @@ class LiveMapPoseAid(PoseFixAid):
         j = g.add(frame)
         if j is None:
             return
-        poses, _ = g.solve(self._heading_held())
-        x0 = np.array([f.pose for f in g.frames])
-        moved = float(np.max(np.hypot(*(poses[:, :2] - x0[:, :2]).T)))
+        poses, info = g.solve(self._heading_held())
+        moved = info["moved_max_m"]
         if moved < self.map_params.resolution:
             return
         g.move(poses)
