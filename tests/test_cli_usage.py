@@ -169,3 +169,21 @@ def test_signal_is_one_line(tmp_path: Path, sig: int, code: int) -> None:
     assert err.endswith("; no partial outputs were kept\n") and len(err.splitlines()) == 1, err
     assert error_lines(err) == err.splitlines()
     assert list(tmp_path.iterdir()) == []
+
+
+def test_blas_held_to_one_thread_when_numpy_came_first():
+    """A command called in-process, numpy loaded before the CLI set its BLAS variables
+    (this test session: conftest imports it), runs with the CLI's one BLAS thread all the
+    same (fuzzyslam.cli._blas_limits), so it computes the floats its own process would:
+    more threads split a matrix product's sums differently, and the live map's matches
+    amplify the last bits over a long run (measured on ACES: closed-loop mean 0.366 m in
+    a fresh process, 0.379 m in-process with OpenBLAS's own threads)."""
+    threadpoolctl = pytest.importorskip("threadpoolctl")
+    import fuzzyslam.cli as cli_module
+
+    assert cli_module._NUMPY_FIRST
+    if cli_module._BLAS_USER_SET:
+        pytest.skip("a BLAS thread variable is set in this environment: it wins")
+    with cli_module._blas_limits():
+        blas = [i for i in threadpoolctl.threadpool_info() if i["user_api"] == "blas"]
+        assert blas and all(i["num_threads"] == 1 for i in blas)

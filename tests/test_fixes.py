@@ -1197,6 +1197,25 @@ def test_direct_correlation_equals_match_template(room):
         assert np.allclose(a, b, rtol=1e-5, atol=1e-4 * np.abs(a).max())
 
 
+def test_one_channel_scores_add_up_to_the_two_channel_scores(room):
+    """The scores are linear in the template's masses, so a template's scores (both
+    channels correlated) are those of its m(O) alone plus those of its m(E) alone, each
+    of which correlates one channel (a channel without mass is skipped, as a laser's end
+    points' m(E) = 0): the matchTemplate and the matrix-product paths."""
+    walls, fgm = room
+    pose = np.array([1.5, 1.2, 0.3])
+    pts, masses = flm_evidence(flm_at(pose, walls), 0.05)
+    assert np.any(masses[:, 0]) and np.any(masses[:, 1])
+    only_o, only_e = masses * [1.0, 0.0], masses * [0.0, 1.0]
+    thetas = pose[2] + np.deg2rad(np.arange(-3.0, 3.5, 1.0))
+    for shifts, w in ((0, 3), (81, 2)):
+        m = PoseMatcher(fgm, FixParams(pose_direct_shifts=shifts))
+        both = m.scores(pts, masses, pose, thetas, w)
+        parts = m.scores(pts, only_o, pose, thetas, w) + m.scores(pts, only_e, pose, thetas, w)
+        assert np.abs(m.scores(pts, only_e, pose, thetas, w)).max() > 0
+        assert np.allclose(both, parts, rtol=1e-5, atol=1e-5 * np.abs(both).max())
+
+
 def test_pose_matches_wait_for_travel_or_turn(room):
     """With pose_min_travel 0.5 m and pose_min_turn_deg 20, 0.1 m steps are matched every
     5th step after an applied match, and a turn in place of 25 deg is matched at once;

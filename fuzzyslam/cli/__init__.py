@@ -44,6 +44,10 @@ BLAS_VARIABLES = (
     "NUMEXPR_NUM_THREADS",
 )
 _blas_threads = os.environ.get("FUZZYSLAM_BLAS_THREADS", "1")
+_BLAS_USER_SET = any(v in os.environ for v in BLAS_VARIABLES)
+# numpy loaded before this module (a script or a test calling main): the variables come
+# too late for its BLAS, which main then limits at run time (_blas_limits)
+_NUMPY_FIRST = "numpy" in sys.modules
 if _blas_threads != "default":
     for _var in BLAS_VARIABLES:
         os.environ.setdefault(_var, _blas_threads)
@@ -288,6 +292,20 @@ def main(argv: list[str] | None = None) -> None:
     sys.exit(code)
 
 
+def _blas_limits() -> contextlib.AbstractContextManager:
+    """The CLI's BLAS thread count where numpy was loaded before the variables were set
+    (module comment): threadpoolctl's run-time limit, so that a command called in-process
+    computes the same floats as in its own process (a matrix product's sums are split
+    differently by more threads: the live map's matches, and so its trajectory, differ
+    in the last bits, which a long run can amplify). Nothing to do otherwise, or where
+    the user chose the count."""
+    if not _NUMPY_FIRST or _BLAS_USER_SET or not _blas_threads.isdigit():
+        return contextlib.nullcontext()
+    from threadpoolctl import threadpool_limits
+
+    return threadpool_limits(limits=int(_blas_threads))
+
+
 def _invoke(args: list[str]) -> None:
     """Parse ``args`` and run the command, as ``cli.main(standalone_mode=False)`` does
     but without its blank line on stderr at Ctrl-C (click's, before raising Abort): an
@@ -295,7 +313,7 @@ def _invoke(args: list[str]) -> None:
     completion = getattr(cli, "_main_shell_completion", None)
     if completion is not None:
         completion({}, "fuzzyslam")
-    with cli.make_context("fuzzyslam", args) as ctx:
+    with _blas_limits(), cli.make_context("fuzzyslam", args) as ctx:
         cli.invoke(ctx)
 
 

@@ -95,8 +95,13 @@ def olson_blur(m_o: np.ndarray, sigma_cells: float) -> np.ndarray:
     Computed as exp of a grey dilation of log m_o with the non-flat structuring element
     s(d) = -|d|^2 / (2 sigma^2), |d_x|, |d_y| <= r = ceil(2.5 sigma): the maximum over the
     (2r + 1)^2 offsets d of log m_o(x + d) + s(d), log m_o taken as -30 off the map (the
-    definition of ``scipy.ndimage.grey_dilation(..., mode="constant", cval=-30)``, whose
-    values these are to the bit: the same sums, and max is exact).
+    definition of ``scipy.ndimage.grey_dilation(..., mode="constant", cval=-30)``). The
+    element is the dilation of a row element by a column one, s(d) = s1(d_y) + s1(d_x),
+    so the dilation is a row pass then a column pass (the chain rule
+    f + (B1 + B2) = (f + B1) + B2, + the dilation: Soille, "Morphological Image
+    Analysis", 2nd ed., Springer 2003, sec. 3.9); the sums are taken in another order
+    than scipy's, so a value may differ from it in the last bit of the float64 log,
+    which the float32 result almost never keeps.
 
     Parameters
     ----------
@@ -115,13 +120,18 @@ def olson_blur(m_o: np.ndarray, sigma_cells: float) -> np.ndarray:
         return m.astype(np.float32)
     r = max(1, math.ceil(2.5 * sigma_cells))
     d = np.arange(-r, r + 1, dtype=np.float64)
-    struct = -(d[:, None] ** 2 + d[None, :] ** 2) / (2.0 * sigma_cells**2)
+    s1 = -(d**2) / (2.0 * sigma_cells**2)  # s(d) = s1(d_y) + s1(d_x)
     logm = np.pad(np.log(np.maximum(m, 1e-9)), r, mode="constant", constant_values=-30.0)
     h, w = m.shape
+    # s is separable and max distributes over +: max_dy [s1(dy) + max_dx (f + s1(dx))],
+    # 2 (2r + 1) passes over the map instead of (2r + 1)^2 (over the element's offsets,
+    # not the cells)
+    rows = np.full((h + 2 * r, w), -np.inf)
+    for j in range(2 * r + 1):
+        np.maximum(rows, logm[:, j : j + w] + s1[j], out=rows)
     out = np.full((h, w), -np.inf)
-    for i in range(2 * r + 1):  # over the structuring element's offsets, not the cells
-        for j in range(2 * r + 1):
-            np.maximum(out, logm[i : i + h, j : j + w] + struct[i, j], out=out)
+    for i in range(2 * r + 1):
+        np.maximum(out, rows[i : i + h] + s1[i], out=out)
     return np.exp(out).astype(np.float32)
 
 
@@ -310,24 +320,31 @@ class PoseMatcher:
         flat = (corner[..., None] + offs).ravel()  # (n, N, 4)
         wb = np.stack([(1 - av) * (1 - au), (1 - av) * au, av * (1 - au), av * au], axis=-1)
         cells = n * size * size
+        # a channel the template has no mass in (a laser's end points: m(E) = 0) adds
+        # exactly zero to every score: it is neither splatted nor correlated
+        chans = [ch for ch in (0, 1) if np.any(masses[:, ch])] or [0]
         tmpl = np.stack(
             [
                 np.bincount(flat, weights=(wb * masses[None, :, None, ch]).ravel(), minlength=cells)
-                for ch in (0, 1)
+                for ch in chans
             ],
             axis=-1,
         )
-        tmpl = tmpl.astype(np.float32).reshape(n, size, size, 2)
+        tmpl = tmpl.astype(np.float32).reshape(n, size, size, len(chans))
         patch = self._patch(base[1] - half - w, base[0] - half - w, size + 2 * w)
+        if len(chans) == 1:
+            patch = np.ascontiguousarray(patch[..., chans[0] : chans[0] + 1])
         shifts = (2 * w + 1) ** 2
         if shifts <= self.params.pose_direct_shifts:
             # few translations: every rotation's correlation at once, one matrix product
             # of the templates (n, K) with the patch's windows (K, shifts), K = size^2 x 2
             # (cv2.matchTemplate's DFT costs the same ~1 ms per rotation for any window)
-            win = np.lib.stride_tricks.sliding_window_view(patch, (size, size, 2))
+            win = np.lib.stride_tricks.sliding_window_view(patch, (size, size, len(chans)))
             win = win.reshape(shifts, -1)
             out = tmpl.reshape(n, -1) @ win.T
             return out.reshape(n, 2 * w + 1, 2 * w + 1)
+        if len(chans) == 1:  # cv2 takes (H, W) for one channel
+            patch, tmpl = patch[..., 0], np.ascontiguousarray(tmpl[..., 0])
         return np.stack([cv2.matchTemplate(patch, tmpl[i], cv2.TM_CCORR) for i in range(n)])
 
     # -- the match ------------------------------------------------------------------------
