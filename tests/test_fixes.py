@@ -1197,6 +1197,26 @@ def test_direct_correlation_equals_match_template(room):
         assert np.allclose(a, b, rtol=1e-5, atol=1e-4 * np.abs(a).max())
 
 
+def test_corridor_end_points_scores_equal_the_direct_correlation(room):
+    """A laser's end points along a corridor (two walls 1.6 m apart, 10 m long; m(O) = 1,
+    m(E) = 0): each rotation's template is cut to its points' box before
+    cv2.matchTemplate, and its scores equal the matrix-product correlation of the whole
+    square template (a second implementation of the same sums)."""
+    _, fgm = room
+    pose = np.array([1.5, 1.2, 0.3])
+    x = np.arange(-5.0, 5.0, 0.05)
+    pts = np.concatenate([np.stack([x, np.full_like(x, y)], axis=1) for y in (-0.8, 0.8)])
+    masses = np.zeros((len(pts), 2))
+    masses[:, 0] = 1.0
+    thetas = pose[2] + np.deg2rad(np.arange(-10.0, 10.5, 2.5))
+    for w in (1, 4):
+        a = PoseMatcher(fgm, FixParams()).scores(pts, masses, pose, thetas, w)
+        b = PoseMatcher(fgm, FixParams(pose_direct_shifts=81)).scores(pts, masses, pose, thetas, w)
+        assert a.shape == b.shape == (len(thetas), 2 * w + 1, 2 * w + 1)
+        assert np.abs(b).max() > 0
+        assert np.allclose(a, b, rtol=1e-5, atol=1e-5 * np.abs(b).max())
+
+
 def test_one_channel_scores_add_up_to_the_two_channel_scores(room):
     """The scores are linear in the template's masses, so a template's scores (both
     channels correlated) are those of its m(O) alone plus those of its m(E) alone, each
