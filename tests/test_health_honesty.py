@@ -157,6 +157,33 @@ def test_the_flagged_line_gives_seconds_into_the_log_and_causes(capsys) -> None:
     assert _health(_aid(["ok"] * 25), start).diverged_after_start_s is OMIT
 
 
+def test_a_window_test_says_where_its_windows_were_out_of_bounds() -> None:
+    """A run flagged by the NIS windows' rate test alone (ACES's live map: out of bounds
+    over 339-437, 793-904 and 1137-1220 s, decided at 1219.5 s) is said to be in
+    trouble from its first window out of bounds, with the spans and the decision's
+    time, in seconds into the log; with a reason of another kind as well (an aid's),
+    the line keeps that reason's time, and lists the spans all the same."""
+    from dataclasses import replace
+
+    from fuzzyslam.slam.stage import _trouble_line
+
+    start = 1_600_000_000.0
+    base = _health(_aid(["gated"] * 25), start)
+    spans = [[start + 339.44, start + 436.62], [start + 792.88, start + 904.481],
+             [start + 1137.01, start + 1219.5]]  # fmt: skip
+    h = replace(base, reasons=["nis_rate"], out_of_bounds_spans=spans,
+                diverged_at=start + 1219.5, diverged_after_start_s=1219.5)  # fmt: skip
+    line = _trouble_line(h)
+    assert "from 339.4 s into the log" in line
+    assert "339.4-436.6, 792.9-904.5, 1137.0-1219.5 s into the log, found at 1219.5 s" in line
+    assert "nis_rate: noise set too small" in line and "1600000" not in line
+    both = replace(h, reasons=["nis_rate", "pose_matches_refused"],
+                   diverged_at=start + 31.5, diverged_after_start_s=31.5)  # fmt: skip
+    line = _trouble_line(both)
+    assert "from 31.5 s into the log" in line and "found at" not in line
+    assert "339.4-436.6" in line
+
+
 def replace_t(d: PoseDecision, t: float) -> PoseDecision:
     from dataclasses import replace
 

@@ -36,7 +36,13 @@ from fuzzyslam.slam.noise import DetectionNoiseEstimate, corroborated, suggestio
 from fuzzyslam.slam.outputs import StreamingOutputs, write_outputs, write_summary
 from fuzzyslam.slam.prefetch import input_events
 from fuzzyslam.slam.prefetch import wanted as prefetch_wanted
-from fuzzyslam.slam.run_results import filter_health, lost_events, reason_causes, with_finding
+from fuzzyslam.slam.run_results import (
+    FilterHealth,
+    filter_health,
+    lost_events,
+    reason_causes,
+    with_finding,
+)
 from fuzzyslam.slam.runner import SlamResult, SlamRunner
 from fuzzyslam.slam.summary import RunSummary
 from fuzzyslam.slam.turn_check import (
@@ -414,21 +420,59 @@ def start_time(events: Iterator[Event], t0: float) -> tuple[Iterator[Event], flo
     return itertools.chain([first], events), min(t0, first.t)
 
 
+# the reasons found by the NIS and association windows (their spans say where)
+WINDOW_REASONS = frozenset({"nis", "nis_rate", "association"})
+
+
+def _trouble_line(health: FilterHealth) -> str:
+    """The flagged line's text: since when the filter looks in trouble, why, and, where
+    windows were out of bounds, over which spans, in seconds into the log.
+
+    A window test decides from the windows seen so far (``nis_rate``: more windows out
+    of bounds than chance allows), so ``diverged_at`` is when it decided, possibly long
+    after the first window out of bounds: a run flagged by window tests alone is said
+    to be in trouble from its first span's start, with the spans listed (at most the
+    summary's five) and the decision's time.
+
+    Parameters
+    ----------
+    health : FilterHealth
+        The run's filter_health (flagged).
+
+    Returns
+    -------
+    str
+    """
+    after = health.diverged_after_start_s
+    causes = reason_causes(health.reasons) or "NIS or association windows"
+    if not isinstance(after, float):
+        return (
+            f"filter_health: the filter looks inconsistent or lost from t = "
+            f"{health.diverged_at:.3f} s ({causes}; see the summary's filter_health): do not "
+            "trust this estimate"
+        )
+    start = float(health.diverged_at) - after
+    spans = [(a - start, b - start) for a, b in health.out_of_bounds_spans]
+    since, found = after, ""
+    if spans and set(health.reasons) <= WINDOW_REASONS:
+        since = min(a for a, _ in spans)
+        found = f", found at {after:.1f} s"
+    windows = ""
+    if spans:
+        listed = ", ".join(f"{a:.1f}-{b:.1f}" for a, b in spans)
+        windows = f"; windows out of bounds {listed} s into the log{found}"
+    return (
+        f"filter_health: the filter looks inconsistent or lost from {since:.1f} s into the "
+        f"log ({causes}{windows}; see the summary's filter_health): do not trust this "
+        "estimate"
+    )
+
+
 def _tell(summary: RunSummary, cfg: Config | None = None) -> None:
     """The one-line notes on stderr: the filter in trouble, the noise to change."""
     health = summary.filter_health
     if health.diverged:
-        after = health.diverged_after_start_s
-        when = (
-            f"{after:.1f} s into the log"
-            if isinstance(after, float)
-            else f"t = {health.diverged_at:.3f} s"
-        )
-        note(
-            f"filter_health: the filter looks inconsistent or lost from {when} "
-            f"({reason_causes(health.reasons) or 'NIS or association windows'}; see "
-            "the summary's filter_health): do not trust this estimate"
-        )
+        note(_trouble_line(health))
     turns = summary.odometry_turn_check
     encoders = cfg is not None and summary.odometry_source.startswith("encoders")
     if turns and turns["flagged"]:
