@@ -97,9 +97,9 @@ def olson_blur(m_o: np.ndarray, sigma_cells: float) -> np.ndarray:
     (2r + 1)^2 offsets d of log m_o(x + d) + s(d), log m_o taken as -30 off the map (the
     definition of ``scipy.ndimage.grey_dilation(..., mode="constant", cval=-30)``). The
     element is the dilation of a row element by a column one, s(d) = s1(d_y) + s1(d_x),
-    so the dilation is a row pass then a column pass (the chain rule
-    f + (B1 + B2) = (f + B1) + B2, + the dilation: Soille, "Morphological Image
-    Analysis", 2nd ed., Springer 2003, sec. 3.9); the sums are taken in another order
+    so the dilation is a row pass then a column pass (the chain rule of dilations,
+    dil(f, dil(B1, B2)) = dil(dil(f, B1), B2): Soille, "Morphological Image Analysis",
+    2nd ed., Springer 2003, ch. 3); the sums are taken in another order
     than scipy's, so a value may differ from it in the last bit of the float64 log,
     which the float32 result almost never keeps.
 
@@ -337,7 +337,8 @@ class PoseMatcher:
         shifts = (2 * w + 1) ** 2
         if shifts <= self.params.pose_direct_shifts:
             # few translations: every rotation's correlation at once, one matrix product
-            # of the templates (n, K) with the patch's windows (K, shifts), K = size^2 x 2
+            # of the templates (n, K) with the patch's windows (K, shifts), K = size^2 x
+            # the channels correlated
             # (cv2.matchTemplate's DFT costs the same ~1 ms per rotation for any window)
             win = np.lib.stride_tricks.sliding_window_view(patch, (size, size, len(chans)))
             win = win.reshape(shifts, -1)
