@@ -385,6 +385,40 @@ def test_refill_is_the_map_of_its_keyframes_fused_in_turn(monkeypatch):
     assert float(canvas[1][1].sum()) > 100.0  # walls were seen
 
 
+def test_a_graph_edges_map_is_its_keyframes_fused_in_turn(monkeypatch):
+    """keyframes_map (a graph edge's map): the keyframes in batches of the same sensors
+    (sensor_batches: a second laser mount splits them), the same masses cell for cell
+    as FgmBuilder.add_ring of each in turn at its pose relative to the anchor."""
+    from fuzzyslam.fixes import live_map
+    from fuzzyslam.fixes.live_map import Keyframe, keyframes_map, sensor_batches
+    from fuzzyslam.maps.fgm import FgmBuilder
+    from fuzzyslam.maps.grid import Grid
+    from fuzzyslam.se2 import between
+
+    monkeypatch.setattr(live_map, "REFILL_BATCH", 3)
+    params = load_config("real_building_scan").fgm
+    lines = room_lines(-3.0, -2.0, 30.0, 3.0)
+    turned = MOUNTS + np.array([0.0, 0.05, 0.0])  # another mount: another batch
+    frames = []
+    for k, x in enumerate(np.arange(0.0, 12.0, 1.0)):
+        p = np.array([x, 0.1 * math.sin(x), 0.03 * x])
+        m = turned if k in (4, 5) else MOUNTS
+        frames.append(Keyframe(k, float(k), p, p, ring_in_lines(p, m, lines, FOV, RMAX),
+                               RMAX, FOV, m))  # fmt: skip
+    assert [len(b) for b in sensor_batches(frames, 3)] == [3, 1, 2, 3, 3]
+    anchor = frames[3].pose
+    got = keyframes_map(frames, anchor, params, 8.0)
+    rel = np.array([between(anchor, f.pose) for f in frames])
+    lo, hi = rel[:, :2].min(axis=0) - 8.0, rel[:, :2].max(axis=0) + 8.0
+    b = FgmBuilder(Grid.covering(lo[0], lo[1], hi[0], hi[1], params.resolution), params)
+    for f, p in zip(frames, rel, strict=True):
+        b.add_ring(p, f.ranges, f.max_range, f.fov, f.mounts)
+    for x, y in zip((got.m_e, got.m_o, got.m_t, got.m_c),
+                    (b.map.m_e, b.map.m_o, b.map.m_t, b.map.m_c), strict=True):  # fmt: skip
+        np.testing.assert_allclose(x, y, atol=1e-6)
+    assert float(got.m_o.sum()) > 50.0  # walls were seen
+
+
 def _loop_scan(pose: np.ndarray, walls: np.ndarray, rmax: float) -> np.ndarray:
     """The laser's ranges at ``pose`` in the wall segments (each beam one ray; rmax: no
     echo)."""
