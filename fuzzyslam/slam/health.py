@@ -193,6 +193,9 @@ def repair_covariance(p: np.ndarray, floor: float = 1e-12) -> tuple[np.ndarray, 
 # around it at the start (a pose-fix run on a short log, which closes 1-2 windows, is
 # judged by its matches instead: fixes/pose_aid.py, pose_matches_refused)
 RATE_LEVEL = 1e-6
+# the reasons DivergenceMonitor's windows give (its streak tests, "nis" and "association",
+# and the NIS rate test): where they were found, its out-of-bounds spans say
+WINDOW_REASONS = frozenset({"nis", "nis_rate", "association"})
 RATE_RTOL = 1e-9  # relative margin of that comparison: the log-space sum gives alpha^2
 # as 1.0000000000000004e-06 at alpha = 1e-3, as 9.999999999999987e-07 at 1e-3 (1 - 1e-15)
 

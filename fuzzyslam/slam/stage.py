@@ -29,6 +29,7 @@ from fuzzyslam.rundir import OPTIONAL_OUTPUTS, RUN_OUTPUTS
 from fuzzyslam.slam import calibration as cal
 from fuzzyslam.slam import calibration_files
 from fuzzyslam.slam.events import Event
+from fuzzyslam.slam.health import WINDOW_REASONS
 from fuzzyslam.slam.inputs import LogInputs, open_inputs
 from fuzzyslam.slam.latency import MotionTap, delay_note
 from fuzzyslam.slam.log_setup import slow_odometry_note
@@ -420,10 +421,6 @@ def start_time(events: Iterator[Event], t0: float) -> tuple[Iterator[Event], flo
     return itertools.chain([first], events), min(t0, first.t)
 
 
-# the reasons found by the NIS and association windows (their spans say where)
-WINDOW_REASONS = frozenset({"nis", "nis_rate", "association"})
-
-
 def _trouble_line(health: FilterHealth) -> str:
     """The flagged line's text: since when the filter looks in trouble, why, and, where
     windows were out of bounds, over which spans, in seconds into the log.
@@ -444,27 +441,21 @@ def _trouble_line(health: FilterHealth) -> str:
     str
     """
     after = health.diverged_after_start_s
+    when, windows = f"t = {health.diverged_at:.3f} s", ""
+    if isinstance(after, float):  # the log's start known: seconds into the log
+        start = float(health.diverged_at) - after
+        spans = [(a - start, b - start) for a, b in health.out_of_bounds_spans]
+        since, found = after, ""
+        if spans and set(health.reasons) <= WINDOW_REASONS:
+            since, found = min(a for a, _ in spans), f", found at {after:.1f} s"
+        when = f"{since:.1f} s into the log"
+        if spans:
+            listed = ", ".join(f"{a:.1f}-{b:.1f}" for a, b in spans)
+            windows = f"; windows out of bounds {listed} s into the log{found}"
     causes = reason_causes(health.reasons) or "NIS or association windows"
-    if not isinstance(after, float):
-        return (
-            f"filter_health: the filter looks inconsistent or lost from t = "
-            f"{health.diverged_at:.3f} s ({causes}; see the summary's filter_health): do not "
-            "trust this estimate"
-        )
-    start = float(health.diverged_at) - after
-    spans = [(a - start, b - start) for a, b in health.out_of_bounds_spans]
-    since, found = after, ""
-    if spans and set(health.reasons) <= WINDOW_REASONS:
-        since = min(a for a, _ in spans)
-        found = f", found at {after:.1f} s"
-    windows = ""
-    if spans:
-        listed = ", ".join(f"{a:.1f}-{b:.1f}" for a, b in spans)
-        windows = f"; windows out of bounds {listed} s into the log{found}"
     return (
-        f"filter_health: the filter looks inconsistent or lost from {since:.1f} s into the "
-        f"log ({causes}{windows}; see the summary's filter_health): do not trust this "
-        "estimate"
+        f"filter_health: the filter looks inconsistent or lost from {when} ({causes}"
+        f"{windows}; see the summary's filter_health): do not trust this estimate"
     )
 
 
