@@ -22,6 +22,11 @@ T = TypeVar("T")
 
 TIME_FORMAT = "%.9f"
 
+# Two stamps this close (s) are one instant, whatever their size: a Unix time's float64
+# resolution is 0.24 us, and other tools' text files keep microseconds. An absolute
+# tolerance: a relative one (numpy's isclose default, 1e-5) is hours at 1.7e9 s.
+SAME_INSTANT_S = 1e-6
+
 
 def to_ns(t: float) -> int:
     """Integer nanoseconds of a time in seconds: the float's own value rounded to the

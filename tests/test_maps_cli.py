@@ -11,6 +11,7 @@ import yaml
 from conftest import shared_dir
 
 from fuzzyslam.cli import main
+from fuzzyslam.maps.build import covered
 from fuzzyslam.maps.mapio import load_fgm, load_references, read_pgm
 from fuzzyslam.streams.messages import pose_of, range_msg, stamp_to_sec
 from fuzzyslam.streams.reader import LogReader
@@ -239,3 +240,38 @@ def test_a_trajectory_evo_exports_from_the_log_builds_the_same_map(tmp_path, cap
     for mass in ("m_e", "m_o", "m_t", "m_c"):  # 4e-5 measured
         assert np.abs(getattr(maps[0], mass) - getattr(maps[1], mass)).max() < 1e-4, mass
     assert maps[0].m_o.max() > 0.5  # walls were found
+
+
+EXCERPT = Path(__file__).resolve().parents[1] / "data" / "carmen_fr079_excerpt"
+
+
+def test_covered_at_unix_times():
+    """A ring is on the trajectory only within a microsecond of a sample or between two
+    close samples, at Unix times as at 0 s (numpy's relative isclose tolerance is hours
+    at 1.6e9 s)."""
+    for t0 in (0.0, 1.6e9):
+        t = t0 + np.arange(0.0, 61.0, 0.2)
+        tq = t0 + np.array([-5.0, 0.0, 30.1, 60.0, 60.0 + 4e-7, 61.0, 500.0])
+        ok = covered(tq, t, max_gap=1.0)
+        np.testing.assert_array_equal(ok, [False, True, True, True, True, False, False])
+
+
+def test_short_trajectory_of_a_unix_time_log(tmp_path, capsys):
+    """The committed Freiburg excerpt (Unix-time stamps) with a trajectory that ends
+    halfway: one line naming the uncovered rings, exit 3, no output directory."""
+    t, p = read_tum(EXCERPT / "truth.tum")
+    short = tmp_path / "short.tum"
+    write_tum(short, t[: len(t) // 2], p[: len(t) // 2])
+    out = tmp_path / "fgm"
+    args = ["map", str(EXCERPT / "log.mcap"), "--trajectory", str(short), "--ranges", "scan"]
+    code, _, err = run_cli([*args, "-o", str(out)], capsys)
+    line = err.strip().splitlines()[-1]
+    assert code == 3 and "short.tum" in line and "does not cover laser scans" in line, err
+    assert f"{t[len(t) // 2 - 1]:.2f} s)" in line  # the trajectory's end, to the 10 ms
+    assert not out.exists()
+    # the covered half maps, the rest said skipped
+    code, stdout, _ = run_cli([*args, "--skip-uncovered", "--no-figures", "-o", str(out)], capsys)
+    s = json.loads(stdout)
+    assert code == 0 and s["rings_skipped"] > 0 and s["rings_used"] > 0
+    scans = sum(1 for _ in LogReader(EXCERPT / "log.mcap").messages(["/scan"]))
+    assert s["rings_used"] + s["rings_skipped"] == scans

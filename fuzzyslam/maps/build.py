@@ -34,7 +34,7 @@ from fuzzyslam.progress import Progress, note
 from fuzzyslam.se2 import interpolate_poses, wrap_angle_period
 from fuzzyslam.slam import calibration_files
 from fuzzyslam.slam.log_setup import base_frame
-from fuzzyslam.stamps import LogTime, log_time
+from fuzzyslam.stamps import SAME_INSTANT_S, LogTime, log_time
 from fuzzyslam.streams.logmeta import World, read_scenario, read_world
 from fuzzyslam.streams.ranges import open_ranges
 from fuzzyslam.streams.reader import LogReader
@@ -63,7 +63,8 @@ class MapOptions:
 
 def covered(tq: np.ndarray, t: np.ndarray, max_gap: float) -> np.ndarray:
     """Whether each query time lies within the trajectory, between samples at most
-    ``max_gap`` seconds apart (or within max_gap/2 of a sample).
+    ``max_gap`` seconds apart, or on a sample (within ``SAME_INSTANT_S``, an absolute
+    tolerance: the same at 0 s as at Unix times).
 
     Parameters
     ----------
@@ -82,7 +83,7 @@ def covered(tq: np.ndarray, t: np.ndarray, max_gap: float) -> np.ndarray:
     j = np.searchsorted(t, tq)
     lo = t[np.clip(j - 1, 0, len(t) - 1)]
     hi = t[np.clip(j, 0, len(t) - 1)]
-    exact = np.isclose(lo, tq, atol=1e-9) | np.isclose(hi, tq, atol=1e-9)
+    exact = (np.abs(lo - tq) <= SAME_INSTANT_S) | (np.abs(hi - tq) <= SAME_INSTANT_S)
     inside = (tq >= t[0]) & (tq <= t[-1]) & (hi - lo <= max_gap)
     return exact | inside
 
