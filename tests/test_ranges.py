@@ -9,6 +9,7 @@ from __future__ import annotations
 
 import math
 import shutil
+from dataclasses import replace
 from pathlib import Path
 from types import SimpleNamespace
 
@@ -25,7 +26,7 @@ from fuzzyslam.slam.odom_gate import OdomGate, first_plausible_pose, plausible_m
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.ranges import open_ranges
 from fuzzyslam.streams.reader import LogReader
-from fuzzyslam.streams.scan import scan_geometry, scan_ranges, scan_rings
+from fuzzyslam.streams.scan import ANGLE_TOL, kept_step, scan_geometry, scan_ranges, scan_rings
 from fuzzyslam.streams.sonar import RingStats
 from fuzzyslam.streams.tum import read_tum
 from fuzzyslam.streams.writer import LogWriter
@@ -455,3 +456,33 @@ def test_map_refuses_unsorted_trajectory_and_sorts_it_on_request(tmp_path, capsy
 
     m1, m2 = load_fgm(tmp_path / "m1" / "fgm.npz").map, load_fgm(tmp_path / "m2" / "fgm.npz").map
     assert np.array_equal(m1.m_o, m2.m_o) and np.array_equal(m1.m_e, m2.m_e)
+
+
+def test_kept_beams_at_least_a_cone_apart():
+    """``scan_step`` is the least step: beams finer than the cone are kept one cone apart
+    (float32 increments of an exact fraction of the cone keep that fraction)."""
+    inc = {d: float(np.float32(math.radians(d))) for d in (0.25, 0.352, 0.5, 1.0)}
+    cone = math.radians(2.0)
+    assert kept_step(4, cone, inc[0.25]) == 8  # a UTM-30LX: 8 beams a cone
+    assert kept_step(4, cone, -inc[0.25]) == 8  # listed clockwise
+    assert kept_step(4, cone, inc[0.352]) == 6  # a URG-04LX: 5.68 beams a cone
+    assert kept_step(4, cone, inc[0.5]) == 4 and kept_step(4, cone, inc[1.0]) == 4
+    assert kept_step(1, 0.0, inc[0.25]) == 1 and kept_step(3, cone, math.nan) == 3
+    # kept beams' spacing: never below the cone (less the float32 slack), never a step
+    # more than needed
+    for d, v in inc.items():
+        k = kept_step(1, cone, v)
+        assert k * v >= cone - ANGLE_TOL and (k - 1) * v < cone, d
+
+
+def test_fine_laser_read_with_a_cone_between_kept_beams(tmp_path):
+    """The committed 0.5-deg Freiburg excerpt with ``scan_step`` 1 under 2-deg cones keeps
+    every 4th beam, as the preset's step does: the same sensors."""
+    base = load_config("real_building_scan.yaml")
+    one = replace(base, ranges=replace(base.ranges, scan_step=1))
+    reader = LogReader(EXCERPT / "log.mcap")
+    a = open_ranges(reader, base, "scan", base="base_link")
+    b = open_ranges(reader, one, "scan", base="base_link")
+    assert a.geometry.step == b.geometry.step == 4
+    np.testing.assert_array_equal(a.mounts, b.mounts)
+    assert b.describe()["scan_step"] == 4 and b.describe()["sensors"] == 90

@@ -17,7 +17,8 @@ sensors sit (one home for ``map`` and ``run``):
 - ``scan``: ``topics.scan`` (sensor_msgs/LaserScan) as a ring of narrow sensors, one per
   kept beam (:mod:`fuzzyslam.streams.scan`), at the laser's /tf_static mount (frame of
   the first message) composed with each beam angle; cone width ``ranges.beam_width_deg``,
-  every ``ranges.scan_step``-th beam kept. A scan of another beam count or angles is read
+  every ``ranges.scan_step``-th beam kept, or fewer: the kept beams at least a cone
+  apart (:func:`fuzzyslam.streams.scan.kept_step`). A scan of another beam count or angles is read
   onto the first scan's kept beams, placed by the same laser mount (``RangeSensor.laser``;
   :func:`fuzzyslam.streams.scan.scan_rings`).
 
@@ -66,7 +67,9 @@ class RangeParams:
     ``beam_width_deg``: the cone of one laser beam in the evidence model. A laser's beam
     diverges by well under a degree; the cone also stands for the angular share of the
     beams left out by ``scan_step``, so the preset sets it to about the kept beams'
-    spacing (cones that tile the field of view, no cell between two beams skipped).
+    spacing (cones that tile the field of view, no cell between two beams skipped). A
+    laser whose beams are finer than that keeps fewer, one every cone
+    (:func:`fuzzyslam.streams.scan.kept_step`): ``scan_step`` is the least step.
     """
 
     source: str = field(default="auto", metadata={"choices": list(SOURCES)})
@@ -230,7 +233,7 @@ def _scan(reader: LogReader, cfg: Any, base: str) -> RangeSensor:
     if first is None:
         raise InputError(reader.path, f"no message on {tp}")
     rp: RangeParams = cfg.ranges
-    geom = scan_geometry(first.msg, rp.scan_step)
+    geom = scan_geometry(first.msg, rp.scan_step, float(np.deg2rad(rp.beam_width_deg)))
     if geom.beams == 0 or not (np.isfinite(geom.angle_increment) and geom.angle_increment != 0):
         raise InputError(reader.path, f"{tp}: a scan with no beams or a zero angle increment")
     tf = _tf_messages(reader, cfg.topics.tf_static) or []

@@ -176,18 +176,66 @@ class ScanGeometry:
         return Resampled(index, ok, np.where(ok, got, want), moved)
 
 
-def scan_geometry(msg, step: int = 1) -> ScanGeometry:
-    """The geometry of a LaserScan message, keeping every ``step``-th beam."""
+def scan_geometry(msg, step: int = 1, spacing: float = 0.0) -> ScanGeometry:
+    """The geometry of a LaserScan message, keeping every ``step``-th beam, or more
+    apart: the kept beams at least ``spacing`` (rad) apart (:func:`kept_step`).
+
+    Parameters
+    ----------
+    msg : sensor_msgs/LaserScan
+        The first message.
+    step : int
+        Keep at least every ``step``-th beam.
+    spacing : float
+        The kept beams' least angle apart (rad): the evidence model's beam cone.
+
+    Returns
+    -------
+    ScanGeometry
+    """
     if step < 1:
         raise ValueError(f"step must be >= 1, got {step}")
+    inc = float(msg.angle_increment)
     return ScanGeometry(
         str(msg.header.frame_id),
         float(msg.angle_min),
-        float(msg.angle_increment),
+        inc,
         len(msg.ranges),
-        int(step),
+        kept_step(step, spacing, inc),
         _time_increment(msg),
     )
+
+
+def kept_step(step: int, spacing: float, increment: float) -> int:
+    """Every how many beams a scan is kept: ``step``, or more where its beams are so
+    fine that ``step`` of them span less than ``spacing``.
+
+    Each kept beam's cone (the evidence model's beam width) stands for the beams around
+    it: kept beams closer than their cones overlap, and each wall cell is then counted by
+    two or more beams as though they were independent looks, which makes a scan match
+    overconfident. Measured on Freiburg 079 read as a 0.25-deg laser (1081 beams, 270 deg,
+    2-deg cones): every 4th beam (1 deg apart) put 9 of 12 NIS windows of the pose run
+    out of bounds and cost 3.8x the CPU; every 8th (2 deg) kept the 0.5-deg log's
+    figures. Beam angles are float32: ``ANGLE_TOL`` is allowed.
+
+    Parameters
+    ----------
+    step : int
+        The least step (``ranges.scan_step``).
+    spacing : float
+        The least angle between kept beams (rad); 0 for none.
+    increment : float
+        The scan's angle increment (rad, either sign).
+
+    Returns
+    -------
+    int
+        At least ``step``.
+    """
+    inc = abs(float(increment))
+    if not (np.isfinite(inc) and inc > 0.0) or spacing <= ANGLE_TOL:
+        return int(step)
+    return max(int(step), int(np.ceil((spacing - ANGLE_TOL) / inc)))
 
 
 def _time_increment(msg) -> float:
