@@ -9,6 +9,7 @@ from __future__ import annotations
 import json
 import subprocess
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -44,8 +45,10 @@ def _rewrite(dst: Path, cov_of) -> list[np.ndarray]:
     return written
 
 
-def _frames(log: Path) -> list[Frame]:
-    inputs = open_inputs(log, load_config("real_detections.yaml"))
+def _frames(log: Path, own: str = "floor") -> list[Frame]:
+    cfg = load_config("real_detections.yaml")
+    cfg = replace(cfg, slam=replace(cfg.slam, detection_own_covariance=own))
+    inputs = open_inputs(log, cfg)
     return [e for e in inputs.events() if isinstance(e, Frame)]
 
 
@@ -88,6 +91,51 @@ def test_own_covariance_is_used(tmp_path: Path) -> None:
             assert np.allclose(f.cov, w, rtol=1e-12, atol=0) and np.allclose(f.cov, 4 * b.cov)
             n_own += len(f.z)
     assert n_own > 50
+
+
+def test_own_covariance_below_the_model_is_floored(tmp_path: Path) -> None:
+    """A detector that claims a quarter of the model's variance along and across the line
+    of sight: raised to the model exactly with ``floor`` (the default), taken as it is
+    with ``use``, ignored with ``model``."""
+    slam = load_config("real_detections.yaml").slam
+    log = tmp_path / "small.mcap"
+    written = _rewrite(log, lambda pts: 0.25 * slam.detection_cov(pts))
+    base = _frames(EXCERPT)
+    floored, used, model = (_frames(log, own) for own in ("floor", "use", "model"))
+    assert len(floored) == len(used) == len(model) == len(base) == len(written) > 10
+    for f, u, m, b, w in zip(floored, used, model, base, written, strict=True):
+        assert np.allclose(f.cov, b.cov, rtol=1e-12, atol=1e-15)
+        assert np.allclose(u.cov, w, rtol=1e-12, atol=0)
+        assert np.array_equal(m.cov, b.cov)
+
+
+def test_floor_adds_only_what_the_model_has_more_of() -> None:
+    """``detection_cov_floored`` on random own covariances: C' - C is positive
+    semidefinite, C' holds at least the model's variance along (u) and across (n) the
+    line of sight, C' = C where C already did, and the covariance without its own (NaN)
+    is the model's."""
+    slam = load_config("real_detections.yaml").slam
+    rng = np.random.default_rng(7)
+    m = 400
+    z = rng.uniform(-6.0, 6.0, (m, 2))
+    a = rng.normal(0.0, 0.15, (m, 2, 2))
+    own = a @ a.transpose(0, 2, 1) + 1e-6 * np.eye(2)
+    own[::10] = np.nan
+    cov, floored = slam.detection_cov_floored(z, own)
+    model = slam.detection_cov(z)
+    u = z / np.hypot(z[:, 0], z[:, 1])[:, None]
+    n = np.stack([-u[:, 1], u[:, 0]], axis=1)
+    has = ~np.isnan(own[:, 0, 0])
+    assert np.array_equal(cov[~has], model[~has])
+    d = cov[has] - own[has]
+    assert np.linalg.eigvalsh(0.5 * (d + d.transpose(0, 2, 1))).min() > -1e-12
+    for v in (u, n):
+        q = np.einsum("ki,kij,kj->k", v, cov, v)
+        assert np.all(q >= np.einsum("ki,kij,kj->k", v, model, v) * (1 - 1e-12))
+    q_own = [np.einsum("ki,kij,kj->k", v, own, v) for v in (u, n)]
+    q_mod = [np.einsum("ki,kij,kj->k", v, model, v) for v in (u, n)]
+    held = has & (q_own[0] >= q_mod[0]) & (q_own[1] >= q_mod[1])
+    assert np.array_equal(cov[held], own[held]) and 0 < floored == has.sum() - held.sum()
 
 
 @pytest.mark.slow

@@ -95,6 +95,7 @@ READ_STATE = (
     "first_problem",
     "gap_seconds",
     "own_covariances",
+    "own_floored",
     "ring_stats",
     "lost",
     "odometry_restarts",
@@ -142,6 +143,7 @@ class LogInputs:
     lost: dict[str, float] = field(default_factory=lambda: {"frames": 0, "readings": 0})
     odom_gap_s: float = ODOM_GAP_S  # a longer silence is a gap (odometry_gap_s)
     own_covariances: int = 0  # detections that brought their own covariance
+    own_floored: int = 0  # ... raised to the model's (SlamParams.detection_cov_floored)
     _names: list = field(default_factory=list)
     _idx: list = field(default_factory=list)
     _rejected_in_row: int = 0
@@ -577,18 +579,17 @@ class LogInputs:
             r = mount.rotation
             z = (z3 @ r.T + mount.translation)[:, :2]
             own = (r @ own3 @ r.T)[:, :2, :2]
-            bad = ~(np.linalg.det(own) > 0) | ~(own[:, 0, 0] > 0)  # NaN, or degenerate
+            with np.errstate(invalid="ignore"):  # NaN where no own covariance
+                bad = ~(np.linalg.det(own) > 0) | ~(own[:, 0, 0] > 0)  # NaN, or degenerate
             own[bad] = np.nan
         ok = np.all(np.isfinite(z), axis=1)
         if not np.all(ok):
             bad = int(np.count_nonzero(~ok))  # detections, not messages
             self.warn("nan_detections", f"{bad} non-finite detection(s) at t={t:.3f} s", bad)
             z, own = z[ok], own[ok]
-        cov = self.cfg.slam.detection_cov(z)
-        has = np.all(np.isfinite(own), axis=(1, 2))
-        if np.any(has):
-            cov[has] = own[has]
-            self.own_covariances += int(np.count_nonzero(has))
+        cov, floored = self.cfg.slam.detection_cov_floored(z, own)
+        self.own_covariances += int(np.count_nonzero(np.all(np.isfinite(own), axis=(1, 2))))
+        self.own_floored += floored
         return Frame(t, z, cov)
 
     def _ring_events(self, start: float | None = None) -> Iterator[Event]:

@@ -76,6 +76,13 @@ class SlamParams:
     detection_sigma_range: float = field(default=0.02, metadata={"min": 1e-4, "max": 10.0})
     detection_sigma_range_per_m: float = field(default=0.0, metadata={"min": 0.0, "max": 1.0})
     detection_sigma_bearing_deg: float = field(default=0.6, metadata={"min": 1e-3, "max": 45.0})
+    # a detection's own covariance (vision_msgs/Detection3DArray): ``floor``: taken, but
+    # no smaller than the model above along and across the line of sight (a detector's
+    # covariance is its Gaussian core, the model's margin holds its tails); ``use``: taken
+    # as it is; ``model``: ignored (detection_cov_floored)
+    detection_own_covariance: str = field(
+        default="floor", metadata={"choices": ["floor", "use", "model"]}
+    )
     # data association
     gate_chi2: float = field(default=9.21, metadata={"min": 0.1})
     new_lamp_chi2: float = field(default=40.0, metadata={"min": 0.1})
@@ -151,3 +158,55 @@ class SlamParams:
         st = r * np.deg2rad(self.detection_sigma_bearing_deg)
         along = u[:, :, None] * u[:, None, :]
         return sr[:, None, None] ** 2 * along + st[:, None, None] ** 2 * (np.eye(2) - along)
+
+    def detection_cov_floored(self, z: np.ndarray, own: np.ndarray) -> tuple[np.ndarray, int]:
+        """Covariances of detections some of which carry their own
+        (``detection_own_covariance``): with ``floor``, each own C is raised to at least
+        the model's variance along the line of sight u and across it n,
+
+            C' = C + max(0, sigma_r^2 - u^T C u) u u^T + max(0, (r sigma_b)^2 - n^T C n) n n^T,
+
+        which adds positive semidefinite terms only (C' >= C, and C' = C where C already
+        holds the model's); with ``use`` C as it is; with ``model`` the model's
+        (:meth:`detection_cov`). Without an own covariance (NaN), the model's.
+
+        Parameters
+        ----------
+        z : ndarray, shape (m, 2)
+            Detections (robot frame, m).
+        own : ndarray, shape (m, 2, 2)
+            Their own covariances, NaN where they carry none.
+
+        Returns
+        -------
+        cov : ndarray, shape (m, 2, 2)
+        floored : int
+            How many own covariances were raised.
+        """
+        cov = self.detection_cov(z)
+        has = np.all(np.isfinite(own), axis=(1, 2))
+        if self.detection_own_covariance == "model" or not np.any(has):
+            return cov, 0
+        c = np.array(own[has], dtype=float)
+        if self.detection_own_covariance == "floor":
+            zz = np.asarray(z, dtype=float).reshape(-1, 2)[has]
+            r = np.hypot(zz[:, 0], zz[:, 1])
+            with np.errstate(invalid="ignore", divide="ignore"):
+                u = np.where(r[:, None] > 0, zz / r[:, None], np.array([1.0, 0.0]))
+            n = np.stack([-u[:, 1], u[:, 0]], axis=1)
+            model = cov[has]
+            raised = 0
+            for d in (u, n):
+                short = np.maximum(0.0, _quad(model, d) - _quad(c, d))
+                c += short[:, None, None] * (d[:, :, None] * d[:, None, :])
+                raised = raised | (short > 0)
+            floored = int(np.count_nonzero(raised))
+        else:
+            floored = 0
+        cov[has] = c
+        return cov, floored
+
+
+def _quad(c: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """d_k^T C_k d_k for (m, 2, 2) C and (m, 2) d."""
+    return np.einsum("ki,kij,kj->k", d, c, d)

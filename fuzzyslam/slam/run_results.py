@@ -26,8 +26,10 @@ from fuzzyslam.summary import OMIT
 class RunCounts:
     """The run summary's ``counts``: events handled and what became of them.
 
-    ``detections_own_covariance`` (detections that carried their own covariance) is
-    present for logs whose lamps come as PoseArray detections only (set by the run stage).
+    ``detections_own_covariance`` (detections that carried their own covariance) and
+    ``detections_own_floored`` (of those, raised to the configured model:
+    ``slam.detection_own_covariance``) are present for logs whose lamps come as
+    detections only (set by the run stage).
     """
 
     odometry: int  # odometry increments
@@ -45,6 +47,7 @@ class RunCounts:
     tentative_expired: int
     tentative_pending: int
     detections_own_covariance: int = OMIT
+    detections_own_floored: int = OMIT
     # the relocalisation test's (slam/relocalise.py), present when it is on
     relocalisation_tests: int = OMIT
     relocalisations: int = OMIT  # accepted: the pose had left its covariance

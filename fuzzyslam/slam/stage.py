@@ -707,7 +707,11 @@ def _run_filter(
         start=inputs.start + inputs.clock_offset,  # diverged_after_start_s: for the notes
     )
     if inputs.lamp_source == "detections":
-        res.counts = replace(res.counts, detections_own_covariance=inputs.own_covariances)
+        res.counts = replace(
+            res.counts,
+            detections_own_covariance=inputs.own_covariances,
+            detections_own_floored=inputs.own_floored,
+        )
     if res.counts.odometry == 0:
         raise InputError(inputs.reader.path, _no_odometry(inputs))
     if inputs.lamp_source == "frames" and res.counts.frames == 0:
