@@ -120,6 +120,26 @@ def test_overconfidence_warned_only_when_gross() -> None:
     assert m["headline"]["warnings"] == m["warnings"]
 
 
+def test_estimate_in_another_frame_is_said_not_called_overconfident() -> None:
+    """An estimate with the stated noise but written in its start pose's frame (the truth
+    moved by 3 m and 40 deg): without --align, the frames are said (raw RMSE against the
+    RMSE after one rigid motion) instead of an overconfident NEES; with --align, or in the
+    truth's own frame, nothing is said."""
+    truth, est = _noisy_estimate(1.0)
+    moved = Estimate(est.t, se2.compose(np.array([3.0, -1.0, 0.7]), est.poses), cov=est.cov)
+    m = evaluate(truth, moved, EvalParams()).metrics
+    ape = m["phases"]["overall"]["ape_m"]
+    (w,) = [w for w in m["warnings"] if "another frame" in w]
+    assert f"RMSE {ape['raw']['rmse']:.3g} m as written, {ape['aligned']['rmse']:.3g} m" in w
+    assert ape["raw"]["rmse"] > 10 * ape["aligned"]["rmse"]
+    assert not [w for w in m["warnings"] if "overconfident" in w]
+    for m in (
+        evaluate(truth, moved, EvalParams(), align=True).metrics,
+        evaluate(truth, est, EvalParams()).metrics,
+    ):
+        assert not [w for w in m["warnings"] if "another frame" in w or "overconfident" in w]
+
+
 def test_overconfident_thresholds_are_chi_square_not_the_band() -> None:
     """Out of the 95 % band of the mean is not enough (the samples are correlated); the
     mean above one sample's 99.9 % quantile (16.27 for 3 dof), or over 5 % of the samples

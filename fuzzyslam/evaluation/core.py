@@ -459,6 +459,7 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
         truth.lines_dropped,
         truth.lines_refused,
         truth.t.size,
+        blocks["overall"].ape_m if alignment is None else None,
     )
     typed = R.Metrics(
         label=est.label,

@@ -223,6 +223,11 @@ class Metrics:
 
 
 COVERAGE_WARN = 0.99  # below this fraction of the estimate compared, the summary says so
+# an unaligned estimate whose position RMSE a rigid motion cuts by this factor, and by
+# more than FRAMES_DIFFER_M, is in another frame than the truth (a real log's run maps in
+# its start pose's frame): its raw errors and NEES measure that motion, not the filter
+FRAMES_DIFFER_RATIO = 3.0
+FRAMES_DIFFER_M = 0.5
 
 
 def evaluation_warnings(
@@ -232,10 +237,12 @@ def evaluation_warnings(
     truth_lines_dropped: int | None = None,
     truth_lines_refused: int = 0,
     truth_lines: int = 0,
+    unaligned_ape: ApeMetrics | None = None,
 ) -> list[str]:
     """What the numbers do not cover, or say loudly, in words: a truth covering only part
-    of the estimate, a damaged truth log, truth lines dropped as stray, an estimate
-    grossly overconfident against the truth (:func:`consistency.overconfident`).
+    of the estimate, a damaged truth log, truth lines dropped as stray, an estimate in
+    another frame than the truth (``FRAMES_DIFFER_*``: then said instead of its NEES), an
+    estimate grossly overconfident against the truth (:func:`consistency.overconfident`).
 
     Parameters
     ----------
@@ -251,6 +258,8 @@ def evaluation_warnings(
         Truth lines the stray-line test refused (more than dropped: too many, all kept).
     truth_lines : int
         The truth's lines.
+    unaligned_ape : ApeMetrics or None
+        The overall APE of an estimate evaluated without ``--align`` (None: aligned).
 
     Returns
     -------
@@ -280,7 +289,21 @@ def evaluation_warnings(
             f"{truth_lines_dropped} stray truth line(s) dropped: poses the robot cannot "
             "have reached from the lines around them (the odometry glitch gate)"
         )
-    if nees is not OMIT and overconfident(nees):
+    frames_differ = (
+        unaligned_ape is not None
+        and unaligned_ape is not OMIT
+        and unaligned_ape.raw.rmse > FRAMES_DIFFER_RATIO * unaligned_ape.aligned.rmse
+        and unaligned_ape.raw.rmse - unaligned_ape.aligned.rmse > FRAMES_DIFFER_M
+    )
+    if frames_differ:
+        out.append(
+            f"the estimate looks to be in another frame than the truth: position RMSE "
+            f"{unaligned_ape.raw.rmse:.3g} m as written, {unaligned_ape.aligned.rmse:.3g} m "
+            "after one rigid motion (a real log's run maps in its start pose's frame); "
+            "pass --align to score it in the truth's frame (the raw errors and NEES here "
+            "measure that motion, not the filter)"
+        )
+    elif nees is not OMIT and overconfident(nees):
         out.append(
             f"the filter is overconfident: NEES mean {nees.mean:.3g} ({nees.dof} expected, "
             f"{overconfident_threshold(nees.dof):.1f} the limit), above 100 for "
