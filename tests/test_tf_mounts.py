@@ -12,6 +12,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from test_robust_logs import rewrite
 
 from fuzzyslam.config import load_config
 from fuzzyslam.errors import InputError
@@ -24,6 +25,7 @@ from fuzzyslam.streams.tf import (
     Rigid,
     TfProblem,
     compose_to_base,
+    constant_transforms,
     frame_mounts,
     locate,
     quaternion_matrix,
@@ -322,3 +324,96 @@ def test_decimation_keeps_the_same_beams_whichever_way_they_are_listed():
     a = np.sort(scan_geometry(ccw, step=4).angles)
     b = np.sort(scan_geometry(cw, step=4).angles)
     assert len(a) == len(b) == 5 and np.allclose(a, b) and a[0] == pytest.approx(-0.8)
+
+
+# --- (e) mounts broadcast on /tf (ROS 1's static_transform_publisher) ----------------------
+
+EXCERPT = Path(__file__).resolve().parents[1] / "data" / "carmen_fr079_excerpt"
+
+
+def test_e_constant_transforms_keep_what_never_moves():
+    """Of a /tf stream: a mount republished with float jitter (1e-6) is kept once, as first
+    seen; the odometry's moving odom -> base_link, a mount that moves 5 mm once, one that
+    turns by 0.2 deg once and a child under two parents are left out."""
+    msgs = []
+    for k in range(50):
+        t = 0.1 * k
+        jitter = 1e-6 * (-1) ** k
+        msgs.append(
+            tf(
+                link("odom", "base_link", 0.01 * k, 0.0, yaw=0.002 * k),
+                link("base_link", "laser", 0.2 + jitter, -0.1, 0.3, roll=PI),
+                link("base_link", "pan", 0.1 + (0.005 if k == 30 else 0.0)),
+                link("base_link", "tilt", yaw=math.radians(0.2) if k == 40 else 0.0),
+                link("base_link" if k % 2 else "base_footprint", "camera", 0.1),
+            )
+        )
+        for ts in msgs[-1].transforms:
+            ts.header.stamp = M.header(t, "x").stamp
+    kept = constant_transforms(msgs)
+    assert [(ts.header.frame_id, ts.child_frame_id) for ts in kept] == [("base_link", "laser")]
+    assert kept[0].transform.translation.x == pytest.approx(0.2 + 1e-6, abs=1e-12)
+
+
+def _mounts_on_tf(path: Path, pan: bool = False) -> Path:
+    """The excerpt with its /tf_static mounts moved to /tf, republished with every /odom
+    message beside the odometry's odom -> base_link (a ROS 1 log's static_transform_publisher);
+    ``pan``: the laser's mount turning (a pan unit), no longer a mount."""
+    mounts = [m.msg for m in LogReader(EXCERPT / "log.mcap").messages(["/tf_static"])]
+    links = [ts for msg in mounts for ts in msg.transforms]
+
+    def fault(m):
+        if m.topic == "/tf_static":
+            return []
+        if m.topic != "/odom":
+            return [(m.topic, m.typename, m.msg, m.t)]
+        p = m.msg.pose.pose.position
+        odo = link("odom", "base_link", p.x, p.y)
+        now = [odo, *links]
+        if pan:
+            turn = link("base_link", "laser", yaw=0.3 * math.sin(m.t))
+            now = [odo, turn, *(ts for ts in links if ts.child_frame_id != "laser")]
+        return [(m.topic, m.typename, m.msg, m.t), ("/tf", M.TF_MESSAGE, tf(*now), m.t)]
+
+    return rewrite(EXCERPT / "log.mcap", path, fault)
+
+
+def test_e_sensors_placed_by_tf_mounts_as_by_tf_static(tmp_path: Path):
+    """The excerpt's laser and 9 sonars, their mounts on /tf instead of /tf_static: the
+    same mounts, said to come from /tf; a laser whose /tf mount turns is refused in one
+    line that says /tf was looked at."""
+    cfg = load_config("real_building_scan.yaml")
+    log = _mounts_on_tf(tmp_path / "tf.mcap")
+    for kind in ("scan", "sonar"):
+        a = open_ranges(LogReader(EXCERPT / "log.mcap"), cfg, kind)
+        b = open_ranges(LogReader(log), cfg, kind)
+        np.testing.assert_allclose(b.mounts, a.mounts, atol=1e-12)
+        assert a.mounts_source == "/tf_static" and b.mounts_source == "/tf (constant transforms)"
+        assert b.topics == a.topics and len(b.mounts) == (90 if kind == "scan" else 9)
+    pan = _mounts_on_tf(tmp_path / "pan.mcap", pan=True)
+    with pytest.raises(InputError) as e:
+        open_ranges(LogReader(pan), cfg, "scan")
+    assert "no /tf_static mount for /scan (frame 'laser'), nor a constant transform on /tf" in str(
+        e.value
+    )
+    assert open_ranges(LogReader(pan), cfg, "sonar").mounts_source == "/tf (constant transforms)"
+
+
+def test_e_a_scan_in_the_base_frame_needs_no_mount_and_says_so(tmp_path: Path):
+    """No /tf_static and the scans stamped in base_link: the laser is the base (identity
+    mounts), and ``mounts_source`` says no transform was needed instead of naming a
+    /tf_static the log does not have."""
+
+    def fault(m):
+        if m.topic == "/tf_static":
+            return []
+        if m.topic == "/scan":
+            m.msg.header.frame_id = "base_link"
+        return [(m.topic, m.typename, m.msg, m.t)]
+
+    log = rewrite(EXCERPT / "log.mcap", tmp_path / "base.mcap", fault)
+    cfg = load_config("real_building_scan.yaml")
+    s = open_ranges(LogReader(log), cfg, "scan")
+    assert s.mounts_source == "none needed: /scan is in the base frame 'base_link'"
+    a = open_ranges(LogReader(EXCERPT / "log.mcap"), cfg, "scan")  # its laser at the base
+    np.testing.assert_allclose(s.mounts, a.mounts, atol=1e-12)

@@ -85,6 +85,7 @@ from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.ranges import RangeSensor, open_ranges
 from fuzzyslam.streams.reader import LogMessage, LogReader
 from fuzzyslam.streams.sonar import RingStats
+from fuzzyslam.streams.static_tf import static_messages
 from fuzzyslam.streams.tf import Rigid, static_tree
 
 CAMERA_FRAME = "ceiling_camera"
@@ -839,8 +840,9 @@ def open_inputs(
             reader.require([tp.camera_info], "the config's topics.camera_info")
             raise InputError(reader.path, f"no message on {tp.camera_info}")
         offset, axes = tuple(cfg.camera.offset), IDENTITY_AXES
-        if reader.has(tp.tf_static):  # the lens and image axes in the base frame
-            tree = static_tree(m.msg for m in reader.messages([tp.tf_static]))
+        tf_msgs, _ = static_messages(reader, tp, [CAMERA_FRAME], frames.base)
+        if tf_msgs:  # the lens and image axes in the base frame
+            tree = static_tree(tf_msgs)
             mount = mount_in_base(reader, cfg, tree, CAMERA_FRAME, frames.base, "the camera", notes)
             if mount is not None:
                 offset, axes = floor_mount(mount)

@@ -28,6 +28,7 @@ from fuzzyslam.slam.odom_gate import SPEED_MARGIN, OdomGate, first_plausible_pos
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.logmeta import read_scenario
 from fuzzyslam.streams.reader import LogMessage, LogReader
+from fuzzyslam.streams.static_tf import static_messages
 from fuzzyslam.streams.tf import Rigid, TfProblem, locate, static_tree
 
 ODOM_GAP_S = 1.0  # odometry silent for longer than this: a gap (counted, motion kept)
@@ -1053,11 +1054,8 @@ def detection_mount_of(reader: LogReader, cfg: Config, base: str, notes: list[st
     frame = str(first.header.frame_id).lstrip("/") if first is not None else ""
     if not frame or frame == base:
         return None
-    tree = (
-        static_tree(m.msg for m in reader.messages([tp.tf_static]))
-        if reader.has(tp.tf_static)
-        else None
-    )
+    msgs, _ = static_messages(reader, tp, [frame], base)  # /tf_static (or /tf's constant)
+    tree = static_tree(msgs) if msgs or reader.has(tp.tf_static) else None
     what = f"the detections' frame {frame!r}"
     mount = mount_in_base(reader, cfg, tree, frame, base, what, notes) if tree is not None else None
     if mount is not None or (frame in BASE_ALIASES and base in BASE_ALIASES):

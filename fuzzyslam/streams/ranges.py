@@ -4,23 +4,25 @@
 sensors sit (one home for ``map`` and ``run``):
 
 - ``sonar``: the topics ``topics.sonar_prefix``NN present in the log (any number and
-  placement: a 9-sonar front ring reads as 9 sensors), each placed by the /tf_static
-  mount of its Range messages' ``header.frame_id``. A present topic whose frame has no
-  mount, or whose mount cannot be composed (two parents, a cycle, a zero quaternion, a
-  cone axis near vertical), is an error naming it. Only a log without any /tf_static
-  (older simulated logs) falls back to the nominal ``sonar.count`` ring of
-  ``robot.radius``, and says so in ``mounts_source``. The firing pattern (simultaneous
-  or sequential) and the stamp gap that groups readings into rings are measured on the
-  first ``FIRING_SAMPLE`` readings (:func:`fuzzyslam.streams.sonar.firing_gap`). Rings
-  read before any Range message with a valid field of view take the config's sonar cone
-  ``sonar.fov_deg`` (``RangeSensor.cone``).
+  placement: a 9-sonar front ring reads as 9 sensors), each placed by the /tf_static mount
+  of its Range messages' ``header.frame_id`` (or, where /tf_static does not place it, by
+  /tf's constant transforms: :mod:`fuzzyslam.streams.static_tf`). A present topic whose
+  frame has no mount, or whose mount cannot be composed (two parents, a cycle, a zero
+  quaternion, a cone axis near vertical), is an error naming it. Only a log without any
+  /tf_static (nor /tf mounts; older simulated logs) falls back to the nominal
+  ``sonar.count`` ring of ``robot.radius``, and says so in ``mounts_source``. The firing
+  pattern (simultaneous or sequential) and the stamp gap that groups readings into rings
+  are measured on the first ``FIRING_SAMPLE`` readings
+  (:func:`fuzzyslam.streams.sonar.firing_gap`). Rings read before any Range message with a
+  valid field of view take the config's sonar cone ``sonar.fov_deg``
+  (``RangeSensor.cone``).
 - ``scan``: ``topics.scan`` (sensor_msgs/LaserScan) as a ring of narrow sensors, one per
-  kept beam (:mod:`fuzzyslam.streams.scan`), at the laser's /tf_static mount (frame of
-  the first message) composed with each beam angle; cone width ``ranges.beam_width_deg``,
-  every ``ranges.scan_step``-th beam kept, or fewer: the kept beams at least a cone
-  apart (:func:`fuzzyslam.streams.scan.kept_step`). A scan of another beam count or angles is read
-  onto the first scan's kept beams, placed by the same laser mount (``RangeSensor.laser``;
-  :func:`fuzzyslam.streams.scan.scan_rings`).
+  kept beam (:mod:`fuzzyslam.streams.scan`), at the laser's /tf_static (or /tf constant)
+  mount (frame of the first message) composed with each beam angle; cone width
+  ``ranges.beam_width_deg``, every ``ranges.scan_step``-th beam kept, or fewer: the kept
+  beams at least a cone apart (:func:`fuzzyslam.streams.scan.kept_step`). A scan of
+  another beam count or angles is read onto the first scan's kept beams, placed by the
+  same laser mount (``RangeSensor.laser``; :func:`fuzzyslam.streams.scan.scan_rings`).
 
 A mount is the sensor frame's transform in the robot's base frame (``base``: the
 odometry's child frame), composed down the whole /tf_static chain with full 3D
@@ -55,6 +57,7 @@ from fuzzyslam.streams.sonar import (
     mounts_of_frames,
     present_sonar_topics,
 )
+from fuzzyslam.streams.static_tf import static_messages
 from fuzzyslam.streams.tf import Rigid, TfProblem, frame_mounts
 
 SOURCES = ("auto", "sonar", "scan")
@@ -133,12 +136,6 @@ class RangeSensor:
         return out
 
 
-def _tf_messages(reader: LogReader, topic: str) -> list[Any] | None:
-    if not reader.has(topic):
-        return None
-    return [m.msg for m in reader.messages([topic])]
-
-
 def _first_frames(reader: LogReader, topics: list[str]) -> dict[str, str]:
     """topic -> header.frame_id of its first message (topics without messages left out)."""
     frames: dict[str, str] = {}
@@ -183,9 +180,15 @@ def _tf_problem(reader: LogReader, tf_topic: str, problems: dict[str, str], fram
         raise InputError(reader.path, f"{tf_topic} cannot place {why}")
 
 
+def _nor_tf(reader: LogReader, cfg: Any) -> str:
+    """The end of a missing mount's line: whether /tf was looked at too."""
+    return f", nor a constant transform on {cfg.topics.tf}" if reader.has(cfg.topics.tf) else ""
+
+
 def _sonar(reader: LogReader, cfg: Any, topics: list[str], base: str) -> RangeSensor:
-    tf = _tf_messages(reader, cfg.topics.tf_static)
-    if not tf:  # no /tf_static topic, or none of its messages readable (a damaged log)
+    frames = _first_frames(reader, topics)
+    tf, source = static_messages(reader, cfg.topics, frames.values(), base)
+    if not tf:  # no /tf_static (nor /tf mounts), or none readable (a damaged log)
         count = cfg.sonar.count
         nominal = [cfg.topics.sonar(i) for i in range(count)]
         if topics != nominal:
@@ -200,22 +203,23 @@ def _sonar(reader: LogReader, cfg: Any, topics: list[str], base: str) -> RangeSe
             topics,
             sonar_mounts(count, cfg.robot.radius),
             f"nominal {count}-sonar ring (no {cfg.topics.tf_static}"
-            + (" message: the log is damaged)" if tf is not None else ")"),
+            + (" message: the log is damaged)" if reader.has(cfg.topics.tf_static) else ")"),
             ring_gap=gap,
             firing=firing,
             cone=_cone(cfg),
         )
-    frames = _first_frames(reader, topics)
     topics = [tp for tp in topics if tp in frames]
     if not topics:
         raise InputError(reader.path, f"no message on the sonar topics {cfg.topics.sonar_prefix}NN")
     stand_ins: dict[str, str] = {}
     mounts, missing, problems = mounts_of_frames(tf, frames, base, stand_ins)
-    _tf_problem(reader, cfg.topics.tf_static, problems, frames)
+    _tf_problem(reader, source, problems, frames)
     if missing:
         names = ", ".join(f"{tp} (frame {frames[tp]!r})" for tp in missing)
-        raise InputError(reader.path, f"no {cfg.topics.tf_static} mount for {names}")
-    source = _mounts_source(reader, cfg.topics.tf_static, stand_ins, base)
+        raise InputError(
+            reader.path, f"no {cfg.topics.tf_static} mount for {names}" + _nor_tf(reader, cfg)
+        )
+    source = _mounts_source(reader, source, stand_ins, base)
     firing, gap = _firing(reader, topics)
     return RangeSensor(
         "sonar", topics, mounts, source, ring_gap=gap, firing=firing, cone=_cone(cfg)
@@ -236,7 +240,7 @@ def _scan(reader: LogReader, cfg: Any, base: str) -> RangeSensor:
     geom = scan_geometry(first.msg, rp.scan_step, float(np.deg2rad(rp.beam_width_deg)))
     if geom.beams == 0 or not (np.isfinite(geom.angle_increment) and geom.angle_increment != 0):
         raise InputError(reader.path, f"{tp}: a scan with no beams or a zero angle increment")
-    tf = _tf_messages(reader, cfg.topics.tf_static) or []
+    tf, source = static_messages(reader, cfg.topics, [geom.frame], base)
     frames = {tp: geom.frame}
     stand_ins: dict[str, str] = {}
     found, missing, problems = frame_mounts(tf, frames, base, stand_ins)
@@ -245,16 +249,20 @@ def _scan(reader: LogReader, cfg: Any, base: str) -> RangeSensor:
             beams = geom.mounts(found[tp])
         except TfProblem as e:
             problems[tp] = f"the laser is {e}"
-    _tf_problem(reader, cfg.topics.tf_static, problems, frames)
+    _tf_problem(reader, source, problems, frames)
     if missing:
         raise InputError(
-            reader.path, f"no {cfg.topics.tf_static} mount for {tp} (frame {geom.frame!r})"
+            reader.path,
+            f"no {cfg.topics.tf_static} mount for {tp} (frame {geom.frame!r})"
+            + _nor_tf(reader, cfg),
         )
+    if not tf:  # the scan is stamped in the base frame itself
+        source = f"none needed: {tp} is in the base frame {base!r}"
     return RangeSensor(
         "scan",
         [tp],
         beams,
-        _mounts_source(reader, cfg.topics.tf_static, stand_ins, base),
+        _mounts_source(reader, source, stand_ins, base),
         geom,
         float(np.deg2rad(rp.beam_width_deg)),
         laser=found[tp],

@@ -230,6 +230,62 @@ def static_tree(messages: Iterable[Any]) -> TfTree:
     return TfTree(parents, problems)
 
 
+# a transform of a dynamic tf stream that moves less than this over the log is a mount
+CONSTANT_M = 1e-3
+CONSTANT_RAD = 1e-3
+
+
+def constant_transforms(messages: Iterable[Any]) -> list[Any]:
+    """The transforms of a dynamic tf stream (/tf) that never change: a ROS 1 robot's
+    mounts, broadcast by tf's ``static_transform_publisher`` at a fixed rate before tf2
+    gave them /tf_static (and converted so by ``rosbags-convert``).
+
+    A (parent, child) pair is constant when every one of its samples lies within
+    ``CONSTANT_M`` (translation) and ``CONSTANT_RAD`` (the rotation between the two
+    quaternions, 2 acos |q . q0|) of its first; a child seen under two parents, a zero or
+    non-finite quaternion or a non-finite translation is left out (:func:`static_tree`
+    says why where a chain needs it). The odometry's odom -> base moves, and is left out
+    too, unless the robot never moved.
+
+    Parameters
+    ----------
+    messages : iterable of TFMessage
+        The /tf messages, in log order.
+
+    Returns
+    -------
+    list of TransformStamped
+        The first sample of each constant pair, in order of first sight.
+    """
+    first: dict[str, Any] = {}
+    values: dict[str, list[list[float]]] = {}
+    parent: dict[str, str] = {}
+    for msg in messages:
+        for ts in msg.transforms:
+            child, par = _name(ts.child_frame_id), _name(ts.header.frame_id)
+            if parent.setdefault(child, par) != par:
+                parent[child] = ""  # two parents: not a mount
+                continue
+            t, q = ts.transform.translation, ts.transform.rotation
+            first.setdefault(child, ts)
+            values.setdefault(child, []).append([t.x, t.y, t.z, q.x, q.y, q.z, q.w])
+    out = []
+    for child, ts in first.items():
+        if not parent[child]:
+            continue
+        v = np.array(values[child], dtype=float)
+        q = v[:, 3:]
+        n = np.linalg.norm(q, axis=1)
+        if not (np.all(np.isfinite(v)) and np.all(n >= 1e-9)):
+            continue
+        q = q / n[:, None]
+        moved = np.abs(v[:, :3] - v[0, :3]).max()
+        turned = 2.0 * np.arccos(np.clip(np.abs(q @ q[0]), 0.0, 1.0)).max()
+        if moved <= CONSTANT_M and turned <= CONSTANT_RAD:
+            out.append(ts)
+    return out
+
+
 def _up(tree: TfTree, frame: str, base: str | None) -> tuple[Rigid, str]:
     """(transform of ``frame`` in the last frame reached, that frame): up the parent
     chain until ``base`` (None: never) or the root. TfProblem on a problem frame or a
