@@ -188,8 +188,14 @@ REASON_CAUSES = {
         "heading fixes on the wrong walls: a start pose off, an odometry scale or turn "
         "error, a range sensor's mount yaw, odometry noise set too small"
     ),
-    "pose_matches_ambiguous": "too few range sensors or a featureless place for the map",
-    "pose_matches_refused": "odometry scale, the range sensor's mount, a clock offset",
+    "pose_matches_ambiguous": (
+        "too few range sensors or a featureless place for the map, a start pose off the "
+        "map's (--start-pose)"
+    ),
+    "pose_matches_refused": (
+        "a start pose off the map's (--start-pose: a log's odometry starts at its own "
+        "origin), odometry scale, the range sensor's mount, a clock offset"
+    ),
     "events_lost": "stamps on another clock or back in time, a driver that stopped",
     "odometry_turn_scale": "the odometry's turn scale (wheel base, driver), not the noise",
     "odometry_distance_scale": (
