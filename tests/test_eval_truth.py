@@ -14,7 +14,13 @@ import pytest
 
 from fuzzyslam import se2
 from fuzzyslam.evaluation.consistency import Consistency, overconfident
-from fuzzyslam.evaluation.core import Estimate, Truth, drop_stray_truth, evaluate
+from fuzzyslam.evaluation.core import (
+    MAX_STRAY_SHARE,
+    Estimate,
+    Truth,
+    drop_stray_truth,
+    evaluate,
+)
 from fuzzyslam.evaluation.evaluate import read_truth, run_evaluate
 from fuzzyslam.evaluation.params import EvalParams
 from fuzzyslam.streams.tum import read_tum, write_tum
@@ -118,6 +124,19 @@ def test_overconfidence_warned_only_when_gross() -> None:
     assert f"NEES mean {nees['mean']:.3g} (3 expected" in w
     assert f"above 100 for {100 * nees['frac_above_100']:.0f} % of the compared" in w
     assert m["headline"]["warnings"] == m["warnings"]
+
+
+def test_a_short_truth_keeps_its_strays_dropped() -> None:
+    """Ten seconds of truth with three strays (3 % of its lines, over the share a fast
+    truth is told by): each came back, none ended in the gate's reset, so they are
+    dropped all the same."""
+    t, p = _loop(seconds=10.0)
+    at = [20, 50, 80]
+    ts, ps = _with_strays(t, p, at)
+    assert len(at) > MAX_STRAY_SHARE * ts.size
+    kt, kp, dropped, refused = drop_stray_truth(ts, ps)
+    assert dropped == refused == len(at)
+    assert np.array_equal(kt, t) and np.array_equal(kp, p)
 
 
 def test_estimate_in_another_frame_is_said_not_called_overconfident() -> None:

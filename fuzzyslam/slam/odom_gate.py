@@ -284,8 +284,29 @@ def plausible_mask(t: np.ndarray, poses: np.ndarray, gate: OdomGate | None = Non
     -------
     ndarray of bool, shape (N,)
     """
+    return gate_steps(t, poses, gate) != "jump"
+
+
+def gate_steps(t: np.ndarray, poses: np.ndarray, gate: OdomGate | None = None) -> np.ndarray:
+    """(N,) str: what the gate makes of each pose (:meth:`OdomGate.step`: ``ok``, ``jump``
+    refused, ``reset`` taken after ``reset_after`` refusals in a row, ...), starting from
+    the first confirmed pose (:func:`first_plausible_pose`).
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        Times (s).
+    poses : ndarray, shape (N, 3)
+        The stream's poses.
+    gate : OdomGate, optional
+        The test (default limits).
+
+    Returns
+    -------
+    ndarray of str, shape (N,)
+    """
     gate = gate if gate is not None else OdomGate()
     first = first_plausible_pose(t, poses, gate)
     if first is not None:
         gate.prime(*first)
-    return np.array([gate.step(float(ti), p) != "jump" for ti, p in zip(t, poses, strict=True)])
+    return np.array([gate.step(float(ti), p) for ti, p in zip(t, poses, strict=True)])
