@@ -14,6 +14,7 @@ from test_robust_logs import cli
 from fuzzyslam import errors
 
 MICRO = Path(__file__).parent / "micro.yaml"  # 1/10 lap
+SAMPLE = Path(__file__).resolve().parents[1] / "data" / "sample.mcap"
 TUM = "0.0 0 0 0 0 0 0 1\n1.0 0.1 0 0 0 0 0 1\n"
 
 
@@ -96,6 +97,26 @@ def test_run_calibration_inside_its_output_is_refused_first(tmp_path: Path) -> N
     assert code == errors.EXIT_INPUT and out == "", err
     one_error(err, a / "calibration.yaml", "same as an input")
     assert (a / "calibration.yaml").read_text(encoding="utf-8") == "mine\n"
+
+
+def test_run_calibration_csv_is_named_as_maps_input(tmp_path: Path) -> None:
+    """``run --calibration RUN/calibration.csv`` (map's input, not run's): one line naming
+    the file, saying a calibration.yaml was expected and the CSV is map's, without
+    Python's own error text; nothing written."""
+    import numpy as np
+
+    from fuzzyslam.slam import calibration, calibration_files
+
+    model = calibration.Calibration("wheels", 0.3, np.ones(3), np.eye(3) * 1e-4)
+    csv_path = tmp_path / "r1" / "calibration.csv"
+    csv_path.parent.mkdir()
+    rows = [calibration_files.csv_row(t, model.factors, model.cov) for t in (0.0, 1.0)]
+    calibration_files.write_csv(csv_path, model, rows)
+    code, out, err = cli("run", SAMPLE, "-o", tmp_path / "est", "--calibration", csv_path)
+    assert code == errors.EXIT_INPUT and out == "", err
+    one_error(err, csv_path, "not a calibration.yaml", "'map --calibration'")
+    assert "string indices" not in err and "not a calibration file (" not in err
+    assert not (tmp_path / "est").exists()
 
 
 @pytest.mark.slow

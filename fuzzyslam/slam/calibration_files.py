@@ -134,6 +134,12 @@ def write_yaml(path: Path, d: dict) -> None:
     path.write_text(yaml.safe_dump(d, sort_keys=False))  # staged, as write_csv
 
 
+NOT_CALIBRATION_YAML = (
+    "not a calibration.yaml (a run's or a map's: model, factors and covariance); a run's "
+    "calibration.csv is the input of 'map --calibration', not of 'run --calibration'"
+)
+
+
 def load(path: str | Path, model: Calibration) -> Calibration:
     """``model`` started from the factors and covariance of a calibration.yaml (a run's,
     or a map directory's: the calibration at the map's freeze time).
@@ -153,16 +159,22 @@ def load(path: str | Path, model: Calibration) -> Calibration:
     path = check_input_file(path, "calibration")  # an input: never replaced by an output
     try:
         d = yaml.safe_load(path.read_text())
-        kind = d["model"]
-        c = np.asarray(d["factors"], dtype=float)
-        cov = np.asarray(d["covariance"], dtype=float)
-    except (OSError, yaml.YAMLError, KeyError, TypeError, ValueError) as exc:
-        raise InputError(path, f"not a calibration file ({exc})") from None
+    except (UnicodeDecodeError, yaml.YAMLError):
+        d = None
+    if not isinstance(d, dict) or not {"model", "factors", "covariance"} <= d.keys():
+        # e.g. a run's calibration.csv (map's input), read by YAML as one string
+        raise InputError(path, NOT_CALIBRATION_YAML)
+    kind = d["model"]
     if kind != model.kind:
         raise InputError(
             path, f"calibration model '{kind}', but this log's odometry needs '{model.kind}'"
         )
     k = model.k
+    try:
+        c = np.asarray(d["factors"], dtype=float)
+        cov = np.asarray(d["covariance"], dtype=float)
+    except (TypeError, ValueError):
+        c = cov = np.zeros(0)  # not numbers: refused below
     ok = c.shape == (k,) and cov.shape == (k, k) and np.all(np.isfinite(cov))
     if not ok or not np.all(np.isfinite(c)) or np.any(c <= 0):
         raise InputError(path, f"needs {k} positive factors and a {k}x{k} covariance")
