@@ -83,9 +83,9 @@ def read_landmarks(path: str | os.PathLike, truth: bool = False) -> tuple[np.nda
     """The lamps of a landmarks.yaml (this module's, or a real log's true landmarks:
     ``{landmarks: [{id, x, y}, ...]}``, ``id`` defaulting to the position in the list).
 
-    A run's landmarks.yaml may hold no lamp (a lamp-less run: ``landmarks: []``); a file of
-    true landmarks (``truth``) must be a mapping with a non-empty ``landmarks`` list, else
-    it is a bad input (a TUM file, a bare list, another YAML given by mistake).
+    Either must be a mapping with a ``landmarks`` list, else it is a bad input (a TUM file,
+    a bare list, another YAML given by mistake); a run's landmarks.yaml may hold no lamp (a
+    lamp-less run: ``landmarks: []``), a file of true landmarks (``truth``) must hold one.
 
     Parameters
     ----------
@@ -107,16 +107,17 @@ def read_landmarks(path: str | os.PathLike, truth: bool = False) -> tuple[np.nda
         data = yaml.safe_load(p.read_text(encoding="utf-8"))
     except (OSError, UnicodeDecodeError, yaml.YAMLError) as exc:
         raise InputError(p, f"cannot read {what} YAML: {str(exc).splitlines()[0]}") from None
-    if truth and not (isinstance(data, dict) and "landmarks" in data):
+    if not (isinstance(data, dict) and "landmarks" in data):
         held = {dict: "a mapping without it", list: "a bare list", str: "plain text",
                 type(None): "nothing"}  # fmt: skip
+        expected = "" if truth else "a run's landmarks.yaml, "
         raise InputError(
             p,
-            "not a landmarks truth file: no 'landmarks' list (the YAML holds "
+            f"not a {what} file: no 'landmarks' list (the YAML holds "
             f"{held.get(type(data), 'a ' + type(data).__name__)}; expected "
-            "'landmarks: [{id, x, y}, ...]')",
+            f"{expected}'landmarks: [{{id, x, y}}, ...]')",
         )
-    lms = (data or {}).get("landmarks") if isinstance(data, dict) else None
+    lms = data["landmarks"]
     if lms is None:
         lms = []
     if not isinstance(lms, list):

@@ -57,6 +57,22 @@ def test_map_calibration_and_landmarks_fifos_are_refused_first(tmp_path: Path) -
     assert not (tmp_path / "fgm").exists()
 
 
+def test_map_landmarks_that_are_not_lamps_are_refused_first(tmp_path: Path) -> None:
+    """``map --landmarks TRAJECTORY.tum`` (or another YAML): one line naming the file and
+    what a landmarks file holds, before the log is read (here absent), nothing written;
+    not a map without lamps and exit 0."""
+    traj = tmp_path / "t.tum"
+    traj.write_text(TUM, encoding="utf-8")
+    other = tmp_path / "calibration.yaml"
+    other.write_text("model: odom\nfactors: [1, 1]\n", encoding="utf-8")
+    base = ["map", tmp_path / "absent.mcap", "--trajectory", traj, "-o", tmp_path / "fgm"]
+    for wrong in (traj, other):
+        code, out, err = cli(*base, "--landmarks", wrong)
+        assert code == errors.EXIT_INPUT and out == "", err
+        one_error(err, wrong, "not a landmarks file", "'landmarks: [{id, x, y}, ...]'")
+    assert not (tmp_path / "fgm").exists()
+
+
 def test_evaluate_fifo_trajectory_is_not_a_regular_file(tmp_path: Path) -> None:
     """A run directory whose trajectory.tum is a FIFO: "not a regular file" naming it,
     not "no trajectory.tum"."""

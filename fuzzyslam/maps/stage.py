@@ -12,6 +12,7 @@ from fuzzyslam.errors import InputError, UsageError
 from fuzzyslam.fileio import check_input_file
 from fuzzyslam.maps.build import MapOptions, build_map
 from fuzzyslam.presets import resolve as resolve_config
+from fuzzyslam.rundir import read_landmarks
 from fuzzyslam.stamps import LogTime
 
 
@@ -90,4 +91,5 @@ def run(
         check_input_file(opts.calibration, "calibration file (--calibration)")
     if opts.landmarks is not None:
         check_input_file(opts.landmarks, "landmarks file (--landmarks)")
+        read_landmarks(opts.landmarks)  # its content too (a TUM file: not lamps)
     return build_map(log, trajectory, outdir, cfg, opts)
