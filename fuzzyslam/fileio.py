@@ -285,7 +285,9 @@ class OutputDir:
         self.owns = tuple(owns)
         self.tmp: Path | None = None
 
-    def __enter__(self) -> Path:
+    def _where(self) -> Path:
+        """The directory the staging directory goes into (InputError when the output
+        path is not a directory or its parent is missing)."""
         check_output_target(self.path, "directory")
         real = self.path.resolve()
         parent = real.parent
@@ -293,7 +295,26 @@ class OutputDir:
             raise InputError(self.path, f"parent directory {parent} does not exist")
         # a directory filled in place (a mount point, the working directory) is staged
         # inside itself: its files are then renamed within one file system
-        where = real if real.is_dir() and _in_place_only(real) else parent
+        return real if real.is_dir() and _in_place_only(real) else parent
+
+    def check(self) -> None:
+        """Raise the error that entering would (the path not a directory, its parent
+        missing, a staging directory that cannot be made there), staging nothing: for a
+        stage that enters only after its work (``map``, ``evaluate``), so that an unusable
+        output is said before the work, as ``run``'s, which enters first."""
+        where = self._where()
+        try:
+            with deferred():  # Ctrl-C held: the probe is never left behind
+                os.rmdir(
+                    tempfile.mkdtemp(prefix=f".{self.path.resolve().name}.", suffix=".part",
+                                     dir=where)
+                )  # fmt: skip
+        except OSError as exc:  # read-only or full: as __enter__ says it
+            raise write_error(self.path, exc) from exc
+
+    def __enter__(self) -> Path:
+        where = self._where()
+        real = self.path.resolve()
         try:
             # Ctrl-C held from the folder's making until its name is kept; __exit__ does
             # not run for an exception raised here, so a held one removes the folder

@@ -73,6 +73,28 @@ def test_map_landmarks_that_are_not_lamps_are_refused_first(tmp_path: Path) -> N
     assert not (tmp_path / "fgm").exists()
 
 
+@pytest.mark.parametrize("command", ["map", "evaluate"])
+def test_output_that_is_a_file_is_refused_before_the_work(command: str, tmp_path: Path) -> None:
+    """``-o FILE`` (an existing regular file): refused before the work, as ``run`` does,
+    here before the log or truth is read (absent: its error would come first otherwise,
+    and with a real one the output's only after the work); the file left as it was and no
+    staging directory left behind."""
+    traj = tmp_path / "t.tum"
+    traj.write_text(TUM, encoding="utf-8")
+    absent = tmp_path / "absent.mcap"
+    out_file = tmp_path / "out"
+    out_file.write_text("mine\n", encoding="utf-8")
+    args = {
+        "map": ["map", absent, "--trajectory", traj],
+        "evaluate": ["evaluate", absent, traj],
+    }[command]
+    code, out, err = cli(*args, "-o", out_file)
+    assert code == errors.EXIT_INPUT and out == "", err
+    one_error(err, out_file, "not a directory")
+    assert out_file.read_text(encoding="utf-8") == "mine\n"
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["out", "t.tum"]
+
+
 def test_evaluate_fifo_trajectory_is_not_a_regular_file(tmp_path: Path) -> None:
     """A run directory whose trajectory.tum is a FIFO: "not a regular file" naming it,
     not "no trajectory.tum"."""

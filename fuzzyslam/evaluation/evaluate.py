@@ -342,6 +342,8 @@ def run_evaluate(
     labelled = [split_label(c) for c in compare]
     compare = [c for _, c in labelled]
     check_outputs([truth_path, estimate_path, *compare, *extra_inputs], [outdir])
+    staged = OutputDir(outdir, owns=("fig4_lamps.png", "consistency.png", "compare.png"))
+    staged.check()  # an unusable output said now, not after the work (as run's)
     fgm = read_fgm(map_dir) if map_dir is not None else None
     est = read_estimate(estimate_path, label)
     # a compared estimate gives a row of the side-by-side table and a curve: its
@@ -378,7 +380,7 @@ def run_evaluate(
         if changes is not None:  # --fix pose on a log with obstacles (issue 8)
             ev = replace(ev, typed=replace(ev.typed, change_detection=changes))
         bar.update_to(len(evs) + 1)
-        with OutputDir(outdir, owns=("fig4_lamps.png", "consistency.png", "compare.png")) as tmp:
+        with staged as tmp:
             figs = figures.draw_all(tmp, truth, est, ev, fgm)
             if others:
                 figures.fig_compare(tmp / "compare.png", truth, [(e.label, v) for e, v in evs])

@@ -333,6 +333,9 @@ def build_map(
     params: MapParams = cfg.fgm
     outdir = Path(outdir)
     check_outputs([log_path, traj_path], [outdir])
+    owns = ("fgm.png", "conflict.png", "hough.png", "calibration.yaml")
+    staged = OutputDir(outdir, owns=owns)
+    staged.check()  # an unusable output said now, not after the work (as run's)
     run_dir = Path(traj_path).resolve().parent
     if outdir.resolve() == run_dir and (run_dir / "summary.json").is_file():
         raise InputError(
@@ -460,8 +463,7 @@ def build_map(
         log_damage=reader.damage(),
         calibration=calib if calib is not None else OMIT,
     )
-    owns = ("fgm.png", "conflict.png", "hough.png", "calibration.yaml")
-    with OutputDir(outdir, owns=owns) as tmp:
+    with staged as tmp:
         mapio.save_fgm(tmp / "fgm.npz", fgm, True, t_end, log_id)
         if calib is not None:
             calibration_files.write_yaml(tmp / "calibration.yaml", calib)
