@@ -183,3 +183,19 @@ def test_run_on_a_cut_off_log_notes_the_loss(micro, tmp_path: Path) -> None:
     (line,) = err.splitlines()
     assert line.startswith(f"fuzzyslam: note: {cut}: the log is damaged or cut off: ")
     assert "bytes lost" in line and "log_damage" in line
+
+
+def test_map_on_a_cut_off_log_notes_the_loss(micro, tmp_path: Path) -> None:
+    """``map`` on a log cut off at 60 %: exit 0 and the one note ``run`` gives (the same
+    wording), saying the map covers the intact part only (the summary's log_damage)."""
+    log, truth = micro
+    cut = tmp_path / "cut.mcap"
+    data = log.read_bytes()
+    cut.write_bytes(data[: int(0.6 * len(data))])
+    code, out, err = cli("map", cut, "--trajectory", truth, "-o", tmp_path / "fgm",
+                         "--config", MICRO, "--no-figures")  # fmt: skip
+    assert code == 0, err
+    (line,) = err.splitlines()
+    assert line.startswith(f"fuzzyslam: note: {cut}: the log is damaged or cut off: ")
+    assert "bytes lost" in line and "the map covers the intact part" in line
+    assert '"truncated": true' in out

@@ -194,6 +194,34 @@ def emit(summary: dict[str, Any]) -> None:
         raise write_error("<stdout>", exc, replaced=True) from exc
 
 
+def tell_damage(log: Any, damage: dict | None, what: str) -> None:
+    """One note on stderr when the log was damaged or cut off (a summary's
+    ``log_damage``): how much was lost, and that ``what`` covers the intact part only.
+
+    Parameters
+    ----------
+    log : path
+        The log, as the user named it.
+    damage : dict or None
+        The summary's ``log_damage`` (``LogReader.damage()``).
+    what : str
+        The output made from the log ("the estimate", "the map").
+    """
+    from fuzzyslam.progress import note
+
+    if not damage or not (
+        damage.get("truncated") or damage.get("lost_bytes") or damage.get("damaged_records")
+    ):
+        return
+    note(
+        f"{log}: the log is damaged or cut off: {damage.get('lost_bytes', 0)} bytes lost "
+        f"({100 * damage.get('lost_fraction', 0.0):.2f} % of the file), "
+        f"{damage.get('damaged_records', 0)} damaged records skipped, "
+        f"{damage.get('salvaged_messages', 0)} messages salvaged; {what} covers the "
+        "intact part only (the summary's log_damage)"
+    )
+
+
 COMMANDS = ("simulate", "run", "map", "evaluate", "reproduce", "sweep")
 
 

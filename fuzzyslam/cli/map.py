@@ -12,6 +12,7 @@ from fuzzyslam.cli import (
     emit,
     ranges_option,
     stage_call,
+    tell_damage,
 )
 
 
@@ -118,20 +119,20 @@ def map_cmd(
     """
     from fuzzyslam.maps.stage import run
 
-    emit(
-        stage_call(
-            run,
-            log,
-            trajectory,
-            outdir,
-            config,
-            until_run,
-            until,
-            skip_uncovered,
-            landmarks,
-            not no_figures,
-            ranges,
-            sort,
-            calibration,
-        )
+    summary = stage_call(
+        run,
+        log,
+        trajectory,
+        outdir,
+        config,
+        until_run,
+        until,
+        skip_uncovered,
+        landmarks,
+        not no_figures,
+        ranges,
+        sort,
+        calibration,
     )
+    tell_damage(log, summary.get("log_damage"), "the map")
+    emit(summary)

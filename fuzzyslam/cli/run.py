@@ -16,6 +16,7 @@ from fuzzyslam.cli import (
     emit,
     ranges_option,
     stage_call,
+    tell_damage,
 )
 
 
@@ -209,7 +210,7 @@ def run_command(
             figures=figures,
             live_map=live_map,
         )
-    _tell_damage(log, summary.get("log_damage"))
+    tell_damage(log, summary.get("log_damage"), "the estimate")
     emit(summary)
 
 
@@ -218,21 +219,3 @@ def _shared_walks() -> contextlib.AbstractContextManager[None]:
     from fuzzyslam.streams.reader import shared_walks
 
     return shared_walks()
-
-
-def _tell_damage(log: Path, damage: dict | None) -> None:
-    """One note on stderr when the log was damaged or cut off (the summary's
-    ``log_damage``): how much was lost."""
-    from fuzzyslam.progress import note
-
-    if not damage or not (
-        damage.get("truncated") or damage.get("lost_bytes") or damage.get("damaged_records")
-    ):
-        return
-    note(
-        f"{log}: the log is damaged or cut off: {damage.get('lost_bytes', 0)} bytes lost "
-        f"({100 * damage.get('lost_fraction', 0.0):.2f} % of the file), "
-        f"{damage.get('damaged_records', 0)} damaged records skipped, "
-        f"{damage.get('salvaged_messages', 0)} messages salvaged; the estimate covers the "
-        "intact part only (the summary's log_damage)"
-    )
