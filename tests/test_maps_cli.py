@@ -80,7 +80,7 @@ def test_map_writes_every_output(built_map):
     np.testing.assert_allclose(m.m_e + m.m_o + m.m_t + m.m_c, 1.0, atol=1e-5)
     meta = yaml.safe_load((out / "fgm.yaml").read_text())
     assert meta["mode"] == "trinary" and meta["negate"] == 0
-    assert meta["origin"] == [m.grid.origin[0], m.grid.origin[1], 0.0]
+    assert meta["origin"] == pytest.approx([m.grid.origin[0], m.grid.origin[1], 0.0], abs=1e-9)
     img = read_pgm(out / meta["image"])
     assert img.shape == m.grid.shape
     # top row of the picture is the map's largest y: the occupied cells agree after a flip

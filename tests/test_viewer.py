@@ -84,6 +84,21 @@ def _small_map() -> BeliefMap:
     return bm
 
 
+def test_nav2_yaml_writes_the_origin_without_float_noise(tmp_path) -> None:
+    """fgm.yaml's origin as a person (and nav2's map_server) reads it: a grid origin of
+    -0.1 * 257 (-25.700000000000003) and 0.1 + 0.2 is written -25.7 and 0.3, within
+    1e-9 m of the grid's; -0.0 as 0.0."""
+    for origin, want in (((-0.1 * 257, 0.1 + 0.2), "- -25.7\n- 0.3\n"),
+                         ((-0.0, 1.5), "- 0.0\n- 1.5\n")):  # fmt: skip
+        g = Grid(origin, 0.1, (4, 6))
+        bm = BeliefMap(g, *(np.full(g.shape, 0.25, dtype=np.float32) for _ in range(4)))
+        mapio.save_nav2(tmp_path / "fgm.yaml", tmp_path / "fgm.pgm", bm)
+        text = (tmp_path / "fgm.yaml").read_text(encoding="utf-8")
+        assert f"resolution: 0.1\norigin:\n{want}- 0.0\n" in text, text
+        nav2 = yaml.safe_load(text)
+        assert nav2["origin"][:2] == pytest.approx(list(origin), abs=1e-9)
+
+
 def test_fgm_messages_decode_and_match_nav2(tmp_path) -> None:
     bm = _small_map()
     mapio.save_nav2(tmp_path / "fgm.yaml", tmp_path / "fgm.pgm", bm)

@@ -95,8 +95,10 @@ def grid_problem(origin: Any, resolution: Any, shape: Any) -> str | None:
     org = np.asarray(origin, dtype=float)
     shp = np.asarray(shape)
     if res.shape != () or not np.isfinite(res) or not MIN_RESOLUTION <= res <= MAX_RESOLUTION:
-        return f"resolution must be a finite number of metres in [{MIN_RESOLUTION:g}, " \
+        return (
+            f"resolution must be a finite number of metres in [{MIN_RESOLUTION:g}, "
             f"{MAX_RESOLUTION:g}], got {np.array2string(res.ravel()[:2])}"
+        )
     if org.shape != (2,) or not np.all(np.isfinite(org)) or np.any(np.abs(org) > MAX_COORDINATE):
         return f"origin must be two finite coordinates within {MAX_COORDINATE:g} m"
     if shp.shape != (2,) or shp.dtype.kind not in "iu" or np.any(shp < 1):
@@ -253,6 +255,13 @@ def occupancy_image(bm: BeliefMap, unknown_t: float = 0.9) -> np.ndarray:
     return np.flipud(img)
 
 
+def _nav2_metres(v: float) -> float:
+    """``v`` (m) rounded to 1e-9 m, so that fgm.yaml shows -25.7, not the float noise of
+    the grid's arithmetic (-25.700000000000003); still a plain YAML float for nav2, and
+    never -0.0."""
+    return round(float(v), 9) + 0.0
+
+
 def save_nav2(yaml_path: str | os.PathLike, pgm_path: str | os.PathLike, bm: BeliefMap) -> None:
     """Write the nav2 map_server pair (binary PGM P5 + YAML naming it).
 
@@ -272,8 +281,8 @@ def save_nav2(yaml_path: str | os.PathLike, pgm_path: str | os.PathLike, bm: Bel
     meta = {
         "image": Path(pgm_path).name,
         "mode": "trinary",
-        "resolution": float(bm.grid.resolution),
-        "origin": [float(bm.grid.origin[0]), float(bm.grid.origin[1]), 0.0],
+        "resolution": _nav2_metres(bm.grid.resolution),
+        "origin": [_nav2_metres(bm.grid.origin[0]), _nav2_metres(bm.grid.origin[1]), 0.0],
         "negate": 0,
         "occupied_thresh": OCCUPIED_THRESH,
         "free_thresh": FREE_THRESH,
