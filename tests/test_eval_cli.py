@@ -297,6 +297,20 @@ def test_recorded_log_truth_loses_its_stray_poses(case: dict) -> None:
     assert sim.lines_dropped is None
 
 
+def test_help_says_a_real_log_with_ground_truth_is_a_truth(tmp_path: Path) -> None:
+    """``evaluate --help`` says TRUTH may be any log with /ground_truth/odom, not only a
+    simulated one, as it is: the committed MRCLAM excerpt (a real log) against its own
+    truth.tum gives sub-millimetre errors."""
+    r = _cli("evaluate", "--help")
+    assert r.returncode == 0, r.stderr
+    text = " ".join(r.stdout.split())
+    assert "/ground_truth/odom" in text and "or a real one" in text, text
+    excerpt = Path(__file__).resolve().parents[1] / "data" / "real" / "mrclam6_excerpt"
+    r = _cli("evaluate", excerpt / "log.mcap", excerpt / "truth.tum", "-o", tmp_path / "rep")
+    assert r.returncode == 0, r.stderr
+    assert json.loads(r.stdout)["ape_rmse_m"] < 0.005
+
+
 @pytest.mark.parametrize(
     ("truth", "est", "needle"),
     [

@@ -66,7 +66,9 @@ def evaluate_cmd(
 ) -> None:
     """Compare ESTIMATE with TRUTH and write a report into OUTDIR.
 
-    TRUTH is a simulated .mcap log (ground truth, world and run events inside) or a TUM file.
+    TRUTH is an .mcap log with ground truth (nav_msgs/Odometry on /ground_truth/odom: a
+    simulated log, with its world and run events too, or a real one that has the topic) or
+    a TUM file.
     ESTIMATE is a 'fuzzyslam run' output directory or a TUM file. Kinds are detected by content.
 
     Computes, overall, per run and per phase (A = runs up to the FGM freeze, 'after' = later

@@ -1,6 +1,7 @@
 """Edge of the evaluation: read TRUTH and ESTIMATE files, run the core, write REPORTDIR.
 
-TRUTH is a simulated MCAP log (ground truth, world and scenario inside) or a TUM file;
+TRUTH is an MCAP log with ground truth (a simulated one, its world and scenario inside, or
+a real one with the ground truth topic) or a TUM file;
 ESTIMATE is a ``fuzzyslam run`` output directory or a TUM file. Kinds are detected by content.
 """
 
@@ -113,7 +114,9 @@ def read_truth(path: str | os.PathLike, progress: bool = True) -> Truth:
         t, poses, dropped, refused = drop_stray_truth(t, poses)
         return Truth(t, poses, source=path_text(path), lines_dropped=dropped, lines_refused=refused)
     if kind != KIND_MCAP:
-        raise InputError(path, "TRUTH must be a simulated MCAP log or a TUM file, not a directory")
+        raise InputError(
+            path, "TRUTH must be an MCAP log with ground truth or a TUM file, not a directory"
+        )
     reader = LogReader(path)
     world = read_world(reader)
     scenario = read_scenario(reader)
@@ -121,7 +124,9 @@ def read_truth(path: str | os.PathLike, progress: bool = True) -> Truth:
     if scenario is not None:
         topic = scenario.config.get("topics", {}).get("ground_truth", topic)
     if topic not in reader.topics:
-        raise InputError(path, f"log has no ground truth (no topic {topic}); give a simulated log")
+        raise InputError(
+            path, f"log has no ground truth (no topic {topic}); give a log with it or a TUM file"
+        )
     ts, rows = [], []  # (x, y, qx, qy, qz, qw) per message; the yaws at once below
     with Progress(reader.end - reader.start, "evaluate: reading ground truth", progress) as bar:
         for lm in reader.messages([topic]):

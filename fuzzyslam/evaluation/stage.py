@@ -25,9 +25,10 @@ def run(
     landmarks_truth: str | os.PathLike | None = None,
     align: bool = False,
 ) -> dict[str, Any]:
-    """Evaluate ``estimate`` (a run directory or TUM file) against ``truth`` (a simulated
-    log or a TUM file) into ``outdir`` with the config's ``evaluation`` section (the
-    defaults without ``config``). Returns the headline figures (JSON summary).
+    """Evaluate ``estimate`` (a run directory or TUM file) against ``truth`` (a log with
+    ground truth, simulated or real, or a TUM file) into ``outdir`` with the config's
+    ``evaluation`` section (the defaults without ``config``). Returns the headline figures
+    (JSON summary).
 
     Checked first: ``outdir`` is not the map's directory (an input, as for ``run``), and
     a run directory's trajectory.tum that exists is a regular file (a FIFO is "not a
