@@ -95,6 +95,37 @@ def test_sections_are_numbered_in_order() -> None:
         assert list(headings(doc)) == list(range(1, len(headings(doc)) + 1)), doc
 
 
+# options the README's command table leaves out on purpose
+TABLE_OMITS = {"run": {"--seed"}}  # accepted for pipelines, changes nothing
+
+
+def test_readme_command_table_names_every_option() -> None:
+    """The README's command table (``| command | does |``): a row per command whose
+    synopsis names every option of the command (but :data:`TABLE_OMITS`) and none it
+    does not have, checked against the CLI itself."""
+    from fuzzyslam.cli import COMMANDS, _register, cli
+
+    _register()
+    readme = (ROOT / "README.md").read_text(encoding="utf-8")
+    rows = dict(re.findall(r"^\| `fuzzyslam (\w+) (.*?)` \|", readme, re.M))
+    assert sorted(rows) == sorted(COMMANDS)
+    bad = []
+    for name, synopsis in rows.items():
+        given = set(re.findall(r"(?<![\w-])(--?[a-z][\w-]*)", synopsis))
+        spellings = [
+            set(p.opts + p.secondary_opts) for p in cli.commands[name].params
+            if p.param_type_name == "option"
+        ]  # fmt: skip
+        known = set().union(*spellings)
+        bad += [f"{name}: {o} is no option of the command" for o in sorted(given - known)]
+        bad += [
+            f"{name}: {'/'.join(sorted(o))} missing from the table"
+            for o in spellings
+            if not o & given and not o & TABLE_OMITS.get(name, set())
+        ]
+    assert not bad, "\n".join(bad)
+
+
 def test_committed_reports_have_no_broken_link():
     """Every local link of README.md, docs/*.md and data/results/report.md names a file of
     the repository (the committed results are a subset of a reproduce output: links to
