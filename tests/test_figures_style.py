@@ -260,6 +260,33 @@ def test_a_sweep_over_two_keys_draws_a_plot_per_key(tmp_path) -> None:
     assert all(p.stat().st_size > 1000 for p in paths)
 
 
+def test_a_boolean_sweep_draws_categories_and_one_figure_legend(tmp_path, monkeypatch) -> None:
+    """A boolean key: categorical ticks False, True (points, no joining line), one legend
+    for the figure (none in the panels), room over the highest mark, "1 seed"."""
+    from fuzzyslam.reproduce import sweep_plot
+
+    rows = [{"values": {"slam.calibrate": c, "robot.wheel_noise": w},
+             "measures": {m: {"mean": 0.3 + w + c, "min": 0.2, "max": 0.5 + w + c, "n": 1}
+                          for m in ("a (cm)", "b (deg)")}}
+            for c in (True, False) for w in (0.005, 0.02)]  # fmt: skip
+    figs = _capture(monkeypatch, sweep_plot, "save_png")
+    sweep_plot.plot_sweep(tmp_path, rows, ["slam.calibrate", "robot.wheel_noise"], 1, "seeds")
+    fig = figs[0]
+    assert len(fig.legends) == 1 and len(fig.legends[0].get_texts()) == 2
+    assert "mean over 1 seed," in fig._suptitle.get_text()
+    for ax in fig.axes:
+        assert ax.get_legend() is None
+        assert [t.get_text() for t in ax.get_xticklabels()] == ["False", "True"]
+        for ln in ax.get_lines():
+            if len(ln.get_xdata()) > 1:  # the means (the caps are markers alone too)
+                assert ln.get_linestyle() == "None"
+        assert ax.get_ylim()[1] > 0.5 + 0.02 + 1.0  # the highest bar inside, with room
+    # the number line of the other key keeps its joining lines
+    num = figs[1]
+    assert any(ln.get_linestyle() == "-" for ln in num.axes[0].get_lines())
+    assert len(num.legends) == 1
+
+
 def test_sweep_labels_its_evaluations_with_the_grid_value_and_seed() -> None:
     from fuzzyslam.reproduce.sweep import sweep_steps
 
