@@ -19,7 +19,7 @@ import contextlib
 import functools
 import math
 import os
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import ParamSpec, TypeVar
 
@@ -47,6 +47,85 @@ SERIES = (BLUE, ORANGE, SKY, BLACK)
 SERIES_DASHES = ("-", "--", "-.", ":")
 EVENT_COLOURS = {"FGM frozen": GREEN, "lamp failure": VERMILLION, "bump": PURPLE}
 EXPECTED = BLACK
+
+# The kinds of estimate the figures put side by side (summary.png, compare.png): one
+# colour, line style and marker each, the same in every figure. An estimate's kind is
+# found in its label (:func:`estimate_kind`); labels of no kind take the series' other
+# colours, in order (:func:`series_styles`). Markers every few samples (KIND_MARKERS
+# along a curve) tell apart curves that coincide. The odometry is fig1's dead reckoning.
+ESTIMATE_KINDS = {  # kind: (words in a label that name it, style)
+    "lamps only": (("lamps only", "no fixes"), {"color": BLUE, "ls": "-", "marker": None}),
+    "heading fixes": (("heading fixes", "heading fix"),
+                      {"color": ORANGE, "ls": "--", "marker": "^"}),
+    "pose fixes": (("pose fixes", "pose fix"), {"color": SKY, "ls": "-.", "marker": "o"}),
+    "odometry": (("odometry", "dead reckoning"), {"color": VERMILLION, "ls": "--",
+                                                  "marker": None}),
+}  # fmt: skip
+KIND_MARKERS = 14  # markers along a curve that has them (markevery)
+
+
+def estimate_kind(label: str) -> str | None:
+    """The kind of estimate a label names (a key of :data:`ESTIMATE_KINDS`): the first
+    kind whose words it holds (case ignored), None for none.
+
+    Parameters
+    ----------
+    label : str
+        The estimate's label ("all lamps off: heading fixes", "lamps only (A, B)").
+
+    Returns
+    -------
+    str or None
+    """
+    low = label.lower()
+    return next((k for k, (words, _s) in ESTIMATE_KINDS.items()
+                 if any(w in low for w in words)), None)  # fmt: skip
+
+
+def series_styles(labels: Sequence[str], samples: Sequence[int] | None = None) -> list[dict]:
+    """The line style of each labelled estimate, for ``Axes.plot``: its kind's
+    (:data:`ESTIMATE_KINDS`), or, for a label of no kind, the next of the series' colours
+    and dashes that no kind drawn uses.
+
+    Parameters
+    ----------
+    labels : sequence of str
+        The estimates' labels, in drawing order.
+    samples : sequence of int, optional
+        The samples of each curve: a kind's markers go every ``n / KIND_MARKERS``
+        samples, shifted per kind (coinciding curves' markers side by side).
+
+    Returns
+    -------
+    list of dict
+        ``color``, ``ls``, ``marker``, ``markevery``, ``ms`` and ``zorder`` for each
+        label.
+    """
+    kinds = [estimate_kind(lab) for lab in labels]
+    used = {ESTIMATE_KINDS[k][1]["color"] for k in kinds if k is not None}
+    # black first (no kind's, no event's), then the series' colours no kind drawn uses
+    order = [BLACK, *(c for c in SERIES if c != BLACK)]
+    dashes = dict(zip(order, SERIES_DASHES, strict=True))
+    free = [(c, dashes[c]) for c in order if c not in used]
+    out, j = [], 0
+    for i, k in enumerate(kinds):
+        if k is not None:
+            style = dict(ESTIMATE_KINDS[k][1])
+        else:
+            colour, dash = free[j % len(free)] if free else (SERIES[j % len(SERIES)], "-")
+            style = {"color": colour, "ls": dash, "marker": None}
+            j += 1
+        # the kinds in their order, lamps only lowest: the same curve on top everywhere
+        style["zorder"] = 2.0 + 0.01 * (list(ESTIMATE_KINDS).index(k) if k is not None
+                                        else len(ESTIMATE_KINDS) + j)  # fmt: skip
+        n = samples[i] if samples is not None else 0
+        step = max(n // KIND_MARKERS, 1)
+        shift = list(ESTIMATE_KINDS).index(k) if k is not None else 0
+        style["markevery"] = (shift * step // 3, step) if style["marker"] and n else None
+        style["ms"] = 3.5
+        out.append(style)
+    return out
+
 
 # The figures' one style, at print size: a figure is drawn at its printed width (one
 # column, COLUMN_W, or both, WIDE_W: a two-column paper's widths), its text 8-9 pt, its

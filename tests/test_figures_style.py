@@ -135,6 +135,58 @@ def test_time_axes_start_at_the_logs_start(tmp_path, monkeypatch, name) -> None:
     assert fig.axes[-1].get_xlabel() == "time since the log's start (s)"
 
 
+def test_an_estimate_kind_has_one_style_in_summary_and_compare(tmp_path, monkeypatch) -> None:
+    """summary.png and compare.png style an estimate by its kind (figsave.ESTIMATE_KINDS):
+    the run directories of the summary's panels and of the compare figures' labels get the
+    same colour, dashes and marker; heading and pose fixes differ in all three; labels of
+    no kind take colours no kind drawn uses."""
+    from matplotlib.colors import to_hex
+
+    from fuzzyslam.reproduce.plan import compare_label
+    from fuzzyslam.reproduce.report import SUMMARY_PANELS
+
+    def look(style: dict) -> tuple:
+        return style["color"], style["ls"], style["marker"]
+
+    for _log, _title, runs in SUMMARY_PANELS:
+        for name, label in runs:
+            assert look(figsave.series_styles([label])[0]) == look(
+                figsave.series_styles([compare_label(name)])[0]
+            ), (name, label)
+    lamps, heading, pose = (look(figsave.ESTIMATE_KINDS[k][1])
+                            for k in ("lamps only", "heading fixes", "pose fixes"))  # fmt: skip
+    assert all(a != b for a, b in zip(heading, pose, strict=True))
+    assert figsave.estimate_kind("all lamps off: no fixes") == "lamps only"
+    assert figsave.estimate_kind("lamps only (A, B)") == "lamps only"
+    other = figsave.series_styles(["x", "A+B: lamps only"])[0]["color"]
+    assert other not in (lamps[0], heading[0], pose[0])
+    # compare.png draws them so, whatever the order of its estimates
+    truth, est = _real_case()
+    ev = evaluate(truth, est, EvalParams(), align=True)
+    figs = _capture(monkeypatch, ef)
+    ef.fig_compare(tmp_path / "f.png", truth,
+                   [("C: heading fixes (paper)", ev), ("A+B: lamps only", ev)])  # fmt: skip
+    lines = {ln.get_label(): ln for ln in figs[0].axes[0].get_lines()}
+    assert to_hex(lines["A+B: lamps only"].get_color()) == to_hex(lamps[0])
+    assert lines["C: heading fixes (paper)"].get_marker() == heading[2]
+
+
+def test_fig3_legend_lies_under_the_axes(tmp_path, monkeypatch) -> None:
+    """fig3's legend of the error and its band is the figure's, under the axes (over no
+    data, no band and no run label)."""
+    truth, est = _real_case()
+    est.cov = np.tile(np.diag([0.01, 0.01, 0.001]), (est.t.size, 1, 1))
+    ev = evaluate(truth, est, EvalParams(), align=True)
+    figs = _capture(monkeypatch, ef)
+    ef.fig3_errors(tmp_path / "f.png", truth, ev)
+    fig = figs[0]
+    assert all(ax.get_legend() is None for ax in fig.axes)
+    (leg,) = fig.legends
+    assert {t.get_text() for t in leg.get_texts()} >= {"±2σ (filter)", "estimate − truth"}
+    renderer = fig.canvas.get_renderer()
+    assert leg.get_window_extent(renderer).y1 < fig.axes[-1].get_window_extent(renderer).y0
+
+
 def test_the_shared_style_sizes_text_for_print() -> None:
     with figsave.figure_style():
         rc = matplotlib.rcParams

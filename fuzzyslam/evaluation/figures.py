@@ -22,6 +22,7 @@ from fuzzyslam.figsave import (
     BLACK,
     BLUE,
     COLUMN_W,
+    ESTIMATE_KINDS,
     EVENT_COLOURS,
     EXPECTED,
     GREEN,
@@ -36,6 +37,7 @@ from fuzzyslam.figsave import (
     fixed_layout,
     log_name,
     save_png,
+    series_styles,
     styled,
 )
 from fuzzyslam.maps.grid import BeliefMap
@@ -44,7 +46,8 @@ from fuzzyslam.streams.logmeta import World
 
 Array = NDArray[np.float64]
 DPI = PRINT_DPI  # made at print size and at the PNG's dpi (fuzzyslam/figsave.py's style)
-C_TRUTH, C_EST, C_ODOM = BLACK, BLUE, VERMILLION  # the Okabe-Ito palette (figsave.py)
+# the Okabe-Ito palette (figsave.py); the odometry as in every figure (ESTIMATE_KINDS)
+C_TRUTH, C_EST, C_ODOM = BLACK, BLUE, ESTIMATE_KINDS["odometry"][1]["color"]
 
 
 # Margins of the figures' fixed layouts (inches, 8-9 pt text; fuzzyslam/figsave.py): tick
@@ -360,7 +363,9 @@ def mark_events(axes: list[plt.Axes], truth: Truth, t0: float = 0.0) -> list:
             for ax in axes:
                 ax.axvline(t - t0, **style[kind])
         if ts:
-            handles.append(Line2D([], [], label=f"{kind} ({len(ts)})", **style[kind]))
+            # the runs are numbered at their starts: "run starts", the others counted
+            label = "run starts" if kind == "run start" else f"{kind} ({len(ts)})"
+            handles.append(Line2D([], [], label=label, **style[kind]))
     return handles
 
 
@@ -433,8 +438,9 @@ def fig3_errors(path: Path, truth: Truth, ev: Evaluation, title: str = "") -> No
             lim = max(lim, float(np.nanpercentile(2.0 * ev.sigma[:, k] * scale[k], 99.5)))
         lim = lim * 1.1 if np.isfinite(lim) and lim > 0 else 1.0
         ax.set_ylim(-lim, lim)
-    handles = mark_events(list(axes), truth, t0)
-    axes[0].legend(loc="upper right", ncol=2, fontsize=8, borderaxespad=0.2)
+    # the curves' legend with the events' under the axes (over none of the data, the
+    # band or the run labels)
+    handles = axes[0].get_legend_handles_labels()[0] + mark_events(list(axes), truth, t0)
     axes[-1].set_xlabel(TIME_LABEL)
     axes[0].set_title(title or f"Fig. 3: pose errors\n{run_title(truth, ev_label(ev))}", y=1.0)
     bottom = events_bottom(len(handles))
@@ -695,10 +701,11 @@ def fig_compare(path: Path, truth: Truth, runs: Sequence[tuple[str, Evaluation]]
     fig, ax = plt.subplots(figsize=(WIDE_W, 2.6), dpi=DPI)
     errs = [np.hypot(ev.errors[:, 0], ev.errors[:, 1]) * 100.0 for _label, ev in runs]
     floor = log_floor(*errs)  # every error inside the axes (those under it drawn at it)
-    for j, ((label, ev), err) in enumerate(zip(runs, errs, strict=True)):
-        # the palette's colours, none an event's, and dashes: curves that coincide show
-        ax.plot(ev.assoc.t - t0, np.maximum(err, floor), lw=1.0, color=SERIES[j % len(SERIES)],
-                ls=SERIES_DASHES[j % len(SERIES_DASHES)], label=label)  # fmt: skip
+    # each kind of estimate in its colour, dashes and markers, as in summary.png (none an
+    # event's colour): curves that coincide show
+    styles = series_styles([label for label, _ev in runs], [e.size for e in errs])
+    for (label, ev), err, style in zip(runs, errs, styles, strict=True):
+        ax.plot(ev.assoc.t - t0, np.maximum(err, floor), lw=1.0, label=label, **style)
     ax.set_yscale("log")
     ax.set_ylim(bottom=floor)
     ax.set_ylabel("position error (cm)")

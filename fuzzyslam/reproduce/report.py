@@ -178,12 +178,11 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
     from fuzzyslam.evaluation.metrics import associate, pose_errors
     from fuzzyslam.figsave import (
         PRINT_DPI,
-        SERIES,
-        SERIES_DASHES,
         WIDE_W,
         figure_style,
         fixed_layout,
         save_png,
+        series_styles,
     )
     from fuzzyslam.streams.tum import read_tum
 
@@ -198,18 +197,20 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
         for ax, (log, title, runs) in zip(axes, panels, strict=True):
             truth = read_truth(root / seed_dir / f"{log}.mcap", progress=False)
             t0 = log_start(truth)
-            for j, (name, label) in enumerate(runs):
+            curves = []
+            for name, label in runs:
                 tum = root / seed_dir / name / "trajectory.tum"
                 if not tum.is_file():
                     continue
                 t, poses = read_tum(tum)
                 a = associate(t, poses, truth.t, truth.poses, 0.05)
                 e = pose_errors(a.est, a.truth)
-                # the Okabe-Ito palette and dashes: the curves coincide until the freeze
-                style = {"color": SERIES[j % len(SERIES)],
-                         "ls": SERIES_DASHES[j % len(SERIES_DASHES)]}  # fmt: skip
-                ax.plot(a.t - t0, 100.0 * np.hypot(e[:, 0], e[:, 1]), lw=1.0, label=label,
-                        **style)  # fmt: skip
+                curves.append((label, a.t - t0, 100.0 * np.hypot(e[:, 0], e[:, 1])))
+            # each kind of estimate in its colour, dashes and markers, as in compare.png:
+            # the curves coincide until the freeze
+            styles = series_styles([c[0] for c in curves], [c[1].size for c in curves])
+            for (label, x, y), style in zip(curves, styles, strict=True):
+                ax.plot(x, y, lw=1.0, label=label, **style)
             ax.set_yscale("log")
             ax.set_ylabel("position error (cm)")
             ax.set_title(f"{seed_dir}/{log}.mcap: {title}", y=1.0)
