@@ -347,17 +347,20 @@ def test_sweep_labels_its_evaluations_with_the_grid_value_and_seed() -> None:
     assert "robot.wheel_noise=0.005, seed 1" in ev.argv
 
 
-def test_changes_time_colour_bar_from_the_logs_start(tmp_path, monkeypatch) -> None:
+def test_changes_time_colour_bar_from_the_runs_start(tmp_path, monkeypatch) -> None:
+    """changes.png's times are since the run's first ring (the detector's t_first), and
+    its colour bar says so; the log is named in the title."""
     from fuzzyslam.fixes import changes
 
     cs = [changes.Change(T0 + 100.0 + k, 0.5 * k, 1.0, 0.3, 4, 0.5) for k in range(5)]
     assert not hasattr(changes, "save_png")  # imported inside the drawing function
     seen = _capture(monkeypatch, figsave, "save_png")
-    changes.draw_changes(tmp_path / "changes.png", _fgm(), cs, t0=T0)
+    changes.draw_changes(tmp_path / "changes.png", _fgm(), cs, t0=T0, log="people.mcap")
     fig = seen[0]
     sc = fig.axes[0].collections[0]
     assert np.asarray(sc.get_array()).min() == pytest.approx(100.0)
-    assert fig.axes[0].child_axes[0].get_ylabel() == "time since the log's start (s)"
+    assert fig.axes[0].child_axes[0].get_ylabel() == "time since the run's start (s)"
+    assert fig.axes[0].get_title().endswith(": people.mcap")
     assert fig.get_size_inches()[0] <= figsave.COLUMN_W + 1e-9
     assert Path(tmp_path / "changes.png").is_file()
 

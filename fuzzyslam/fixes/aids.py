@@ -320,6 +320,11 @@ def aids_for_log(
     aids = make_aids(
         map_dir, mode, cfg, start, expect_log_id=log_identity(world_dict, reader.fingerprint())
     )
+    from fuzzyslam.figsave import log_name
+
+    for aid in aids:  # the log named in the figures' titles (changes.png)
+        if hasattr(aid, "log"):
+            aid.log = log_name(log)
     when = min((a.start_time for a in aids), default=None)
     if when is not None:
         _tell_fix_start(when, fix_from, reader.start, reader.end)

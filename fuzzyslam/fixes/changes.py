@@ -244,6 +244,7 @@ class ChangeDetector(FlmAhead, FixAid):
         self.rings = 0
         self.uncertain = 0
         self.t_first: float | None = None  # the first ring's time: changes.png's origin
+        self.log = ""  # the log's name, changes.png's title (aids_for_log sets it)
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
         """Detect changes in the ring's FLM, when the position is known well enough.
@@ -309,10 +310,11 @@ class ChangeDetector(FlmAhead, FixAid):
         Returns
         -------
         list of (callable, tuple)
-            ``(draw_changes, (path, fgm, detections, log start))``.
+            ``(draw_changes, (path, fgm, detections, the run's start, the log's name))``.
         """
         t0 = self.t_first if self.t_first is not None else 0.0
-        return [(draw_changes, (Path(outdir) / "changes.png", self.fgm, self.decisions, t0))]
+        return [(draw_changes, (Path(outdir) / "changes.png", self.fgm, self.decisions, t0,
+                                self.log))]  # fmt: skip
 
     def messages(
         self, topics: Any, start: float | None = None
@@ -366,10 +368,15 @@ def change_messages(changes: Sequence[Change], topic: str) -> list[tuple[str, st
     return out
 
 
-def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change], t0: float = 0.0) -> None:
+TIME_LABEL = "time since the run's start (s)"  # changes.png's colour bar (from t_first)
+
+
+def draw_changes(
+    path: Path, fgm: BeliefMap, changes: Sequence[Change], t0: float = 0.0, log: str = ""
+) -> None:
     """changes.png: the frozen FGM (pignistic occupancy, grey) with every detection drawn
-    over it (black-edged dots coloured by their time since the log's start, viridis: dark
-    early, light late), one column wide, sized from the map's aspect.
+    over it (black-edged dots coloured by their time since the run's start, its first
+    ring, viridis: dark early, light late), one column wide, sized from the map's aspect.
 
     Parameters
     ----------
@@ -380,7 +387,9 @@ def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change], t0: floa
     changes : sequence of Change
         The detections.
     t0 : float
-        The log's start (s, log time; the run's first ring): the time colour bar's origin.
+        The run's start (s, log time: its first ring): the time colour bar's origin.
+    log : str
+        The log's name (:func:`fuzzyslam.figsave.log_name`), in the title when given.
     """
     # a Figure without pyplot (its import and figure manager are not needed for one
     # PNG), drawn once and cropped to its drawn pixels (fuzzyslam/figsave.py)
@@ -409,8 +418,9 @@ def draw_changes(path: Path, fgm: BeliefMap, changes: Sequence[Change], t0: floa
             sc = ax.scatter(xy[:, 0], xy[:, 1], c=t, cmap="viridis", s=20, edgecolors="black",
                             linewidths=0.6, zorder=3)  # fmt: skip
             cax = ax.inset_axes((1.0 + 0.08 / ax_w, 0.0, 0.1 / ax_w, 1.0))
-            fig.colorbar(sc, cax=cax, label="time since the log's start (s)")
-        ax.set_title(f"change detections ({len(changes)}) over the frozen FGM", y=1.0)
+            fig.colorbar(sc, cax=cax, label=TIME_LABEL)
+        of = f": {log}" if log else ""
+        ax.set_title(f"change detections ({len(changes)}) over the frozen FGM{of}", y=1.0)
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
         ax.set_aspect("equal")
