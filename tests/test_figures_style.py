@@ -187,6 +187,37 @@ def test_fig3_legend_lies_under_the_axes(tmp_path, monkeypatch) -> None:
     assert leg.get_window_extent(renderer).y1 < fig.axes[-1].get_window_extent(renderer).y0
 
 
+def test_consistency_breaks_running_means_at_gaps_and_marks_values_below(
+    tmp_path, monkeypatch
+) -> None:
+    """A kind's NIS running mean is not joined across a stretch without its updates (a NaN
+    in the gap), and values under the log axis's floor are marked on its bottom edge."""
+    from fuzzyslam.evaluation.core import Updates
+
+    t, v = ef.break_gaps(np.array([0.0, 1.0, 2.0, 3.0, 50.0, 51.0]), np.ones(6))
+    assert np.isnan(v).sum() == 1 and 3.0 < t[np.isnan(v)][0] < 50.0
+    truth, est = _real_case()
+    n = est.t.size
+    est.cov = np.tile(np.diag([0.01, 0.01, 0.001]), (n, 1, 1))
+    tu = np.concatenate([est.t[:40], est.t[-40:]])  # a gap in the middle
+    nis = np.full(tu.size, 1.5)
+    nis[5] = 0.0  # under any floor
+    est.updates = Updates(t=tu, kind=np.array(["lamp"] * tu.size), id=np.zeros(tu.size, int),
+                          dof=np.full(tu.size, 2), nis=nis,
+                          accepted=np.ones(tu.size, bool))  # fmt: skip
+    ev = evaluate(truth, est, EvalParams(), align=True)
+    figs = _capture(monkeypatch, ef)
+    assert ef.fig_consistency(tmp_path / "f.png", truth, est, ev)
+    ax = figs[0].axes[1]
+    mean = next(ln for ln in ax.get_lines() if ln.get_label() == "lamp, running mean")
+    x, y = (np.asarray(a, dtype=float) for a in mean.get_data())
+    gap = np.isnan(y)
+    assert gap.sum() == 1 and tu[39] - T0 < x[gap][0] < tu[40] - T0
+    edge = [ln for ln in ax.get_lines() if ln.get_marker() == "v"]
+    assert edge and len(edge[0].get_xdata()) == 1
+    assert "below the axis (on its edge)" in [t.get_text() for t in ax.get_legend().get_texts()]
+
+
 def test_the_shared_style_sizes_text_for_print() -> None:
     with figsave.figure_style():
         rc = matplotlib.rcParams

@@ -13,6 +13,7 @@ import matplotlib
 matplotlib.use("Agg")
 import matplotlib.pyplot as plt
 import numpy as np
+from matplotlib.lines import Line2D
 from numpy.typing import NDArray
 
 from fuzzyslam.evaluation.align import Similarity
@@ -345,8 +346,6 @@ def mark_events(axes: list[plt.Axes], truth: Truth, t0: float = 0.0) -> list:
     """
     if truth.scenario is None:
         return []
-    from matplotlib.lines import Line2D
-
     style = {
         "run start": {"color": "0.6", "lw": 1.0, "ls": ":"},
         "FGM frozen": {"color": EVENT_COLOURS["FGM frozen"], "lw": 1.2, "ls": "-"},
@@ -603,6 +602,75 @@ def running_mean(v: Array, frac: float = 0.02) -> Array:
     return np.where(cnt > 0, (num[hi] - num[lo]) / np.maximum(cnt, 1), np.nan)
 
 
+GAP_FACTOR = 5.0  # a gap in a series: over this many times its median sample spacing
+
+
+def break_gaps(t: Array, v: Array, factor: float = GAP_FACTOR) -> tuple[Array, Array]:
+    """A series with a NaN in each of its gaps (a spacing over ``factor`` times the median
+    positive spacing), so that its line breaks there instead of joining the two sides.
+
+    Parameters
+    ----------
+    t : array_like, shape (n,)
+        The times, in order.
+    v : array_like, shape (n,)
+        The values.
+    factor : float
+        The gap, in median spacings.
+
+    Returns
+    -------
+    (ndarray, ndarray)
+        The times and values with a point (mid-gap, NaN) in each gap.
+    """
+    t, v = np.asarray(t, dtype=float).ravel(), np.asarray(v, dtype=float).ravel()
+    dt = np.diff(t)
+    pos = dt[dt > 0]
+    if pos.size < 2:
+        return t, v
+    gaps = np.flatnonzero(dt > factor * float(np.median(pos)))
+    mid = (t[gaps] + t[gaps + 1]) / 2.0
+    return np.insert(t, gaps + 1, mid), np.insert(v, gaps + 1, np.nan)
+
+
+def mark_below(ax: plt.Axes, t: Array, v: Array, floor: float, colour: str) -> bool:
+    """Triangles on the bottom edge of ``ax`` at the times of the values under ``floor``
+    (the log axis's lower limit, where they are drawn); True when there is one.
+
+    Parameters
+    ----------
+    ax : Axes
+        A log-scale axes with ``floor`` its lower limit.
+    t : array_like
+        The times (x, data).
+    v : array_like
+        The values.
+    floor : float
+        The lower limit.
+    colour : str
+        The triangles' colour (the series').
+
+    Returns
+    -------
+    bool
+    """
+    low = np.asarray(v, dtype=float) < floor
+    if not low.any():
+        return False
+    # x in data, y in axes coordinates: on the edge whatever the limits
+    ax.plot(np.asarray(t, dtype=float)[low], np.zeros(int(low.sum())), "v", ms=3.5,
+            color=colour, mec=BLACK, mew=0.3, ls="none", clip_on=False, zorder=5,
+            transform=ax.get_xaxis_transform())  # fmt: skip
+    return True
+
+
+def below_handle(markerscale: float = 1.0) -> Line2D:
+    """The legend entry of :func:`mark_below`'s triangles (for a legend of
+    ``markerscale``: drawn at their size)."""
+    return Line2D([], [], marker="v", ms=3.5 / markerscale, color="0.5", mec=BLACK, mew=0.3,
+                  ls="none", label="below the axis (on its edge)")  # fmt: skip
+
+
 @styled
 def fig_consistency(path: Path, truth: Truth, est: Estimate, ev: Evaluation) -> bool:
     """NEES (3 dof) against time with its per-sample 95 % band, and NIS of accepted updates
@@ -616,25 +684,20 @@ def fig_consistency(path: Path, truth: Truth, est: Estimate, ev: Evaluation) -> 
     side = {"loc": "upper left", "bbox_to_anchor": (1.01, 1.0), "fontsize": 8, "frameon": False}
     if ev.nees is not None:
         lo, hi = chi2_quantile(0.025, 3), chi2_quantile(0.975, 3)
-        floor = log_floor(ev.nees)  # every sample inside the axes (zeros drawn at it)
-        ax.semilogy(
-            ev.assoc.t - t0,
-            np.maximum(ev.nees, floor),
-            color=SKY,
-            lw=0.6,
-            label=f"NEES (mean {np.nanmean(ev.nees):.2f})",
-        )
-        ax.semilogy(
-            ev.assoc.t - t0,
-            running_mean(ev.nees),
-            color=BLUE,
-            lw=1.4,
-            label="running mean (2 %)",
-        )
+        # every sample inside the axes: those under the floor (zeros) drawn at it, and
+        # marked on the axis's edge
+        floor = min(log_floor(ev.nees), 10.0 ** np.floor(np.log10(lo)))
+        tn = ev.assoc.t - t0
+        ax.semilogy(*break_gaps(tn, np.maximum(ev.nees, floor)), color=SKY, lw=0.6,
+                    label=f"NEES (mean {np.nanmean(ev.nees):.2f})")  # fmt: skip
+        # the running mean broken where the samples stop (no line across a gap)
+        ax.semilogy(*break_gaps(tn, running_mean(ev.nees)), color=BLUE, lw=1.4,
+                    label="running mean (2 %)")  # fmt: skip
         ax.axhspan(lo, hi, color=ORANGE, alpha=0.15, lw=0, label="95 % band, one sample (3 dof)")
         ax.axhline(3.0, color=EXPECTED, lw=0.9, ls="--", label="expected NEES = 3")
-        ax.set_ylim(bottom=min(floor, 10.0 ** np.floor(np.log10(lo))))
-        ax.legend(**side)
+        ax.set_ylim(bottom=floor)
+        extra = [below_handle()] if mark_below(ax, tn, ev.nees, floor, SKY) else []
+        ax.legend(handles=ax.get_legend_handles_labels()[0] + extra, **side)
     ax.set_ylabel("NEES (pose, 3 dof)")
     ax.grid(alpha=0.3, which="both")
     ax = axes[1]
@@ -646,17 +709,22 @@ def fig_consistency(path: Path, truth: Truth, est: Estimate, ev: Evaluation) -> 
             m = (u.kind == kind) & u.accepted & (u.dof > 0) & np.isfinite(u.nis)
             if m.any():
                 kinds.append((kind, m, u.nis[m] / u.dof[m]))
-        floor = log_floor(*(v for _k, _m, v in kinds))
+        floor = min(log_floor(*(v for _k, _m, v in kinds)), 0.1)
+        below = False
         for j, (kind, m, v) in enumerate(kinds):
             colour = SERIES[j % len(SERIES)]
-            ax.semilogy(u.t[m] - t0, np.maximum(v, floor), ".", ms=2, alpha=0.5, color=colour,
+            tk = u.t[m] - t0
+            ax.semilogy(tk, np.maximum(v, floor), ".", ms=2, alpha=0.5, color=colour,
                         label=f"{kind} ({m.sum()} accepted, mean {v.mean():.2f})")  # fmt: skip
-            ax.semilogy(u.t[m] - t0, running_mean(v), color=colour, lw=1.4,
+            # broken where the kind's updates stop (a lamp-less stretch): no line across
+            ax.semilogy(*break_gaps(tk, running_mean(v)), color=colour, lw=1.4,
                         ls=SERIES_DASHES[j % len(SERIES_DASHES)],
                         label=f"{kind}, running mean")  # fmt: skip
+            below |= mark_below(ax, tk, v, floor, colour)
         ax.axhline(1.0, color=EXPECTED, lw=0.9, ls="--", label="expected NIS / dof = 1")
-        ax.set_ylim(bottom=min(floor, 0.1))
-        ax.legend(**side, markerscale=4)
+        ax.set_ylim(bottom=floor)
+        extra = [below_handle(4.0)] if below else []
+        ax.legend(handles=ax.get_legend_handles_labels()[0] + extra, **side, markerscale=4)
     ax.set_ylabel("NIS / dof (dimensionless)")
     ax.set_xlabel(TIME_LABEL)
     ax.grid(alpha=0.3, which="both")
