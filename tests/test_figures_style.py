@@ -313,6 +313,29 @@ def test_hough_shows_the_strongest_references_only() -> None:
     assert [r.id for r in kept] == [1, 3, 5] and mf.HOUGH_REFS == 3
 
 
+def test_hough_titles_say_what_the_strength_is() -> None:
+    assert mf.strongest_title(4.987) == "strongest line: 4.99 m of wall"
+    assert mf.strongest_title(0.18, "FLM: ") == "FLM: strongest line: 0.18 m of wall"
+    fig, ax = plt.subplots()
+    mf._hough_panel(ax, None, mf.strongest_title(0.0), {})
+    assert ax.get_title() == "no wall evidence (no Hough plane)"
+    plt.close(fig)
+
+
+def test_fgm_true_lamps_are_rings_over_the_estimates(tmp_path, monkeypatch) -> None:
+    """fgm.png: the true lamps hollow, larger and drawn over the estimated ones."""
+    figs = _capture(monkeypatch, mf)
+    world = type("W", (), {"lamps": [0, 1], "lamp_array": np.array([[1.0, 1.0], [2.0, 1.0]]),
+                           "wall_array": np.zeros((0, 4))})()  # fmt: skip
+    mf.fig_fgm(tmp_path / "f.png", _fgm(), np.zeros((2, 3)), [], world,  # type: ignore[arg-type]
+               np.array([[1.0, 1.0], [2.0, 1.0]]))  # fmt: skip
+    ax = figs[0].axes[0]
+    true = next(ln for ln in ax.get_lines() if ln.get_label() == "true lamps")
+    est = next(ln for ln in ax.get_lines() if ln.get_label().startswith("estimated"))
+    assert true.get_markerfacecolor() == "none"
+    assert true.get_markersize() > est.get_markersize() and true.get_zorder() > est.get_zorder()
+
+
 def test_sweep_ticks_at_the_swept_values_on_a_log_axis(tmp_path, monkeypatch) -> None:
     from fuzzyslam.reproduce import sweep_plot
 

@@ -23,7 +23,6 @@ from fuzzyslam.figsave import (
     PRINT_DPI,
     VERMILLION,
     WIDE_W,
-    YELLOW,
     fixed_layout,
     log_name,
     save_png,
@@ -124,13 +123,15 @@ def fig_fgm(
         ax.annotate(str(r.id), corner, fontsize=8, fontweight="bold", color=BLACK,
                     ha="center", va="center", path_effects=HALO)  # fmt: skip
         key.append(f"{r.id}: {np.rad2deg(r.angle):.2f} deg")
+    # the estimates small, the true lamps as larger rings over them: both show where
+    # they coincide
+    if landmarks is not None and len(landmarks):
+        ax.plot(landmarks[:, 0], landmarks[:, 1], "X", mfc=VERMILLION, mec=BLACK, mew=0.5,
+                ms=4.5, zorder=3, label=f"estimated {noun}")  # fmt: skip
     if world is not None and len(world.lamps):
         la = world.lamp_array
-        ax.plot(la[:, 0], la[:, 1], "o", mfc=YELLOW, mec=BLACK, mew=1.0, ms=6,
+        ax.plot(la[:, 0], la[:, 1], "o", color=BLACK, mfc="none", mew=1.0, ms=9, zorder=4,
                 label="true lamps")  # fmt: skip
-    if landmarks is not None and len(landmarks):
-        ax.plot(landmarks[:, 0], landmarks[:, 1], "X", mfc=VERMILLION, mec=BLACK, mew=0.6,
-                ms=6, label=f"estimated {noun}")  # fmt: skip
     ax.set_xlabel("x (m)")
     ax.set_ylabel("y (m)")
     ax.set_aspect("equal")
@@ -199,6 +200,24 @@ def _wrapped_plane(wd: WallDirection) -> tuple[np.ndarray, tuple[float, float, f
     return wide, extent
 
 
+def strongest_title(strength: float, prefix: str = "") -> str:
+    """A Hough panel's title: its strongest line's votes, metres of wall at full belief
+    (the wall direction's ``strength``).
+
+    Parameters
+    ----------
+    strength : float
+        The strongest line's strength (m).
+    prefix : str
+        Put before it ("FLM: ").
+
+    Returns
+    -------
+    str
+    """
+    return f"{prefix}strongest line: {strength:.2f} m of wall"
+
+
 def _hough_panel(ax, wd: WallDirection | None, title: str, cbar_of: dict) -> None:
     """A Hough plane (votes over the line normal's angle and rho) with its peaks: the wall
     direction's (red) and the strongest of another direction (white, when there is one),
@@ -207,8 +226,10 @@ def _hough_panel(ax, wd: WallDirection | None, title: str, cbar_of: dict) -> Non
     ax.set_ylabel("ρ (m)")
     ax.xaxis.set_major_locator(MultipleLocator(45))
     ax.yaxis.set_major_locator(MaxNLocator(4))
+    # the title at the labels' size: as wide as the panel with its tick labels, over none
+    # of the neighbour's
     if wd is None or wd.plane is None:
-        ax.set_title(title + " (no evidence)", y=1.0)
+        ax.set_title("no wall evidence (no Hough plane)", y=1.0, fontsize=HOUGH_TITLE_PT)
         ax.set_xlim(-HOUGH_PAD_DEG, 180 + HOUGH_PAD_DEG)
         return
     wide, extent = _wrapped_plane(wd)
@@ -231,7 +252,7 @@ def _hough_panel(ax, wd: WallDirection | None, title: str, cbar_of: dict) -> Non
         ax.plot(xs, ys, **(PEAK_OTHER if second else PEAK_WALL))
     ax.set_xlim(-HOUGH_PAD_DEG, 180 + HOUGH_PAD_DEG)
     ax.set_ylim(extent[2], extent[3])
-    ax.set_title(title, y=1.0)
+    ax.set_title(title, y=1.0, fontsize=HOUGH_TITLE_PT)
 
 
 def _shared_colorbar(im, cbar_of: dict, kind: str) -> None:
@@ -293,6 +314,7 @@ PEAK_ROOM_DEG = 7.0  # a peak's circle is about this wide on the theta axis: non
 PANEL_W, PANEL_H = 1.55, 1.3
 H_LEFT, H_RIGHT, H_BOTTOM, H_TOP = 0.55, 0.85, 0.45, 0.85
 H_WSPACE, H_HSPACE = 0.55, 0.6
+HOUGH_TITLE_PT = 8.0  # a Hough plane's title ("strongest line: 4.99 m of wall")
 HOUGH_REFS = 3  # hough.png: the strongest corridors (by Hough peak) drawn, and the FLM
 POOL_PX = 2.0  # a wall cell drawn at least this many pixels wide (max-pooled when smaller)
 # the peaks: red (the wall direction) and white (another), black-edged to show on any
@@ -475,7 +497,7 @@ def fig_hough(
         ax.set_ylabel("y (m)")
         ax.set_aspect("equal")
         ax.set_title(f"{r.name}: {np.rad2deg(r.angle):.2f} deg", y=1.0)
-        _hough_panel(bottom, r.wall, f"Hough: peak {r.strength:.2f} m", cbar_of)
+        _hough_panel(bottom, r.wall, strongest_title(r.strength), cbar_of)
         drawn["other"] |= other(r.wall)
     if flm is not None and flm_wd is not None:
         ax, bottom = pair(n - 1)
@@ -494,7 +516,7 @@ def fig_hough(
         ax.set_ylabel("y, robot frame (m)")
         ax.set_aspect("equal")
         ax.set_title(f"FLM (robot frame): {np.rad2deg(flm_wd.angle):.2f} deg", y=1.0)
-        _hough_panel(bottom, flm_wd, f"FLM Hough: peak {flm_wd.strength:.2f} m", cbar_of)
+        _hough_panel(bottom, flm_wd, strongest_title(flm_wd.strength, "FLM: "), cbar_of)
         drawn["other"] |= other(flm_wd)
     # fixed margins and gaps (inches) for the tick labels, axis labels and titles between
     # the panels, the blank rest cropped (fuzzyslam/figsave.py)
