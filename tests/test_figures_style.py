@@ -414,7 +414,8 @@ def test_changes_time_colour_bar_from_the_runs_start(tmp_path, monkeypatch) -> N
     sc = fig.axes[0].collections[0]
     assert np.asarray(sc.get_array()).min() == pytest.approx(100.0)
     assert fig.axes[0].child_axes[0].get_ylabel() == "time since the run's start (s)"
-    assert fig.axes[0].get_title().endswith(": people.mcap")
+    assert fig.axes[0].get_title().endswith("\npeople.mcap")
+    assert Image.open(tmp_path / "changes.png").size[0] <= figsave.COLUMN_W * 300 + 1
     assert fig.get_size_inches()[0] <= figsave.COLUMN_W + 1e-9
     assert Path(tmp_path / "changes.png").is_file()
 

@@ -402,7 +402,8 @@ def draw_changes(
     x0, y0 = g.origin
     extent = (x0, x0 + nx * g.resolution, y0, y0 + ny * g.resolution)
     occ = fgm.m_o + 0.5 * fgm.m_t
-    left, right, bottom, top = 0.6, 0.8, 0.42, 0.3  # inches: labels, the colour bar right
+    # inches: labels, the colour bar right, a title of one or two lines (with the log)
+    left, right, bottom, top = 0.6, 0.8, 0.42, 0.45 if log else 0.3
     ax_w = COLUMN_W - left - right
     ax_h = ax_w * float(np.clip((extent[3] - extent[2]) / (extent[1] - extent[0]), 0.35, 1.4))
     with figure_style():
@@ -419,7 +420,7 @@ def draw_changes(
                             linewidths=0.6, zorder=3)  # fmt: skip
             cax = ax.inset_axes((1.0 + 0.08 / ax_w, 0.0, 0.1 / ax_w, 1.0))
             fig.colorbar(sc, cax=cax, label=TIME_LABEL)
-        of = f": {log}" if log else ""
+        of = f"\n{log}" if log else ""  # the log on a line of its own (one column wide)
         ax.set_title(f"change detections ({len(changes)}) over the frozen FGM{of}", y=1.0)
         ax.set_xlabel("x (m)")
         ax.set_ylabel("y (m)")
