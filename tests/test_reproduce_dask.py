@@ -120,6 +120,35 @@ def test_scheduler_unreachable_is_one_line(tmp_path):
     assert not (tmp_path / "o").exists()
 
 
+@pytest.mark.parametrize("command", ["reproduce", "sweep"])
+def test_malformed_scheduler_address_and_ship_files_alone_are_usage_errors(tmp_path, command):
+    """A malformed ``--scheduler`` (no port, a scheme Dask has not, no host, a port out of
+    range) is a usage error naming the option, before anything connects (was exit 3, "what
+    answered is not a Dask scheduler", though nothing answered); ``--ship-files`` without
+    ``--scheduler`` too (was accepted and ignored). One line, exit 2, nothing written."""
+    args = (["reproduce", "--quick", "--seeds", "1"] if command == "reproduce" else
+            ["sweep", "quick", "--set", "robot.wheel_noise=0.01", "--seeds", "1"])  # fmt: skip
+    cases = [(["--scheduler", a], "--scheduler") for a in
+             ("nonsense", "http://127.0.0.1:8786", "tcp://127.0.0.1", "tcp://:8786",
+              "tcp://127.0.0.1:99999", "127.0.0.1:87x6")]  # fmt: skip
+    cases.append((["--ship-files"], "--ship-files needs --scheduler"))
+    for extra, why in cases:
+        p = cli(*args, "-o", tmp_path / "o", *extra)
+        lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
+        assert p.returncode == 2 and len(lines) == 1, (extra, p.stderr)
+        assert "usage error" in lines[0] and why in lines[0], lines[0]
+        assert not (tmp_path / "o").exists()
+
+
+def test_well_formed_scheduler_addresses_pass():
+    """The forms Dask reads: tcp by default, its schemes, a name, IPv6 in brackets."""
+    from fuzzyslam.cli import SCHEDULER_ADDRESS
+
+    for a in ("tcp://10.0.0.1:8786", "10.0.0.1:8786", "tls://node-3.cluster:8786",
+              "ws://[::1]:8786", "ucx://h_1:1", "inproc://10.0.0.1/123/1"):  # fmt: skip
+        assert SCHEDULER_ADDRESS.convert(a, None, None) == a
+
+
 @pytest.mark.slow  # waits out the connect timeout and its margin: 7 s
 def test_an_address_that_is_no_dask_scheduler_is_one_line(tmp_path):
     """A server that accepts the connection and says nothing (a dashboard's port, any HTTP
@@ -138,8 +167,13 @@ def test_an_address_that_is_no_dask_scheduler_is_one_line(tmp_path):
                 return
             conn.sendall(reply)  # then keeps the connection open, silent
 
+    http = (
+        b"HTTP/1.1 400 Bad Request\r\nContent-Type: text/plain\r\n"
+        b"Content-Length: 11\r\nConnection: close\r\n\r\nBad Request"
+    )  # a proxy's
     for reply, why in ((b"", "no Dask scheduler answered"),
-                       (b"\xff" * 64, "not a Dask scheduler")):  # fmt: skip
+                       (b"\xff" * 64, "not a Dask scheduler"),
+                       (http, "not a Dask scheduler")):  # fmt: skip
         sock = socket.create_server(("127.0.0.1", 0))
         threading.Thread(target=serve, args=(sock, reply), daemon=True).start()
         port = sock.getsockname()[1]
@@ -150,6 +184,9 @@ def test_an_address_that_is_no_dask_scheduler_is_one_line(tmp_path):
         sock.close()
         lines = [ln for ln in p.stderr.splitlines() if ln.strip()]
         assert p.returncode == 3 and len(lines) == 1 and why in lines[0], p.stderr
+        # the client's own reading of the reply (numpy's "Unable to allocate 3.07 EiB for
+        # an array ...") is no message of ours
+        assert "allocate" not in lines[0] and "array" not in lines[0], lines[0]
         assert time.monotonic() - t0 < 1.0 + CONNECT_MARGIN_S + 10.0
         assert not (tmp_path / "o").exists()
 

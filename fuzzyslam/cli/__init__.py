@@ -9,6 +9,7 @@ from __future__ import annotations
 import contextlib
 import math
 import os
+import re
 import sys
 import traceback
 from typing import Any
@@ -115,6 +116,68 @@ class LogTimeType(click.ParamType):
 
 
 LOG_TIME = LogTimeType()
+
+
+# The address schemes of a Dask distributed scheduler (distributed's comm backends);
+# an address without one is tcp, as Dask reads it
+SCHEDULER_SCHEMES = ("tcp", "tls", "inproc", "ucx", "ws", "wss")
+_HOST_PORT = re.compile(r"(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+):([0-9]{1,5})")
+
+
+class SchedulerAddressType(click.ParamType):
+    """A Dask scheduler's address, ``[SCHEME://]HOST:PORT`` (``--scheduler``), checked
+    for its form before anything connects: a scheme among :data:`SCHEDULER_SCHEMES`
+    (none: tcp), a host and a port in 1..65535 (``inproc://`` names a process's own
+    scheduler: anything after the scheme). A malformed address is a usage error naming
+    the option (exit 2), not a scheduler that did not answer."""
+
+    name = "ADDRESS"
+
+    def convert(self, value: Any, param: Any, ctx: Any) -> Any:
+        text = str(value).strip()
+        scheme, sep, location = text.partition("://")
+        if not sep:
+            scheme, location = "tcp", text
+        if scheme not in SCHEDULER_SCHEMES:
+            self.fail(
+                f"{value!r}: unknown address scheme '{scheme}' (a Dask scheduler's address "
+                f"is [SCHEME://]HOST:PORT, SCHEME one of {', '.join(SCHEDULER_SCHEMES)})",
+                param,
+                ctx,
+            )
+        if scheme == "inproc" and location:
+            return text
+        m = _HOST_PORT.fullmatch(location)
+        if m is None or not 1 <= int(m.group(2)) <= 65535:
+            self.fail(
+                f"{value!r} is not a Dask scheduler's address [SCHEME://]HOST:PORT "
+                "(e.g. tcp://10.0.0.1:8786): "
+                + ("no port" if m is None and ":" not in location else "a bad host or port"),
+                param,
+                ctx,
+            )
+        return text
+
+
+SCHEDULER_ADDRESS = SchedulerAddressType()
+
+
+def check_ship_files(scheduler: str | None, ship_files: bool) -> None:
+    """Refuse ``--ship-files`` without ``--scheduler`` (a usage error, exit 2): the files
+    travel to Dask workers; a local pool's processes share them already.
+
+    Parameters
+    ----------
+    scheduler : str or None
+        The ``--scheduler`` address.
+    ship_files : bool
+        Whether ``--ship-files`` was given.
+    """
+    if ship_files and scheduler is None:
+        raise click.UsageError(
+            "--ship-files needs --scheduler: it sends the steps' files to Dask workers "
+            "(the local pool reads them where they are)"
+        )
 
 
 # The largest seed: a config's ``seed`` is refused above it (config.py's DEFAULT_BOUND,

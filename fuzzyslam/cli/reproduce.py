@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from fuzzyslam.cli import MAX_SEED, cli, emit
+from fuzzyslam.cli import MAX_SEED, SCHEDULER_ADDRESS, check_ship_files, cli, emit
 
 
 @cli.command("reproduce")
@@ -53,7 +53,7 @@ from fuzzyslam.cli import MAX_SEED, cli, emit
 )
 @click.option(
     "--scheduler",
-    metavar="ADDRESS",
+    type=SCHEDULER_ADDRESS,
     default=None,
     help="Run the steps on an existing Dask distributed scheduler (tcp://host:8786) "
     "instead of a local pool; its workers must see OUTDIR's parent at the same path "
@@ -76,7 +76,7 @@ from fuzzyslam.cli import MAX_SEED, cli, emit
 )
 @click.option("--ship-files", is_flag=True,
               help="Send each step's input files with its task and take its outputs back: "
-              "for Dask workers that do not share OUTDIR's filesystem.")  # fmt: skip
+              "for Dask workers (--scheduler) that do not share OUTDIR's filesystem.")  # fmt: skip
 def reproduce_command(
     outdir: Path,
     seeds: int,
@@ -123,6 +123,7 @@ def reproduce_command(
     from fuzzyslam.reproduce.overrides import parse_one
     from fuzzyslam.reproduce.stage import run
 
+    check_ship_files(scheduler, ship_files)
     if first_seed + seeds - 1 > MAX_SEED:  # the bound of a config's seed (and --seed)
         raise click.UsageError(
             f"the last seed, --first-seed {first_seed} + --seeds {seeds} - 1, is above "

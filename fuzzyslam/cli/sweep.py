@@ -6,7 +6,7 @@ from pathlib import Path
 
 import click
 
-from fuzzyslam.cli import MAX_SEED, cli, emit
+from fuzzyslam.cli import MAX_SEED, SCHEDULER_ADDRESS, check_ship_files, cli, emit
 
 
 @cli.command("sweep")
@@ -31,11 +31,11 @@ from fuzzyslam.cli import MAX_SEED, cli, emit
               "to go on where it stopped.")  # fmt: skip
 @click.option("-j", "--jobs", type=click.IntRange(min=1), default=None,
               help="Steps at once (default: the usable CPUs, or the Dask threads).")  # fmt: skip
-@click.option("--scheduler", metavar="ADDRESS", default=None,
+@click.option("--scheduler", type=SCHEDULER_ADDRESS, default=None,
               help="Run the steps on an existing Dask scheduler (shared filesystem).")  # fmt: skip
 @click.option("--ship-files", is_flag=True,
               help="Send each step's input files with its task and take its outputs back: "
-              "for Dask workers that do not share OUTDIR's filesystem.")  # fmt: skip
+              "for Dask workers (--scheduler) that do not share OUTDIR's filesystem.")  # fmt: skip
 def sweep_command(config: str, sets: tuple[str, ...], seeds: int | None,
                   logs_glob: str | None, outdir: Path, jobs,
                   scheduler: str | None, ship_files: bool) -> None:  # fmt: skip
@@ -63,6 +63,7 @@ def sweep_command(config: str, sets: tuple[str, ...], seeds: int | None,
     from fuzzyslam.reproduce.overrides import parse_set
     from fuzzyslam.reproduce.sweep import sweep
 
+    check_ship_files(scheduler, ship_files)
     if logs_glob is not None and seeds is not None:
         raise click.UsageError("give --seeds or --logs, not both")
     if seeds is not None and seeds - 1 > MAX_SEED:  # the bound of a config's seed (--seed)

@@ -344,13 +344,16 @@ def _connect(client_type: Any, scheduler: str, timeout: str) -> Any:
         )
     exc = box.pop("error", None)
     if exc is not None:
-        msg = " ".join(str(exc).split())[:200] or type(exc).__name__
-        if isinstance(exc, (OSError, TimeoutError)):
-            why = "cannot reach the Dask scheduler"
-        else:
-            why = "what answered is not a Dask scheduler"
+        if isinstance(exc, (OSError, TimeoutError)):  # Dask's own words: refused, timed out
+            msg = " ".join(str(exc).split())[:200] or type(exc).__name__
+            why = f"cannot reach the Dask scheduler: {msg}"
+        else:  # whatever the client made of a foreign reply (a numpy error, say): not shown
+            why = (
+                "what answered is not a Dask scheduler (its reply is not Dask's protocol; "
+                "is this the scheduler's address, port 8786 by default?)"
+            )
         _drop_half_made_client(exc)
-        raise InputError(scheduler, f"{why}: {msg}") from None
+        raise InputError(scheduler, why) from None
     return box["client"]
 
 
