@@ -399,9 +399,20 @@ def test_an_output_directory_a_worker_cannot_see_is_one_line(tmp_path, dask_clus
     with pytest.raises(StepFailed) as exc:
         execute([Step("seed0/a", ("--version",), (), 1.0)], root, scheduler=address)
     msg = str(exc.value)
-    assert "\n" not in msg and "not visible on this worker" in msg
+    assert "\n" not in msg and "is not visible on the worker" in msg
     assert str(root) in msg and any(w in msg for w in workers)
     assert exc.value.exit_code == InputError.exit_code
+    assert "--ship-files" in msg  # what to do about it
+
+    # reproduce's steps run in a temporary directory beside OUTDIR: the line names OUTDIR,
+    # the user's path, never the temporary .part name (it did)
+    staged = tmp_path / "elsewhere" / ".out.ib08f1q6.part"
+    with pytest.raises(StepFailed) as exc:
+        execute([Step("seed0/a", ("--version",), (), 1.0)], staged, scheduler=address,
+                final=Path("results/out"))  # fmt: skip
+    msg = str(exc.value)
+    assert "results/out: the output directory is not visible on the worker" in msg, msg
+    assert ".part" not in msg and "ib08f1q6" not in msg, msg
 
 
 @pytest.mark.slow

@@ -146,7 +146,32 @@ def _entry(kind: str) -> Callable[..., dict[str, Any]]:
     return importlib.import_module(STAGES[kind]).run
 
 
-def run_step(kind: str, call: tuple[tuple[str, Any], ...], root: str) -> tuple:
+def not_visible(outdir: str, where: str, host: str) -> str:
+    """The line of a step whose worker cannot see the plan's directory: it names the
+    user's output directory ``outdir`` (never the temporary ``.part`` directory the steps
+    run in, which the user never named) and the worker, and says what to do.
+
+    Parameters
+    ----------
+    outdir : str
+        The output directory as the user gave it (``-o``).
+    where, host : str
+        The worker's address and host name.
+
+    Returns
+    -------
+    str
+    """
+    return (
+        f"{outdir}: the output directory is not visible on the worker {where} on "
+        f"{host}; workers must see its filesystem at the same path (a shared one), or add "
+        "--ship-files to send the files with the steps"
+    )
+
+
+def run_step(
+    kind: str, call: tuple[tuple[str, Any], ...], root: str, shown: str | None = None
+) -> tuple:
     """Run a step, the stage ``kind``'s entry ``run(**dict(call))`` (``Step.call``: the
     same as the step's ``fuzzyslam`` command line), in ``root`` in this process.
 
@@ -158,6 +183,10 @@ def run_step(kind: str, call: tuple[tuple[str, Any], ...], root: str) -> tuple:
         The keyword arguments of the stage's entry.
     root : str
         The absolute working directory of the step (the plan's output directory).
+    shown : str or None
+        The output directory as the user named it (where ``root``, a temporary
+        directory beside it, goes), for the error of a worker that cannot see ``root``;
+        None: ``root``.
 
     Returns
     -------
@@ -173,10 +202,7 @@ def run_step(kind: str, call: tuple[tuple[str, Any], ...], root: str) -> tuple:
 
     where, host, pid = _where(), socket.gethostname(), os.getpid()
     if not os.path.isdir(root):
-        msg = (
-            f"{root}: the output directory is not visible on this worker ({where} on "
-            f"{host}); workers must share the filesystem at the same path"
-        )
+        msg = not_visible(shown or root, where, host)
         return False, 0.0, None, msg, InputError.exit_code, "", where, host, pid
     with _STEP_LOCK:
         cwd = os.getcwd()
@@ -262,9 +288,10 @@ class Engine:
         self.pool = self._client.get_executor(pure=False)
         self.where = f"the Dask scheduler {scheduler} ({threads} worker threads)"
 
-    def submit(self, step: Step, root: Path) -> Future:
-        """Start ``step`` in ``root``; a concurrent.futures Future of run_step's tuple."""
-        fn, args = run_step, (step.kind, step.call, str(root))
+    def submit(self, step: Step, root: Path, shown: Path | None = None) -> Future:
+        """Start ``step`` in ``root`` (``shown``: the output directory as the user named
+        it, for errors); a concurrent.futures Future of run_step's tuple."""
+        fn, args = run_step, (step.kind, step.call, str(root), str(shown or root))
         if self.ship:
             from fuzzyslam.reproduce.ship import pack_inputs, rewrite_call, run_shipped_step
 
@@ -500,7 +527,7 @@ def execute(
                         ready = ready_order(ready, prio)
                         for s in ready[: max(engine.jobs - len(running), 0)]:
                             del pending[s.key]
-                            running[engine.submit(s, root)] = s
+                            running[engine.submit(s, root, final)] = s
                             started[s.key] = time.monotonic()
                     elif not running:
                         break
