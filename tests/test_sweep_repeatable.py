@@ -343,3 +343,72 @@ def test_a_folder_without_symbolic_links_gets_hard_links_or_one_line(
         sw.link_logs(tmp_path / "other", logs)
     msg = str(info.value)
     assert "\n" not in msg and "no symbolic links" in msg and str(runs / "log.mcap") in msg
+
+
+# --- 5: a rerun with another grid replaces the old one -------------------------------
+
+
+def _tree(root: Path) -> list[str]:
+    return sorted(p.relative_to(root).as_posix() for p in root.rglob("*"))
+
+
+def test_a_sweep_with_another_grid_replaces_the_old_one(tmp_path: Path) -> None:
+    """Rerun into the same OUTDIR: the same grid goes on (every step skipped, nothing
+    removed); a grid with fewer values leaves no old grid point (g1/ and g1.yaml of
+    wheel_noise 0.02 stayed though the table had one row); another key leaves no old
+    figure (sweep_robot.wheel_noise.png stayed beside the new one); fewer seeds leave
+    no old seed folder. The cells the new grid has again are kept (skipped)."""
+    out = tmp_path / "sw"
+
+    def sweep(*args: str) -> dict:
+        code, stdout, err = cli("sweep", MICRO, *args, "-o", out)
+        assert code == 0, err
+        return json.loads(stdout)
+
+    first = sweep("--set", "robot.wheel_noise=0.005,0.02", "--seeds", "2")
+    assert first["ran"] == 12
+    before = _tree(out)
+    assert {"g0", "g1", "g0.yaml", "g1.yaml", "g1/seed1"} <= set(before)
+    again = sweep("--set", "robot.wheel_noise=0.005,0.02", "--seeds", "2")
+    assert again["skipped"] == 12 and _tree(out) == before  # resumed: all kept
+    kept = (out / "g0/seed0/eval/metrics.json").read_bytes()
+
+    one = sweep("--set", "robot.wheel_noise=0.005", "--seeds", "1")
+    assert one["skipped"] == 3 and one["ran"] == 0  # g0/seed0 reused, not run again
+    tree = _tree(out)
+    assert not [p for p in tree if p.startswith(("g1", "g0/seed1"))], tree
+    assert not [p for p in tree if p.startswith(".sweep/g1") or "seed1" in p], tree
+    assert (out / "g0/seed0/eval/metrics.json").read_bytes() == kept
+    assert len(json.loads((out / "sweep.json").read_text())["rows"]) == 1
+
+    other = sweep("--set", "slam.calibrate=false,true", "--seeds", "1")
+    assert other["figures"] == [str(out / "sweep_slam.calibrate.png")]
+    assert sorted(p.name for p in out.glob("sweep_*.png")) == ["sweep_slam.calibrate.png"]
+    assert {"g0.yaml", "g1.yaml", "g1/seed0/eval/metrics.json"} <= set(_tree(out))
+
+
+def test_removing_another_grid_touches_only_the_names_a_sweep_writes(tmp_path: Path) -> None:
+    """What a sweep did not write (a note, another PNG, a folder of the user's) stays;
+    a log sweep's links of logs no longer swept go, and base.yaml once CONFIG is an
+    embedded name."""
+    from fuzzyslam.reproduce.plan import Step
+    from fuzzyslam.reproduce.sweep import remove_other_grids
+
+    files = ["g0.yaml", "g3.yaml", "g0/seed0/eval/metrics.json", "g0/log1_b/est/x",
+             "g3/seed0/log.mcap", "sweep_a.png", "sweep_b.png", "figure.png", "notes.md",
+             "mine/g3/x", "g0/mine/x", "logs/log0_a/log.mcap", "logs/log1_b/log.mcap",
+             "base.yaml", ".sweep/g0__seed0__log.json", ".sweep/g3__seed0__log.json"]  # fmt: skip
+    for f in files:
+        (tmp_path / f).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / f).write_text("x")
+    step = Step("g0/seed0/log", ("simulate", "g0.yaml", "-o", "g0/seed0/log.mcap"), (), 1.0)
+    gone = remove_other_grids(tmp_path, [step], 1, ["seed0"], [tmp_path / "sweep_a.png"],
+                              base=False)  # fmt: skip
+    assert sorted(p.relative_to(tmp_path).as_posix() for p in gone) == [
+        ".sweep/g3__seed0__log.json", "base.yaml", "g0/log1_b", "g3", "g3.yaml",
+        "logs/log0_a", "logs/log1_b", "sweep_b.png"]  # fmt: skip
+    left = {p.relative_to(tmp_path).as_posix() for p in tmp_path.rglob("*") if p.is_file()}
+    assert left == {"g0.yaml", "g0/seed0/eval/metrics.json", "figure.png", "notes.md",
+                    "mine/g3/x", "g0/mine/x", "sweep_a.png",
+                    ".sweep/g0__seed0__log.json"}  # fmt: skip
+    assert not (tmp_path / "logs").exists()

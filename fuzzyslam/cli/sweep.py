@@ -55,7 +55,8 @@ def sweep_command(config: str, sets: tuple[str, ...], seeds: int | None,
     numpy, scipy, opencv and mcap versions) are unchanged is skipped
     (counted as "skipped" in the summary), so a sweep killed halfway goes on.
     Every grid point's config is checked before anything is written; an OUTDIR that
-    is neither empty nor a previous sweep's output is refused.
+    is neither empty nor a previous sweep's output is refused; a rerun with another grid
+    replaces the old one (its other grid points, seeds and figures are removed).
     """
     import glob
 

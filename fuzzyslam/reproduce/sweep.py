@@ -498,7 +498,10 @@ def sweep(
         Seeds of every grid point (ignored with ``logs``).
     outdir : path
         Output directory; kept between runs (its finished steps are skipped). It must be
-        absent, empty or a previous sweep's output (it holds ``.sweep/``).
+        absent, empty or a previous sweep's output (it holds ``.sweep/``); once this
+        sweep has written its table, what a previous one made and this grid has not
+        (other grid points, seeds, logs, figures) is removed
+        (:func:`remove_other_grids`).
     jobs, scheduler
         As for ``reproduce``.
     logs : list of path or None
@@ -576,9 +579,83 @@ def sweep(
 
     figures = plot_sweep(root, rows, [k for k, _ in sets], len(units),
                          "logs" if logs else "seeds")  # fmt: skip
+    # a changed grid replaces the old one: its other points, seeds and figures go
+    remove_other_grids(root, steps, len(points), units, figures, Path(config).is_file())
     return {"command": "sweep", "table": str(root / "sweep.md"),
             "results": str(root / "sweep.json"), "figures": [str(f) for f in figures],
             **info, "rows": rows}  # fmt: skip
+
+
+def remove_other_grids(
+    root: Path, steps: list[Step], n_points: int, units: list[str], figures: list[Path],
+    base: bool,
+) -> list[Path]:  # fmt: skip
+    """Remove what a previous sweep in ``root`` made and this one did not: the grid
+    points beyond this grid's (``gI/``, ``gI.yaml``), the seeds' or logs' folders of a
+    grid point that this sweep has not (``gI/seedS/``, ``gI/logJ_NAME/``), their links
+    (``logs/logJ_NAME/``), the figures of keys no longer swept (``sweep_KEY.png``), the
+    step records of steps not in this sweep (``.sweep/``) and ``base.yaml`` when CONFIG
+    is no file now. Called once the sweep has written its table: OUTDIR then holds this
+    grid's outputs only (a changed grid replaces the old one), and a sweep stopped
+    before leaves the old ones for a rerun to go on with. Only the names a sweep writes
+    are touched; the cells this grid has again stay (their steps were skipped or run).
+
+    Parameters
+    ----------
+    root : Path
+        The sweep's output directory.
+    steps : list of Step
+        This sweep's steps (all of them, skipped or run).
+    n_points : int
+        This grid's points (``g0`` .. ``g{n_points - 1}``).
+    units : list of str
+        This sweep's seed or log folder names (``seedS``, ``logJ_NAME``).
+    figures : list of Path
+        The figures this sweep drew.
+    base : bool
+        Whether this sweep's grid points extend ``base.yaml`` (CONFIG is a file).
+
+    Returns
+    -------
+    list of Path
+        What was removed.
+    """
+    gone: list[Path] = []
+
+    def remove(p: Path) -> None:
+        if p.is_dir() and not p.is_symlink():
+            shutil.rmtree(p)
+        else:
+            p.unlink(missing_ok=True)
+        gone.append(p)
+
+    keep_units = set(units)
+    unit_name = re.compile(r"seed\d+|log\d+_.+")
+    drawn = {f.name for f in figures}
+    for p in sorted(root.iterdir()):
+        point = re.fullmatch(r"g(\d+)(\.yaml)?", p.name)
+        if point is not None and int(point.group(1)) >= n_points:
+            remove(p)
+        elif point is not None and point.group(2) is None and p.is_dir():
+            for cell in sorted(p.iterdir()):
+                if unit_name.fullmatch(cell.name) and cell.name not in keep_units:
+                    remove(cell)
+        elif re.fullmatch(r"sweep_.+\.png", p.name) and p.name not in drawn:
+            remove(p)
+        elif p.name == "base.yaml" and not base:
+            remove(p)
+    links = root / LINKS
+    if links.is_dir() and not links.is_symlink():
+        for d in sorted(links.iterdir()):
+            if unit_name.fullmatch(d.name) and d.name not in keep_units:
+                remove(d)
+        if not any(links.iterdir()):
+            links.rmdir()
+    records = {_record(root, s.key).name for s in steps}
+    for rec in sorted((root / ".sweep").glob("*.json")):
+        if rec.name not in records:
+            remove(rec)
+    return gone
 
 
 def _row(root: Path, i: int, overrides: dict[str, Any], units: list[str]) -> dict[str, Any]:
