@@ -455,6 +455,63 @@ def test_reproduce_ships_the_files_with_the_tasks(tmp_path, dask_cluster, local_
 
 
 @pytest.mark.slow
+def test_a_lost_worker_s_replacement_is_not_counted_as_a_step_at_once(tmp_path):
+    """One worker (under its nanny) killed after the first finished step: Dask runs the
+    step again on the worker the nanny starts in its place, at a new address. results.json
+    lists both workers, but ``info.jobs`` and report.md say 1 step at once, the most that
+    ran (they said 2 "worker processes": the workers that ran a step were counted)."""
+    sched_file = tmp_path / "scheduler.json"
+    env = {k: v for k, v in os.environ.items() if k != "FUZZYSLAM_NO_PROGRESS"}
+    env["MPLBACKEND"] = "Agg"
+    procs = [subprocess.Popen(
+        [BIN / "dask", "scheduler", "--host", "127.0.0.1", "--port", "0", "--no-dashboard",
+         "--scheduler-file", sched_file],
+        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env, start_new_session=True,
+    )]  # fmt: skip
+    try:
+        for _ in range(300):
+            if sched_file.is_file() and sched_file.stat().st_size > 0:
+                break
+            time.sleep(0.1)
+        procs.append(subprocess.Popen(
+            [BIN / "dask", "worker", "--scheduler-file", sched_file, "--nthreads", "1",
+             "--nworkers", "1", "--host", "127.0.0.1", "--no-dashboard",
+             "--local-directory", tmp_path],
+            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, env=env,
+            start_new_session=True,
+        ))  # fmt: skip
+        from distributed import Client
+
+        with Client(scheduler_file=str(sched_file), timeout=30) as client:
+            client.wait_for_workers(1, timeout=60)
+            address = client.scheduler.address
+            (first_pid,) = client.run(os.getpid).values()
+        log = tmp_path / "stderr.txt"
+        with open(log, "w") as err:
+            run = subprocess.Popen(
+                [sys.executable, "-m", "fuzzyslam", "reproduce", "--quick", "--paper-only",
+                 "--seeds", "1", "-o", tmp_path / "out", "--scheduler", address],
+                stdout=subprocess.PIPE, stderr=err, env=env,
+            )  # fmt: skip
+            for _ in range(600):  # the first finished step, then the worker dies
+                if "[1/" in log.read_text() or run.poll() is not None:
+                    break
+                time.sleep(0.1)
+            os.kill(first_pid, signal.SIGKILL)  # the worker process; its nanny starts another
+            run.wait(timeout=600)
+        assert run.returncode == 0, log.read_text()
+        results = json.loads((tmp_path / "out" / "results.json").read_text())
+        assert len({s["worker"] for s in results["steps"]}) == 2  # the lost one, its heir
+        assert results["info"]["jobs"] == 1
+        assert "at most 1 step at once" in (tmp_path / "out" / "report.md").read_text()
+    finally:
+        for p in reversed(procs):
+            with contextlib.suppress(ProcessLookupError):
+                os.killpg(p.pid, signal.SIGKILL)
+            p.wait()
+
+
+@pytest.mark.slow
 def test_a_scheduler_that_goes_away_is_one_line(tmp_path):
     """The scheduler killed while steps run: one line naming it, exit 3 (was an internal
     error with Dask's tracebacks), and nothing left of the output."""

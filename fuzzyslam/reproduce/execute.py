@@ -478,6 +478,7 @@ def execute(
     final: Path | None = None,
     on_done: Callable[[Step, StepResult], None] | None = None,
     ship: bool = False,
+    engine_info: dict[str, Any] | None = None,
 ) -> dict[str, StepResult]:
     """Run every step (dependencies first) in ``root``.
 
@@ -501,6 +502,11 @@ def execute(
         Called with (step, result) as each step succeeds (sweep's resume records).
     ship : bool
         Send the files with the tasks (workers without a shared filesystem).
+    engine_info : dict or None
+        Filled with ``jobs``, the most steps that ran at once: ``jobs`` when given, else
+        the local pool's processes or the Dask cluster's worker threads when the plan
+        started (a worker that replaces a lost one adds none: the engine never has more
+        than this many steps out).
 
     Returns
     -------
@@ -515,6 +521,8 @@ def execute(
     started: dict[str, float] = {}
     failure: StepResult | None = None
     engine = Engine(jobs, scheduler, ship)
+    if engine_info is not None:
+        engine_info["jobs"] = engine.jobs
     costs = {s.key: s.cost for s in steps}
     with PlanProgress(sum(costs.values()), len(steps), label, heartbeat_s) as bar:
         moved = f" (moved to {final} when every step succeeded)" if final else ""

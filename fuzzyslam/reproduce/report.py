@@ -249,7 +249,8 @@ def write_report(
         "# fuzzyslam reproduce: the paper's experiment",
         "",
         f"`{info.command}`: suite `{info.suite}` (configs {', '.join(info.configs)}), "
-        f"seeds {', '.join(map(str, seeds))}, {info.jobs} worker processes, "
+        f"seeds {', '.join(map(str, seeds))}, at most {info.jobs} "
+        f"step{'s' if info.jobs != 1 else ''} at once, "
         f"{info.wall_s:.0f} s wall time, fuzzyslam {info.version}."
         + (
             " Config keys set in every config (`set_*.yaml`): "

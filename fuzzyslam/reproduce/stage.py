@@ -20,7 +20,6 @@ from typing import Any
 
 from fuzzyslam import __version__
 from fuzzyslam.config import Config
-from fuzzyslam.cpus import usable_cpus
 from fuzzyslam.errors import InputError
 from fuzzyslam.fileio import OutputDir, _in_place_only
 from fuzzyslam.reproduce.execute import StepResult, execute
@@ -240,9 +239,10 @@ def reproduce(
             (tmp / f"seed{s}").mkdir()
         write_commands(tmp / "commands.sh", steps, set_options(overrides))
         summary = SummaryDrawing(tmp, f"seed{seeds[0]}", {st.key for st in steps})
+        ran: dict[str, Any] = {}
         try:
             done = execute(steps, tmp, jobs, scheduler=scheduler, final=Path(outdir),
-                           ship=ship, on_done=summary.step_done)  # fmt: skip
+                           ship=ship, on_done=summary.step_done, engine_info=ran)  # fmt: skip
             drawn = summary.result()
         finally:
             summary.join()  # before a failure removes the directory it writes into
@@ -261,7 +261,8 @@ def reproduce(
             configs=[suite.paper, suite.bumps] + ([suite.dark, suite.people] if beyond else []),
             overrides=overrides,
             seeds=seeds,
-            jobs=jobs or (len(workers) if scheduler else usable_cpus()),
+            jobs=ran["jobs"],  # steps at once: not the workers that ran one (a lost
+            # worker's replacement is one more of those, never one more step at once)
             engine=f"dask {scheduler}" if scheduler else "local",
             workers=workers,
             logs_kept=keep_logs,
