@@ -352,6 +352,7 @@ def _tree(root: Path) -> list[str]:
     return sorted(p.relative_to(root).as_posix() for p in root.rglob("*"))
 
 
+@pytest.mark.slow  # end to end: 4 sweeps in subprocesses (a pool forked in-process can hang)
 def test_a_sweep_with_another_grid_replaces_the_old_one(tmp_path: Path) -> None:
     """Rerun into the same OUTDIR: the same grid goes on (every step skipped, nothing
     removed); a grid with fewer values leaves no old grid point (g1/ and g1.yaml of
@@ -361,9 +362,11 @@ def test_a_sweep_with_another_grid_replaces_the_old_one(tmp_path: Path) -> None:
     out = tmp_path / "sw"
 
     def sweep(*args: str) -> dict:
-        code, stdout, err = cli("sweep", MICRO, *args, "-o", out)
-        assert code == 0, err
-        return json.loads(stdout)
+        p = subprocess.run([sys.executable, "-m", "fuzzyslam", "sweep", str(MICRO), *args,
+                            "-o", str(out)], capture_output=True, text=True, timeout=300,
+                           env={**os.environ, "MPLBACKEND": "Agg"})  # fmt: skip
+        assert p.returncode == 0, p.stderr
+        return json.loads(p.stdout)
 
     first = sweep("--set", "robot.wheel_noise=0.005,0.02", "--seeds", "2")
     assert first["ran"] == 12
