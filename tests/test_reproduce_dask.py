@@ -488,15 +488,7 @@ def test_a_lost_worker_s_replacement_is_not_counted_as_a_step_at_once(tmp_path):
             (first_pid,) = client.run(os.getpid).values()
         log = tmp_path / "stderr.txt"
         with open(log, "w") as err:
-            run = subprocess.Popen(
-                [sys.executable, "-m", "fuzzyslam", "reproduce", "--quick", "--paper-only",
-                 "--seeds", "1", "-o", tmp_path / "out", "--scheduler", address],
-                stdout=subprocess.PIPE, stderr=err, env=env,
-            )  # fmt: skip
-            for _ in range(600):  # the first finished step, then the worker dies
-                if "[1/" in log.read_text() or run.poll() is not None:
-                    break
-                time.sleep(0.1)
+            run = _reproduce_past_a_step(address, tmp_path / "out", log, err, env)
             os.kill(first_pid, signal.SIGKILL)  # the worker process; its nanny starts another
             run.wait(timeout=600)
         assert run.returncode == 0, log.read_text()
@@ -509,6 +501,22 @@ def test_a_lost_worker_s_replacement_is_not_counted_as_a_step_at_once(tmp_path):
             with contextlib.suppress(ProcessLookupError):
                 os.killpg(p.pid, signal.SIGKILL)
             p.wait()
+
+
+def _reproduce_past_a_step(address: str, out: Path, log: Path, err, env: dict):
+    """``reproduce --quick --paper-only --seeds 1`` on the cluster at ``address``, its
+    stderr into ``log`` (open as ``err``), returned once its first step has finished (or
+    it has ended)."""
+    run = subprocess.Popen(
+        [sys.executable, "-m", "fuzzyslam", "reproduce", "--quick", "--paper-only",
+         "--seeds", "1", "-o", out, "--scheduler", address],
+        stdout=subprocess.PIPE, stderr=err, env=env,
+    )  # fmt: skip
+    for _ in range(600):
+        if "[1/" in log.read_text() or run.poll() is not None:
+            break
+        time.sleep(0.1)
+    return run
 
 
 @pytest.mark.slow
@@ -542,15 +550,7 @@ def test_a_scheduler_that_goes_away_is_one_line(tmp_path):
             address = client.scheduler.address
         log = tmp_path / "stderr.txt"
         with open(log, "w") as err:
-            run = subprocess.Popen(
-                [sys.executable, "-m", "fuzzyslam", "reproduce", "--quick", "--paper-only",
-                 "--seeds", "1", "-o", tmp_path / "out", "--scheduler", address],
-                stdout=subprocess.PIPE, stderr=err, env=env,
-            )  # fmt: skip
-            for _ in range(600):  # the first finished step, then the scheduler dies
-                if "[1/" in log.read_text() or run.poll() is not None:
-                    break
-                time.sleep(0.1)
+            run = _reproduce_past_a_step(address, tmp_path / "out", log, err, env)
             os.killpg(sched.pid, signal.SIGKILL)
             run.wait(timeout=120)
         lines = [ln for ln in log.read_text().splitlines() if ln.startswith("fuzzyslam:")]
