@@ -18,7 +18,6 @@ need no shared filesystem.
 from __future__ import annotations
 
 import contextlib
-import ctypes
 import gc
 import importlib
 import io
@@ -29,7 +28,6 @@ import socket
 import sys
 import threading
 import time
-import uuid
 from collections.abc import Callable
 from concurrent.futures import FIRST_COMPLETED, Executor, Future, ProcessPoolExecutor, wait
 from dataclasses import dataclass
@@ -38,7 +36,7 @@ from typing import Any
 
 from fuzzyslam import interrupts
 from fuzzyslam.cpus import usable_cpus
-from fuzzyslam.errors import EXIT_INTERNAL, EXIT_INTERRUPTED, FuzzyslamError, InputError
+from fuzzyslam.errors import EXIT_INTERNAL, FuzzyslamError, InputError
 from fuzzyslam.fileio import guard_inputs
 from fuzzyslam.forked import GC_THRESHOLD
 from fuzzyslam.progress import PlanProgress
@@ -73,71 +71,6 @@ class StepResult:
 # One step at a time per process: a step changes the process's working directory and
 # its stdout/stderr, so a Dask worker with several threads must not run two at once.
 _STEP_LOCK = threading.Lock()
-
-
-class StepStopped(BaseException):
-    """Raised in a Dask worker's thread that runs a step of a plan that was interrupted
-    (:func:`stop_steps`), as SIGTERM is in a local pool's worker: the step's clean-up
-    runs (its temporary outputs are removed) and it returns as failed. Not a
-    KeyboardInterrupt (one that leaves a task makes Dask end the worker), nor an
-    Exception (a stage's own handlers could take it for one of theirs)."""
-
-
-# The threads of this process running a step on Dask's behalf: thread id -> the token
-# of the plan (Engine) that sent it, for stop_steps
-_RUNNING: dict[int, str] = {}
-_RUNNING_LOCK = threading.Lock()
-
-
-def _set_async(ident: int, exc: type[BaseException] | None) -> int:
-    """Raise ``exc`` in thread ``ident`` at its next bytecode (None: clear one pending)."""
-    arg = None if exc is None else ctypes.py_object(exc)
-    return ctypes.pythonapi.PyThreadState_SetAsyncExc(ctypes.c_ulong(ident), arg)
-
-
-@contextlib.contextmanager
-def _stoppable(token: str | None):
-    """Mark the block (a step's work, the innermost of its contexts) as stoppable by
-    :func:`stop_steps` with ``token``; None: not stoppable (the local pool's steps stop
-    on SIGTERM). On leaving, a stop that came too late is cleared, under the lock that
-    stop_steps takes: none is raised after the block."""
-    if token is None:
-        yield
-        return
-    ident = threading.get_ident()
-    with _RUNNING_LOCK:
-        _RUNNING[ident] = token
-    try:
-        yield
-    finally:
-        _unregister(ident)
-
-
-def _unregister(ident: int) -> None:
-    with _RUNNING_LOCK:
-        if _RUNNING.pop(ident, None) is not None:
-            _set_async(ident, None)
-
-
-def stop_steps(token: str) -> int:
-    """Stop the steps of the plan ``token`` running in this process (a Dask worker; run
-    there by ``Client.run`` when the plan is interrupted): :class:`StepStopped` is raised
-    in each one's thread, which removes its temporary outputs and ends the step, as
-    SIGTERM does in a local pool's worker. Dask cannot stop a running task itself: its
-    cancellation only forgets the result.
-
-    Parameters
-    ----------
-    token : str
-        The plan's token (``Engine.token``).
-
-    Returns
-    -------
-    int
-        How many steps were stopped.
-    """
-    with _RUNNING_LOCK:
-        return sum(_set_async(i, StepStopped) for i, t in _RUNNING.items() if t == token)
 
 
 def _where() -> str:
@@ -237,11 +170,7 @@ def not_visible(outdir: str, where: str, host: str) -> str:
 
 
 def run_step(
-    kind: str,
-    call: tuple[tuple[str, Any], ...],
-    root: str,
-    shown: str | None = None,
-    token: str | None = None,
+    kind: str, call: tuple[tuple[str, Any], ...], root: str, shown: str | None = None
 ) -> tuple:
     """Run a step, the stage ``kind``'s entry ``run(**dict(call))`` (``Step.call``: the
     same as the step's ``fuzzyslam`` command line), in ``root`` in this process.
@@ -258,9 +187,6 @@ def run_step(
         The output directory as the user named it (where ``root``, a temporary
         directory beside it, goes), for the error of a worker that cannot see ``root``;
         None: ``root``.
-    token : str or None
-        The plan's token on Dask, whose :func:`stop_steps` stops the step (None: a local
-        pool's step, stopped by SIGTERM).
 
     Returns
     -------
@@ -292,12 +218,8 @@ def run_step(
                 threadpool_limits(limits=1),
                 contextlib.redirect_stdout(out),
                 contextlib.redirect_stderr(err),
-                _stoppable(token),  # innermost: no stop lands in the others' exits
             ):
                 summary = _entry(kind)(**dict(call))
-        except StepStopped:  # the plan was interrupted; the step cleaned up on its way
-            _unregister(threading.get_ident())
-            fail = "stopped: the plan was interrupted", EXIT_INTERRUPTED
         except FuzzyslamError as exc:
             fail = " ".join(str(exc).split()), exc.exit_code
         except Exception as exc:  # a bug in a stage: report it as an internal failure
@@ -336,7 +258,6 @@ class Engine:
         self.ship = ship
         self._shipped: dict[Future, tuple[str, ...]] = {}
         self._client = None
-        self.token = uuid.uuid4().hex  # this plan's steps on Dask workers (stop_steps)
         if scheduler is None:
             self.jobs = max(1, jobs or usable_cpus())
             ctx = multiprocessing.get_context("fork" if os.name == "posix" else "spawn")
@@ -370,14 +291,13 @@ class Engine:
     def submit(self, step: Step, root: Path, shown: Path | None = None) -> Future:
         """Start ``step`` in ``root`` (``shown``: the output directory as the user named
         it, for errors); a concurrent.futures Future of run_step's tuple."""
-        token = self.token if self._client is not None else None
-        fn, args = run_step, (step.kind, step.call, str(root), str(shown or root), token)
+        fn, args = run_step, (step.kind, step.call, str(root), str(shown or root))
         if self.ship:
             from fuzzyslam.reproduce.ship import pack_inputs, rewrite_call, run_shipped_step
 
             argv, files = pack_inputs(step.argv, root)
             fn, args = run_shipped_step, (step.kind, rewrite_call(step.call, step.argv, argv),
-                                          argv, files, token)  # fmt: skip
+                                          argv, files)  # fmt: skip
         kw = {"key": _task_key(step)} if self._client is not None else {}
         fut = self.pool.submit(fn, *args, **kw)
         if self.ship:
@@ -414,24 +334,7 @@ class Engine:
             self.pool.shutdown(wait=True, cancel_futures=cancel)
             return
         self.pool.shutdown(wait=not cancel)  # Dask's executor: wait=False cancels
-        if cancel:  # Dask only forgets a running task: the workers stop our steps
-            self._stop_running()
         self._client.close()
-
-    STOP_WAIT_S = 2.0  # longest wait for the workers' answer to stop_steps
-
-    def _stop_running(self) -> None:
-        """Have every worker stop this plan's running steps (:func:`stop_steps`), waiting
-        at most ``STOP_WAIT_S`` for their answer (a lost worker does not hold Ctrl-C)."""
-        client = self._client
-
-        def ask() -> None:
-            with contextlib.suppress(Exception):
-                client.run(stop_steps, self.token, on_error="ignore")
-
-        asking = threading.Thread(target=ask, name="dask-stop", daemon=True)
-        asking.start()
-        asking.join(self.STOP_WAIT_S)
 
 
 CONNECT_MARGIN_S = 5.0  # beyond the connect timeout: the handshake of what answered

@@ -76,17 +76,12 @@ def pack_inputs(argv: tuple[str, ...], root: Path) -> tuple[tuple[str, ...], dic
 
 
 def run_shipped_step(
-    kind: str,
-    call: tuple,
-    argv: tuple[str, ...],
-    files: dict[str, bytes],
-    token: str | None = None,
+    kind: str, call: tuple, argv: tuple[str, ...], files: dict[str, bytes]
 ) -> tuple:
     """Run a step (stage ``kind``, its ``call``; ``argv`` its shipped command, which names
     its outputs) in a private temporary directory holding ``files``; the result of
     ``execute.run_step`` with, last, {relative path: bytes} of its outputs (each output
-    a file, or a directory: its files under it). ``token``: the plan's, whose
-    ``execute.stop_steps`` stops the step (its private directory is removed)."""
+    a file, or a directory: its files under it)."""
     from fuzzyslam.reproduce.execute import run_step
 
     with tempfile.TemporaryDirectory(prefix="fuzzyslam-step.") as tmp:
@@ -96,7 +91,7 @@ def run_shipped_step(
             (d / rel).write_bytes(data)
         for o in outputs_of(argv):
             (d / o).parent.mkdir(parents=True, exist_ok=True)
-        res = run_step(kind, call, str(d), None, token)
+        res = run_step(kind, call, str(d))
         produced: dict[str, bytes] = {}
         if res[0]:
             for o in outputs_of(argv):
