@@ -144,7 +144,8 @@ def drop_stray_truth(t: ArrayLike, poses: ArrayLike) -> tuple[Array, Array, int,
     along an arc is dropped; after 10 refusals in a row the stream has really moved and
     its pose is kept). Stray lines are glitches that come back: when the gate refuses more
     than ``MAX_STRAY_SHARE`` of the lines and some of its refusals end with the stream
-    taken where it went (a ``reset``: it did not come back), the truth is of something
+    taken where it went (a ``reset``: it did not come back), or run to the last line, the
+    truth is of something
     faster than those limits (or an idealised path) and every line is kept. A short
     excerpt whose few strays are a larger share of its lines keeps them dropped (the first
     90 s of Freiburg 079: 13 of 428 lines, every one come back). A simulated log's truth
@@ -173,7 +174,9 @@ def drop_stray_truth(t: ArrayLike, poses: ArrayLike) -> tuple[Array, Array, int,
     steps = gate_steps(t, p)
     keep = steps != "jump"
     refused = int((~keep).sum())
-    if refused > MAX_STRAY_SHARE * t.size and np.any(steps == "reset"):
+    # refusals still running at the last line never came back: the truth moved there
+    moved = np.any(steps == "reset") or (t.size > 0 and not keep[-1])
+    if refused > MAX_STRAY_SHARE * t.size and moved:
         return t, p, 0, refused
     return t[keep], p[keep], refused, refused
 

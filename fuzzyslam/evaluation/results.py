@@ -241,8 +241,9 @@ def evaluation_warnings(
 ) -> list[str]:
     """What the numbers do not cover, or say loudly, in words: a truth covering only part
     of the estimate, a damaged truth log, truth lines dropped as stray, an estimate in
-    another frame than the truth (``FRAMES_DIFFER_*``: then said instead of its NEES), an
-    estimate grossly overconfident against the truth (:func:`consistency.overconfident`).
+    another frame than the truth (``FRAMES_DIFFER_*``), an estimate grossly overconfident
+    against the truth (:func:`consistency.overconfident`; said too when the frames differ:
+    a start heading off by 15 deg is both).
 
     Parameters
     ----------
@@ -301,9 +302,9 @@ def evaluation_warnings(
             f"{unaligned_ape.raw.rmse:.3g} m as written, {unaligned_ape.aligned.rmse:.3g} m "
             "after one rigid motion (a real log's run maps in its start pose's frame); "
             "pass --align to score it in the truth's frame (the raw errors and NEES here "
-            "measure that motion, not the filter)"
+            "measure that motion as well as the filter's)"
         )
-    elif nees is not OMIT and overconfident(nees):
+    if nees is not OMIT and overconfident(nees):
         out.append(
             f"the filter is overconfident: NEES mean {nees.mean:.3g} ({nees.dof} expected, "
             f"{overconfident_threshold(nees.dof):.1f} the limit), above 100 for "
