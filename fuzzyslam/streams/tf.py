@@ -34,6 +34,7 @@ References: REP 103 (Standard units of measure and coordinate conventions), REP 
 
 from __future__ import annotations
 
+import math
 from collections.abc import Hashable, Iterable
 from dataclasses import dataclass, field
 from typing import Any, TypeVar
@@ -258,32 +259,30 @@ def constant_transforms(messages: Iterable[Any]) -> list[Any]:
         The first sample of each constant pair, in order of first sight.
     """
     first: dict[str, Any] = {}
-    values: dict[str, list[list[float]]] = {}
-    parent: dict[str, str] = {}
+    ref: dict[str, tuple[str, np.ndarray, np.ndarray]] = {}  # parent, translation, unit q
+    out_of: set[str] = set()  # moved, two parents or bad: no mount (no samples kept)
+    cos_half = math.cos(CONSTANT_RAD / 2.0)
     for msg in messages:
         for ts in msg.transforms:
             child, par = _name(ts.child_frame_id), _name(ts.header.frame_id)
-            if parent.setdefault(child, par) != par:
-                parent[child] = ""  # two parents: not a mount
+            if child in out_of:
                 continue
             t, q = ts.transform.translation, ts.transform.rotation
-            first.setdefault(child, ts)
-            values.setdefault(child, []).append([t.x, t.y, t.z, q.x, q.y, q.z, q.w])
-    out = []
-    for child, ts in first.items():
-        if not parent[child]:
-            continue
-        v = np.array(values[child], dtype=float)
-        q = v[:, 3:]
-        n = np.linalg.norm(q, axis=1)
-        if not (np.all(np.isfinite(v)) and np.all(n >= 1e-9)):
-            continue
-        q = q / n[:, None]
-        moved = np.abs(v[:, :3] - v[0, :3]).max()
-        turned = 2.0 * np.arccos(np.clip(np.abs(q @ q[0]), 0.0, 1.0)).max()
-        if moved <= CONSTANT_M and turned <= CONSTANT_RAD:
-            out.append(ts)
-    return out
+            tr = np.array([t.x, t.y, t.z], dtype=float)
+            qv = np.array([q.x, q.y, q.z, q.w], dtype=float)
+            n = float(np.linalg.norm(qv))
+            if not (np.all(np.isfinite(tr)) and math.isfinite(n) and n >= 1e-9):
+                out_of.add(child)
+                continue
+            qv /= n
+            if child not in ref:
+                first[child], ref[child] = ts, (par, tr, qv)
+                continue
+            p0, tr0, q0 = ref[child]
+            # |q . q0|: q and -q are one rotation; the angle between them is 2 acos of it
+            if p0 != par or np.abs(tr - tr0).max() > CONSTANT_M or abs(qv @ q0) < cos_half:
+                out_of.add(child)
+    return [ts for child, ts in first.items() if child not in out_of]
 
 
 def _up(tree: TfTree, frame: str, base: str | None) -> tuple[Rigid, str]:
