@@ -20,7 +20,6 @@ import functools
 import math
 import os
 from collections.abc import Callable, Sequence
-from pathlib import Path
 from typing import ParamSpec, TypeVar
 
 import matplotlib
@@ -29,8 +28,6 @@ import numpy as np
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 from matplotlib.colors import to_rgba_array
 from matplotlib.figure import Figure
-
-from fuzzyslam.summary import path_text
 
 P = ParamSpec("P")
 R = TypeVar("R")
@@ -199,32 +196,6 @@ def styled(fn: Callable[P, R]) -> Callable[P, R]:
             return fn(*args, **kwargs)
 
     return wrapper
-
-
-def log_name(path: str | os.PathLike | None) -> str:
-    """A log's or run's short name for a title: its file name, with its folder's name when
-    the file's name alone says little (``mrclam6-robot2/log.mcap``, ``trajectory.tum``'s
-    run directory).
-
-    Parameters
-    ----------
-    path : path or None
-        The file or directory.
-
-    Returns
-    -------
-    str
-        The name, as :func:`fuzzyslam.summary.path_text` shows it (valid Unicode under
-        any locale: matplotlib cannot draw the lone surrogates of a name the locale
-        could not decode); empty for None or an empty path.
-    """
-    if path is None or str(path) == "":
-        return ""
-    p = Path(path)
-    generic = {"log.mcap", "truth.tum", "trajectory.tum", "estimates.mcap", "."}
-    if p.name in generic and p.parent.name:
-        return path_text(f"{p.parent.name}/{p.name}")
-    return path_text(p.name)
 
 
 def fixed_layout(

@@ -17,6 +17,7 @@ import json
 import math
 import os
 from dataclasses import fields, is_dataclass
+from pathlib import Path
 from typing import Any
 
 
@@ -224,3 +225,29 @@ def summary_text(summary: dict[str, Any]) -> str:
     return json.dumps(
         strict(as_json(summary)), indent=2, sort_keys=True, default=jsonable, allow_nan=False
     )
+
+
+def log_name(path: str | os.PathLike | None) -> str:
+    """A log's or run's short name for a title: its file name, with its folder's name when
+    the file's name alone says little (``mrclam6-robot2/log.mcap``, ``trajectory.tum``'s
+    run directory).
+
+    Parameters
+    ----------
+    path : path or None
+        The file or directory.
+
+    Returns
+    -------
+    str
+        The name, as :func:`path_text` shows it (valid Unicode under
+        any locale: matplotlib cannot draw the lone surrogates of a name the locale
+        could not decode); empty for None or an empty path.
+    """
+    if path is None or str(path) == "":
+        return ""
+    p = Path(path)
+    generic = {"log.mcap", "truth.tum", "trajectory.tum", "estimates.mcap", "."}
+    if p.name in generic and p.parent.name:
+        return path_text(f"{p.parent.name}/{p.name}")
+    return path_text(p.name)

@@ -36,7 +36,6 @@ from fuzzyslam.figsave import (
     VERMILLION,
     WIDE_W,
     fixed_layout,
-    log_name,
     save_png,
     series_styles,
     styled,
@@ -44,6 +43,7 @@ from fuzzyslam.figsave import (
 from fuzzyslam.maps.grid import BeliefMap
 from fuzzyslam.slam.health import chi2_quantile
 from fuzzyslam.streams.logmeta import World
+from fuzzyslam.summary import log_name
 
 Array = NDArray[np.float64]
 DPI = PRINT_DPI  # made at print size and at the PNG's dpi (fuzzyslam/figsave.py's style)

@@ -30,6 +30,7 @@ import numpy as np
 from fuzzyslam.errors import InputError, UsageError
 from fuzzyslam.references import Reference, read_references
 from fuzzyslam.stamps import LogTime, format_seconds, log_time
+from fuzzyslam.summary import log_name
 
 if TYPE_CHECKING:  # the plug-ins and the maps stage load with a map only (lazy below):
     from fuzzyslam.maps.grid import BeliefMap  # a run without --map does not import them
@@ -320,8 +321,6 @@ def aids_for_log(
     aids = make_aids(
         map_dir, mode, cfg, start, expect_log_id=log_identity(world_dict, reader.fingerprint())
     )
-    from fuzzyslam.figsave import log_name
-
     for aid in aids:  # the log named in the figures' titles (changes.png)
         if hasattr(aid, "log"):
             aid.log = log_name(log)

@@ -389,7 +389,7 @@ def draw_changes(
     t0 : float
         The run's start (s, log time: its first ring): the time colour bar's origin.
     log : str
-        The log's name (:func:`fuzzyslam.figsave.log_name`), in the title when given.
+        The log's name (:func:`fuzzyslam.summary.log_name`), in the title when given.
     """
     # a Figure without pyplot (its import and figure manager are not needed for one
     # PNG), drawn once and cropped to its drawn pixels (fuzzyslam/figsave.py)

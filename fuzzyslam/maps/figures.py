@@ -24,7 +24,6 @@ from fuzzyslam.figsave import (
     VERMILLION,
     WIDE_W,
     fixed_layout,
-    log_name,
     save_png,
     styled,
 )
@@ -36,6 +35,7 @@ from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.references import Reference
 from fuzzyslam.rundir import read_landmarks
 from fuzzyslam.streams.logmeta import World
+from fuzzyslam.summary import log_name
 
 DPI = PRINT_DPI  # made at print size and at the PNG's dpi (fuzzyslam/figsave.py's style)
 LEGEND_RIGHT = 2.5  # fgm.png: its colour bar, legend and corridor key right of the axes (in)
