@@ -104,6 +104,7 @@ def series_styles(labels: Sequence[str], samples: Sequence[int] | None = None) -
     order = [BLACK, *(c for c in SERIES if c != BLACK)]
     dashes = dict(zip(order, SERIES_DASHES, strict=True))
     free = [(c, dashes[c]) for c in order if c not in used]
+    rank = {k: r for r, k in enumerate(ESTIMATE_KINDS)}
     out, j = [], 0
     for i, k in enumerate(kinds):
         if k is not None:
@@ -113,11 +114,10 @@ def series_styles(labels: Sequence[str], samples: Sequence[int] | None = None) -
             style = {"color": colour, "ls": dash, "marker": None}
             j += 1
         # the kinds in their order, lamps only lowest: the same curve on top everywhere
-        style["zorder"] = 2.0 + 0.01 * (list(ESTIMATE_KINDS).index(k) if k is not None
-                                        else len(ESTIMATE_KINDS) + j)  # fmt: skip
+        style["zorder"] = 2.0 + 0.01 * (rank[k] if k is not None else len(rank) + j)
         n = samples[i] if samples is not None else 0
         step = max(n // KIND_MARKERS, 1)
-        shift = list(ESTIMATE_KINDS).index(k) if k is not None else 0
+        shift = rank[k] if k is not None else 0
         style["markevery"] = (shift * step // 3, step) if style["marker"] and n else None
         style["ms"] = 3.5
         out.append(style)

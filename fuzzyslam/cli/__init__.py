@@ -271,10 +271,9 @@ def tell_damage(log: Any, damage: dict | None, what: str) -> None:
         The output made from the log ("the estimate", "the map").
     """
     from fuzzyslam.progress import note
+    from fuzzyslam.streams.reader import lost_something
 
-    if not damage or not (
-        damage.get("truncated") or damage.get("lost_bytes") or damage.get("damaged_records")
-    ):
+    if not lost_something(damage):
         return
     note(
         f"{log}: the log is damaged or cut off: {damage.get('lost_bytes', 0)} bytes lost "

@@ -633,6 +633,11 @@ def break_gaps(t: Array, v: Array, factor: float = GAP_FACTOR) -> tuple[Array, A
     return np.insert(t, gaps + 1, mid), np.insert(v, gaps + 1, np.nan)
 
 
+# mark_below's triangles and their legend entry
+BELOW_MARK = {"marker": "v", "mec": BLACK, "mew": 0.3, "ls": "none"}
+BELOW_MS = 3.5
+
+
 def mark_below(ax: plt.Axes, t: Array, v: Array, floor: float, colour: str) -> bool:
     """Triangles on the bottom edge of ``ax`` at the times of the values under ``floor``
     (the log axis's lower limit, where they are drawn); True when there is one.
@@ -658,17 +663,17 @@ def mark_below(ax: plt.Axes, t: Array, v: Array, floor: float, colour: str) -> b
     if not low.any():
         return False
     # x in data, y in axes coordinates: on the edge whatever the limits
-    ax.plot(np.asarray(t, dtype=float)[low], np.zeros(int(low.sum())), "v", ms=3.5,
-            color=colour, mec=BLACK, mew=0.3, ls="none", clip_on=False, zorder=5,
-            transform=ax.get_xaxis_transform())  # fmt: skip
+    ax.plot(np.asarray(t, dtype=float)[low], np.zeros(int(low.sum())), ms=BELOW_MS,
+            color=colour, clip_on=False, zorder=5, transform=ax.get_xaxis_transform(),
+            **BELOW_MARK)  # fmt: skip
     return True
 
 
 def below_handle(markerscale: float = 1.0) -> Line2D:
     """The legend entry of :func:`mark_below`'s triangles (for a legend of
     ``markerscale``: drawn at their size)."""
-    return Line2D([], [], marker="v", ms=3.5 / markerscale, color="0.5", mec=BLACK, mew=0.3,
-                  ls="none", label="below the axis (on its edge)")  # fmt: skip
+    return Line2D([], [], ms=BELOW_MS / markerscale, color="0.5",
+                  label="below the axis (on its edge)", **BELOW_MARK)  # fmt: skip
 
 
 @styled

@@ -24,6 +24,7 @@ from typing import Any
 
 from fuzzyslam.evaluation.consistency import Consistency, overconfident, overconfident_threshold
 from fuzzyslam.evaluation.metrics import Stats
+from fuzzyslam.streams.reader import lost_something
 from fuzzyslam.summary import OMIT, key
 
 
@@ -274,7 +275,7 @@ def evaluation_warnings(
             f"the truth covers only {100 * cov.fraction:.1f} % of the estimate's samples "
             f"({t0:.1f}-{t1:.1f} s); the rest is not evaluated"
         )
-    if dmg and (dmg.get("truncated") or dmg.get("lost_bytes") or dmg.get("damaged_records")):
+    if lost_something(dmg):
         out.append(
             f"the truth log is damaged ({dmg.get('lost_bytes', 0)} bytes lost); ground truth "
             "is missing where it was"

@@ -150,10 +150,7 @@ class SlamParams:
         -------
         ndarray, shape (m, 2, 2)
         """
-        z = np.asarray(z, dtype=float).reshape(-1, 2)
-        r = np.hypot(z[:, 0], z[:, 1])
-        with np.errstate(invalid="ignore", divide="ignore"):
-            u = np.where(r[:, None] > 0, z / r[:, None], np.array([1.0, 0.0]))
+        r, u = _line_of_sight(z)
         sr = self.detection_sigma_range + self.detection_sigma_range_per_m * r
         st = r * np.deg2rad(self.detection_sigma_bearing_deg)
         along = u[:, :, None] * u[:, None, :]
@@ -189,10 +186,7 @@ class SlamParams:
             return cov, 0
         c = np.array(own[has], dtype=float)
         if self.detection_own_covariance == "floor":
-            zz = np.asarray(z, dtype=float).reshape(-1, 2)[has]
-            r = np.hypot(zz[:, 0], zz[:, 1])
-            with np.errstate(invalid="ignore", divide="ignore"):
-                u = np.where(r[:, None] > 0, zz / r[:, None], np.array([1.0, 0.0]))
+            u = _line_of_sight(z)[1][has]
             n = np.stack([-u[:, 1], u[:, 0]], axis=1)
             model = cov[has]
             raised = 0
@@ -205,6 +199,15 @@ class SlamParams:
             floored = 0
         cov[has] = c
         return cov, floored
+
+
+def _line_of_sight(z: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Ranges (m,) and unit lines of sight (m, 2) of detections z (m, 2); (1, 0) at 0."""
+    z = np.asarray(z, dtype=float).reshape(-1, 2)
+    r = np.hypot(z[:, 0], z[:, 1])
+    with np.errstate(invalid="ignore", divide="ignore"):
+        u = np.where(r[:, None] > 0, z / r[:, None], np.array([1.0, 0.0]))
+    return r, u
 
 
 def _quad(c: np.ndarray, d: np.ndarray) -> np.ndarray:

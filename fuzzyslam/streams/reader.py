@@ -155,6 +155,25 @@ def shared_walks() -> Iterator[None]:
         _SCANS = before
 
 
+def lost_something(report: dict[str, Any] | None) -> bool:
+    """Whether a damage report (:meth:`LogReader.damage`, a summary's ``log_damage``) says
+    the log lost anything: its summary or footer, bytes, or records.
+
+    Parameters
+    ----------
+    report : dict or None
+        The report (None: no report).
+
+    Returns
+    -------
+    bool
+    """
+    return bool(
+        report
+        and (report.get("truncated") or report.get("lost_bytes") or report.get("damaged_records"))
+    )
+
+
 class LogReader:
     """Read a ROS 2 MCAP recording (a file, or a ros2 bag folder holding one:
     :func:`bag_file`).

@@ -16,13 +16,12 @@ from typing import Any
 
 from fuzzyslam.streams import messages as M
 from fuzzyslam.streams.reader import LogReader
-from fuzzyslam.streams.tf import TfProblem, constant_transforms, locate, static_tree
+from fuzzyslam.streams.tf import TfProblem, TfTree, constant_transforms, locate, static_tree
 from fuzzyslam.streams.topics import Topics
 
 
-def _unplaced(messages: list[Any], frames: Iterable[str], base: str) -> bool:
-    """Whether a frame of ``frames`` is not placed on ``base`` by ``messages``."""
-    tree = static_tree(messages)
+def _unplaced(tree: TfTree, frames: Iterable[str], base: str) -> bool:
+    """Whether a frame of ``frames`` is not placed on ``base`` by ``tree``."""
     for frame in frames:
         try:
             if locate(tree, frame, base) is None:
@@ -62,9 +61,10 @@ def static_messages(
     msgs = (
         [m.msg for m in reader.messages([topics.tf_static])] if reader.has(topics.tf_static) else []
     )
-    if not reader.has(topics.tf) or not _unplaced(msgs, frames, base):
+    tree = static_tree(msgs)
+    if not reader.has(topics.tf) or not _unplaced(tree, frames, base):
         return msgs, topics.tf_static
-    known = set(static_tree(msgs).parents)
+    known = set(tree.parents)
     extra = [
         ts
         for ts in constant_transforms(m.msg for m in reader.messages([topics.tf]))
