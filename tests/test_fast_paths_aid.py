@@ -54,6 +54,13 @@ def test_grid_centres_cached_equal_meshgrid():
         assert g.centres()[0] is x  # computed once per grid
         with pytest.raises(ValueError):
             x[0, 0] = 1.0  # shared: read-only
+        for box in (
+            (slice(3, 17), slice(0, 40)),
+            (slice(0, 1), slice(5, 6)),
+            (slice(9, 9), slice(2, 8)),
+        ):
+            bx, by = g.box_centres(box)  # the references' Hough reads boxes of a big map
+            assert np.array_equal(bx, x[box]) and np.array_equal(by, y[box])
 
 
 def _plain_flm(ranges, max_range, fov, mounts, params):

@@ -15,10 +15,16 @@ from fuzzyslam.maps.evidence import reading_masses, ring_evidence
 from fuzzyslam.maps.fgm import FgmBuilder, FrozenMapError
 from fuzzyslam.maps.flm import build_flm, build_flm_rings
 from fuzzyslam.maps.grid import BeliefMap, Grid
-from fuzzyslam.maps.hough import dominant_direction, flm_wall_direction, hough_accumulator
+from fuzzyslam.maps.hough import (
+    dominant_direction,
+    flm_wall_direction,
+    hough_accumulator,
+    wall_weights,
+)
 from fuzzyslam.maps.params import MapParams
 from fuzzyslam.maps.quality import wall_quality
 from fuzzyslam.maps.references import extract_references
+from fuzzyslam.references import read_references, write_references
 from fuzzyslam.robot import sonar_mounts
 from fuzzyslam.se2 import between, compose, wrap_angle_period
 
@@ -358,3 +364,42 @@ def test_a_stub_beside_the_path_gives_no_confident_reference():
     assert not corr[0].ambiguous and corr[0].strength > 3.0
     assert stub[0].ambiguous and stub[0].strength < 1.5
     assert not next(r for r in loose if angle_error_deg(r.angle, a80) < 2.0).ambiguous
+
+
+def test_a_stretch_without_walls_is_an_ambiguous_reference_that_loads(tmp_path):
+    """A 7 m corridor (walls y = +-1) and then a 6 m drive across an empty hall (no wall
+    cell within its band): the hall's reference has no Hough direction, so it takes the
+    path's (90 deg) with strength 0, flagged ambiguous, and references.yaml round-trips
+    (a NaN angle was written, and every run on the map refused it). The corridor's
+    reference, read from its region's bounding box only, equals the one read from the
+    whole grid (the Hough's points and their order are the same)."""
+    grid = Grid.covering(-2.0, -3.0, 13.0, 12.0, 0.1)
+    bm = BeliefMap.vacuous(grid)
+    for y in (-1.0, 1.0):
+        _paint_segment(bm, (0.0, y), (7.0, y))
+    path = np.concatenate(
+        [np.column_stack([np.linspace(0, 9, 91), np.zeros(91)]),
+         np.column_stack([np.full(90, 9.0), np.linspace(0.1, 9.0, 90)])]
+    )  # fmt: skip
+    params = MapParams()
+    refs = extract_references(bm, path, params)
+    assert len(refs) == 2
+    corr, hall = sorted(refs, key=lambda r: r.stretch.point[1])
+    assert hall.cells == 0 and hall.strength == 0.0 and hall.ambiguous
+    assert angle_error_deg(hall.angle, np.pi / 2) < 1.0
+    assert not corr.ambiguous and angle_error_deg(corr.angle, 0.0) < 0.5
+    X, Y = grid.centres()
+    st = corr.stretch
+    s = (X - st.point[0]) * st.direction[0] + (Y - st.point[1]) * st.direction[1]
+    q = (X - st.point[0]) * -st.direction[1] + (Y - st.point[1]) * st.direction[0]
+    mask = (s >= st.s0) & (s <= st.s1) & (np.abs(q) <= params.segment_band)
+    whole = dominant_direction(
+        X, Y, np.where(mask, wall_weights(bm, params.wall_threshold), 0.0), params,
+        rho_step=grid.resolution,
+    )  # fmt: skip
+    assert (whole.angle, whole.strength, whole.cells) == (corr.angle, corr.strength, corr.cells)
+    path_yaml = tmp_path / "references.yaml"
+    write_references(path_yaml, refs)
+    back = read_references(path_yaml)
+    assert [r.ambiguous for r in back] == [r.ambiguous for r in refs]
+    assert all(np.isfinite(r.angle) for r in back)

@@ -85,6 +85,23 @@ class Grid:
         """
         return _centres(self)
 
+    def box_centres(self, box: tuple[slice, slice]) -> tuple[np.ndarray, np.ndarray]:
+        """X, Y of the cell centres in ``box`` (rows, columns), equal to
+        ``centres()`` sliced by it to the last bit, without the whole grid's arrays.
+
+        Parameters
+        ----------
+        box : tuple of slice
+            Rows and columns (steps of 1, within the grid).
+
+        Returns
+        -------
+        X, Y : ndarray, shape (rows, columns)
+        """
+        rows, cols = (range(*b.indices(n)) for b, n in zip(box, self.shape, strict=True))
+        return np.meshgrid(_cell_centres(self.origin[0], cols, self.resolution),
+                           _cell_centres(self.origin[1], rows, self.resolution))  # fmt: skip
+
     @property
     def extent(self) -> tuple[float, float, float, float]:
         """(xmin, xmax, ymin, ymax), for matplotlib's imshow(origin='lower')."""
@@ -92,11 +109,16 @@ class Grid:
         return (ox, ox + self.shape[1] * self.resolution, oy, oy + self.shape[0] * self.resolution)
 
 
+def _cell_centres(origin: float, cells: range, resolution: float) -> np.ndarray:
+    """Centres of the cells ``cells`` along one axis (one formula for every caller)."""
+    return origin + (np.arange(cells.start, cells.stop) + 0.5) * resolution
+
+
 @lru_cache(maxsize=16)
 def _centres(grid: Grid) -> tuple[np.ndarray, np.ndarray]:
     """:meth:`Grid.centres`, read-only (shared by every caller of the same grid)."""
-    xs = grid.origin[0] + (np.arange(grid.shape[1]) + 0.5) * grid.resolution
-    ys = grid.origin[1] + (np.arange(grid.shape[0]) + 0.5) * grid.resolution
+    xs = _cell_centres(grid.origin[0], range(grid.shape[1]), grid.resolution)
+    ys = _cell_centres(grid.origin[1], range(grid.shape[0]), grid.resolution)
     out = np.meshgrid(xs, ys)
     for a in out:
         a.flags.writeable = False

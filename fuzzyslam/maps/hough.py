@@ -79,7 +79,9 @@ class WallDirection:
     birge: float = float("nan")
 
 
-def wall_weights(bm: BeliefMap, threshold: float) -> np.ndarray:
+def wall_weights(
+    bm: BeliefMap, threshold: float, box: tuple[slice, slice] | None = None
+) -> np.ndarray:
     """Wall evidence per cell: bel(O) = m(O) where it reaches ``threshold``, else 0.
 
     Parameters
@@ -88,12 +90,14 @@ def wall_weights(bm: BeliefMap, threshold: float) -> np.ndarray:
         The map (ny, nx).
     threshold : float
         Smallest m(O) that votes.
+    box : tuple of slice, optional
+        Only these rows and columns (default the whole map).
 
     Returns
     -------
-    ndarray, shape (ny, nx)
+    ndarray, shape (ny, nx), or the box's shape
     """
-    m_o = np.asarray(bm.m_o, dtype=float)
+    m_o = np.asarray(bm.m_o if box is None else bm.m_o[box], dtype=float)
     return np.where(m_o >= threshold, m_o, 0.0)
 
 

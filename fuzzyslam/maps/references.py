@@ -34,6 +34,12 @@ path the map was built along (the robot drives the corridors' centre lines):
 6. a reference is flagged ambiguous (no heading fix uses it) when its Hough finds two
    directions alike, or when its strongest wall line is shorter than
    ``reference_min_strength`` metres of wall (a room, a stub, a doorway beside the path).
+   A region with no wall cells at all (a drive across a hall, into a big room) has no
+   Hough direction: its reference takes the path's direction (mod pi) with strength 0,
+   ambiguous, so that it still marks "no corridor here" for the fixes.
+
+Each Hough reads only the cells of its region's bounding box, so the memory of a map's
+references grows with its corridors' areas, not with the map's.
 """
 
 from __future__ import annotations
@@ -353,8 +359,7 @@ def extract_references(fgm: BeliefMap, path_xy: np.ndarray, params: MapParams) -
     list of Reference
     """
     stretches = merge_stretches(straight_stretches(path_xy, params), params)
-    X, Y = fgm.grid.centres()
-    w_all = wall_weights(fgm, params.wall_threshold)
+    grid = fgm.grid
     refs = []
     trim = params.segment_end_trim
     stretches = [
@@ -365,19 +370,30 @@ def extract_references(fgm: BeliefMap, path_xy: np.ndarray, params: MapParams) -
     for i, st in enumerate(stretches):  # one Hough per corridor
         d = st.direction
         n = np.array([-d[1], d[0]])
-        s = (X - st.point[0]) * d[0] + (Y - st.point[1]) * d[1]
-        q = (X - st.point[0]) * n[0] + (Y - st.point[1]) * n[1]
+        region = st.polygon(params.segment_band)
+        # the region's bounding box in cells: a cell whose centre lies in the region
+        # has its index in the box (row-major order kept, so the Hough's points and
+        # their order are those of the whole grid's)
+        iy, ix = grid.cell_of(region)
+        box = (
+            slice(max(int(iy.min()), 0), max(min(int(iy.max()) + 1, grid.shape[0]), 0)),
+            slice(max(int(ix.min()), 0), max(min(int(ix.max()) + 1, grid.shape[1]), 0)),
+        )
+        x, y = grid.box_centres(box)
+        s = (x - st.point[0]) * d[0] + (y - st.point[1]) * d[1]
+        q = (x - st.point[0]) * n[0] + (y - st.point[1]) * n[1]
         mask = (s >= st.s0) & (s <= st.s1) & (np.abs(q) <= params.segment_band)
-        w = np.where(mask, w_all, 0.0)
-        wd = dominant_direction(X, Y, w, params, rho_step=fgm.grid.resolution)
+        w = np.where(mask, wall_weights(fgm, params.wall_threshold, box), 0.0)
+        wd = dominant_direction(x, y, w, params, rho_step=grid.resolution)
+        walls = bool(np.isfinite(wd.angle))  # else no wall cells: the path's direction
         refs.append(
             Reference(
                 i,
                 f"corridor_{i}",
-                wd.angle,
+                wd.angle if walls else st.angle,
                 wd.strength,
-                st.polygon(params.segment_band),
-                bool(wd.ambiguous or wd.strength < params.reference_min_strength),
+                region,
+                bool(not walls or wd.ambiguous or wd.strength < params.reference_min_strength),
                 wd.cells,
                 wd,
                 st,
