@@ -97,8 +97,11 @@ def test_interpolation_heading_short_way_and_association_gap() -> None:
     pt = np.array([[0, 0, np.pi - 0.1], [1, 0, -np.pi + 0.1], [2, 0, 0.0], [3, 0, 0.0]])
     q = M.interpolate_poses(tt, pt, [0.5])
     assert abs(q[0, 2]) == pytest.approx(np.pi)
-    a = M.associate([0.5, 1.5, 6.0, 11.0], np.zeros((4, 3)), tt, pt, max_dt=0.6)
+    a = M.associate([0.5, 1.5, 6.0, 11.0], np.zeros((4, 3)), tt, pt, max_dt=0.6, max_gap=0.5)
     # 6.0 is 4 s from any truth sample; 11.0 is outside the span
+    np.testing.assert_array_equal(a.index, [0, 1])
+    # between samples 1 s apart, 0.5 s from each: interpolated when the bound allows it
+    a = M.associate([0.5, 1.5, 6.0], np.zeros((3, 3)), tt, pt, max_dt=0.1, max_gap=1.0)
     np.testing.assert_array_equal(a.index, [0, 1])
 
 

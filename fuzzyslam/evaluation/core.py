@@ -250,6 +250,29 @@ def _phase_block(
     )
 
 
+def pair(t: Array, poses: Array, truth: Truth, params: EvalParams) -> M.Associated:
+    """Poses paired with the truth interpolated at their times (:func:`metrics.associate`
+    with the ``max_dt_s`` and ``max_gap_s`` of ``params``).
+
+    Parameters
+    ----------
+    t : ndarray, shape (N,)
+        The poses' times.
+    poses : ndarray, shape (N, 3)
+        The poses.
+    truth : Truth
+        The truth.
+    params : EvalParams
+        ``max_dt_s`` and ``max_gap_s``.
+
+    Returns
+    -------
+    Associated
+        The kept samples.
+    """
+    return M.associate(t, poses, truth.t, truth.poses, params.max_dt_s, params.max_gap_s)
+
+
 def truth_alignment(est: Estimate, truth: Truth, params: EvalParams) -> Similarity | None:
     """The rigid 2-D motion (Umeyama, no scale) that best maps the estimate's positions
     onto the truth's, paired in time (:func:`metrics.associate`).
@@ -261,14 +284,14 @@ def truth_alignment(est: Estimate, truth: Truth, params: EvalParams) -> Similari
     truth : Truth
         The truth.
     params : EvalParams
-        ``max_dt_s`` for pairing.
+        ``max_dt_s`` and ``max_gap_s`` for pairing.
 
     Returns
     -------
     Similarity or None
         The motion; None with fewer than two pairs.
     """
-    assoc = M.associate(est.t, est.poses, truth.t, truth.poses, params.max_dt_s)
+    assoc = pair(est.t, est.poses, truth, params)
     if len(assoc) < 2:
         return None
     return umeyama(assoc.est[:, :2], assoc.truth[:, :2])
@@ -289,7 +312,7 @@ def align_estimate(
     truth : Truth
         The truth.
     params : EvalParams
-        ``max_dt_s`` for pairing.
+        ``max_dt_s`` and ``max_gap_s`` for pairing.
     motion : Similarity, optional
         The motion, when already found (:func:`truth_alignment`).
 
@@ -342,7 +365,7 @@ def anchored_nees(
     truth : Truth
         The truth.
     params : EvalParams
-        ``max_dt_s`` for pairing.
+        ``max_dt_s`` and ``max_gap_s`` for pairing.
     assoc : Associated, optional
         The pairing in time already made (of this estimate or of a moved copy: it depends
         on the times only).
@@ -353,7 +376,7 @@ def anchored_nees(
         NEES per paired sample (the samples of :func:`metrics.associate`).
     """
     if assoc is None:
-        assoc = M.associate(est.t, est.poses, truth.t, truth.poses, params.max_dt_s)
+        assoc = pair(est.t, est.poses, truth, params)
     poses = est.poses[assoc.index]
     s = anchor(poses[0], assoc.truth[0])
     rot = np.eye(3)
@@ -393,7 +416,7 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
     if align:
         to_truth = truth_alignment(est, truth, params)
         est, alignment = align_estimate(est, truth, params, to_truth)
-    assoc = M.associate(est.t, est.poses, truth.t, truth.poses, params.max_dt_s)
+    assoc = pair(est.t, est.poses, truth, params)
     if len(assoc) < 2:
         raise SpanError(
             f"estimate time span [{est.t[0]:.3f}, {est.t[-1]:.3f}] s does not overlap the "
@@ -451,7 +474,7 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
     odometry = OMIT
     if est.odometry is not None:
         ot, op = est.odometry
-        oa = M.associate(ot, op, truth.t, truth.poses, params.max_dt_s)
+        oa = pair(ot, op, truth, params)
         if len(oa) >= 2:
             oe = M.pose_errors(oa.est, oa.truth)
             odometry = R.OdometryMetrics(
@@ -497,7 +520,8 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
 
 def truth_coverage(truth: Truth, est: Estimate, compared: int) -> R.TruthCoverage:
     """How much of the estimate the truth covers: the estimate's samples compared (those
-    with a truth pose within max_dt_s) over all of them, and both time spans.
+    inside the truth's span with truth samples around them at most max_gap_s apart, or one
+    within max_dt_s: :func:`metrics.associate`) over all of them, and both time spans.
 
     Parameters
     ----------

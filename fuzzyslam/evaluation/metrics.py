@@ -134,6 +134,33 @@ def nearest_gap(t_ref: ArrayLike, t_query: ArrayLike) -> Array:
     return np.minimum(left, right)
 
 
+def bracket_gap(t_ref: ArrayLike, t_query: ArrayLike) -> Array:
+    """The spacing t_ref[i] - t_ref[i-1] of the two reference times around each query time
+    (t_ref sorted); inf for a query outside [t_ref[0], t_ref[-1]] or fewer than two times.
+
+    Parameters
+    ----------
+    t_ref : array_like, shape (N,)
+        Sorted reference times.
+    t_query : array_like, shape (M,)
+        Query times.
+
+    Returns
+    -------
+    ndarray, shape (M,)
+        The spacings (s).
+    """
+    t_ref = np.asarray(t_ref, dtype=float).reshape(-1)
+    tq = np.asarray(t_query, dtype=float).reshape(-1)
+    out = np.full(tq.shape, np.inf)
+    if t_ref.size < 2:
+        return out
+    inside = (tq >= t_ref[0]) & (tq <= t_ref[-1])
+    i = np.clip(np.searchsorted(t_ref, tq[inside], side="right"), 1, t_ref.size - 1)
+    out[inside] = t_ref[i] - t_ref[i - 1]
+    return out
+
+
 @dataclass
 class Associated:
     """Estimate samples paired with truth interpolated at their times.
@@ -156,11 +183,18 @@ def associate(
     t_truth: ArrayLike,
     truth: ArrayLike,
     max_dt: float,
+    max_gap: float,
 ) -> Associated:
     """Pair each estimate with the truth interpolated at its time.
 
-    An estimate sample is kept when its time lies inside the truth's span and a truth sample
-    lies within ``max_dt`` seconds of it (so no pose is interpolated across a gap in the truth).
+    The truth is interpolated at the estimate's stamps (:func:`fuzzyslam.se2.interpolate_poses`:
+    positions linearly, headings the shorter way round the circle). An estimate sample is
+    kept when its time lies inside the truth's span and either the two truth samples around
+    it are at most ``max_gap`` seconds apart, or a truth sample lies within ``max_dt``
+    seconds of it. So a 30 Hz estimate is compared all along a 4 Hz truth, but not in the
+    middle of a gap in the truth: across a long gap a straight line would invent a truth
+    the robot need not have followed (:class:`~fuzzyslam.evaluation.params.EvalParams`
+    gives the bound's reason).
 
     Parameters
     ----------
@@ -173,7 +207,9 @@ def associate(
     truth : array_like, shape (K, 3)
         True poses.
     max_dt : float
-        Largest gap (s) to the nearest truth sample.
+        Largest time (s) to the nearest truth sample, whatever the spacing around it.
+    max_gap : float
+        Largest spacing (s) of the truth samples interpolated between.
 
     Returns
     -------
@@ -185,7 +221,8 @@ def associate(
     tt = np.asarray(t_truth, dtype=float).reshape(-1)
     pt = np.asarray(truth, dtype=float).reshape(-1, 3)
     ti = interpolate_poses(tt, pt, te)
-    keep = np.isfinite(ti[:, 0]) & (nearest_gap(tt, te) <= max_dt)
+    near = (nearest_gap(tt, te) <= max_dt) | (bracket_gap(tt, te) <= max_gap)
+    keep = np.isfinite(ti[:, 0]) & near
     idx = np.flatnonzero(keep)
     return Associated(te[idx], pe[idx], ti[idx], idx)
 

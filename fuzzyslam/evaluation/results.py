@@ -273,7 +273,8 @@ def evaluation_warnings(
         t0, t1 = cov.truth_span_s
         out.append(
             f"the truth covers only {100 * cov.fraction:.1f} % of the estimate's samples "
-            f"({t0:.1f}-{t1:.1f} s); the rest is not evaluated"
+            f"({t0:.1f}-{t1:.1f} s); the rest, outside that span or in gaps of the truth "
+            "longer than evaluation.max_gap_s, is not evaluated"
         )
     if lost_something(dmg):
         out.append(

@@ -176,6 +176,7 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
         mark_events,
     )
     from fuzzyslam.evaluation.metrics import associate, pose_errors
+    from fuzzyslam.evaluation.params import EvalParams
     from fuzzyslam.figsave import (
         PRINT_DPI,
         WIDE_W,
@@ -203,7 +204,7 @@ def draw_summary(root: Path, seed_dir: str, out: Path) -> bool:
                 if not tum.is_file():
                     continue
                 t, poses = read_tum(tum)
-                a = associate(t, poses, truth.t, truth.poses, 0.05)
+                a = associate(t, poses, truth.t, truth.poses, 0.05, EvalParams().max_gap_s)
                 e = pose_errors(a.est, a.truth)
                 curves.append((label, a.t - t0, 100.0 * np.hypot(e[:, 0], e[:, 1])))
             # each kind of estimate in its colour, dashes and markers, as in compare.png:
