@@ -104,3 +104,42 @@ def test_corrected_path_moves_each_pose_with_its_keyframes():
     np.testing.assert_allclose(out[:, 1], t / 10.0, atol=1e-12)  # the correction grows linearly
     # keyframes land where the graph put them
     np.testing.assert_allclose(out[[0, 10]], after, atol=1e-12)
+
+
+def _two_laps(stretch: float) -> dict:
+    """A square driven twice with exact odometry, each second-lap pose tied by a loop
+    edge to the first lap's (sigma 2 cm): ``stretch`` of the second lap's distance from
+    the square's first corner is what its scan matches say it is beyond the odometry's (a
+    map drifted along its corridors); returns ``optimise``'s figures with the graph's
+    counts, as KeyframeGraph.solve gives them."""
+    lap = square_loop()
+    n = len(lap)
+    truth = np.vstack([lap, lap])
+    i, j = np.arange(2 * n - 1), np.arange(1, 2 * n)
+    z = np.array([between(truth[a], truth[b]) for a, b in zip(i, j, strict=True)])
+    w = np.repeat(np.diag([1 / 0.05, 1 / 0.05, 1 / math.radians(1.5)])[None], len(i), axis=0)
+    li, lj = np.arange(n), np.arange(n, 2 * n)
+    seen = lap.copy()
+    seen[:, :2] = lap[:, :2] * (1.0 + stretch)  # lap 2 where the drifted map puts it
+    lz = np.array([between(lap[a], seen[a]) for a in range(n)])
+    lw = np.repeat(np.diag([1 / 0.02, 1 / 0.02, 1 / math.radians(0.5)])[None], n, axis=0)
+    _, info = optimise(
+        truth, np.append(i, li), np.append(j, lj), np.vstack([z, lz]), np.concatenate([w, lw])
+    )
+    return {**info, "loops": n, "loop_candidates": n}
+
+
+def test_a_graph_that_contradicts_itself_is_found_inconsistent():
+    """A live map's loops that agree with its odometry leave no edge beyond the robust
+    kernel's threshold: consistent. Loops that say the second lap is 30 % longer than
+    the odometry (0.3 m a step, 6 sigmas) bend the chain: its edges down-weighted, more
+    than half the loop edges' count: inconsistent. And loop candidates of which
+    more than 40 % found no match: inconsistent too (at least 10 either way)."""
+    from fuzzyslam.fixes.live_map import inconsistent
+
+    good, bent = _two_laps(0.0), _two_laps(0.3)
+    assert good["downweighted"] == 0 and not inconsistent(good)
+    assert bent["downweighted"] > 0.5 * bent["loops"] and inconsistent(bent)
+    assert not inconsistent({"loops": 30, "loop_candidates": 50})  # 20 of 50 unmatched
+    assert inconsistent({"loops": 29, "loop_candidates": 50})  # 21 of 50
+    assert not inconsistent({"loops": 1, "loop_candidates": 10})  # 9: too few to tell

@@ -196,6 +196,11 @@ REASON_CAUSES = {
         "a start pose off the map's (--start-pose: a log's odometry starts at its own "
         "origin), odometry scale, the range sensor's mount, a clock offset"
     ),
+    "live_map_inconsistent": (
+        "the live map drifted: a laser too short for the corridors (range_max), the "
+        "robot's own body in the scan (ranges.min_range_m), walls a few degrees off the "
+        "building's right angles (fixes.live_right_angles)"
+    ),
     "events_lost": "stamps on another clock or back in time, a driver that stopped",
     "odometry_turn_scale": "the odometry's turn scale (wheel base, driver), not the noise",
     "odometry_distance_scale": (
