@@ -51,10 +51,12 @@ def test_scan_ranges_follow_the_message_definition():
     """+inf: no return within range_max (kept as range_max, no echo); -inf, NaN, below
     range_min or above range_max: invalid (NaN); echoes kept (sensor_msgs/LaserScan)."""
     raw = np.array([1.5, np.inf, -np.inf, np.nan, 0.01, 45.0, 40.0, 39.9], dtype=np.float32)
-    r, invalid, no_echo = scan_ranges(raw, 0.05, 40.0)
+    got = scan_ranges(raw, 0.05, 40.0)
+    r = got.ranges
     assert r[0] == pytest.approx(1.5) and r[7] == pytest.approx(39.9, abs=1e-5)
-    assert r[1] == 40.0 and r[6] == 40.0 and no_echo == 2
-    assert np.isnan(r[[2, 3, 4, 5]]).all() and invalid == 4
+    assert r[1] == 40.0 and r[6] == 40.0 and got.no_echo == 2
+    assert np.isnan(r[[2, 3, 4, 5]]).all() and got.invalid == 4
+    assert got.zeros == got.too_near == 0
 
 
 def test_scan_rings_decimate_and_place_every_beam():

@@ -36,7 +36,7 @@ from fuzzyslam.slam import calibration_files
 from fuzzyslam.slam.log_setup import base_frame
 from fuzzyslam.stamps import SAME_INSTANT_S, LogTime, log_time
 from fuzzyslam.streams.logmeta import World, read_scenario, read_world
-from fuzzyslam.streams.ranges import open_ranges
+from fuzzyslam.streams.ranges import invalid_note, invalid_ranges, open_ranges
 from fuzzyslam.streams.reader import LogReader
 from fuzzyslam.streams.sonar import RingStats, deskewed_mounts
 from fuzzyslam.streams.tum import read_tum
@@ -408,6 +408,9 @@ def build_map(
             f"({stats.readings} readings: {stats.invalid} invalid, {stats.no_echo} no echo; "
             f"{why})",
         )
+    invalid = invalid_ranges(stats, sensor)  # a driver's 0.0 read as invalid, ...
+    if invalid is not None:  # (a map refused above says its counts in its one line)
+        note(invalid_note(invalid))
     refs = extract_references(fgm, poses[:, :2], params)
     world = read_world(reader)
     world_dict = world.to_dict() if world is not None else None
@@ -442,6 +445,7 @@ def build_map(
         rings_skipped=int((~ok).sum()),
         sonar_stats=stats.as_dict(),
         range_sensor=sensor.describe(),
+        invalid_ranges=invalid if invalid is not None else OMIT,
         trajectory_repeats_dropped=tum_dropped,
         cell_updates=builder.cell_updates,
         cells_touched=touched,

@@ -45,7 +45,9 @@ class WallQuality:
 class MapSummary:
     """The ``map`` stage's JSON summary (stdout and summary.json, docs/contracts.md
     sec. 3); ``calibration`` is absent (:data:`~fuzzyslam.summary.OMIT`) when the
-    trajectory's run had no odometry calibration."""
+    trajectory's run had no odometry calibration; ``invalid_ranges`` unless more than a
+    third of the range readings were invalid
+    (:func:`fuzzyslam.streams.ranges.invalid_ranges`)."""
 
     log: str
     config: dict[str, str] = OMIT  # name, source, chosen_by (fuzzyslam/presets.py)
@@ -62,6 +64,7 @@ class MapSummary:
     rings_skipped: int
     sonar_stats: dict[str, Any]
     range_sensor: dict[str, Any]
+    invalid_ranges: dict[str, Any] = OMIT
     trajectory_repeats_dropped: int
     cell_updates: int
     cells_touched: int

@@ -54,6 +54,7 @@ from fuzzyslam.slam.turn_check import (
     turn_note,
     turn_ratio,
 )
+from fuzzyslam.streams.ranges import invalid_note, invalid_ranges
 from fuzzyslam.summary import OMIT, as_json
 
 TWIST = ("", " twist")  # an Odometry whose twist alone is read (LogInputs.odom_twist)
@@ -131,7 +132,18 @@ def make_summary(
         aids={type(a).__name__: a.summary() for a in aids} if aids else OMIT,
         rings=inputs.ring_stats.as_dict() if aids else OMIT,
         range_sensor=(inputs.ranges.describe() if aids and inputs.ranges is not None else OMIT),
+        invalid_ranges=_invalid_ranges(inputs) if aids else OMIT,
     )
+
+
+def _invalid_ranges(inputs: LogInputs) -> dict[str, Any]:
+    """The summary's ``invalid_ranges``: the range sensor's invalid readings by cause,
+    when more than a third of them were (:func:`fuzzyslam.streams.ranges.invalid_ranges`),
+    else OMIT."""
+    found = None
+    if inputs.ranges is not None:
+        found = invalid_ranges(inputs.ring_stats, inputs.ranges)
+    return found if found is not None else OMIT
 
 
 def run(
@@ -464,6 +476,9 @@ def _tell(summary: RunSummary, cfg: Config | None = None) -> None:
     health = summary.filter_health
     if health.diverged:
         note(_trouble_line(health))
+    invalid = getattr(summary, "invalid_ranges", OMIT)  # a summary without range fixes
+    if invalid is not OMIT:  # the log's, not the filter's (a driver's 0.0)
+        note(invalid_note(invalid))
     turns = summary.odometry_turn_check
     encoders = cfg is not None and summary.odometry_source.startswith("encoders")
     if turns and turns["flagged"]:

@@ -18,7 +18,8 @@ class RunSummary:
     sec. 2). Fields left :data:`~fuzzyslam.summary.OMIT` are absent from the JSON:
     ``first_warning`` (no input problem), ``noise_estimate`` and
     ``odometry_delay_estimate`` (lamps from frames), ``calibration`` (off), ``aids``,
-    ``rings``, ``range_sensor`` (no fixes),
+    ``rings``, ``range_sensor`` (no fixes), ``invalid_ranges`` (no fixes, or at most a
+    third of the range readings invalid: :func:`fuzzyslam.streams.ranges.invalid_ranges`),
     ``noise_adapted`` (without ``--adapt-noise``). ``odometry_turn_check`` and
     ``odometry_distance_check`` are always there, null for a log too short or turning
     (moving) too little (slam/turn_check.py)."""
@@ -53,4 +54,5 @@ class RunSummary:
     aids: dict[str, Any] = OMIT  # class name -> summary() (a fixes/summaries.py dataclass)
     rings: dict[str, Any] = OMIT
     range_sensor: dict[str, Any] = OMIT
+    invalid_ranges: dict[str, Any] = OMIT
     noise_adapted: dict[str, Any] | None = OMIT

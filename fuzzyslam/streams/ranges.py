@@ -46,7 +46,7 @@ from fuzzyslam.errors import InputError
 from fuzzyslam.robot import sonar_mounts
 from fuzzyslam.streams.messages import stamp_to_sec
 from fuzzyslam.streams.reader import LogMessage, LogReader
-from fuzzyslam.streams.scan import ScanGeometry, scan_geometry, scan_rings
+from fuzzyslam.streams.scan import ZERO_READS, ScanGeometry, scan_geometry, scan_rings
 from fuzzyslam.streams.sonar import (
     FIRING_SAMPLE,
     SIMULTANEOUS_GAP_S,
@@ -73,11 +73,34 @@ class RangeParams:
     spacing (cones that tile the field of view, no cell between two beams skipped). A
     laser whose beams are finer than that keeps fewer, one every cone
     (:func:`fuzzyslam.streams.scan.kept_step`): ``scan_step`` is the least step.
+
+    ``scan_zero``: how a LaserScan's exact 0.0 below its (positive) range_min is read:
+    ``no_echo`` (no return within range_max: weak empty evidence, as +inf) or
+    ``invalid`` (skipped). REP 117 writes +inf for no return, but common drivers (a
+    TurtleBot3's LDS-01, others) write 0.0, and an exact 0.0 from a laser is practically
+    never an object nearer than range_min. Read as invalid, an LDS-01's no returns leave
+    the maps without their empty space: the ACES building re-recorded as one (67 % of
+    the beams 0.0) had its pose fixes lost (2.09 m mean error; 0.11 m read as no echo).
+    So ``no_echo`` is the default, but only on a beam that has echoed in an earlier scan:
+    a beam blocked by the robot's own body, or outside the laser's real view, reads 0.0
+    in every scan and is no open space (that recording's rear half, never seen by the
+    180-deg source laser: read as open too, its pose fixes erred 0.15 m and its closed
+    live map 1.26 m, against 0.11 and 0.65 m left invalid). No CARMEN log, nor the
+    simulator (sonars only, no echo at max_range), writes an exact 0.0: their outputs
+    are unchanged.
+
+    ``min_range_m``: the least range of an echo used (m), scans and sonar Range messages
+    alike; nearer echoes are invalid (``too_near`` in the ring counts), not walls. 0 (the
+    default) leaves the message's own range_min the only limit; a robot whose body or
+    struts stand in the sensor's view (echoes at 0.15-0.2 m off them) sets it beyond
+    them, as slam_toolbox's ``min_laser_range``.
     """
 
     source: str = field(default="auto", metadata={"choices": list(SOURCES)})
     beam_width_deg: float = field(default=1.0, metadata={"min": 0.01, "max": 45.0})
     scan_step: int = field(default=1, metadata={"min": 1, "max": 100})
+    scan_zero: str = field(default="no_echo", metadata={"choices": list(ZERO_READS)})
+    min_range_m: float = field(default=0.0, metadata={"min": 0.0, "max": 10.0})
 
 
 @dataclass
@@ -87,7 +110,8 @@ class RangeSensor:
     (a sonar ring: ``firing`` simultaneous or sequential, ``ring_gap`` the largest
     stamp step within a ring, s, :func:`fuzzyslam.streams.sonar.firing_gap`, and
     ``cone`` the field of view (rad) until a Range message gives a valid one; a laser:
-    ``laser`` its mount, which places the beams of a scan of another geometry)."""
+    ``laser`` its mount, which places the beams of a scan of another geometry;
+    ``zero`` and ``min_range``: ``ranges.scan_zero`` and ``ranges.min_range_m``)."""
 
     kind: str
     topics: list[str]
@@ -99,6 +123,8 @@ class RangeSensor:
     firing: str = ""
     cone: float | None = None
     laser: Rigid | None = None
+    zero: str = "no_echo"  # ranges.scan_zero
+    min_range: float = 0.0  # ranges.min_range_m
 
     @property
     def stamped_apart(self) -> bool:
@@ -113,9 +139,19 @@ class RangeSensor:
         """Rings (or scans) of the log's messages on :attr:`topics`, in log order."""
         if self.kind == "scan":
             assert self.geometry is not None
-            return scan_rings(messages, self.geometry, self.beam_width, stats, self.laser)
+            return scan_rings(
+                messages,
+                self.geometry,
+                self.beam_width,
+                stats,
+                self.laser,
+                self.zero,
+                self.min_range,
+            )
         index = {tp: i for i, tp in enumerate(self.topics)}
-        return group_rings(messages, index, len(self.topics), self.ring_gap, stats, self.cone)
+        return group_rings(
+            messages, index, len(self.topics), self.ring_gap, stats, self.cone, self.min_range
+        )
 
     def describe(self) -> dict[str, Any]:
         """For a stage's JSON summary."""
@@ -133,6 +169,9 @@ class RangeSensor:
             out["time_increment_s"] = self.geometry.time_increment
             out["scan_step"] = self.geometry.step
             out["beam_width_deg"] = float(np.rad2deg(self.beam_width))
+            out["scan_zero"] = self.zero
+        if self.min_range > 0:
+            out["min_range_m"] = self.min_range
         return out
 
 
@@ -207,6 +246,7 @@ def _sonar(reader: LogReader, cfg: Any, topics: list[str], base: str) -> RangeSe
             ring_gap=gap,
             firing=firing,
             cone=_cone(cfg),
+            min_range=cfg.ranges.min_range_m,
         )
     topics = [tp for tp in topics if tp in frames]
     if not topics:
@@ -222,7 +262,14 @@ def _sonar(reader: LogReader, cfg: Any, topics: list[str], base: str) -> RangeSe
     source = _mounts_source(reader, source, stand_ins, base)
     firing, gap = _firing(reader, topics)
     return RangeSensor(
-        "sonar", topics, mounts, source, ring_gap=gap, firing=firing, cone=_cone(cfg)
+        "sonar",
+        topics,
+        mounts,
+        source,
+        ring_gap=gap,
+        firing=firing,
+        cone=_cone(cfg),
+        min_range=cfg.ranges.min_range_m,
     )
 
 
@@ -266,6 +313,8 @@ def _scan(reader: LogReader, cfg: Any, base: str) -> RangeSensor:
         geom,
         float(np.deg2rad(rp.beam_width_deg)),
         laser=found[tp],
+        zero=rp.scan_zero,
+        min_range=rp.min_range_m,
     )
 
 
@@ -312,3 +361,86 @@ def open_ranges(
     looked = {"sonar": sonar, "scan": scan, "": f"{sonar} or {scan}"}[source]
     have = ", ".join(sorted(reader.topics)) or "none"
     raise InputError(reader.path, f"missing stream(s) {looked}; the log has: {have}")
+
+
+INVALID_SHARE = 1 / 3  # more of the readings invalid than this: a note and a count
+
+
+def invalid_ranges(stats: RingStats, sensor: RangeSensor) -> dict[str, Any] | None:
+    """The summary's ``invalid_ranges`` when more than ``INVALID_SHARE`` of the range
+    readings read were invalid by the log's own doing, else None: a property of the log
+    (its driver, its limits), not of the filter, so it is said apart from
+    ``filter_health``. The echoes ``ranges.min_range_m`` drops are the config's choice
+    (the robot's body in the view): counted, but they do not make the note.
+
+    Parameters
+    ----------
+    stats : RingStats
+        The sensor's counts over the log (or the map's window).
+    sensor : RangeSensor
+        The sensor read (its kind, topics, ``zero`` and ``min_range``).
+
+    Returns
+    -------
+    dict or None
+        ``readings``, ``invalid``, ``share`` (of the readings), and the invalid ones by
+        cause: ``zero_invalid`` (a laser's exact 0.0 read as invalid:
+        ``ranges.scan_zero`` ``invalid``, or on a beam that had not echoed yet),
+        ``too_near`` (``ranges.min_range_m``) and ``other`` (NaN,
+        -inf, outside the message's limits); with ``sensor`` (its first topic),
+        ``scan_zero`` and ``min_range_m``.
+    """
+    if stats.readings <= 0 or stats.invalid - stats.too_near <= INVALID_SHARE * stats.readings:
+        return None
+    zeros = stats.zero_invalid if sensor.kind == "scan" else 0
+    return {
+        "sensor": sensor.topics[0] if len(sensor.topics) == 1 else sensor.kind,
+        "readings": stats.readings,
+        "invalid": stats.invalid,
+        "share": round(stats.invalid / stats.readings, 4),
+        "zero_invalid": zeros,
+        "too_near": stats.too_near,
+        "other": stats.invalid - zeros - stats.too_near,
+        "scan_zero": sensor.zero if sensor.kind == "scan" else None,
+        "min_range_m": sensor.min_range,
+    }
+
+
+def invalid_note(found: dict[str, Any]) -> str:
+    """The stderr line for the summary's ``invalid_ranges`` (:func:`invalid_ranges`):
+    the counts by cause, commonest first, and what to set for the commonest.
+
+    Parameters
+    ----------
+    found : dict
+        ``invalid_ranges`` as :func:`invalid_ranges` gives it.
+
+    Returns
+    -------
+    str
+    """
+    zeros = (
+        "exact 0.0 below the laser's range_min (ranges.scan_zero: invalid; no_echo reads "
+        "them as no return, what drivers such as a TurtleBot3's LDS-01 mean by 0.0)"
+        if found["scan_zero"] == "invalid"
+        else "exact 0.0 on beams that had never echoed (blocked by the robot's own body, "
+        "or outside the laser's real view: not read as open space)"
+    )
+    causes = {
+        "zero_invalid": zeros,
+        "too_near": (
+            f"echoes nearer than ranges.min_range_m = {found['min_range_m']:g} m (lower it "
+            "if these are walls, not the robot)"
+        ),
+        "other": (
+            "NaN, -inf or outside the messages' [range_min, range_max) (the driver's own "
+            "limits: check them against its ranges)"
+        ),
+    }
+    ranked = sorted((k for k in causes if found[k] > 0), key=lambda k: -found[k])
+    parts = "; ".join(f"{found[k]} {causes[k]}" for k in ranked)
+    return (
+        f"{found['sensor']}: {found['invalid']} of {found['readings']} range readings "
+        f"({100 * found['share']:.0f} %) are invalid and not used: {parts} "
+        "(the summary's invalid_ranges)"
+    )

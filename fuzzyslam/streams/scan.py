@@ -15,8 +15,18 @@ Ranges are read as the message defines them (sensor_msgs/LaserScan; REP 117):
 - a finite range in [range_min, range_max) is an echo;
 - ``+inf`` (or exactly range_max) is "no return within range_max": kept as range_max,
   the "no echo" reading of :mod:`fuzzyslam.streams.sonar` (``no_echo``);
+- an exact 0.0 below range_min is read as ``ranges.scan_zero`` says (``zero_ranges``
+  counts them, ``zero_invalid`` those read as invalid): ``no_echo`` (the default) as no
+  return on a beam that has echoed in an earlier scan, invalid on one that has not yet
+  (a beam the robot's own body blocks, or outside the laser's real view, reads 0.0 in
+  every scan: it is not open space); ``invalid`` as invalid. REP 117 writes +inf for no
+  return, but common drivers (a TurtleBot3's LDS-01, others) write 0.0, and a laser's
+  exact 0.0 is practically never an object nearer than range_min;
 - ``-inf`` (too close), NaN (erroneous) and finite ranges below range_min or above
   range_max are invalid: NaN, skipped by the evidence (``invalid``);
+- an echo nearer than ``ranges.min_range_m`` (the robot's own body or struts in the
+  laser's view: small positive ranges above range_min) is invalid too, not a wall
+  (``too_near``; 0, the default, leaves range_min the only limit);
 - a message with as many beams as the first one, its angle_min within ``ANGLE_TOL`` of
   the first one's and its angle_increment's difference summed over the scan within
   ``ANGLE_TOL`` too, has the first one's geometry (float32 fields that jitter);
@@ -47,6 +57,7 @@ from __future__ import annotations
 
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass
+from typing import NamedTuple
 
 import numpy as np
 from numpy.typing import ArrayLike
@@ -59,6 +70,7 @@ from fuzzyslam.streams.tf import Rigid, TfProblem, beam_mounts
 
 ANGLE_TOL = 1e-4  # rad: angles this close are one geometry (float32 jitter is ~1e-7 rad)
 FEW_REFUSED = 3  # more scans refused than this: a line on stderr
+ZERO_READS = ("no_echo", "invalid")  # ranges.scan_zero: how an exact 0.0 is read
 
 
 @dataclass(frozen=True)
@@ -244,17 +256,73 @@ def _time_increment(msg) -> float:
     return ti if np.isfinite(ti) and ti > 0 else 0.0
 
 
-def scan_ranges(raw: np.ndarray, range_min: float, range_max: float) -> tuple[np.ndarray, int, int]:
-    """(ranges (M,), invalid count, no-echo count) of raw LaserScan ranges (M,) (module
-    docstring): echoes kept, no return -> range_max, invalid -> NaN."""
+class ReadScan(NamedTuple):
+    """One scan's ranges as read (:func:`scan_ranges`), with its counts."""
+
+    ranges: np.ndarray  # (M,) echoes, range_max for no echo, NaN for invalid
+    echo: np.ndarray  # (M,) bool: the beams that echoed
+    invalid: int  # readings invalid (NaN)
+    no_echo: int  # readings read as no echo (zeros included where read so)
+    zeros: int  # exact 0.0 that are not echoes (below range_min or min_range)
+    zeros_invalid: int  # of them, read as invalid
+    too_near: int  # echoes within the message's limits but nearer than min_range
+
+
+def scan_ranges(
+    raw: np.ndarray,
+    range_min: float,
+    range_max: float,
+    zero: str = "no_echo",
+    min_range: float = 0.0,
+    echoed: np.ndarray | None = None,
+) -> ReadScan:
+    """Raw LaserScan ranges read by the message's limits and the config's (module
+    docstring): echoes kept, no return -> range_max, invalid -> NaN.
+
+    Parameters
+    ----------
+    raw : ndarray, shape (M,)
+        The message's ranges (float32).
+    range_min, range_max : float
+        The message's limits.
+    zero : {"no_echo", "invalid"}
+        How an exact 0.0 that is not an echo is read (``ranges.scan_zero``).
+    min_range : float
+        The least range of an echo used (``ranges.min_range_m``, m; 0: range_min alone).
+    echoed : ndarray of bool, shape (M,), optional
+        The beams that have echoed in an earlier scan: with ``zero`` ``no_echo`` a 0.0
+        is no echo only on those (a beam that never echoes is blocked, or outside the
+        laser's view: its 0.0 invalid); None: on every beam.
+
+    Returns
+    -------
+    ReadScan
+    """
+    if zero not in ZERO_READS:
+        raise ValueError(f"zero must be one of {', '.join(ZERO_READS)}, got {zero!r}")
     r = np.asarray(raw, dtype=float)
     with np.errstate(invalid="ignore"):
+        within = np.isfinite(r) & (r >= range_min) & (r < range_max)
+        echo = within & (r >= min_range)
+        zeros = (r == 0.0) & ~echo
+        near = within & ~echo & ~zeros
         no_echo = (r == np.inf) | (r == np.float32(range_max))
-        echo = np.isfinite(r) & (r >= range_min) & (r < range_max)
+    quiet = zeros if zero == "no_echo" else np.zeros_like(zeros)
+    if echoed is not None:
+        quiet = quiet & echoed
+    no_echo |= quiet
     out = np.where(echo, r, np.nan)
     out[no_echo] = range_max
-    invalid = int(len(r) - np.count_nonzero(echo) - np.count_nonzero(no_echo))
-    return out, invalid, int(np.count_nonzero(no_echo))
+    n_zeros = int(np.count_nonzero(zeros))
+    return ReadScan(
+        out,
+        echo,
+        int(len(r) - np.count_nonzero(echo) - np.count_nonzero(no_echo)),
+        int(np.count_nonzero(no_echo)),
+        n_zeros,
+        n_zeros - int(np.count_nonzero(quiet)),
+        int(np.count_nonzero(near)),
+    )
 
 
 def scan_rings(
@@ -263,6 +331,8 @@ def scan_rings(
     beam_width: float,
     stats: RingStats | None = None,
     laser: Rigid | ArrayLike | None = None,
+    zero: str = "no_echo",
+    min_range: float = 0.0,
 ) -> Iterator[Ring]:
     """LaserScan messages (log order) as :class:`Ring` s of the geometry's kept beams.
 
@@ -284,6 +354,11 @@ def scan_rings(
     laser : Rigid or array_like, shape (3,), optional
         The laser's mount in the base frame (as :meth:`ScanGeometry.mounts`), which
         places the beams of a scan of another geometry; default the base frame itself.
+    zero : {"no_echo", "invalid"}
+        How an exact 0.0 below range_min is read (``ranges.scan_zero``,
+        :func:`scan_ranges`).
+    min_range : float
+        The least range of an echo used (``ranges.min_range_m``, m).
 
     Returns
     -------
@@ -300,6 +375,7 @@ def scan_rings(
         x, y, yaw = np.asarray(laser, dtype=float).reshape(3)
         laser = Rigid.planar(x, y, yaw)
     kept = geometry.kept
+    echoed = np.zeros(len(kept), dtype=bool)  # the kept beams that have echoed so far
     after = kept - kept[-1]  # each kept beam's place before the last, in beams
     last_t = -np.inf
     refused, topic = 0, "the laser scans"
@@ -334,14 +410,18 @@ def scan_rings(
             raw = np.asarray(msg.ranges, dtype=np.float32)
             ti = _time_increment(msg)
             if same:
-                ranges, invalid, no_echo = scan_ranges(raw[kept], lo, hi)
+                got = scan_ranges(raw[kept], lo, hi, zero, min_range, echoed)
+                ranges = got.ranges
+                echoed |= got.echo
                 read, last = len(kept), int(kept[-1])
                 offsets = after * ti
             else:
                 assert other is not None
                 ok = other.ok
                 ranges = np.full(len(kept), np.nan)
-                ranges[ok], invalid, no_echo = scan_ranges(raw[other.index[ok]], lo, hi)
+                got = scan_ranges(raw[other.index[ok]], lo, hi, zero, min_range, echoed[ok])
+                ranges[ok] = got.ranges
+                echoed[ok] |= got.echo
                 read = int(np.count_nonzero(ok))
                 last = int(other.index[ok].max())  # the last beam taken (beam k at k * ti)
                 offsets = np.where(ok, (other.index - last) * ti, np.nan)
@@ -349,8 +429,11 @@ def scan_rings(
                 st.extra["resampled_scans"] += 1
             st.rings += 1
             st.readings += read
-            st.invalid += invalid
-            st.no_echo += no_echo
+            st.invalid += got.invalid
+            st.no_echo += got.no_echo
+            st.zero_ranges += got.zeros
+            st.zero_invalid += got.zeros_invalid
+            st.too_near += got.too_near
             rmax = np.full(len(kept), hi)
             if ti > 0 and read > 1:
                 yield Ring(t + last * ti, ranges, rmax, float(beam_width), offsets, own)

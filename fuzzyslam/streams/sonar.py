@@ -35,7 +35,10 @@ counted, never silently used:
 - ranges at or beyond max_range are "no echo" and stay as max_range (``no_echo``); so is
   +inf, REP 117's "nothing detected" (a driver may publish either; ``simulate`` writes
   max_range);
-- ranges below min_range become NaN (``invalid``);
+- ranges below min_range become NaN (``invalid``), and so do echoes nearer than
+  ``ranges.min_range_m`` (``invalid`` and ``too_near``: the robot's own body in the
+  cone; 0, the default, leaves min_range the only limit), as a laser's
+  (:func:`fuzzyslam.streams.scan.scan_ranges`);
 - a reading whose max_range is not a positive finite number becomes NaN (``invalid``);
 - a reading whose max_range is beyond what an ultrasonic sensor can measure
   (``MAX_PLAUSIBLE_RANGE``) becomes NaN (``invalid`` and ``implausible``);
@@ -162,6 +165,9 @@ class RingStats:
     bad_fov: int = 0
     implausible: int = 0
     sequential: int = 0  # rings whose readings' stamps span more than the gap
+    zero_ranges: int = 0  # a laser's exact 0.0 below range_min (ranges.scan_zero)
+    zero_invalid: int = 0  # of them, read as invalid
+    too_near: int = 0  # echoes nearer than ranges.min_range_m (invalid)
     # the stamp (s) of the first scan refused (``extra["bad_scans"]``; not in as_dict)
     first_refused_at: float | None = None
 
@@ -178,6 +184,9 @@ class RingStats:
             "bad_fov": self.bad_fov,
             "implausible": self.implausible,
             "sequential": self.sequential,
+            "zero_ranges": self.zero_ranges,
+            "zero_invalid": self.zero_invalid,
+            "too_near": self.too_near,
             **self.extra,
         }
 
@@ -240,6 +249,7 @@ def group_rings(
     gap: float = SIMULTANEOUS_GAP_S,
     stats: RingStats | None = None,
     cone: float | None = None,
+    min_range: float = 0.0,
 ) -> Iterator[Ring]:
     """Group sonar Range messages (in log order) into rings, one per firing cycle.
 
@@ -264,6 +274,9 @@ def group_rings(
     cone : float or None
         The field of view (rad) of the rings read before any reading with a valid one:
         the config's ``sonar.fov_deg`` (None: ``DEFAULT_CONE``, its default).
+    min_range : float
+        The least range of an echo used (``ranges.min_range_m``, m; 0: the messages'
+        min_range alone): nearer echoes are invalid (``too_near``).
 
     Returns
     -------
@@ -333,6 +346,11 @@ def group_rings(
             st.no_echo += 1
             rmax[i] = hi
             ranges[i] = hi
+        elif r < min_range:  # the robot's own body: not a wall (ranges.min_range_m)
+            st.invalid += 1
+            st.too_near += 1
+            rmax[i] = hi
+            ranges[i] = np.nan
         else:
             rmax[i] = hi
             ranges[i] = r
