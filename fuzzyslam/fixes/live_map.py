@@ -897,10 +897,11 @@ class LiveMapPoseAid(PoseFixAid):
         cannot see the end of, on readings of the robot's own body) either bends the
         chain beyond its stated noise to take the loop edges, so that the robust kernel
         down-weights its edges, or does not match where the estimate says it is back on
-        mapped ground. Measured (30 live-map runs: the CARMEN buildings with 7 odometry
-        variants and 9 other lasers, synthetic buildings of 20 to 60 min): the runs at
+        mapped ground. Measured (28 live-map runs: the CARMEN buildings with their own and
+        4 other odometries, 11 re-recordings as other robots record them, synthetic
+        buildings of 20 to 64 min): the runs at
         0.07-0.45 m of closed error (aligned) down-weighted at most 0.2 edges per loop
-        edge and refused at most 27 % of the loop candidates; the ones flagged, 0.61-6.0
+        edge and refused at most 20 % of the loop candidates; the ones flagged, 0.61-6.0
         m: ACES with a 3.5 m laser (0.67-1.15 edges per loop edge), with the robot's body
         in the scan (2.3; Freiburg 1.0 and 51 % refused), and a building whose corridors
         lie 6 deg off its right angles (48 % refused). Not seen: a drift along a 150 m
