@@ -506,3 +506,108 @@ def test_an_online_loop_closure_moves_the_keyframes_the_map_and_the_filter():
     again.builder = type(aid.live.builder)(aid.live.map.grid, again.params)
     again.refill(aid._frames)
     np.testing.assert_array_equal(again.map.m_o, aid.live.map.m_o)
+
+
+def _refill_in_turn(live, frames) -> None:
+    """The refill of an online closure as it was before it became lazy (the second
+    implementation): the map from nothing, every keyframe fused in time order, the grid
+    grown batch by batch."""
+    from fuzzyslam.fixes.live_map import REFILL_BATCH, sensor_batches, stacked_readings
+
+    live.builder = FgmBuilder(live.builder.map.grid, live.params)
+    for batch in sensor_batches(frames, REFILL_BATCH):
+        poses = np.array([f.pose for f in batch], dtype=float)
+        reach = np.array([live._reach(f.ranges, f.max_range, f.mounts) for f in batch])
+        live._cover((poses[:, :2] - reach[:, None]).min(axis=0),
+                    (poses[:, :2] + reach[:, None]).max(axis=0))  # fmt: skip
+        live.builder.add_rings(poses, *stacked_readings(batch), batch[0].fov, batch[0].mounts)
+
+
+def test_a_lazy_refill_is_the_full_one_bit_for_bit(monkeypatch):
+    """LiveFgm.refill fuses the map again only where it is read next (LiveFgm.fresh): a
+    matcher's patch, then a ring that grows the grid, then the whole map. Each read
+    gives the same floats as the map fused again from all its keyframes at once (the
+    grid growing during the refill and after it), and the grid is the same."""
+    from fuzzyslam.fixes import live_map
+    from fuzzyslam.fixes.live_map import Keyframe, LiveMatcher
+
+    monkeypatch.setattr(live_map, "REFILL_BATCH", 4)
+    monkeypatch.setattr(live_map, "REFRESH_ALL", 1.0)  # never all at once: partial reads
+    cfg = load_config("real_building_scan")
+    # toward -x: the grid grows on its origin's side (its cell centres' floats move)
+    lines = room_lines(-90.0, -2.0, 3.0, 3.0)
+    poses = np.array([[-x, 0.2 * math.sin(x / 5), 0.02 * x] for x in np.arange(0.0, 70.0, 1.5)])
+    frames = [Keyframe(k, float(k), p, p, laser_ring(p, lines), RMAX, FOV, MOUNTS)
+              for k, p in enumerate(poses)]  # fmt: skip
+    lazy, full = (LiveFgm(poses[0], cfg.fgm) for _ in range(2))
+    for live in (lazy, full):
+        for f in frames[:5]:  # a map of other poses first: the refill forgets it
+            live.add_ring(f.pose + np.array([0.3, -0.2, 0.1]), f.ranges, RMAX, FOV, MOUNTS)
+    lazy.refill(frames)
+    _refill_in_turn(full, frames)
+    assert lazy.grid == full.grid and lazy.grown == full.grown >= 2
+
+    def same(a, b, box=(slice(None), slice(None))) -> None:
+        for x, y in zip((a.m_e, a.m_o, a.m_t, a.m_c), (b.m_e, b.m_o, b.m_t, b.m_c),
+                        strict=True):  # fmt: skip
+            np.testing.assert_array_equal(x[box], y[box])
+
+    # a matcher's patch near the start: fused there only (the far end still stale)
+    matcher = LiveMatcher(lazy, cfg.fixes)
+    patch = matcher._patch(100, 100, 120)
+    assert lazy._stale is not None and lazy._stale.any() and not lazy._stale[100:220, 100:220].any()
+    np.testing.assert_array_equal(patch, LiveMatcher(full, cfg.fixes)._patch(100, 100, 120))
+    done = ~lazy._stale
+    same(lazy.builder.map, full.builder.map, done)
+    # a ring past the corridor's end grows the grid: the stale cells keep their grid's
+    # floats (FgmBuilder.add_rings(on=...)), and the whole map is the full refill's
+    far = np.array([-88.0, 0.5, 0.2])
+    for live in (lazy, full):
+        live.add_ring(far, laser_ring(far, lines), RMAX, FOV, MOUNTS)
+    assert lazy.grid == full.grid and lazy.grown == full.grown
+    same(lazy.map, full.map)
+    assert lazy._stale is None and float(full.map.m_o.sum()) > 100.0
+
+
+def test_the_graph_solve_is_the_one_of_its_edges_listed_anew():
+    """KeyframeGraph.solve keeps its edges as arrays between solves and builds the
+    heading priors at once: the same solution, bit for bit, as the edges listed anew
+    for each solve (se2.between per keyframe), before and after edges are added."""
+    from fuzzyslam.fixes.live_map import HEADING_PRIOR_DEG, SOLVE_TOL, KeyframeGraph
+    from fuzzyslam.fixes.pose_graph import optimise
+    from fuzzyslam.se2 import between
+
+    cfg = load_config("real_building_scan")
+    rng = np.random.default_rng(3)
+    g = KeyframeGraph(lambda f: None, cfg.fgm, cfg.fixes, 9.0)
+
+    class Frame:
+        def __init__(self, pose):
+            self.pose = pose
+
+    def edge(i, j):
+        z = between(g.frames[i].pose, g.frames[j].pose) + rng.normal(0, [0.05, 0.05, 0.02])
+        return (i, j, z, np.diag(1.0 / rng.uniform([0.02, 0.02, 0.005], [0.2, 0.2, 0.05])))
+
+    def listed(heading_prior):
+        x0 = np.array([f.pose for f in g.frames])
+        edges = g.edges + g.loop_edges
+        if heading_prior:
+            w = np.diag([0.0, 0.0, 1.0 / math.radians(HEADING_PRIOR_DEG)])
+            edges += [(0, k, between(x0[0], x0[k]), w) for k in range(1, len(x0))]
+        arrays = [np.array([e[n] for e in edges]) for n in range(4)]
+        return optimise(x0, *arrays, tol=SOLVE_TOL)
+
+    for k in range(60):
+        g.frames.append(Frame(np.array([0.5 * k, math.sin(k / 7), wrap_angle(0.4 * k)])))
+        if k:
+            g.edges.append(edge(k - 1, k))
+        if k >= 20 and k % 5 == 0:
+            g.loop_edges.append(edge(k - 20, k))
+            for prior in (True, False):
+                got, info = g.solve(prior)
+                want, want_info = listed(prior)
+                np.testing.assert_array_equal(got, want)
+                assert {n: info[n] for n in want_info} == want_info
+            g.move(got + rng.normal(0, 1e-3, got.shape))  # as an online closure does
+    assert len(g.loop_edges) == 8

@@ -86,6 +86,12 @@ LEARN_MIN_WALL_M = 10.0
 NOT_FUSED = frozenset({"gated", "edge", "no_match"})
 # keyframes fused in one vectorised pass (an online loop closure's refill, a graph edge's map)
 REFILL_BATCH = 64
+# an online closure's map is fused again where it is next read (LiveFgm.fresh), this far
+# around the cells read (m): the next reads nearby find them done
+REFRESH_MARGIN_M = 16.0
+# ... or all of it, when more than this fraction of the keyframes reach the cells read
+# (their rings' evidence is most of a fusion's cost, whatever cells it is kept for)
+REFRESH_ALL = 0.5
 
 # the pose graph of the keyframes (KeyframeGraph). Odometry edges: 2 cm + 5 % of the
 # distance, 0.5 deg + 1 deg per root metre (1 sigma), looser than the filter's white
@@ -214,6 +220,15 @@ class LiveFgm:
     """An FGM that grows with the robot: :class:`FgmBuilder` on a grid re-allocated
     larger (:func:`grown_grid`) when a ring reaches past its edge.
 
+    After an online loop closure (:meth:`refill`) the map is fused again from its
+    keyframes lazily, cell by cell, where it is next read or written (:meth:`fresh`):
+    a matcher's patch, a new keyframe's cells, or all of it (:attr:`map`). A cell's
+    masses are the fold of its own evidence, ring after ring in time order (sec. 6's
+    discount-and-combine is per cell: m_c <- clip(discount(m_c, 1 - gamma m_c(empty))
+    (conj) e_c)), so a cell fused again from every keyframe that reaches it, in time
+    order, holds the same floats as a fusion of the whole map; what is never read again
+    before the next closure is never fused (its keyframes moved once more).
+
     Parameters
     ----------
     start : ndarray, shape (2,) or (3,)
@@ -229,14 +244,32 @@ class LiveFgm:
         self.builder = FgmBuilder(Grid.covering(x - h, y - h, x + h, y + h, params.resolution),
                                   params)  # fmt: skip
         self.grown = 0  # times the grid was re-allocated
+        # the last refill's keyframes, their poses and reaches then, and the cells not yet
+        # fused again from them (None: every cell is up to date)
+        self._stale: np.ndarray | None = None
+        self._n_stale = 0
+        self._frames: list[Keyframe] = []
+        self._poses = np.zeros((0, 3))
+        self._reaches = np.zeros(0)
+        self._grids: list[Grid] = []  # the grids the refill's keyframes are fused on
+        self._grid_of = np.zeros(0, dtype=np.int64)  # each keyframe's, in self._grids
+        self._reach_of: dict[int, tuple[Keyframe, float]] = {}  # id -> (keyframe, reach)
+
+    @property
+    def grid(self) -> Grid:
+        """The map's grid as it is now (nothing fused for it)."""
+        return self.builder.map.grid
 
     @property
     def map(self) -> BeliefMap:
-        """The map as it is now."""
+        """The map as it is now, every cell up to date (:meth:`fresh` of the whole grid)."""
+        ny, nx = self.grid.shape
+        self.fresh(0, ny, 0, nx)
         return self.builder.map
 
     def _cover(self, lo: np.ndarray, hi: np.ndarray) -> None:
-        """Grow the grid to cover [lo, hi], the masses kept cell for cell."""
+        """Grow the grid to cover [lo, hi], the masses (and which cells are up to date)
+        kept cell for cell."""
         old = self.builder.map
         grid = grown_grid(old.grid, lo, hi, GROW_STEP_M)
         if grid is old.grid:
@@ -254,6 +287,11 @@ class LiveFgm:
         for a, b in zip((new.m_e, new.m_o, new.m_t, new.m_c),
                         (old.m_e, old.m_o, old.m_t, old.m_c), strict=True):  # fmt: skip
             a[r0 : r0 + ny, c0 : c0 + nx] = b
+        if self._stale is not None:
+            # the new cells: no keyframe of the last refill reaches them (it covered them)
+            stale = np.zeros(grid.shape, dtype=bool)
+            stale[r0 : r0 + ny, c0 : c0 + nx] = self._stale
+            self._stale = stale
         self.builder.map = new
         self.grown += 1
 
@@ -262,7 +300,8 @@ class LiveFgm:
     ) -> None:
         """Fuse one ring at ``pose`` (:meth:`FgmBuilder.add_ring`), the grid first grown
         to hold every cell the ring's readings reach (an echo: its range plus the
-        tolerance; no echo: ``no_echo_reach``; ``maps.evidence.reading_masses``).
+        tolerance; no echo: ``no_echo_reach``; ``maps.evidence.reading_masses``) and
+        those cells brought up to date (:meth:`fresh`).
 
         Parameters
         ----------
@@ -280,6 +319,8 @@ class LiveFgm:
         xy = np.asarray(pose, dtype=float)[:2]
         reach = self._reach(ranges, max_range, mounts)
         self._cover(xy - reach, xy + reach)
+        if self._stale is not None:
+            self.fresh(*self._cells(xy - reach, xy + reach))
         self.builder.add_ring(pose, ranges, max_range, fov, mounts)
 
     def _reach(self, ranges: np.ndarray, max_range: Any, mounts: np.ndarray) -> float:
@@ -292,26 +333,132 @@ class LiveFgm:
         reach += float(np.max(np.hypot(mounts[..., 0], mounts[..., 1]), initial=0.0))
         return reach + 2.0 * p.resolution
 
+    def _frame_reach(self, f: Keyframe) -> float:
+        """:meth:`_reach` of a keyframe's ring, kept (it does not depend on the pose)."""
+        got = self._reach_of.get(id(f))
+        if got is None or got[0] is not f:
+            got = (f, self._reach(f.ranges, f.max_range, f.mounts))
+            self._reach_of[id(f)] = got
+        return got[1]
+
+    def _cells(self, lo: np.ndarray, hi: np.ndarray) -> tuple[int, int, int, int]:
+        """The rows r0 .. r1 and columns c0 .. c1 (half-open, clipped to the grid) of
+        the cells that meet the box [lo, hi] (m)."""
+        g = self.grid
+        ny, nx = g.shape
+        res, (ox, oy) = g.resolution, g.origin
+        c0 = min(max(math.floor((float(lo[0]) - ox) / res) - 1, 0), nx)
+        c1 = min(max(math.floor((float(hi[0]) - ox) / res) + 2, 0), nx)
+        r0 = min(max(math.floor((float(lo[1]) - oy) / res) - 1, 0), ny)
+        r1 = min(max(math.floor((float(hi[1]) - oy) / res) + 2, 0), ny)
+        return r0, r1, c0, c1
+
     def refill(self, frames: list[Keyframe]) -> None:
         """Fuse the map again from nothing: each keyframe's ring at its pose (an online
         loop closure moved them), on the grid as it is (grown where a ring needs it).
 
-        The same map as :meth:`add_ring` of each in turn: the rings are fused in time
-        order, REFILL_BATCH at a time (``FgmBuilder.add_rings``: one vectorised pass of
-        evidence per batch, bounding its memory).
+        The same map as :meth:`add_ring` of each in turn, fused where it is next read
+        (:meth:`fresh`; class docstring). The grid grows now, as a fusion of the rings
+        in time order, REFILL_BATCH at a time, would grow it: the same grid.
 
         Parameters
         ----------
         frames : list of Keyframe
             The keyframes, in time order.
         """
-        self.builder = FgmBuilder(self.builder.map.grid, self.params)
+        # the masses are kept (no new map of the whole grid per closure): every cell is
+        # stale after the covers below, and set vacuous when it is fused again (fresh)
+        self._stale = None
+        frames = list(frames)
+        poses = np.array([f.pose for f in frames], dtype=float).reshape(-1, 3)
+        reaches = np.array([self._frame_reach(f) for f in frames], dtype=float)
+        # each keyframe's grid: the one its batch was fused on in a fusion in turn
+        grids: list[Grid] = []
+        grid_of = np.zeros(len(frames), dtype=np.int64)
+        start = 0
         for batch in sensor_batches(frames, REFILL_BATCH):
-            poses = np.array([f.pose for f in batch], dtype=float)
-            reach = np.array([self._reach(f.ranges, f.max_range, f.mounts) for f in batch])
-            self._cover((poses[:, :2] - reach[:, None]).min(axis=0),
-                        (poses[:, :2] + reach[:, None]).max(axis=0))  # fmt: skip
-            self.builder.add_rings(poses, *stacked_readings(batch), batch[0].fov, batch[0].mounts)
+            p, r = poses[start : start + len(batch)], reaches[start : start + len(batch)]
+            self._cover((p[:, :2] - r[:, None]).min(axis=0), (p[:, :2] + r[:, None]).max(axis=0))
+            if not grids or grids[-1] is not self.grid:
+                grids.append(self.grid)
+            grid_of[start : start + len(batch)] = len(grids) - 1
+            start += len(batch)
+        self._grids, self._grid_of = grids, grid_of
+        self._frames, self._poses, self._reaches = frames, poses, reaches
+        self._stale = np.ones(self.grid.shape, dtype=bool)
+        self._n_stale = self._stale.size
+        self.builder.rings = len(frames)
+        live = {id(f) for f in frames}
+        self._reach_of = {k: v for k, v in self._reach_of.items() if k in live}
+
+    def _reaching(self, r0: int, r1: int, c0: int, c1: int) -> tuple[np.ndarray, np.ndarray]:
+        """The refill's keyframes whose cells (within their reach of the pose) can meet
+        the stale cells of rows r0 .. r1, columns c0 .. c1 (their indices, in time
+        order), and those stale cells (a mask of the box)."""
+        sub = self._stale[r0:r1, c0:c1].copy()
+        rows, cols = np.flatnonzero(sub.any(axis=1)), np.flatnonzero(sub.any(axis=0))
+        if rows.size == 0:
+            return np.zeros(0, dtype=np.int64), sub
+        g = self.grid
+        res, (ox, oy) = g.resolution, g.origin
+        lo = np.array([ox + res * (c0 + cols[0]), oy + res * (r0 + rows[0])])
+        hi = np.array([ox + res * (c0 + cols[-1] + 1), oy + res * (r0 + rows[-1] + 1)])
+        xy, r = self._poses[:, :2], self._reaches[:, None]
+        return np.flatnonzero(np.all((xy + r >= lo) & (xy - r <= hi), axis=1)), sub
+
+    def fresh(self, r0: int, r1: int, c0: int, c1: int) -> None:
+        """Bring the cells of rows r0 .. r1, columns c0 .. c1 (half-open) up to date
+        after a :meth:`refill`: the stale cells of that box grown by REFRESH_MARGIN_M
+        (so that the next reads nearby find them done; all of them when more than
+        REFRESH_ALL of the keyframes reach those) are set vacuous and fused from the
+        refill's keyframes that reach them, in time order
+        (``FgmBuilder.add_rings(only=...)``, REFILL_BATCH at a time).
+
+        Parameters
+        ----------
+        r0, r1, c0, c1 : int
+            The box (cells of the grid as it is).
+        """
+        if self._stale is None:
+            return
+        if r1 <= r0 or c1 <= c0 or not self._stale[r0:r1, c0:c1].any():
+            return
+        g = self.grid
+        ny, nx = g.shape
+        # the margin: the farthest a keyframe reaches (the next keyframe's cells, fused
+        # after this read, are then done too) and at least REFRESH_MARGIN_M
+        pad = math.ceil(max(REFRESH_MARGIN_M, float(np.max(self._reaches, initial=0.0)))
+                        / g.resolution)  # fmt: skip
+        box = (max(r0 - pad, 0), min(r1 + pad, ny), max(c0 - pad, 0), min(c1 + pad, nx))
+        chosen, sub = self._reaching(*box)
+        if len(chosen) > REFRESH_ALL * len(self._frames):
+            # most keyframes' evidence is computed anyway: every stale cell at once
+            box = (0, ny, 0, nx)
+            chosen, sub = self._reaching(*box)
+        r0, r1, c0, c1 = box
+        m = self.builder.map
+        for a, v in zip((m.m_e, m.m_o, m.m_t, m.m_c), (0.0, 0.0, 1.0, 0.0), strict=True):
+            a[r0:r1, c0:c1][sub] = v  # from nothing: m(Theta) = 1
+        need = np.zeros(g.shape, dtype=bool)
+        need[r0:r1, c0:c1] = sub
+        flat = need.reshape(-1)
+        # runs of keyframes of one grid (their evidence computed on it: the same floats)
+        cut = np.flatnonzero(np.diff(self._grid_of[chosen])) + 1
+        for run in np.split(chosen, cut):
+            frames = [self._frames[k] for k in run]
+            start = 0
+            for batch in sensor_batches(frames, REFILL_BATCH):
+                poses = self._poses[run[start : start + len(batch)]]
+                self.builder.add_rings(poses, *stacked_readings(batch), batch[0].fov,
+                                       batch[0].mounts, only=flat,
+                                       on=self._grids[self._grid_of[run[0]]])  # fmt: skip
+                start += len(batch)
+        self._stale[r0:r1, c0:c1] = False
+        self._n_stale -= int(sub.sum())
+        if self._n_stale == 0:
+            self._stale = None
+            self._frames, self._poses, self._reaches = [], np.zeros((0, 3)), np.zeros(0)
+            self._grids, self._grid_of = [], np.zeros(0, dtype=np.int64)
 
 
 class LiveMatcher(PoseMatcher):
@@ -336,17 +483,17 @@ class LiveMatcher(PoseMatcher):
     @property
     def grid(self) -> Grid:  # type: ignore[override]
         """The live map's grid (it grows)."""
-        return self.live.map.grid
+        return self.live.grid
 
     def _patch(self, row0: int, col0: int, size: int) -> np.ndarray:
         """PoseMatcher's lookup channels on rows row0 .. row0 + size and columns col0 ..
         col0 + size of the live map, zeros outside it."""
         p = self.params
-        m = self.live.map
-        res = m.grid.resolution
+        g = self.live.grid
+        res = g.resolution
         sigma = p.pose_blur / res
         r = max(1, math.ceil(2.5 * sigma)) if sigma > 0 else 0
-        ny, nx = m.grid.shape
+        ny, nx = g.shape
         out = np.zeros((size, size, 2), dtype=np.float32)
         r0, r1 = max(row0, 0), min(row0 + size, ny)
         c0, c1 = max(col0, 0), min(col0 + size, nx)
@@ -355,6 +502,8 @@ class LiveMatcher(PoseMatcher):
         # the patch within the map and the blur's margin around it
         a0, a1 = max(r0 - r, 0), min(r1 + r, ny)
         b0, b1 = max(c0 - r, 0), min(c1 + r, nx)
+        self.live.fresh(a0, a1, b0, b1)  # after an online closure: fused where read
+        m = self.live.builder.map
         lookup = lookup_channels(m.m_o[a0:a1, b0:b1], m.m_e[a0:a1, b0:b1], res, p)
         out[r0 - row0 : r1 - row0, c0 - col0 : c1 - col0] = lookup[
             r0 - a0 : r1 - a0, c0 - b0 : c1 - b0
@@ -499,6 +648,7 @@ class KeyframeGraph:
         self.edges: list[tuple[int, int, np.ndarray, np.ndarray]] = []
         self.loop_edges: list[tuple[int, int, np.ndarray, np.ndarray]] = []
         self.counts = {"sequential": 0, "loops": 0, "loop_candidates": 0}
+        self._stacks: dict[str, tuple] = {}  # the edge lists as arrays (_stacked)
 
     def _matched(self, idx: range, anchor: int, k: int) -> PoseMatch:
         """Keyframe k's template matched against the map of keyframes ``idx`` in the frame
@@ -556,6 +706,24 @@ class KeyframeGraph:
         span = range(max(0, j - LOOP_SPAN), min(len(f), j + LOOP_SPAN + 1))
         return j if self._add(j, k, self._matched(span, j, k), "loops") else None
 
+    def _stacked(
+        self, edges: list[tuple[int, int, np.ndarray, np.ndarray]], key: str
+    ) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """A list of edges (only ever appended to) as arrays i, j (E,), z (E, 3) and
+        W (E, 3, 3), kept between solves and extended by the edges added since."""
+        have = self._stacks.get(key)
+        n = 0 if have is None else len(have[0])
+        if have is not None and n == len(edges):
+            return have
+        new = edges[n:]
+        add = (np.array([e[0] for e in new], dtype=np.int64).reshape(-1),
+               np.array([e[1] for e in new], dtype=np.int64).reshape(-1),
+               np.array([e[2] for e in new], dtype=float).reshape(-1, 3),
+               np.array([e[3] for e in new], dtype=float).reshape(-1, 3, 3))  # fmt: skip
+        out = add if have is None else tuple(np.concatenate(p) for p in zip(have, add, strict=True))
+        self._stacks[key] = out
+        return out
+
     def move(self, poses: np.ndarray) -> None:
         """Set the keyframes' poses (an online closure's solution).
 
@@ -605,14 +773,17 @@ class KeyframeGraph:
             moved (``moved_mean_m``, ``moved_max_m``).
         """
         x0 = np.array([f.pose for f in self.frames])
-        edges = self.edges + self.loop_edges
+        parts = [self._stacked(self.edges, "edges"), self._stacked(self.loop_edges, "loops")]
         if heading_prior:
+            # edge (0, k): z = (-)x_0 (+) x_k, W = diag(0, 0, 1 / sigma); only its heading
+            # wrap(wrap(-theta_0) + theta_k) counts (W's zeros), the same floats as
+            # se2.between's per pose
+            k = len(x0) - 1
             w = np.diag([0.0, 0.0, 1.0 / math.radians(HEADING_PRIOR_DEG)])
-            edges += [(0, k, between(x0[0], x0[k]), w) for k in range(1, len(x0))]
-        i = np.array([e[0] for e in edges])
-        j = np.array([e[1] for e in edges])
-        z = np.array([e[2] for e in edges])
-        w = np.array([e[3] for e in edges])
+            parts.append((np.zeros(k, dtype=np.int64), np.arange(1, k + 1),
+                          between(x0[0], x0[1:]).reshape(-1, 3),
+                          np.broadcast_to(w, (k, 3, 3))))  # fmt: skip
+        i, j, z, w = (np.concatenate([p[n] for p in parts]) for n in range(4))
         poses, info = optimise(x0, i, j, z, w, tol=SOLVE_TOL)
         moved = np.hypot(*(poses[:, :2] - x0[:, :2]).T)
         return poses, {**self.counts, **info, "moved_mean_m": float(moved.mean()),
@@ -1043,7 +1214,7 @@ class LiveMapPoseAid(PoseFixAid):
         s = super().summary()
         if self.live is None:
             return dataclasses.replace(s, keyframes=0)
-        g = self.live.map.grid
+        g = self.live.grid
         loops = None
         found = self.closed()
         if found is not None:

@@ -126,6 +126,8 @@ class FgmBuilder:
         max_range: np.ndarray | float,
         fov: float,
         mounts: np.ndarray,
+        only: np.ndarray | None = None,
+        on: Grid | None = None,
     ) -> int:
         """Fuse K rings in time order: poses (K, 3), ranges and max ranges (K, M).
 
@@ -156,6 +158,16 @@ class FgmBuilder:
             The cone's full angle (rad).
         mounts : ndarray, shape (M, 3)
             The sensors' poses on the robot.
+        only : ndarray of bool, shape (ny nx,), or None
+            Fuse into these cells only (flat index iy nx + ix), the others left as they
+            are: a cell's masses are the fold of its own evidence in time order, so the
+            cells kept get the same floats as a fusion of the whole rings (the live
+            map's partial refill, ``fixes.live_map.LiveFgm``). None: every cell.
+        on : Grid or None
+            The grid to compute the evidence on, when the map's grid grew since the
+            rings were meant for it: its cells are the map's, offset by whole cells
+            (``fixes.live_map.grown_grid``), and its cell centres' floats those of that
+            grid. None: the map's grid.
 
         Returns
         -------
@@ -164,8 +176,14 @@ class FgmBuilder:
         """
         if self.frozen:
             raise FrozenMapError("the FGM is frozen; it accepts no more readings")
-        ev = rings_evidence(self.grid, poses, ranges, max_range, fov, mounts, self.params)
+        on = self.grid if on is None else on
+        ev = rings_evidence(on, poses, ranges, max_range, fov, mounts, self.params)
         m = self.map
+        # cell (iy, ix) of ``on`` is (iy + dr, ix + dc) of the map's grid
+        res, nx0, nx = on.resolution, on.shape[1], self.grid.shape[1]
+        dr = round((on.origin[1] - self.grid.origin[1]) / res)
+        dc = round((on.origin[0] - self.grid.origin[0]) / res)
+        moved = on is not self.grid and (dr, dc, nx0) != (0, 0, nx)
         # flat views of the four mass arrays: only the cells a ring touches are read and
         # written (no copy of the whole map: the live map of fixes/live_map.py adds its
         # rings one by one to a grid of a building)
@@ -178,8 +196,17 @@ class FgmBuilder:
             a, b = int(ev.ptr[k]), int(ev.ptr[k + 1])
             if a < b:
                 idx = ev.cells[a:b]
+                if moved:
+                    idx = (idx // nx0 + dr) * nx + (idx % nx0 + dc)
+                piece = tuple(x[a:b] for x in ev.masses)
+                if only is not None:
+                    keep = np.flatnonzero(only[idx])
+                    if keep.size == 0:
+                        continue
+                    idx = idx.take(keep)
+                    piece = tuple(x.take(keep) for x in piece)
                 stored = np.stack([f[idx] for f in flat])
-                new = _step(stored, tuple(x[a:b] for x in ev.masses), gamma)
+                new = _step(stored, piece, gamma)
                 for f, row in zip(flat, new, strict=True):
                     f[idx] = row
         self.rings += len(ev.ptr) - 1
