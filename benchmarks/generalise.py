@@ -2,6 +2,7 @@
 
     python benchmarks/generalise.py [--data DIR] [--out DIR] [--part carmen mrclam live]
         [--variants NAME ...] [--starts 0 75 ...] [--window 450]
+    python benchmarks/generalise.py --part live_cpu --long LOG ... [--out DIR]
 
 ``DIR`` (default ``../shared/data/real``, as in bench_buildings.py) holds the building
 logs (``log.mcap`` with /scan, /ground_truth/odom and /odom; ``truth.tum``) and the
@@ -32,6 +33,14 @@ docs/models.md sec. 10b) with both presets, and as dead reckoning: the position 
 mean after a rigid alignment to truth.tum (the map's frame is the start pose's) against
 the dead reckoning's, the aligned heading error, and the raw position error, of the run's
 trajectory.tum and of its trajectory_closed.tum (the loops closed).
+
+**The live map's CPU against its keyframes** (``--part live_cpu``, ``--long LOG ...``:
+logs of one building cut to growing lengths, e.g. the first 16, 32 and 64 min of a long
+one). Each runs ``--live-map`` with ``real_building_scan.yaml``: its keyframes, online
+closures, CPU (s) and CPU per keyframe (ms), a table and, with ``--out``,
+``live_cpu.png`` (CPU against keyframes). CPU per keyframe that stays flat is a cost
+linear in the log; one that grows with the keyframes, quadratic (the online closures'
+refills and solves, docs/models.md sec. 10b).
 
 **Landmark logs** (``--part mrclam``). Windows of ``--window`` s (to the log's end)
 starting at ``--starts`` seconds: each is a run that starts elsewhere, with other
@@ -262,6 +271,52 @@ def live(data: Path, out: Path, variants: list[str], ranges: list[str]) -> list[
     return rows
 
 
+def live_cpu(logs: list[Path], out: Path) -> list[dict]:
+    """``run --live-map`` (``real_building_scan.yaml``) on each log: keyframes, online
+    closures and CPU, one JSON line each (module docstring, ``--part live_cpu``)."""
+    rows = []
+    for k, log in enumerate(logs):
+        s = fuzzyslam("run", str(log), "--config", "real_building_scan.yaml", "--live-map",
+                      "-o", str(out / f"{k}_{log.parent.name}"))  # fmt: skip
+        aid = s["aids"]["LiveMapPoseAid"]
+        keyframes = int(aid["keyframes"])
+        row = {"log": str(log), "log_s": round(s["log_duration_s"], 1), "keyframes": keyframes,
+               "online_closures": (aid.get("loop_closure") or {}).get("online_closures", 0),
+               "cpu_s": round(s["_cpu"], 1),
+               "cpu_ms_per_keyframe": round(1e3 * s["_cpu"] / max(keyframes, 1), 1)}  # fmt: skip
+        print(json.dumps(row), flush=True)
+        rows.append(row)
+    return rows
+
+
+def live_cpu_table(rows: list[dict], png: Path | None) -> str:
+    """The live map's CPU against its keyframes (``--part live_cpu``), and its figure."""
+    out = ["| log | log (s) | keyframes | online closures | CPU (s) | CPU per keyframe (ms) |",
+           "|---|---|---|---|---|---|"]  # fmt: skip
+    for r in rows:
+        out.append(f"| {Path(r['log']).parent.name} | {r['log_s']:.0f} | {r['keyframes']} "
+                   f"| {r['online_closures']} | {r['cpu_s']:.1f} "
+                   f"| {r['cpu_ms_per_keyframe']:.1f} |")  # fmt: skip
+    if png is not None and rows:
+        import matplotlib
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        fig, ax = plt.subplots(figsize=(5, 3.5))
+        k = [r["keyframes"] for r in rows]
+        ax.plot(k, [r["cpu_s"] for r in rows], "o-")
+        ax.set_xlabel("keyframes")
+        ax.set_ylabel("CPU (s)")
+        ax.set_title("run --live-map: CPU against keyframes")
+        ax.set_xlim(left=0)
+        ax.set_ylim(bottom=0)
+        fig.tight_layout()
+        fig.savefig(png, dpi=100)
+        plt.close(fig)
+    return "\n".join(out)
+
+
 def carmen_table(rows: list[dict]) -> str:
     """Per building, ranges and fix: each variant's figure, and how many meet the target."""
     out = ["| building | ranges | fix | figure (target) | " + " | ".join(
@@ -400,9 +455,18 @@ def main() -> None:
     ap.add_argument("--window", type=float, default=450.0)
     ap.add_argument("--ranges", nargs="*", default=["scan", "sonar"],
                     help="the range sensors of --part live (scan, sonar)")
+    ap.add_argument("--long", nargs="*", type=Path, default=[], help="--part live_cpu's logs")
     ap.add_argument("--landmark-config", default="real_detections.yaml",
                     help="the landmark logs' config (a name or a YAML path)")
     a = ap.parse_args()
+    if "live_cpu" in a.part:  # logs given, no data directory needed
+        with tempfile.TemporaryDirectory() as tmp:
+            out = a.out or Path(tmp)
+            rows = live_cpu(a.long, out / "live_cpu")
+            png = out / "live_cpu.png" if a.out else None
+            print(live_cpu_table(rows, png), flush=True)
+        if set(a.part) == {"live_cpu"}:
+            return
     if not a.data.is_dir():
         print(f"no data under {a.data}: skipped")
         return
