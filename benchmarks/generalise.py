@@ -275,6 +275,7 @@ def live_cpu(logs: list[Path], out: Path) -> list[dict]:
     """``run --live-map`` (``real_building_scan.yaml``) on each log: keyframes, online
     closures and CPU, one JSON line each (module docstring, ``--part live_cpu``)."""
     rows = []
+    out.mkdir(parents=True, exist_ok=True)
     for k, log in enumerate(logs):
         s = fuzzyslam("run", str(log), "--config", "real_building_scan.yaml", "--live-map",
                       "-o", str(out / f"{k}_{log.parent.name}"))  # fmt: skip
