@@ -21,7 +21,7 @@ from conftest import run_cli
 from test_robust_logs import keep, rewrite
 
 from fuzzyslam.fixes.params import FixParams
-from fuzzyslam.fixes.pose_aid import REFUSED_MIN, PoseDecision, PoseFixAid
+from fuzzyslam.fixes.pose_aid import REFUSED_MIN, REFUSED_SHARE, PoseDecision, PoseFixAid
 from fuzzyslam.slam.health import DivergenceMonitor
 from fuzzyslam.slam.odom_gate import first_plausible_pose
 from fuzzyslam.slam.run_results import filter_health
@@ -80,29 +80,69 @@ def _health(aid: PoseFixAid, start: float | None = None):
 
 
 def test_refused_pose_matches_flag_the_run() -> None:
-    """More than half of the match attempts since the first applied one (at least 20)
-    refused by the gate or on the window's edge: ``pose_matches_refused`` in
-    filter_health, from the attempt that made it more than half; ``prior_better`` rings
-    are not attempts, ``no_match`` (the ring saw nothing the map has) is not a refusal;
-    exactly half is not enough."""
-    half = REFUSED_MIN // 2
-    # one applied, then 11 refused: 11 of the first 20 attempts, flagged at the 20th (t = 19)
+    """More than REFUSED_SHARE of the match attempts since the first applied one (at
+    least 20) refused by the gate or on the window's edge: ``pose_matches_refused`` in
+    filter_health, from the attempt that made it more; ``prior_better`` rings are not
+    attempts, ``no_match`` (the ring saw nothing the map has) is not a refusal; exactly
+    the share is not enough."""
+    share = int(REFUSED_SHARE * REFUSED_MIN)  # refusals among the first 20: 6
+    assert share == REFUSED_SHARE * REFUSED_MIN
+    # one applied, then share + 1 refused: more than the share of the first 20 attempts,
+    # flagged at the 20th (t = 19)
     first = ["gated", "edge", "recovered"] * 4
-    h = _health(_aid(["ok"] + first[: half + 1] + ["ok"] * (REFUSED_MIN - half - 2) + ["ok"] * 30))
+    h = _health(
+        _aid(["ok"] + first[: share + 1] + ["ok"] * (REFUSED_MIN - share - 2) + ["ok"] * 30)
+    )
     assert h.diverged and h.reasons == ["pose_matches_refused"]
     assert h.diverged_at == REFUSED_MIN - 1
-    # exactly half, then all accepted: never more than half
-    h = _health(_aid(["ok"] + ["gated"] * half + ["ok"] * (REFUSED_MIN - half - 1) + ["ok"] * 30))
+    # exactly the share, then all accepted: never more than it
+    h = _health(_aid(["ok"] + ["gated"] * share + ["ok"] * (REFUSED_MIN - share - 1) + ["ok"] * 30))
     assert not h.diverged
     # no_match and prior_better do not count; later in time the same finding
-    lead = ["ok"] * 10
-    refused = lead + ["gated"] * 11  # the 21st attempt makes 11 of 21
+    lead = ["ok"] * 14
+    refused = lead + ["gated"] * 7  # the 21st attempt makes 7 of 21
     spaced = [x for r in refused for x in (r, "prior_better", "no_match")]
     h = _health(_aid(spaced))
-    assert not h.diverged  # 11 of 63 attempts (no_match ones are attempts, not refused)
+    assert not h.diverged  # 7 of 42 attempts (no_match ones are attempts, not refused)
     h = _health(_aid([x for r in refused for x in (r, "prior_better")]))
     assert h.reasons == ["pose_matches_refused"] and h.diverged_at == 2.0 * 20
     assert not _health(_aid(["gated"] * (REFUSED_MIN - 1))).diverged  # too few to judge
+
+
+def _driven(steps: list[tuple[str, float]]) -> PoseFixAid:
+    """A pose aid (pose_min_travel 1 m, as the building presets) whose attempts have
+    these reasons, each (reason, metres driven since the one before) along a straight
+    line, one per second."""
+    from fuzzyslam.maps.grid import BeliefMap, Grid
+
+    params = FixParams(pose_min_travel=1.0, pose_min_turn_deg=30.0)
+    aid = PoseFixAid(BeliefMap.vacuous(Grid.centred(20, 0.1)), params, lambda r, m: None, 0.0)
+    nan3, nan33 = np.full(3, np.nan), np.full((3, 3), np.nan)
+    x = np.cumsum([d for _, d in steps])
+    aid.decisions = [
+        PoseDecision(float(k), r == "ok", r, nan3, nan33, 0, 1.0, None, np.array([xk, 0.0, 0.0]))
+        for k, ((r, _), xk) in enumerate(zip(steps, x, strict=True))
+    ]
+    return aid
+
+
+def test_refusals_retried_ring_after_ring_count_once_per_metre() -> None:
+    """A refused ring is retried at the next ring, an applied match waits a metre: 6
+    applied a metre apart, then 24 refused 0.15 m apart (3.6 m: a room the sonars
+    cannot place), then applied again. Counted each, 24 of the first 30 attempts are
+    refused (flagged); counted once per metre of travel, as the applied ones are, 4
+    of the first 20 (not flagged). The same refusals a metre apart are flagged, from the attempt
+    that makes them more than half of at least 20."""
+    ok = [("ok", 1.0)] * 6
+    packed = _driven([*ok, *[("edge", 0.15)] * 24, *[("ok", 1.0)] * 20])
+    assert not _health(packed).diverged
+    every = _aid([r for r, _ in [*ok, *[("edge", 0.15)] * 24]])  # no dead reckoning: each
+    assert _health(every).reasons == ["pose_matches_refused"]
+    spread = _driven([*ok, *[("gated", 1.0)] * 24, *[("ok", 1.0)] * 20])
+    h = _health(spread)
+    assert h.reasons == ["pose_matches_refused"] and h.diverged_at == REFUSED_MIN - 1
+    still = _driven([*ok, *[("edge", 0.0)] * 24])  # standing still: no new place either
+    assert not _health(still).diverged
 
 
 # the attempts of the Freiburg excerpt's pose-fix run started 10 deg off in heading
