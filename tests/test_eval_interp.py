@@ -119,3 +119,21 @@ def test_bracket_gap() -> None:
     g = M.bracket_gap([0.0, 1.0, 3.0], [-1.0, 0.0, 0.5, 1.0, 2.0, 3.0, 4.0])
     np.testing.assert_array_equal(g, [np.inf, 1.0, 1.0, 2.0, 2.0, 2.0, np.inf])
     assert np.isinf(M.bracket_gap([1.0], [1.0])).all()
+
+
+def test_heading_fixes_in_a_long_truth_gap_are_not_judged() -> None:
+    """A heading fix is compared with the truth interpolated at its time by the same rule
+    as the poses: one in the middle of a 2 s gap of the truth (beyond max_gap_s) is left
+    out, ones beside truth samples are kept with their exact error (here 0.1 rad)."""
+    from fuzzyslam.evaluation.core import HeadingFixes
+
+    tt = np.concatenate([_times(4.0, 20.0), _times(4.0, 40.0, 22.0)])  # no truth in (20, 22)
+    te = _times(30.0, 40.0)
+    tf = np.array([5.05, 21.0, 30.05])
+    measured = wrap_angle(_line(tf)[:, 2] + 0.1)
+    fixes = HeadingFixes(tf, measured, np.ones(3, dtype=bool), np.array(["ok"] * 3))
+    ev = evaluate(Truth(tt, _line(tt)), Estimate(te, _line(te), heading_fixes=fixes), EvalParams())
+    np.testing.assert_allclose(ev.fix_err[[0, 2]], [0.1, 0.1], atol=1e-9)
+    assert np.isnan(ev.fix_err[1])  # in the gap: not judged
+    fm = ev.typed.phases["overall"].heading_fix
+    assert fm.attempted == 3 and fm.error_deg.n == 2

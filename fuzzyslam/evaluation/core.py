@@ -433,7 +433,9 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
         hf = est.heading_fixes
         th = M.interpolate_poses(truth.t, truth.poses, hf.t)[:, 2]
         fix_t = hf.t
-        fix_err = np.asarray(wrap_angle(hf.measured - th)).reshape(-1)
+        fix_err = np.asarray(wrap_angle(hf.measured - th), dtype=float).reshape(-1)
+        # judged where the truth may be interpolated (metrics.covered), as the poses are
+        fix_err[~M.covered(truth.t, hf.t, params.max_dt_s, params.max_gap_s)] = np.nan
         fix_ok = hf.accepted
     intervals = truth.scenario.run_intervals() if truth.scenario is not None else []
     phases = M.phases_from_runs(

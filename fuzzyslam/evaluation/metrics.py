@@ -177,6 +177,26 @@ class Associated:
         return int(self.t.size)
 
 
+def covered(t_truth: ArrayLike, t_query: ArrayLike, max_dt: float, max_gap: float) -> Array:
+    """Whether the truth may be interpolated at each query time (:func:`associate`'s rule):
+    the two truth samples around it at most ``max_gap`` apart, or one within ``max_dt``.
+
+    Parameters
+    ----------
+    t_truth : array_like, shape (K,)
+        Increasing truth times.
+    t_query : array_like, shape (M,)
+        Query times.
+    max_dt, max_gap : float
+        The bounds (s).
+
+    Returns
+    -------
+    ndarray of bool, shape (M,)
+    """
+    return (nearest_gap(t_truth, t_query) <= max_dt) | (bracket_gap(t_truth, t_query) <= max_gap)
+
+
 def associate(
     t_est: ArrayLike,
     est: ArrayLike,
@@ -221,8 +241,7 @@ def associate(
     tt = np.asarray(t_truth, dtype=float).reshape(-1)
     pt = np.asarray(truth, dtype=float).reshape(-1, 3)
     ti = interpolate_poses(tt, pt, te)
-    near = (nearest_gap(tt, te) <= max_dt) | (bracket_gap(tt, te) <= max_gap)
-    keep = np.isfinite(ti[:, 0]) & near
+    keep = np.isfinite(ti[:, 0]) & covered(tt, te, max_dt, max_gap)
     idx = np.flatnonzero(keep)
     return Associated(te[idx], pe[idx], ti[idx], idx)
 
