@@ -420,7 +420,9 @@ def evaluate(truth: Truth, est: Estimate, params: EvalParams, align: bool = Fals
     if len(assoc) < 2:
         raise SpanError(
             f"estimate time span [{est.t[0]:.3f}, {est.t[-1]:.3f}] s does not overlap the "
-            f"truth's [{truth.t[0]:.3f}, {truth.t[-1]:.3f}] s (within {params.max_dt_s} s)"
+            f"truth's [{truth.t[0]:.3f}, {truth.t[-1]:.3f}] s (fewer than two estimate "
+            f"stamps within {params.max_dt_s} s of a truth sample or between two at most "
+            f"{params.max_gap_s} s apart)"
         )
     err = M.pose_errors(assoc.est, assoc.truth)
     sigma = nees_v = None
