@@ -118,7 +118,7 @@ def write_report(path: Path, metrics: dict[str, Any], figs: dict[str, str]) -> N
         f"- compared samples: {metrics['samples']} over "
         f"{metrics['span_s'][0]:.1f}-{metrics['span_s'][1]:.1f} s "
         f"(truth interpolated at estimate times between truth samples at most "
-        f"{metrics['params'].get('max_gap_s', 0.0)} s apart, or within "
+        f"{metrics['params']['max_gap_s']} s apart, or within "
         f"{metrics['params']['max_dt_s']} s of one)",
         *_truth_lines(metrics),
         *(f"- **warning**: {w}" for w in metrics.get("warnings", [])),
