@@ -26,6 +26,7 @@ from fuzzyslam.slam.health import DivergenceMonitor
 from fuzzyslam.slam.odom_gate import first_plausible_pose
 from fuzzyslam.slam.run_results import filter_health
 from fuzzyslam.streams.tum import read_tum
+from fuzzyslam.summary import OMIT
 
 ROOT = Path(__file__).resolve().parents[1]
 EXCERPT = ROOT / "data" / "carmen_fr079_excerpt"
@@ -186,14 +187,13 @@ def test_the_flagged_line_gives_seconds_into_the_log_and_causes(capsys) -> None:
     summary = SimpleNamespace(
         filter_health=h, counts=SimpleNamespace(frames_stale_odometry=0),
         odometry_delay_estimate=None, noise_estimate=None, odometry_turn_check=None,
-        odometry_distance_check=None,
+        odometry_distance_check=None, invalid_ranges=OMIT,
     )  # fmt: skip
     _tell(summary)
     err = capsys.readouterr().err
     assert "from 31.5 s into the log" in err and "1600000031" not in err
     assert "pose_matches_refused: a start pose off" in err and "odometry scale" in err
     assert "mount" in err
-    from fuzzyslam.summary import OMIT
 
     assert _health(_aid(["ok"] * 25), start).diverged_after_start_s is OMIT
 

@@ -476,9 +476,8 @@ def _tell(summary: RunSummary, cfg: Config | None = None) -> None:
     health = summary.filter_health
     if health.diverged:
         note(_trouble_line(health))
-    invalid = getattr(summary, "invalid_ranges", OMIT)  # a summary without range fixes
-    if invalid is not OMIT:  # the log's, not the filter's (a driver's 0.0)
-        note(invalid_note(invalid))
+    if summary.invalid_ranges is not OMIT:  # the log's, not the filter's (a driver's 0.0)
+        note(invalid_note(summary.invalid_ranges))
     turns = summary.odometry_turn_check
     encoders = cfg is not None and summary.odometry_source.startswith("encoders")
     if turns and turns["flagged"]:
