@@ -61,7 +61,7 @@ import numpy as np
 from fuzzyslam.errors import FuzzyslamError
 from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.pose_aid import PoseFixAid
-from fuzzyslam.fixes.pose_graph import edge_errors, optimise
+from fuzzyslam.fixes.pose_graph import optimise
 from fuzzyslam.fixes.pose_match import PoseMatch, PoseMatcher, lookup_channels
 from fuzzyslam.fixes.scan_heading import ScanLineHeadingAid, scan_segments
 from fuzzyslam.fixes.scan_lines import scan_end_points
@@ -735,25 +735,6 @@ class KeyframeGraph:
         for f, p in zip(self.frames, poses, strict=True):
             f.pose = np.array(p, dtype=float)
 
-    def loop_norms(self, poses: np.ndarray) -> np.ndarray:
-        """Each loop edge's whitened error |W_ij e_ij| at ``poses`` (in sigmas: the
-        graph's robust kernel down-weights an edge beyond its Huber threshold, 3).
-
-        Parameters
-        ----------
-        poses : ndarray, shape (K, 3)
-            A pose per keyframe (a solution).
-
-        Returns
-        -------
-        ndarray, shape (L,)
-        """
-        if not self.loop_edges:
-            return np.zeros(0)
-        i, j, z, w = (np.array(a) for a in zip(*self.loop_edges, strict=True))
-        e = edge_errors(np.asarray(poses, dtype=float), i, j, z)
-        return np.sqrt(np.sum(np.einsum("eab,eb->ea", w, e) ** 2, axis=1))
-
     def solve(self, heading_prior: bool) -> tuple[np.ndarray, dict]:
         """The keyframes' poses that best explain the edges: robust least squares
         (:func:`fuzzyslam.fixes.pose_graph.optimise`, to SOLVE_TOL), the first keyframe
@@ -1229,7 +1210,6 @@ class LiveMapPoseAid(PoseFixAid):
                 "keyframes_moved_max_m": round(info["moved_max_m"], 4),
                 "online_closures": self.online_closures,
                 "online_moved_max_m": round(self.online_moved_max, 4),
-                "loops_beyond_huber": int(np.count_nonzero(self.graph.loop_norms(found[0]) > 3.0)),
                 "closure_d2_max": round(max((j[2] for j in self.closure_jumps), default=0.0), 1),
             }
         return dataclasses.replace(
