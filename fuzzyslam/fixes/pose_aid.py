@@ -129,6 +129,26 @@ POSE_FIELDS = (
 )  # fmt: skip
 
 
+def moved(a: np.ndarray | None, b: np.ndarray) -> tuple[float, float]:
+    """The travel (m) and the turn (rad, absolute) of the dead reckoning from pose ``a``
+    to pose ``b`` (both (3,)); infinite without ``a``.
+
+    Parameters
+    ----------
+    a : ndarray, shape (3,), or None
+        The earlier pose.
+    b : ndarray, shape (3,)
+        The later pose.
+
+    Returns
+    -------
+    (float, float)
+    """
+    if a is None:
+        return math.inf, math.inf
+    return float(np.hypot(b[0] - a[0], b[1] - a[1])), abs(float(wrap_angle(b[2] - a[2])))
+
+
 @dataclass(frozen=True)
 class PoseDecision:
     """One ring's pose fix: the match, and whether the EKF took it (NIS gate)."""
@@ -293,12 +313,8 @@ class PoseFixAid(FlmAhead, FixAid):
             )
             return
         odo = ekf.odometry_pose
-        travel, turn = math.inf, math.inf
-        if self._last_odo is not None:
-            travel = float(np.hypot(*(odo[:2] - self._last_odo[:2])))
-            turn = abs(float(wrap_angle(odo[2] - self._last_odo[2])))
-        p = self.params
-        if travel < p.pose_min_travel and turn < math.radians(p.pose_min_turn_deg):
+        travel, turn = moved(self._last_odo, odo)
+        if not self._apart(travel, turn):
             self.near_last += 1
             return  # too close to the last applied match to add information (params)
         scale = cov_inflation(travel, self.params.pose_corr_distance, self.params.pose_cov_scale)
@@ -461,6 +477,12 @@ class PoseFixAid(FlmAhead, FixAid):
             return None
         return "pose_matches_refused", tried[int(over[0])].t
 
+    def _apart(self, travel: float, turn: float) -> bool:
+        """Whether the dead reckoning has moved ``pose_min_travel`` or turned
+        ``pose_min_turn_deg`` (``travel`` m, ``turn`` rad: :func:`moved`)."""
+        p = self.params
+        return travel >= p.pose_min_travel or turn >= math.radians(p.pose_min_turn_deg)
+
     def _spaced(self, tried: list[PoseDecision]) -> list[PoseDecision]:
         """The attempts :meth:`refused` counts: every applied one, and a refused one only
         once the dead reckoning has moved ``pose_min_travel`` or turned
@@ -482,18 +504,11 @@ class PoseFixAid(FlmAhead, FixAid):
         -------
         list of PoseDecision
         """
-        p = self.params
         out: list[PoseDecision] = []
         last: np.ndarray | None = None
         for d in tried:
             odo = d.odometry
-            if d.accepted or odo is None or last is None:
-                far = True
-            else:
-                travel = float(np.hypot(*(odo[:2] - last[:2])))
-                turn = abs(float(wrap_angle(odo[2] - last[2])))
-                far = travel >= p.pose_min_travel or turn >= math.radians(p.pose_min_turn_deg)
-            if far:
+            if d.accepted or odo is None or self._apart(*moved(last, odo)):
                 out.append(d)
                 last = odo
         return out
