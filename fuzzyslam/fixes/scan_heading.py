@@ -163,6 +163,23 @@ class ScanLineHeadingAid(HeadingFixAid):
     def __init__(self, refs: Sequence[Reference], params: FixParams, start_time: float = 0.0):
         super().__init__(refs, params, None, None, start_time)  # type: ignore[arg-type]
 
+    def _walls_seen(self, t: float, segs: Segments, predicted: float, p_tt: float) -> None:
+        """Look at one scan's segments before its fix is measured (a subclass's check of
+        the building, :class:`~fuzzyslam.fixes.live_map.LiveRightAngleHeading`; here
+        nothing).
+
+        Parameters
+        ----------
+        t : float
+            The scan's log time (s).
+        segs : Segments
+            Its segments (robot frame).
+        predicted : float
+            The filter's heading (rad).
+        p_tt : float
+            Its variance (rad^2).
+        """
+
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
         if not self.started(t):
             return
@@ -176,6 +193,7 @@ class ScanLineHeadingAid(HeadingFixAid):
         odo = float(ekf.odometry_pose[2])
         x0, y0 = float(pose[0]), float(pose[1])
         segs = scan_segments(ring, mounts, p)
+        self._walls_seen(t, segs, predicted, float(cov[2, 2]))
         refs = candidate_references(pose[:2], cov[:2, :2], self.refs, p.junction_margin)
         theta, sigma, ref, fam, why = measure_heading(segs, refs, predicted, cov[2, 2], p)
         strength = fam.support if fam is not None else math.nan
