@@ -170,8 +170,8 @@ def test_live_map_on_a_real_building_beats_dead_reckoning(tmp_path, capsys):
     assert live["map_resolution_m"] == 0.1 and len(live["map_shape"]) == 2
     heading = s["aids"]["LiveRightAngleHeading"]
     assert heading["accepted"] > 20 and heading["reference_learnt_at"] is not None
-    # a right-angled building: its scans' wall families meet square, the fixes go on
-    assert heading["stopped_at"] is None and heading["off_right_angle_scans"] == 0
+    # a right-angled building: its scans' wall families meet square, nothing said
+    assert heading["off_right_angles_at"] is None and heading["off_right_angle_scans"] == 0
     assert "right angles" not in err
     assert s["filter_health"]["reasons"] == []
     assert (out / "pose_fixes.csv").is_file() and (out / "heading_fixes.csv").is_file()
@@ -256,9 +256,9 @@ def test_live_map_on_whole_buildings(building, tmp_path, capsys):
     assert loops["online_closures"] >= 3 and loops["online_moved_max_m"] >= 0.1
     assert f"{loops['online_closures']} loops closed during the run" in err
     # real right-angled buildings: no scan's wall families meet more than 3 deg off a
-    # right angle (measured: 0 of 2 on ACES, 0 of 114 on Freiburg), the fixes go on
+    # right angle (measured: 0 of 2 on ACES, 0 of 114 on Freiburg), nothing said
     heading = s["aids"]["LiveRightAngleHeading"]
-    assert heading["stopped_at"] is None and heading["off_right_angle_scans"] == 0
+    assert heading["off_right_angles_at"] is None and heading["off_right_angle_scans"] == 0
     assert run_cli(["run", str(d / "log.mcap"), "-o", str(dr)], capsys)[0] == 0
     e_live = _errors(out / "trajectory.tum", d / "truth.tum")
     e_dr = _errors(dr / "trajectory.tum", d / "truth.tum")

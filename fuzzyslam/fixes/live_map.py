@@ -1065,8 +1065,8 @@ class LiveMapPoseAid(PoseFixAid):
         in the scan (2.3; Freiburg 1.0 and 51 % refused), and a building whose corridors
         lie 6 deg off its right angles (48 % refused). Not seen: a drift along a 150 m
         corridor whose loops then close nowhere, and a corridor 6 deg off that is driven
-        once (docs/models.md sec. 10b; the right-angle heading fixes now stop in such a
-        building, :class:`LiveRightAngleHeading`).
+        once (docs/models.md sec. 10b; a line on stderr now names such a building,
+        :class:`LiveRightAngleHeading`).
 
         Returns
         -------
@@ -1308,19 +1308,20 @@ class LiveRightAngleHeading(ScanLineHeadingAid):
     The building's right angles are checked as it goes (:meth:`_walls_seen`). A corridor
     a few degrees off them has walls within the fixes' window, and one scan's fix (1.6
     deg of noise) cannot tell its skew from the heading's error: scan after scan the
-    fixes would turn the heading by the skew, and the map with it (a synthetic building
-    with a corridor 5.7 deg off: 0.62 m of mean error, aligned; with two 6 deg off, 1.5 m
-    after one lap, 5.3 m after three). But a scan that sees walls both along and across
-    the building's direction measures the angle between them, which the heading's error
-    does not enter: two families of one scan agree to 0.3-0.5 deg on the development
-    logs. More than OFF_SHARE of such scans (at least OFF_MIN) more than
-    OFF_RIGHT_ANGLE_DEG off a right angle, and the building is not one whose walls all
-    meet at right angles: the fixes stop from the next scan (``stopped_at`` in the
-    summary, a line on stderr), as with ``live_right_angles: false``, and the heading is
-    held by the odometry and the live map's matches alone. Measured: the CARMEN buildings
-    0 of 114 (Freiburg) and 0 of 2 (ACES) such scans off, a synthetic Intel-like
-    building 6 of 4881; the skewed buildings 10-46 % of theirs, stopped at 113-306 s
-    and their errors 0.08-0.51 m (0.22-0.47 m closed), from 0.62-5.3 m.
+    fixes turn the heading by the skew, and the map with it. But a scan that sees walls
+    both along and across the building's direction measures the angle between them,
+    which the heading's error does not enter: two families of one scan agree to 0.3-0.5
+    deg on the development logs. More than OFF_SHARE of such scans (at least OFF_MIN)
+    more than OFF_RIGHT_ANGLE_DEG off a right angle, and the building is not one whose
+    walls all meet at right angles: the summary says when (``off_right_angles_at``) and
+    a line on stderr names ``live_right_angles: false``. Measured (docs/models.md sec.
+    10b): the CARMEN buildings with 7 odometries each, 0 such scans off; synthetic
+    corridor rings with corridors 3-6 deg off, 10-35 % of theirs, 0.62-5.3 m of error
+    (aligned) where 0.06-2.1 m without the fixes. The fixes are not stopped: in a
+    right-angled building with one skewed dead-end wing they cost 0.39 m where 0.58 m
+    without them (stopped at the wing: 2.2 m), the wing's walls turning the heading only
+    while the robot is in it; which corridor is skewed is a question for a map of
+    corridors, as the frozen map's references answer it.
 
     Parameters
     ----------
@@ -1338,10 +1339,10 @@ class LiveRightAngleHeading(ScanLineHeadingAid):
         self._start: np.ndarray | None = None
         self.reference_angle = math.nan
         self.learnt_at: float | None = None
-        # scans seeing both wall families, those off the right angles, when judged off
+        # scans seeing both wall families, those off the right angles, when first too many
         self.right_angle_scans = 0
         self.off_right_angle_scans = 0
-        self.stopped_at: float | None = None
+        self.off_right_angles_at: float | None = None
         self._first_scan = math.nan
 
     def _learn(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
@@ -1398,8 +1399,8 @@ class LiveRightAngleHeading(ScanLineHeadingAid):
             return
         self.off_right_angle_scans += 1
         n, k = self.right_angle_scans, self.off_right_angle_scans
-        if self.stopped_at is None and k >= OFF_MIN and k > OFF_SHARE * n:
-            self.stopped_at = float(t)
+        if self.off_right_angles_at is None and k >= OFF_MIN and k > OFF_SHARE * n:
+            self.off_right_angles_at = float(t)
 
     def on_ring(self, t: float, ring: Any, mounts: np.ndarray, ekf: FilterView) -> None:
         """Learn the building's direction, then fix the heading (class docstring).
@@ -1422,12 +1423,11 @@ class LiveRightAngleHeading(ScanLineHeadingAid):
         if not self.refs:
             self._learn(t, ring, mounts, ekf)
             return
-        if self.stopped_at is not None:
-            return
         super().on_ring(t, ring, mounts, ekf)
 
     def run_note(self, lamps: bool) -> str:
-        """One line for stderr when the fixes stopped (class docstring), else ''.
+        """One line for stderr when the building's walls are off its right angles (class
+        docstring), else ''.
 
         Parameters
         ----------
@@ -1438,19 +1438,19 @@ class LiveRightAngleHeading(ScanLineHeadingAid):
         -------
         str
         """
-        if self.stopped_at is None:
+        if self.off_right_angles_at is None:
             return ""
         return (
             f"live map: {self.off_right_angle_scans} of {self.right_angle_scans} scans saw "
-            f"walls more than {OFF_RIGHT_ANGLE_DEG:g} deg off the building's right angles: "
-            f"its heading fixes against them (fixes.live_right_angles) stopped "
-            f"{self.stopped_at - self._first_scan:.1f} s after its first scan, as "
-            "live_right_angles: false would have them"
+            f"walls more than {OFF_RIGHT_ANGLE_DEG:g} deg off the building's right angles "
+            f"(from {self.off_right_angles_at - self._first_scan:.1f} s after its first "
+            "scan): if some corridors are off them, its heading fixes against them turn "
+            "the heading there; run with fixes.live_right_angles: false"
         )
 
     def summary(self) -> HeadingSummary:
         """ScanLineHeadingAid's entry with the reference learnt (deg, mod 90) and when,
-        and the check of the building's right angles (scans, off, when stopped).
+        and the check of the building's right angles (scans, off, when first too many).
 
         Returns
         -------
@@ -1463,5 +1463,5 @@ class LiveRightAngleHeading(ScanLineHeadingAid):
             reference_learnt_at=self.learnt_at,
             right_angle_scans=self.right_angle_scans,
             off_right_angle_scans=self.off_right_angle_scans,
-            stopped_at=self.stopped_at,
+            off_right_angles_at=self.off_right_angles_at,
         )

@@ -32,11 +32,11 @@ class HeadingSummary:
     reference_angle_deg: float | None = OMIT
     reference_learnt_at: float | None = OMIT
     # ... its scans seeing walls along and across that direction, those whose two
-    # families meet more than 3 deg off a right angle, and when they were judged too many
-    # and the fixes stopped (None: never)
+    # families meet more than 3 deg off a right angle, and when they were first too many
+    # (None: never; a note on stderr then says so)
     right_angle_scans: int = OMIT
     off_right_angle_scans: int = OMIT
-    stopped_at: float | None = OMIT
+    off_right_angles_at: float | None = OMIT
 
 
 @dataclass(frozen=True, kw_only=True)
