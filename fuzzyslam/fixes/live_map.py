@@ -63,7 +63,7 @@ from fuzzyslam.fixes.params import FixParams
 from fuzzyslam.fixes.pose_aid import PoseFixAid
 from fuzzyslam.fixes.pose_graph import optimise
 from fuzzyslam.fixes.pose_match import PoseMatch, PoseMatcher, lookup_channels
-from fuzzyslam.fixes.scan_heading import ScanLineHeadingAid, scan_segments
+from fuzzyslam.fixes.scan_heading import ScanLineHeadingAid, scan_segments, search_window
 from fuzzyslam.fixes.scan_lines import family_direction, scan_end_points
 from fuzzyslam.fixes.summaries import HeadingSummary, PoseSummary
 from fuzzyslam.maps.evidence import reading_kinds
@@ -1367,23 +1367,12 @@ class LiveRightAngleHeading(ScanLineHeadingAid):
         self._angles, self._lengths = [], []
 
     def _walls_seen(self, t: float, segs: Any, predicted: float, p_tt: float) -> None:
-        """Count the scan when it sees walls along and across the building's direction,
-        and whether they meet off its right angles (class docstring).
-
-        Parameters
-        ----------
-        t : float
-            The scan's log time (s).
-        segs : Segments
-            Its segments (robot frame).
-        predicted : float
-            The filter's heading (rad).
-        p_tt : float
-            Its variance (rad^2).
-        """
+        """Count the scan (ScanLineHeadingAid._walls_seen's arguments) when it sees walls
+        along and across the building's direction, each where a fix looks for it
+        (:func:`~fuzzyslam.fixes.scan_heading.search_window`), and whether they meet off
+        its right angles (class docstring)."""
         p = self.params
-        gate = max(math.radians(p.scan_line_gate_deg), 3.0 * math.sqrt(max(p_tt, 0.0)))
-        wall = math.radians(p.scan_line_wall_sigma_deg)
+        gate, wall = search_window(p_tt, p)
         along, across = (
             family_direction(
                 segs, self.reference_angle + off - predicted, gate, wall, p.scan_line_min_support

@@ -96,6 +96,28 @@ def candidate_references(
     return [r for r in corridors_near(xy, refs, margin + 3.0 * sig) if not r.ambiguous]
 
 
+def search_window(p_tt: float, p: FixParams) -> tuple[float, float]:
+    """Where a wall family is looked for around its expected direction, and how straight
+    a real wall is (module docstring).
+
+    Parameters
+    ----------
+    p_tt : float
+        The filter's heading variance (rad^2).
+    p : FixParams
+        ``scan_line_gate_deg``, ``scan_line_wall_sigma_deg``.
+
+    Returns
+    -------
+    gate : float
+        The window's half-width, max(``scan_line_gate_deg``, 3 sqrt(p_tt)) (rad).
+    wall_sigma : float
+        ``scan_line_wall_sigma_deg`` (rad).
+    """
+    gate = max(math.radians(p.scan_line_gate_deg), 3.0 * math.sqrt(max(p_tt, 0.0)))
+    return gate, math.radians(p.scan_line_wall_sigma_deg)
+
+
 def measure_heading(
     segs: Segments,
     refs: Sequence[Reference],
@@ -127,8 +149,7 @@ def measure_heading(
     nan = math.nan
     if not refs:
         return nan, nan, None, None, "no_corridor"
-    gate = max(math.radians(p.scan_line_gate_deg), 3.0 * math.sqrt(max(p_tt, 0.0)))
-    wall = math.radians(p.scan_line_wall_sigma_deg)
+    gate, wall = search_window(p_tt, p)
     floor = math.radians(p.scan_line_sigma_deg)
     offsets = (0.0, math.pi / 2) if p.right_angles else (0.0,)
     found = []
